@@ -1,0 +1,305 @@
+"""The base class of the arm tasks: model, data, seeding, rendering, the step path and the fast open-loop path.
+
+Both paths run exactly the same physics steps with the same controls and reduce the same per-physics-step sensor
+readings with the same task function (:meth:`ArmTaskEnv._outcome`), so a trajectory played through ``step`` and
+through :meth:`ArmTaskEnv.play_trajectories` gives the same reward and info.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import EzPickle
+from mujoco import rollout
+
+from sb3_genrl.envs.arm import FRAME_SKIP, JOINT_NAMES, JOINT_RANGE
+
+# Limits beyond which a simulation counts as unstable (the arm's joints and the task object).
+MAX_JOINT_SPEED = 60.0  # rad/s
+MAX_OBJECT_SPEED = 40.0  # m/s
+
+
+class ArmTaskEnv(gym.Env, EzPickle):
+    """Common machinery of the goal-conditioned arm tasks (see :class:`HockeyEnv` and :class:`BasketballEnv`).
+
+    Subclasses give the MJCF text, the home pose, the goal distribution and the terminal reward.
+    The sensor layout every task shares: ``clock`` (1), object position (3), object velocity (3), joint
+    velocities (7), then task-specific sensors.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 25}
+    horizon: int
+    settle_steps: int
+    worst_reward: float
+    goal_low: np.ndarray
+    goal_high: np.ndarray
+
+    def __init__(
+        self,
+        *,
+        max_joint_delta: float = 0.5,
+        render_mode: str | None = None,
+        width: int = 480,
+        height: int = 480,
+        **kwargs: Any,
+    ) -> None:
+        EzPickle.__init__(self, max_joint_delta=max_joint_delta, render_mode=render_mode, width=width, height=height,
+                          **kwargs)
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
+        if not max_joint_delta > 0:
+            raise ValueError(f"max_joint_delta must be positive, got {max_joint_delta}")
+        self.model = mujoco.MjModel.from_xml_string(self._mjcf())
+        self.model.vis.global_.offwidth = max(self.model.vis.global_.offwidth, width)
+        self.model.vis.global_.offheight = max(self.model.vis.global_.offheight, height)
+        self.data = mujoco.MjData(self.model)
+        self.frame_skip = FRAME_SKIP
+        self.max_joint_delta = float(max_joint_delta)
+        self.render_mode = render_mode
+        self.width, self.height = width, height
+        self._joint_qpos = np.array([self.model.joint(n).qposadr[0] for n in JOINT_NAMES])
+        self._joint_qvel = np.array([self.model.joint(n).dofadr[0] for n in JOINT_NAMES])
+        self._goal_mocap = self.model.body("goal").mocapid[0]
+        self._state_spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+        self.initial_state = self._settled_initial_state()
+        self.action_space = spaces.Box(-self.max_joint_delta, self.max_joint_delta, shape=(7,), dtype=np.float32)
+        self.context_space = spaces.Box(self.goal_low.astype(np.float32), self.goal_high.astype(np.float32), dtype=np.float32)
+        obs_low = np.concatenate([self.goal_low, JOINT_RANGE[:, 0], np.full(7, -np.inf)]).astype(np.float32)
+        obs_high = np.concatenate([self.goal_high, JOINT_RANGE[:, 1], np.full(7, np.inf)]).astype(np.float32)
+        self.observation_space = spaces.Box(obs_low, obs_high, dtype=np.float32)
+        self.goal = 0.5 * (self.goal_low + self.goal_high)
+        self._renderer = None
+        self._reset_episode()
+
+    # ----------------------------------------------------------------------------------------- task hooks
+    def _mjcf(self) -> str:
+        raise NotImplementedError
+
+    def home_qpos(self) -> np.ndarray:
+        """Joint positions (7,) of the pose every episode starts from."""
+        raise NotImplementedError
+
+    def sample_goal(self, rng: np.random.Generator) -> np.ndarray:
+        raise NotImplementedError
+
+    def _place_objects(self) -> None:
+        """Put the task object where it starts, the arm being at its home pose."""
+        raise NotImplementedError
+
+    def _settled(self, row: np.ndarray) -> bool:
+        """Whether the flight or slide is over, judged on one sensor row at a control step boundary."""
+        return False
+
+    def _outcome(self, rows: np.ndarray, goal: np.ndarray) -> tuple[float, dict[str, Any]]:
+        """The terminal reward and summary of an episode from its sensor rows (one per physics step)."""
+        raise NotImplementedError
+
+    # ----------------------------------------------------------------------------------------- set-up
+    def _settled_initial_state(self) -> np.ndarray:
+        """Arm at home, holding still, object resting: simulate half a second and keep the full physics state."""
+        mujoco.mj_resetData(self.model, self.data)
+        home = self.home_qpos()
+        self.data.qpos[self._joint_qpos] = home
+        self.data.ctrl[:] = home
+        self._place_objects()
+        mujoco.mj_forward(self.model, self.data)
+        mujoco.mj_step(self.model, self.data, nstep=250)
+        self.data.time = 0.0
+        state = np.empty(mujoco.mj_stateSize(self.model, self._state_spec))
+        mujoco.mj_getState(self.model, self.data, state, self._state_spec)
+        return state
+
+    def _reset_episode(self) -> None:
+        mujoco.mj_resetData(self.model, self.data)
+        mujoco.mj_setState(self.model, self.data, self.initial_state, self._state_spec)
+        self.data.ctrl[:] = self.home_qpos()
+        self.data.mocap_pos[self._goal_mocap, :2] = self.goal
+        mujoco.mj_forward(self.model, self.data)
+        self._command = self.home_qpos().copy()
+        self._t = 0
+        self._rows: list[np.ndarray] = []
+        self._clipped_steps = 0
+        self._done = False
+
+    # ----------------------------------------------------------------------------------------- gymnasium API
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        super().reset(seed=seed)
+        goal = None if options is None else options.get("goal")
+        if goal is None:
+            self.goal = self.sample_goal(self.np_random)
+        else:
+            goal = np.asarray(goal, dtype=np.float64)
+            if goal.shape != (2,) or not np.all(np.isfinite(goal)):
+                raise ValueError(f"options['goal'] must be a finite (x, y) pair, got {goal!r}")
+            self.goal = goal
+        self._reset_episode()
+        return self._get_obs(), {"goal": self.goal.copy()}
+
+    def step(self, action):
+        if self._done:
+            raise RuntimeError("step() called after the episode ended; call reset() first")
+        action = np.asarray(action, dtype=np.float64)
+        if action.shape != (7,):
+            raise ValueError(f"action must have shape (7,), got {action.shape}")
+        if not np.all(np.isfinite(action)):
+            raise ValueError(f"action contains non-finite values: {action}")
+        self._command, clipped = _next_command(self._command, action[None], self.max_joint_delta)
+        self._clipped_steps += int(clipped[0])
+        self.data.ctrl[:] = self._command
+        unstable = self._simulate(self.frame_skip)
+        self._t += 1
+        if not unstable and self._t == self.horizon:
+            for _ in range(self.settle_steps):
+                if self._settled(self._rows[-1]):
+                    break
+                if self._simulate(self.frame_skip):
+                    break
+        terminated = unstable or self._t == self.horizon
+        reward, info = 0.0, {}
+        if terminated:
+            reward, info = self._finish(np.asarray(self._rows), self.goal, self._clipped_steps)
+            self._done = True
+        return self._get_obs(), reward, terminated, False, info
+
+    def _simulate(self, n: int) -> bool:
+        """Step the physics ``n`` times, recording each sensor row; True when the simulation went unstable."""
+        for _ in range(n):
+            mujoco.mj_step(self.model, self.data)
+            self._rows.append(self.data.sensordata.copy())
+            if _unstable(np.asarray(self._rows[-2:])):
+                return True
+        return False
+
+    def _finish(self, rows: np.ndarray, goal: np.ndarray, clipped_steps: int) -> tuple[float, dict[str, Any]]:
+        info: dict[str, Any] = {"joint_limit_clipped": clipped_steps > 0, "clipped_steps": clipped_steps}
+        if _unstable(rows):
+            info.update(unstable=True, reward=self.worst_reward)
+            return self.worst_reward, info
+        reward, summary = self._outcome(rows, goal)
+        reward = max(reward, self.worst_reward)
+        info.update(summary, unstable=False, reward=reward)
+        return reward, info
+
+    def _get_obs(self) -> np.ndarray:
+        return np.concatenate(
+            [self.goal, self.data.qpos[self._joint_qpos], self.data.qvel[self._joint_qvel]]
+        ).astype(np.float32)
+
+    def get_context(self) -> np.ndarray:
+        """The task context of the current episode: the goal's (x, y) in metres."""
+        return self.goal.astype(np.float32)
+
+    def render(self):
+        if self.render_mode != "rgb_array":
+            return None
+        if self._renderer is None:
+            self._renderer = mujoco.Renderer(self.model, self.height, self.width)
+        self._renderer.update_scene(self.data, camera="overview")
+        return self._renderer.render().copy()
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    # ----------------------------------------------------------------------------------------- fast path
+    def play_trajectory(self, trajectory: np.ndarray, goal: np.ndarray) -> tuple[float, dict[str, Any]]:
+        """Play one ``(horizon, 7)`` trajectory for ``goal``; the same reward and info as stepping through it."""
+        rewards, infos = self.play_trajectories(np.asarray(trajectory)[None], np.asarray(goal)[None])
+        return float(rewards[0]), infos[0]
+
+    def play_trajectories(
+        self, trajectories: np.ndarray, goals: np.ndarray, *, n_threads: int = 1, chunk: int = 256
+    ) -> tuple[np.ndarray, list[dict[str, Any]]]:
+        """Play a batch of open-loop trajectories with :mod:`mujoco.rollout` (no per-step Python).
+
+        :param trajectories: ``(B, horizon, 7)`` joint position deltas in radians (one trajectory may be ``(horizon, 7)``)
+        :param goals: ``(B, 2)`` goal positions in metres (or one ``(2,)`` goal for all)
+        :param n_threads: simulation threads; ``mujoco.rollout`` splits the batch between them
+        :param chunk: trajectories simulated per call, bounding memory (each keeps every physics step's sensors)
+        :return: rewards ``(B,)`` and one info dict per trajectory
+        """
+        trajectories = np.asarray(trajectories, dtype=np.float64)
+        if trajectories.ndim == 2:
+            trajectories = trajectories[None]
+        if trajectories.ndim != 3 or trajectories.shape[1:] != (self.horizon, 7):
+            raise ValueError(f"trajectories must have shape (B, {self.horizon}, 7), got {trajectories.shape}")
+        if not np.all(np.isfinite(trajectories)):
+            raise ValueError("trajectories contain non-finite values (nan or inf)")
+        goals = np.broadcast_to(np.asarray(goals, dtype=np.float64), (len(trajectories), 2)) if np.ndim(goals) == 1 \
+            else np.asarray(goals, dtype=np.float64)
+        if goals.shape != (len(trajectories), 2) or not np.all(np.isfinite(goals)):
+            raise ValueError(f"goals must be finite with shape ({len(trajectories)}, 2), got {goals.shape}")
+        if n_threads < 1:
+            raise ValueError(f"n_threads must be at least 1, got {n_threads}")
+        datas = [mujoco.MjData(self.model) for _ in range(n_threads)]
+        rewards = np.empty(len(trajectories))
+        infos: list[dict[str, Any]] = []
+        for start in range(0, len(trajectories), chunk):
+            batch = trajectories[start:start + chunk]
+            commands = np.empty_like(batch)
+            command = np.tile(self.home_qpos(), (len(batch), 1))
+            clipped = np.zeros(len(batch), dtype=int)
+            for t in range(self.horizon):
+                command, clip_t = _next_command(command, batch[:, t], self.max_joint_delta)
+                commands[:, t] = command
+                clipped += clip_t
+            controls = np.repeat(commands, self.frame_skip, axis=1)
+            hold = np.repeat(commands[:, -1:], self.settle_steps * self.frame_skip, axis=1)
+            controls = np.concatenate([controls, hold], axis=1)
+            _, sensordata = rollout.rollout(self.model, datas, self.initial_state[None], controls,
+                                            initial_warmstart=np.zeros((1, self.model.nv)))
+            for i, rows in enumerate(sensordata):
+                rows = rows[: self._episode_length(rows)]
+                reward, info = self._finish(rows, goals[start + i], int(clipped[i]))
+                rewards[start + i] = reward
+                infos.append(info)
+        return rewards, infos
+
+    def _episode_length(self, rows: np.ndarray) -> int:
+        """Number of physics steps the step path runs for these rows: it stops at instability or when settled."""
+        bad = _unstable_rows(rows)
+        if bad.any():
+            return int(np.argmax(bad)) + 1
+        end = self.horizon * self.frame_skip
+        for _ in range(self.settle_steps):
+            if self._settled(rows[end - 1]):
+                break
+            end += self.frame_skip
+        return end
+
+
+def _next_command(command: np.ndarray, delta: np.ndarray, max_delta: float) -> tuple[np.ndarray, np.ndarray]:
+    """Add per-step deltas (clipped to the action box) to the commanded joint positions, within the joint limits.
+
+    :return: the new commands ``(B, 7)`` and, per row, whether the action box or a joint limit clipped it
+    """
+    step = np.clip(delta, -max_delta, max_delta)
+    target = command + step
+    new = np.clip(target, JOINT_RANGE[:, 0], JOINT_RANGE[:, 1])
+    clipped = np.any(step != delta, axis=1) | np.any(new != target, axis=1)
+    return new, clipped
+
+
+def _unstable_rows(rows: np.ndarray) -> np.ndarray:
+    """Per row: non-finite readings, the clock running backwards (MuJoCo reset a diverged state), or runaway speeds."""
+    rows = np.asarray(rows)
+    bad = ~np.all(np.isfinite(rows), axis=1)
+    clock = rows[:, 0]
+    bad[1:] |= np.diff(clock) <= 0
+    bad |= np.abs(rows[:, 7:14]).max(axis=1, initial=0.0) > MAX_JOINT_SPEED
+    bad |= np.linalg.norm(rows[:, 4:7], axis=1) > MAX_OBJECT_SPEED
+    return bad
+
+
+def _unstable(rows: np.ndarray) -> bool:
+    return bool(_unstable_rows(rows).any())
+
+
+def default_threads() -> int:
+    return max(1, len(os.sched_getaffinity(0)))

@@ -1,0 +1,20 @@
+"""sb3-genrl: policies trained in the latent space of generative models of motor trajectories (GenRL)."""
+
+from importlib.metadata import PackageNotFoundError, entry_points, version
+
+try:
+    __version__ = version("sb3-genrl")
+except PackageNotFoundError:  # running from a source tree that is not installed
+    __version__ = "0.0.0+unknown"
+
+
+def _register_gymnasium_plugins() -> None:
+    # Gymnasium >= 1.0 no longer loads the ``gymnasium.envs`` entry point group by itself; load ours so
+    # ``gymnasium.make("GenRL/Hockey-v0")`` works once ``sb3_genrl`` is imported. Registration only stores
+    # string entry points: no simulator is imported here.
+    for entry_point in entry_points(group="gymnasium.envs"):
+        if entry_point.dist is not None and entry_point.dist.name == "sb3-genrl":
+            entry_point.load()()
+
+
+_register_gymnasium_plugins()

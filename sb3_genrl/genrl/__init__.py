@@ -1,0 +1,6 @@
+"""The GenRL algorithm (paper section 4): EM policy training over a generator's latent space."""
+
+from sb3_genrl.genrl.genrl import GenRL
+from sb3_genrl.genrl.policies import MlpPolicy, MultiInputPolicy
+
+__all__ = ["GenRL", "MlpPolicy", "MultiInputPolicy"]
