@@ -16,7 +16,6 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.utils import EzPickle
 from mujoco import rollout
-
 from sb3_genrl.envs.arm import FRAME_SKIP, JOINT_NAMES, JOINT_RANGE
 
 # Limits beyond which a simulation counts as unstable (the arm's joints and the task object).
@@ -69,8 +68,8 @@ class ArmTaskEnv(gym.Env, EzPickle):
         self.initial_state = self._settled_initial_state()
         self.action_space = spaces.Box(-self.max_joint_delta, self.max_joint_delta, shape=(7,), dtype=np.float32)
         self.context_space = spaces.Box(self.goal_low.astype(np.float32), self.goal_high.astype(np.float32), dtype=np.float32)
-        obs_low = np.concatenate([self.goal_low, JOINT_RANGE[:, 0], np.full(7, -np.inf)]).astype(np.float32)
-        obs_high = np.concatenate([self.goal_high, JOINT_RANGE[:, 1], np.full(7, np.inf)]).astype(np.float32)
+        obs_low = np.concatenate([self.goal_low, JOINT_RANGE[:, 0], np.full(7, -MAX_JOINT_SPEED)]).astype(np.float32)
+        obs_high = np.concatenate([self.goal_high, JOINT_RANGE[:, 1], np.full(7, MAX_JOINT_SPEED)]).astype(np.float32)
         self.observation_space = spaces.Box(obs_low, obs_high, dtype=np.float32)
         self.goal = 0.5 * (self.goal_low + self.goal_high)
         self._renderer = None
@@ -186,9 +185,16 @@ class ArmTaskEnv(gym.Env, EzPickle):
         return reward, info
 
     def _get_obs(self) -> np.ndarray:
-        return np.concatenate(
-            [self.goal, self.data.qpos[self._joint_qpos], self.data.qvel[self._joint_qvel]]
-        ).astype(np.float32)
+        qpos = np.clip(self.data.qpos[self._joint_qpos], JOINT_RANGE[:, 0], JOINT_RANGE[:, 1])
+        qvel = np.clip(self.data.qvel[self._joint_qvel], -MAX_JOINT_SPEED, MAX_JOINT_SPEED)
+        return np.concatenate([self.goal, qpos, qvel]).astype(np.float32)
+
+    def initial_state_object_xy(self) -> np.ndarray:
+        """Where the task object (puck or ball) rests at the start of every episode, (x, y) in metres."""
+        data = mujoco.MjData(self.model)
+        mujoco.mj_setState(self.model, data, self.initial_state, self._state_spec)
+        mujoco.mj_forward(self.model, data)
+        return data.sensordata[1:3].copy()
 
     def get_context(self) -> np.ndarray:
         """The task context of the current episode: the goal's (x, y) in metres."""
@@ -207,6 +213,39 @@ class ArmTaskEnv(gym.Env, EzPickle):
             self._renderer.close()
             self._renderer = None
 
+    def episode_frames(self, trajectory: np.ndarray, goal: np.ndarray, *, every: int = 1) -> list[np.ndarray]:
+        """Play ``trajectory`` for ``goal`` like the step path and return ``rgb_array`` frames (every ``every`` control
+        steps, the settle phase included). Needs ``render_mode="rgb_array"``."""
+        if self.render_mode != "rgb_array":
+            raise ValueError("episode_frames needs an env made with render_mode='rgb_array'")
+        trajectory = self._check_trajectories(trajectory)[0]
+        self.reset(options={"goal": goal})
+        frames = [self.render()]
+        for t, action in enumerate(trajectory):
+            self._command, _ = _next_command(self._command, action[None], self.max_joint_delta)
+            self.data.ctrl[:] = self._command
+            if self._simulate(self.frame_skip):
+                break
+            if (t + 1) % every == 0:
+                frames.append(self.render())
+        for t in range(self.settle_steps):
+            if self._settled(self._rows[-1]) or self._simulate(self.frame_skip):
+                break
+            if (t + 1) % every == 0:
+                frames.append(self.render())
+        self._done = True
+        return frames
+
+    def _check_trajectories(self, trajectories: np.ndarray) -> np.ndarray:
+        trajectories = np.asarray(trajectories, dtype=np.float64)
+        if trajectories.ndim == 2:
+            trajectories = trajectories[None]
+        if trajectories.ndim != 3 or trajectories.shape[1:] != (self.horizon, 7):
+            raise ValueError(f"trajectories must have shape (B, {self.horizon}, 7), got {trajectories.shape}")
+        if not np.all(np.isfinite(trajectories)):
+            raise ValueError("trajectories contain non-finite values (nan or inf)")
+        return trajectories
+
     # ----------------------------------------------------------------------------------------- fast path
     def play_trajectory(self, trajectory: np.ndarray, goal: np.ndarray) -> tuple[float, dict[str, Any]]:
         """Play one ``(horizon, 7)`` trajectory for ``goal``; the same reward and info as stepping through it."""
@@ -224,13 +263,7 @@ class ArmTaskEnv(gym.Env, EzPickle):
         :param chunk: trajectories simulated per call, bounding memory (each keeps every physics step's sensors)
         :return: rewards ``(B,)`` and one info dict per trajectory
         """
-        trajectories = np.asarray(trajectories, dtype=np.float64)
-        if trajectories.ndim == 2:
-            trajectories = trajectories[None]
-        if trajectories.ndim != 3 or trajectories.shape[1:] != (self.horizon, 7):
-            raise ValueError(f"trajectories must have shape (B, {self.horizon}, 7), got {trajectories.shape}")
-        if not np.all(np.isfinite(trajectories)):
-            raise ValueError("trajectories contain non-finite values (nan or inf)")
+        trajectories = self._check_trajectories(trajectories)
         goals = np.broadcast_to(np.asarray(goals, dtype=np.float64), (len(trajectories), 2)) if np.ndim(goals) == 1 \
             else np.asarray(goals, dtype=np.float64)
         if goals.shape != (len(trajectories), 2) or not np.all(np.isfinite(goals)):

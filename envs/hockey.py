@@ -6,7 +6,6 @@ from typing import Any
 
 import mujoco
 import numpy as np
-
 from sb3_genrl.envs.arm import task_mjcf
 from sb3_genrl.envs.base import ArmTaskEnv
 
@@ -32,7 +31,7 @@ _WORLD = f"""
         rgba="0.05 0.05 0.05 1"/>
 </body>
 <body name="goal" mocap="true" pos="1.0 0 0.001">
-  <geom type="cylinder" size="0.03 0.001" contype="0" conaffinity="0" rgba="0.9 0.1 0.1 1"/>
+  <geom type="cylinder" size="0.04 0.001" contype="0" conaffinity="0" rgba="0.9 0.1 0.1 1"/>
 </body>
 """
 _SENSORS = """
@@ -42,7 +41,7 @@ _SENSORS = """
 """ + "\n".join(f'<jointvel joint="joint{i}"/>' for i in range(1, 8)) + """
 <contact subtree1="tool" geom2="table" num="1" data="found"/>
 """
-_CAMERA = '<camera name="overview" pos="0.6 -2.2 1.6" xyaxes="1 0 0 0 0.6 0.8"/>'
+_CAMERA = '<camera name="overview" pos="0.75 -1.75 1.55" xyaxes="1 0 0 0 0.7 0.714"/>'
 
 
 class HockeyEnv(ArmTaskEnv):

@@ -1,0 +1,92 @@
+"""Simulation throughput of the tasks: the fast open-loop path (1 and 2 threads), the step-by-step Gymnasium path,
+and the bound (raw ``mj_step`` over the same number of physics steps per episode).
+
+    python benchmarks/sim_throughput.py [--episodes 256] [--out benchmarks/results/sim_throughput.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import mujoco
+import numpy as np
+from sb3_genrl.envs.basketball import BasketballEnv
+from sb3_genrl.envs.hockey import HockeyEnv
+from sb3_genrl.envs.scripted import scripted_hit, scripted_throw
+
+
+def _trajectories(task: str, n: int, rng: np.random.Generator) -> np.ndarray:
+    if task == "hockey":
+        return np.stack([scripted_hit(strength=s, direction=d) for s, d in rng.uniform([0.7, -0.4], [1.3, 0.4], (n, 2))])
+    return np.stack([scripted_throw(strength=s, yaw=y) for s, y in rng.uniform([0.6, -1.2], [1.2, 1.2], (n, 2))])
+
+
+def _best_of(repeats: int, fn) -> float:
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - start)
+    return min(times)
+
+
+def measure(task: str, episodes: int, step_episodes: int, repeats: int) -> dict:
+    env = HockeyEnv() if task == "hockey" else BasketballEnv()
+    rng = np.random.default_rng(0)
+    trajectories = _trajectories(task, episodes, rng)
+    goals = np.array([env.sample_goal(rng) for _ in range(episodes)])
+    physics_steps = (env.horizon + env.settle_steps) * env.frame_skip
+    # The same commanded joint positions the open-loop path sends, held after the last action.
+    commands = env.home_qpos() + np.cumsum(np.clip(trajectories, -env.max_joint_delta, env.max_joint_delta), axis=1)
+    commands = np.concatenate([commands, np.repeat(commands[:, -1:], env.settle_steps, axis=1)], axis=1)
+
+    def raw_bound():
+        data = mujoco.MjData(env.model)
+        for i in range(episodes):
+            mujoco.mj_setState(env.model, data, env.initial_state, mujoco.mjtState.mjSTATE_FULLPHYSICS)
+            for command in commands[i]:
+                data.ctrl[:] = command
+                mujoco.mj_step(env.model, data, nstep=env.frame_skip)
+
+    def step_path():
+        for i in range(step_episodes):
+            env.reset(seed=i, options={"goal": goals[i]})
+            for action in trajectories[i]:
+                if env.step(action)[2]:
+                    break
+
+    results = {"task": task, "episodes": episodes, "physics_steps_per_episode": physics_steps}
+    results["raw_mj_step"] = episodes / _best_of(repeats, raw_bound)
+    for threads in (1, 2):
+        results[f"open_loop_{threads}_thread"] = episodes / _best_of(
+            repeats, lambda t=threads: env.play_trajectories(trajectories, goals, n_threads=t))
+    results["step_by_step"] = step_episodes / _best_of(repeats, step_path)
+    results["open_loop_1_thread_vs_bound"] = results["open_loop_1_thread"] / results["raw_mj_step"]
+    return results
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--episodes", type=int, default=256)
+    parser.add_argument("--step-episodes", type=int, default=16)
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--out", default="benchmarks/results/sim_throughput.json")
+    args = parser.parse_args()
+    rows = [measure(task, args.episodes, args.step_episodes, args.repeats) for task in ("hockey", "basketball")]
+    print(f"episodes per second (best of {args.repeats} runs, {args.episodes} episodes)")
+    header = ("task", "raw mj_step bound", "open loop 1 thread", "open loop 2 threads", "step by step", "1 thread / bound")
+    print("| " + " | ".join(header) + " |")
+    print("|" + "---|" * len(header))
+    for r in rows:
+        print(f"| {r['task']} | {r['raw_mj_step']:.1f} | {r['open_loop_1_thread']:.1f} | {r['open_loop_2_thread']:.1f} "
+              f"| {r['step_by_step']:.1f} | {r['open_loop_1_thread_vs_bound']:.2f} |")
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(rows, indent=2))
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,132 @@
+"""``GenRL/Basketball-v0``: throw a ball from a cup held by the arm into a basket (paper section 6.1.1)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import mujoco
+import numpy as np
+from sb3_genrl.envs.arm import task_mjcf
+from sb3_genrl.envs.base import ArmTaskEnv
+
+# Paper section 6.1.1: basket at radius 1-8 m and angle [-pi/2, pi/2] from the robot; 78 control steps.
+BASKET_RADIUS_RANGE = (1.0, 8.0)
+BASKET_ANGLE_RANGE = (-np.pi / 2, np.pi / 2)
+BASKETBALL_HORIZON = 78
+BASKET_HEIGHT = 0.4  # height of the basket's rim (m)
+BALL_RADIUS = 0.05
+
+# The cup opens towards the flange's +x axis, the direction in which positive pitch joint motion moves it, so the
+# ball is pushed by the cup's bottom while the arm accelerates and flies on when the arm slows down.
+_TOOL = f"""
+<geom name="cup_stem" type="capsule" fromto="0 0 0 0 0 0.08" size="0.02" rgba="0.2 0.2 0.2 1"/>
+<geom name="cup_bottom" type="box" pos="0 0 0.14" size="0.008 0.07 0.07" rgba="0.85 0.2 0.2 1"/>
+<geom name="cup_side1" type="box" pos="0.035 0.075 0.14" size="0.035 0.006 0.07" rgba="0.85 0.2 0.2 1"/>
+<geom name="cup_side2" type="box" pos="0.035 -0.075 0.14" size="0.035 0.006 0.07" rgba="0.85 0.2 0.2 1"/>
+<geom name="cup_side3" type="box" pos="0.035 0 0.215" size="0.035 0.07 0.006" rgba="0.85 0.2 0.2 1"/>
+<geom name="cup_side4" type="box" pos="0.035 0 0.065" size="0.035 0.07 0.006" rgba="0.85 0.2 0.2 1"/>
+<site name="cup_centre" pos="{0.008 + BALL_RADIUS + 0.002} 0 0.14" size="0.005"/>
+"""
+_WORLD = f"""
+<geom name="floor" type="plane" size="10 10 0.1" material="grid" solref="0.01 0.3"/>
+<body name="ball" pos="0 0 1">
+  <freejoint name="ball"/>
+  <geom name="ball" type="sphere" size="{BALL_RADIUS}" mass="0.2" solref="0.01 0.3" rgba="0.95 0.45 0.1 1"/>
+</body>
+<body name="goal" mocap="true" pos="3 0 {BASKET_HEIGHT}">
+  <geom type="cylinder" size="0.15 0.01" contype="0" conaffinity="0" rgba="0.9 0.1 0.1 0.6"/>
+  <geom type="cylinder" size="0.01 {BASKET_HEIGHT / 2}" pos="0 0 {-BASKET_HEIGHT / 2}" contype="0" conaffinity="0"
+        rgba="0.6 0.6 0.6 1"/>
+</body>
+"""
+_SENSORS = """
+<clock/>
+<framepos objtype="body" objname="ball"/>
+<framelinvel objtype="body" objname="ball"/>
+""" + "\n".join(f'<jointvel joint="joint{i}"/>' for i in range(1, 8))
+_CAMERA = '<camera name="overview" pos="-2.5 -7 4.5" xyaxes="0.94 -0.34 0 0.2 0.55 0.81"/>'
+
+
+class BasketballEnv(ArmTaskEnv):
+    """Throw a ball from a cup into a basket.
+
+    ## Description
+    The 7-DOF arm (see :mod:`sb3_genrl.envs.arm`) holds a ball in a cup (no gripper): the ball leaves the cup when
+    the arm slows down after accelerating it. The basket is placed at radius ``[1, 8] m`` and angle
+    ``[-pi/2, pi/2]`` from the robot (paper section 6.1.1), its rim ``BASKET_HEIGHT`` above the floor. The ball
+    bounces on the floor, so throws that bounce before reaching the basket are possible.
+
+    ## Action Space
+    ``Box(-max_joint_delta, max_joint_delta, (7,))``: the change of the 7 commanded joint positions (rad) per
+    control step (0.04 s), clipped to the joint ranges (``info["joint_limit_clipped"]``).
+
+    ## Observation Space
+    ``Box(16,)``: basket (x, y) in metres, 7 joint positions (rad), 7 joint velocities (rad/s).
+
+    ## Rewards
+    0 until the end; then minus the smallest horizontal distance (m) between the ball and the basket centre over
+    the moments the ball crosses the rim's height going down (each crossing located by linear interpolation
+    between physics steps). A ball that never crosses that height going down gets ``worst_reward`` (-16 m,
+    twice the largest basket radius), as does an unstable simulation (``info["unstable"] = True``).
+
+    ## Starting State
+    The arm at its home pose with the cup open upwards behind the robot, the ball resting in it. Only the basket
+    position is random.
+
+    ## Episode End
+    After ``horizon = 78`` actions the arm holds its last command and the flight runs on for up to
+    ``settle_steps`` control steps, or until the ball rests on the floor. ``info`` then holds ``reached`` (the
+    ball's position at the best crossing, or its last position), ``crossings``, ``distance`` and ``reward``.
+
+    ## Arguments
+    ``max_joint_delta`` (0.5 rad), ``settle_steps`` (50 control steps = 2 s), ``render_mode`` (``"rgb_array"``),
+    ``width``, ``height``.
+
+    ## Version History
+    * v0: initial version.
+    """
+
+    horizon = BASKETBALL_HORIZON
+    worst_reward = -2 * BASKET_RADIUS_RANGE[1]
+    goal_low = np.array([0.0, -BASKET_RADIUS_RANGE[1]])
+    goal_high = np.array([BASKET_RADIUS_RANGE[1], BASKET_RADIUS_RANGE[1]])
+
+    def __init__(self, *, settle_steps: int = 50, **kwargs: Any) -> None:
+        self.settle_steps = int(settle_steps)
+        super().__init__(settle_steps=settle_steps, **kwargs)
+
+    def _mjcf(self) -> str:
+        return task_mjcf(name="basketball", tool=_TOOL, world=_WORLD, sensors=_SENSORS, camera=_CAMERA)
+
+    def home_qpos(self) -> np.ndarray:
+        # Upper arm and forearm tilted back, wrist bent so the flange points backwards and the cup opens upwards.
+        return np.array([0.0, -0.5, 0.0, -0.7, 0.0, -0.3707963267948966, 0.0])
+
+    def sample_goal(self, rng: np.random.Generator) -> np.ndarray:
+        radius = rng.uniform(*BASKET_RADIUS_RANGE)
+        angle = rng.uniform(*BASKET_ANGLE_RANGE)
+        return np.array([radius * np.cos(angle), radius * np.sin(angle)])
+
+    def _place_objects(self) -> None:
+        mujoco.mj_kinematics(self.model, self.data)
+        ball_adr = self.model.joint("ball").qposadr[0]
+        self.data.qpos[ball_adr:ball_adr + 3] = self.data.site("cup_centre").xpos
+        self.data.qpos[ball_adr + 3:ball_adr + 7] = [1, 0, 0, 0]
+
+    def _settled(self, row: np.ndarray) -> bool:
+        return bool(row[3] < BALL_RADIUS + 0.01 and np.linalg.norm(row[4:7]) < 0.05)
+
+    def _outcome(self, rows: np.ndarray, goal: np.ndarray) -> tuple[float, dict[str, Any]]:
+        position = rows[:, 1:4]
+        height = position[:, 2] - BASKET_HEIGHT
+        # Crossing the rim's height going down between physics steps i and i + 1.
+        crossing = np.flatnonzero((height[:-1] >= 0) & (height[1:] < 0))
+        if len(crossing) == 0:
+            return self.worst_reward, {"reached": position[-1, :2].copy(), "crossings": 0,
+                                       "distance": float(np.linalg.norm(position[-1, :2] - goal))}
+        fraction = height[crossing] / (height[crossing] - height[crossing + 1])
+        points = position[crossing, :2] + fraction[:, None] * (position[crossing + 1, :2] - position[crossing, :2])
+        distances = np.linalg.norm(points - goal, axis=1)
+        best = int(np.argmin(distances))
+        distance = float(distances[best])
+        return -distance, {"reached": points[best], "crossings": len(crossing), "distance": distance}
