@@ -2,6 +2,11 @@
 
 from importlib.metadata import PackageNotFoundError, entry_points, version
 
+from sb3_genrl.genrl import GenRL
+from sb3_genrl.wrappers import LatentActionWrapper
+
+__all__ = ["GenRL", "LatentActionWrapper", "__version__"]
+
 try:
     __version__ = version("sb3-genrl")
 except PackageNotFoundError:  # running from a source tree that is not installed

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 
 
@@ -11,6 +12,27 @@ def build_parser() -> argparse.ArgumentParser:
                                      "generators, evaluation, policies, baselines and the paper's study.")
     sub = parser.add_subparsers(dest="command", required=True)
     # Each command adds its own parser here (one function per command, defined below).
+
+    demos = sub.add_parser("demos", help="generate a task's demonstrations as a Minari dataset, with a coverage report")
+    demos.add_argument("--task", required=True, choices=("hockey", "basketball"), help="task")
+    demos.add_argument("--episodes", type=int, default=40000, help="valid demonstrations to keep (paper: 40000)")
+    demos.add_argument("--out", required=True, help="dataset directory to create (must not exist or be empty)")
+    demos.add_argument("--seed", type=int, default=0, help="seed of every random draw")
+    demos.add_argument("--threads", type=int, default=None, help="simulation threads (default: available cores)")
+    demos.add_argument("--no-progress-bar", action="store_true", help="hide the progress bar")
+    demos.set_defaults(func=_demos_command)
+
+    evaluate = sub.add_parser("evaluate", help="precision/recall and DwPR of trained generators (paper section 5.2)")
+    evaluate.add_argument("models", nargs="+", metavar="MODEL_FILE", help="trained generator files")
+    evaluate.add_argument("--data", required=True, help="real trajectories: dataset path or .npy (N, T, M) array")
+    evaluate.add_argument("--out", required=True, help="output directory (results.csv/.md/.json, scatter plots)")
+    evaluate.add_argument("--n", type=int, default=15000, help="real and generated samples (paper: 15000)")
+    evaluate.add_argument("--dwpr-n", type=int, default=10000, help="DwPR samples per intervention (paper: 10000)")
+    evaluate.add_argument("--interventions", type=int, default=5, help="DwPR interventions per dimension (paper: 5)")
+    evaluate.add_argument("--k", type=int, default=3, help="neighbourhood size (paper: 3)")
+    evaluate.add_argument("--seed", type=int, default=0, help="random seed")
+    evaluate.add_argument("--device", default="auto", help="torch device (default: auto)")
+    evaluate.set_defaults(func=_evaluate_command)
 
     play = sub.add_parser("play", help="play the scripted hit and throw, render them and write a short report")
     play.add_argument("--out", required=True, help="output directory (report.md, GIFs, frame strips)")
@@ -48,6 +70,20 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _evaluate_command(args: argparse.Namespace) -> int:
+    from sb3_genrl.metrics import evaluate_generators
+
+    evaluations = evaluate_generators(args.models, args.data, n=args.n, k=args.k, dwpr_n=args.dwpr_n,
+                                      interventions=args.interventions, seed=args.seed, out_dir=args.out,
+                                      device=args.device)
+    for evaluation in evaluations:
+        row = evaluation.row()
+        print(f"{row['model']}: precision {row['precision']:.3f}, recall {row['recall']:.3f}, "
+              f"delta_1 {row['delta_1']:.3f}, mean delta {row['mean_delta']:.3f}")
+    print(f"wrote {args.out}/results.md, results.csv, precision_recall.png, disentanglement.png")
+    return 0
+
+
 def _play_command(args: argparse.Namespace) -> int:
     from sb3_genrl.envs.showcase import play_scripted
 
@@ -78,6 +114,24 @@ def _train_policy_command(args: argparse.Namespace) -> int:
                           progress_bar=not args.no_progress_bar)
     print(f"GenRL on {args.task}: {result['episodes']} episodes, {result['iterations']} iterations, mean reward "
           f"final {result['final_mean_reward']:.4g}, best {result['best_mean_reward']:.4g} -> {result['model_path']}")
+    return 0
+
+
+def _demos_command(args: argparse.Namespace) -> int:
+    import time
+
+    from sb3_genrl.data import dataset_info
+    from sb3_genrl.envs.demonstrations import make_demonstrations
+
+    began = time.perf_counter()
+    path = make_demonstrations(args.task, args.episodes, args.out, seed=args.seed, n_threads=args.threads,
+                               progress_bar=not args.no_progress_bar)
+    info = dataset_info(path)
+    report = json.loads((path / "coverage.json").read_text())
+    print(f"{info['episodes']} {info['task']} demonstrations ({info['drawn']} drawn) in {time.perf_counter() - began:.1f} s"
+          f" -> {path}")
+    print(f"coverage: {100 * report['coverage']:.1f}% of {report['cells']} goal-region cells of {report['cell_size']} m"
+          f" ({100 * report['in_region']:.1f}% of reached points in the region) -> {report['png']}")
     return 0
 
 

@@ -2,5 +2,6 @@
 
 from sb3_genrl.genrl.genrl import GenRL
 from sb3_genrl.genrl.policies import MlpPolicy, MultiInputPolicy
+from sb3_genrl.genrl.train import LearningCurveCallback, train_policy
 
-__all__ = ["GenRL", "MlpPolicy", "MultiInputPolicy"]
+__all__ = ["GenRL", "LearningCurveCallback", "MlpPolicy", "MultiInputPolicy", "train_policy"]

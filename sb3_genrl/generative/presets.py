@@ -1,0 +1,94 @@
+"""The paper's generative-model constants and its model grid (VAE1-9, GAN1-9), by name."""
+
+from __future__ import annotations
+
+from itertools import product
+from typing import TYPE_CHECKING, Any
+
+import torch
+
+if TYPE_CHECKING:  # the models import their defaults from here
+    from sb3_genrl.generative.torch_generator import TorchTrajectoryGenerator
+
+# Section 6.1.2: latent dimensions N_alpha and the regularisation weights of the grid (table 1, "tab:models").
+LATENT_DIMS = (2, 3, 6)
+BETAS = (0.01, 0.005, 0.001)
+INFO_WEIGHTS = (0.1, 1.5, 3.5)
+# Section 6.1.2: trajectories of 7 joints over 69 (hockey) or 78 (basketball) time steps.
+N_JOINTS = 7
+TRAJECTORY_HORIZONS = {"hockey": 69, "basketball": 78}
+# Appendix B: "trained for 5000 epochs with learning rate fixed to 2e-4 using batch size 256"; model selection by the
+# squared error between "100 randomly generated trajectories" and held-out test trajectories.
+EPOCHS = 5000
+LEARNING_RATE = 2e-4
+BATCH_SIZE = 256
+SELECTION_SAMPLES = 100
+# Section 6.1.2: about 40K demonstrations per task (used for benchmark sizes).
+N_DEMONSTRATIONS = 40_000
+
+MODEL_KINDS = ("vae", "gan")
+
+
+def _grid() -> dict[str, dict[str, Any]]:
+    # Table 1 lists the grid with N_alpha as the outer and beta / lambda as the inner loop.
+    presets: dict[str, dict[str, Any]] = {}
+    for index, (latent_dim, beta) in enumerate(product(LATENT_DIMS, BETAS), start=1):
+        presets[f"VAE{index}"] = {"model": "vae", "latent_dim": latent_dim, "beta": beta}
+    for index, (latent_dim, info_weight) in enumerate(product(LATENT_DIMS, INFO_WEIGHTS), start=1):
+        presets[f"GAN{index}"] = {"model": "gan", "latent_dim": latent_dim, "info_weight": info_weight}
+    return presets
+
+
+PRESETS: dict[str, dict[str, Any]] = _grid()
+
+
+def resolve_generator_spec(preset_or_kind: str, *, latent_dim: int | None = None, beta: float | None = None,
+                           info_weight: float | None = None) -> dict[str, Any]:
+    """Model kind and hyperparameters from a preset name (``"VAE1"``..``"GAN9"``) or a kind (``"vae"``, ``"gan"``).
+
+    Explicit values must agree with a preset's; for a kind, ``latent_dim`` and ``beta`` (VAE) or ``info_weight``
+    (GAN) are required.
+    """
+    explicit = {"latent_dim": latent_dim, "beta": beta, "info_weight": info_weight}
+    if preset_or_kind.upper() in PRESETS:
+        spec = dict(PRESETS[preset_or_kind.upper()])
+        for name, value in explicit.items():
+            if value is not None and spec.get(name, value) != value:
+                raise ValueError(f"preset {preset_or_kind.upper()} has {name}={spec[name]}, got {name}={value}")
+            if value is not None and name not in spec:
+                raise ValueError(f"preset {preset_or_kind.upper()} is a {spec['model']} model, which takes no {name}")
+        return spec
+    kind = preset_or_kind.lower()
+    if kind not in MODEL_KINDS:
+        raise ValueError(f"unknown generator {preset_or_kind!r}; expected one of {MODEL_KINDS} or a preset "
+                         f"{list(PRESETS)}")
+    weight_name, unused_name = ("beta", "info_weight") if kind == "vae" else ("info_weight", "beta")
+    if explicit[unused_name] is not None:
+        raise ValueError(f"a {kind} model takes no {unused_name}")
+    for name in ("latent_dim", weight_name):
+        if explicit[name] is None:
+            raise ValueError(f"a {kind} model needs {name} (or use a preset such as "
+                             f"{'VAE1' if kind == 'vae' else 'GAN1'})")
+    return {"model": kind, "latent_dim": latent_dim, weight_name: explicit[weight_name]}
+
+
+def make_generator(preset_or_kind: str, *, horizon: int, action_dim: int, latent_dim: int | None = None,
+                   beta: float | None = None, info_weight: float | None = None,
+                   device: torch.device | str = "auto") -> TorchTrajectoryGenerator:
+    """Build an untrained generator from a preset of paper table 1 or a model kind.
+
+    :param preset_or_kind: ``"VAE1"``..``"VAE9"``, ``"GAN1"``..``"GAN9"``, ``"vae"`` or ``"gan"``
+    :param horizon: number of time steps ``T`` (paper: 69 for hockey, 78 for basketball)
+    :param action_dim: number of joints ``M`` (paper: 7)
+    :param latent_dim: ``N_alpha``; required for a kind, must match a preset
+    :param beta: KL weight of a VAE; required for ``"vae"``, must match a preset
+    :param info_weight: ``lambda`` of an InfoGAN; required for ``"gan"``, must match a preset
+    :param device: torch device or ``"auto"``
+    """
+    from sb3_genrl.generative.infogan import InfoGAN
+    from sb3_genrl.generative.vae import BetaVAE
+
+    spec = resolve_generator_spec(preset_or_kind, latent_dim=latent_dim, beta=beta, info_weight=info_weight)
+    if spec["model"] == "vae":
+        return BetaVAE(horizon, action_dim, spec["latent_dim"], beta=spec["beta"], device=device)
+    return InfoGAN(horizon, action_dim, spec["latent_dim"], info_weight=spec["info_weight"], device=device)

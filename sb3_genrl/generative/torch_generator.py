@@ -1,0 +1,251 @@
+"""Base class of the neural generators: normalisation, decoding, the epoch loop with model selection, saving.
+
+A subclass (:class:`~sb3_genrl.generative.BetaVAE`, :class:`~sb3_genrl.generative.InfoGAN`) only says what is specific
+to it: its networks, its optimizers, one gradient step and its hyperparameters.
+"""
+
+from __future__ import annotations
+
+import abc
+import math
+from collections import defaultdict
+from typing import Any, TypeVar
+
+import numpy as np
+import torch
+from stable_baselines3.common.utils import get_device
+from torch import nn
+from tqdm.auto import tqdm
+
+from sb3_genrl.generative.base import Prior, TrajectoryGenerator
+from sb3_genrl.generative.common import (
+    check_trajectories,
+    minibatch_indices,
+    normalisation_statistics,
+    selection_mse,
+    split_train_validation,
+)
+from sb3_genrl.generative.presets import BATCH_SIZE, EPOCHS, LEARNING_RATE, SELECTION_SAMPLES
+
+SelfTorchTrajectoryGenerator = TypeVar("SelfTorchTrajectoryGenerator", bound="TorchTrajectoryGenerator")
+
+
+class TorchTrajectoryGenerator(TrajectoryGenerator, abc.ABC):
+    """A neural trajectory generator whose decoder maps ``alpha`` to a normalised, flattened trajectory.
+
+    Training data are normalised per joint (one mean and one standard deviation per joint over all trajectories
+    and time steps of the training split); the statistics are part of the model and :meth:`decode` returns raw action
+    units.
+
+    :param horizon: number of time steps ``T``
+    :param action_dim: number of joints ``M``
+    :param latent_dim: ``N_alpha``
+    :param prior: ``"normal"`` or ``"uniform"``
+    :param device: torch device or ``"auto"`` (CUDA when available), as in Stable-Baselines3
+    """
+
+    decoder_name: str = "decoder"
+
+    def __init__(self, *, horizon: int, action_dim: int, latent_dim: int, prior: Prior,
+                 device: torch.device | str = "auto") -> None:
+        super().__init__(horizon=horizon, action_dim=action_dim, latent_dim=latent_dim, prior=prior)
+        self.networks: nn.ModuleDict
+        self._reset(0, device)  # untrained weights from seed 0; fit() draws them again from its own seed
+        self.action_mean = torch.zeros(self.action_dim, device=self.device)
+        self.action_std = torch.ones(self.action_dim, device=self.device)
+        self.history: list[dict[str, float]] = []
+        self.best_epoch: int | None = None
+        self.seed: int | None = None
+        self.saved_version: str | None = None  # sb3-genrl version that wrote the file this model was loaded from
+
+    # --- what a subclass provides -----------------------------------------------------------------------------------
+    @abc.abstractmethod
+    def _build_networks(self) -> nn.ModuleDict:
+        """All networks of the model; ``self.decoder_name`` names the one :meth:`decode` uses."""
+
+    @abc.abstractmethod
+    def _make_optimizers(self, lr: float) -> list[torch.optim.Optimizer]:
+        """Fresh optimizers for one call to :meth:`fit`."""
+
+    @abc.abstractmethod
+    def _train_step(self, batch: torch.Tensor, optimizers: list[torch.optim.Optimizer],
+                    generator: torch.Generator) -> dict[str, float]:
+        """One gradient step on a normalised, flattened ``(B, T*M)`` batch; returns the losses to log."""
+
+    @abc.abstractmethod
+    def _hyperparameters(self) -> dict[str, Any]:
+        """Constructor keyword arguments beyond the shapes (JSON-able), saved with the model."""
+
+    def _decoder_input(self, alpha: torch.Tensor) -> torch.Tensor:
+        """What the decoder receives at decoding time for latent actions ``alpha`` (by default ``alpha`` itself)."""
+        return alpha
+
+    # --- decoding ---------------------------------------------------------------------------------------------------
+    @property
+    def decoder(self) -> nn.Module:
+        return self.networks[self.decoder_name]
+
+    def config(self) -> dict[str, Any]:
+        """Constructor arguments that rebuild this model (without the device)."""
+        return {"horizon": self.horizon, "action_dim": self.action_dim, "latent_dim": self.latent_dim,
+                **self._hyperparameters()}
+
+    def decode_torch(self, alpha: torch.Tensor) -> torch.Tensor:
+        """Differentiable decoding of a ``(n, latent_dim)`` tensor into ``(n, T, M)`` raw actions on ``self.device``.
+
+        Uses the decoder in evaluation mode (batch-norm running statistics), so the output is deterministic.
+        """
+        if alpha.ndim != 2 or alpha.shape[1] != self.latent_dim:
+            raise ValueError(f"latent actions must have shape (n, {self.latent_dim}), got {tuple(alpha.shape)}")
+        if not bool(torch.isfinite(alpha).all()):
+            raise ValueError("latent actions contain non-finite values (nan or inf)")
+        self.networks.eval()
+        decoder_input = self._decoder_input(alpha.to(self.device, torch.float32))
+        normalised = self.decoder(decoder_input).view(-1, self.horizon, self.action_dim)
+        return normalised * self.action_std + self.action_mean
+
+    def decode(self, alpha: np.ndarray) -> np.ndarray:
+        """Map latent actions ``(n, latent_dim)`` to float32 trajectories ``(n, T, M)`` in raw action units (CPU)."""
+        alpha = self.check_latent(alpha)
+        with torch.no_grad():
+            return self.decode_torch(torch.as_tensor(alpha)).cpu().numpy().astype(np.float32, copy=False)
+
+    # --- training ---------------------------------------------------------------------------------------------------
+    def fit(self: SelfTorchTrajectoryGenerator, trajectories: np.ndarray, *, epochs: int = EPOCHS,
+            batch_size: int = BATCH_SIZE, lr: float = LEARNING_RATE, seed: int | None = None,
+            validation_fraction: float = 0.1, tensorboard_log: str | None = None, progress_bar: bool = True,
+            device: torch.device | str = "auto", selection_samples: int = SELECTION_SAMPLES,
+            eval_every: int = 10) -> SelfTorchTrajectoryGenerator:
+        """Train from a fresh initialisation drawn from ``seed`` and keep the best checkpoint (paper appendix B).
+
+        Every ``eval_every`` epochs (and after the last one) ``selection_samples`` trajectories generated from a fixed
+        set of prior samples are compared with the held-out trajectories by :func:`selection_mse`; the weights with
+        the lowest error are restored at the end. Without a held-out split the last weights are kept.
+
+        :param trajectories: ``(N, T, M)`` demonstrations in raw action units
+        :param epochs: passes over the training split (paper: 5000)
+        :param batch_size: minibatch size (paper: 256)
+        :param lr: Adam learning rate (paper: 2e-4)
+        :param seed: seed of the split, the initial weights, the minibatches and the latent noise; ``None`` draws one
+        :param validation_fraction: fraction of the trajectories held out for model selection
+        :param tensorboard_log: directory for TensorBoard scalars (``train/*`` per epoch, ``eval/selection_mse``)
+        :param progress_bar: show a tqdm progress bar over epochs
+        :param device: torch device or ``"auto"``
+        :param selection_samples: generated trajectories per model-selection evaluation (paper: 100)
+        :param eval_every: epochs between model-selection evaluations
+        :return: this model, trained; per evaluation ``self.history`` holds the epoch, its mean losses and the
+            selection MSE (in squared raw action units), and ``self.best_epoch`` the restored epoch
+        """
+        data = check_trajectories(trajectories, self.horizon, self.action_dim)
+        for name, value in (("epochs", epochs), ("selection_samples", selection_samples), ("eval_every", eval_every)):
+            if int(value) != value or value < 1:
+                raise ValueError(f"{name} must be a positive integer, got {value!r}")
+        if not lr > 0:
+            raise ValueError(f"lr must be positive, got {lr}")
+        self.seed = int(np.random.default_rng().integers(2**31)) if seed is None else int(seed)
+        rng = np.random.default_rng(self.seed)
+        train, held_out = split_train_validation(data, validation_fraction, rng)
+        minibatch_indices(len(train), batch_size, np.arange(len(train)))  # validates batch_size early
+
+        self._reset(self.seed, device)
+        mean, std = normalisation_statistics(train)
+        self.action_mean = torch.as_tensor(mean, device=self.device)
+        self.action_std = torch.as_tensor(std, device=self.device)
+        train_tensor = ((torch.as_tensor(train, device=self.device) - self.action_mean) / self.action_std).flatten(1)
+        optimizers = self._make_optimizers(lr)
+        noise_generator = torch.Generator().manual_seed(self.seed)
+        selection_latents = self.sample_prior(selection_samples, rng)
+        writer = None
+        if tensorboard_log is not None:
+            from torch.utils.tensorboard import SummaryWriter
+
+            writer = SummaryWriter(log_dir=tensorboard_log)
+
+        self.history, self.best_epoch = [], None
+        best_error, best_state = math.inf, None
+        try:
+            for epoch in tqdm(range(1, epochs + 1), disable=not progress_bar, desc=type(self).__name__, unit="epoch"):
+                losses = self._train_epoch(train_tensor, batch_size, optimizers, rng, noise_generator)
+                if writer is not None:
+                    for name, value in losses.items():
+                        writer.add_scalar(f"train/{name}", value, epoch)
+                if epoch % eval_every != 0 and epoch != epochs:
+                    continue
+                error = selection_mse(self.decode(selection_latents), held_out) if len(held_out) else math.nan
+                self.history.append({"epoch": epoch, **losses, "selection_mse": error})
+                if writer is not None and len(held_out):
+                    writer.add_scalar("eval/selection_mse", error, epoch)
+                if not len(held_out) or error < best_error:
+                    best_error, self.best_epoch = error, epoch
+                    best_state = {key: value.detach().clone() for key, value in self.networks.state_dict().items()}
+        finally:
+            if writer is not None:
+                writer.close()
+        if best_state is not None:
+            self.networks.load_state_dict(best_state)
+        self.networks.eval()
+        return self
+
+    def _reset(self, seed: int, device: torch.device | str) -> None:
+        """Rebuild the networks on ``device`` with initial weights drawn from ``seed`` (global torch RNG untouched)."""
+        self.device = get_device(device)
+        with torch.random.fork_rng(devices=[]):
+            torch.manual_seed(seed)
+            self.networks = self._build_networks().to(self.device)
+
+    def _train_epoch(self, train: torch.Tensor, batch_size: int, optimizers: list[torch.optim.Optimizer],
+                     rng: np.random.Generator, noise_generator: torch.Generator) -> dict[str, float]:
+        """One pass over the shuffled training split; returns the losses averaged over its samples."""
+        self.networks.train()
+        sums: dict[str, float] = defaultdict(float)
+        count = 0
+        for indices in minibatch_indices(len(train), batch_size, rng.permutation(len(train))):
+            batch = train[torch.as_tensor(indices, device=self.device)]
+            for name, value in self._train_step(batch, optimizers, noise_generator).items():
+                sums[name] += value * len(indices)
+            count += len(indices)
+        return {name: total / count for name, total in sums.items()}
+
+    def _noise(self, kind: Prior, shape: tuple[int, ...], generator: torch.Generator) -> torch.Tensor:
+        """Standard normal or U(-1, 1) noise drawn on the CPU from ``generator`` (device-independent), on the device."""
+        if kind == "normal":
+            noise = torch.randn(shape, generator=generator)
+        else:
+            noise = torch.rand(shape, generator=generator) * 2.0 - 1.0
+        return noise.to(self.device)
+
+    # --- saving -----------------------------------------------------------------------------------------------------
+    def state_tensors(self) -> dict[str, torch.Tensor]:
+        """All weights and the normalisation statistics, as CPU tensors."""
+        state = {f"networks.{key}": value.detach().cpu() for key, value in self.networks.state_dict().items()}
+        state["action_mean"] = self.action_mean.detach().cpu()
+        state["action_std"] = self.action_std.detach().cpu()
+        return state
+
+    def load_state_tensors(self, state: dict[str, torch.Tensor]) -> None:
+        """Inverse of :meth:`state_tensors`; raises ``ValueError`` on missing, unexpected or misshaped entries."""
+        state = dict(state)
+        try:
+            mean, std = state.pop("action_mean"), state.pop("action_std")
+        except KeyError as error:
+            raise ValueError(f"missing normalisation statistics {error}") from None
+        if tuple(mean.shape) != (self.action_dim,) or tuple(std.shape) != (self.action_dim,):
+            raise ValueError(f"normalisation statistics must have shape ({self.action_dim},), got "
+                             f"{tuple(mean.shape)} and {tuple(std.shape)}")
+        prefix = "networks."
+        networks_state = {key[len(prefix):]: value for key, value in state.items() if key.startswith(prefix)}
+        if len(networks_state) != len(state):
+            raise ValueError(f"unexpected entries {sorted(set(state) - {prefix + key for key in networks_state})}")
+        try:
+            self.networks.load_state_dict(networks_state)
+        except RuntimeError as error:
+            raise ValueError(f"weights do not match the architecture: {error}") from None
+        self.action_mean = mean.to(self.device, torch.float32)
+        self.action_std = std.to(self.device, torch.float32)
+        self.networks.eval()
+
+    def save(self, path: str) -> None:
+        """Write weights, configuration, normalisation statistics, history and package version to one file."""
+        from sb3_genrl.generative.serialization import save_generator
+
+        save_generator(self, path)

@@ -1,0 +1,103 @@
+"""Train a generator from an array or a demonstration dataset (what ``genrl train-generator`` calls)."""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import numpy as np
+import torch
+
+from sb3_genrl.generative.presets import (
+    BATCH_SIZE,
+    EPOCHS,
+    LEARNING_RATE,
+    PRESETS,
+    SELECTION_SAMPLES,
+    make_generator,
+)
+from sb3_genrl.generative.torch_generator import TorchTrajectoryGenerator
+
+_ARRAY_KEYS = ("actions", "trajectories")
+
+
+def load_trajectories(data: np.ndarray | str | os.PathLike[str]) -> np.ndarray:
+    """Motor trajectories ``(N, T, M)`` from an array, a ``.npy`` / ``.npz`` file or a Minari dataset directory.
+
+    A ``.npz`` file must hold a single array or one named ``actions`` or ``trajectories``; a directory is read with
+    :func:`sb3_genrl.data.load_actions`.
+    """
+    if not isinstance(data, str | os.PathLike):
+        array = np.asarray(data)
+    else:
+        path = os.fspath(data)
+        if os.path.isdir(path):
+            try:
+                from sb3_genrl.data import load_actions
+            except ImportError as error:
+                raise ValueError(f"{path!r} is a directory, but reading Minari datasets needs "
+                                 f"sb3_genrl.data.load_actions ({error})") from None
+            array = np.asarray(load_actions(path))
+        elif not os.path.exists(path):
+            raise FileNotFoundError(f"no dataset at {path!r}")
+        elif path.endswith(".npy"):
+            array = np.load(path, allow_pickle=False)
+        elif path.endswith(".npz"):
+            with np.load(path, allow_pickle=False) as archive:
+                names = list(archive.keys())
+                name = names[0] if len(names) == 1 else next((key for key in _ARRAY_KEYS if key in names), None)
+                if name is None:
+                    raise ValueError(f"{path!r} holds arrays {names}; expected one array or one named {_ARRAY_KEYS}")
+                array = archive[name]
+        else:
+            raise ValueError(f"{path!r} is neither a Minari dataset directory nor a .npy/.npz file")
+    if array.ndim != 3:
+        raise ValueError(f"trajectories must have shape (N, T, M) (N, horizon, action_dim), got {array.shape}")
+    return array
+
+
+def train_generator(data: np.ndarray | str | os.PathLike[str], *, model: str | None = None, preset: str | None = None,
+                    latent_dim: int | None = None, beta: float | None = None, info_weight: float | None = None,
+                    epochs: int = EPOCHS, batch_size: int = BATCH_SIZE, lr: float = LEARNING_RATE, seed: int | None = 0,
+                    validation_fraction: float = 0.1, eval_every: int = 10, selection_samples: int = SELECTION_SAMPLES,
+                    out: str | os.PathLike[str] | None = None, tensorboard_log: str | None = None,
+                    progress_bar: bool = False, device: torch.device | str = "auto") -> TorchTrajectoryGenerator:
+    """Build a generator (by preset or kind), fit it on trajectories and optionally save it.
+
+    The horizon and number of joints are read from the data.
+
+    :param data: ``(N, T, M)`` array, ``.npy`` / ``.npz`` file, or Minari dataset directory
+    :param model: ``"vae"`` or ``"gan"`` (default ``"vae"`` when no preset is given)
+    :param preset: ``"VAE1"``..``"GAN9"`` of paper table 1; explicit hyperparameters must agree with it
+    :param latent_dim: ``N_alpha``
+    :param beta: KL weight (VAE)
+    :param info_weight: ``lambda`` (InfoGAN)
+    :param epochs: training epochs (paper: 5000)
+    :param batch_size: minibatch size (paper: 256)
+    :param lr: Adam learning rate (paper: 2e-4)
+    :param seed: training seed
+    :param validation_fraction: held-out fraction for model selection
+    :param eval_every: epochs between model-selection evaluations
+    :param selection_samples: generated trajectories per evaluation (paper: 100)
+    :param out: file to save the trained generator to (``None``: not saved)
+    :param tensorboard_log: TensorBoard log directory
+    :param progress_bar: show a progress bar
+    :param device: torch device or ``"auto"``
+    :return: the trained generator
+    """
+    if preset is not None:
+        spec: dict[str, Any] = {"preset_or_kind": preset}
+        preset_model = PRESETS.get(preset.upper(), {}).get("model")
+        if model is not None and preset_model is not None and model.lower() != preset_model:
+            raise ValueError(f"preset {preset} is a {preset_model} model, got model={model!r}")
+    else:
+        spec = {"preset_or_kind": model or "vae"}
+    trajectories = load_trajectories(data)
+    generator = make_generator(**spec, horizon=trajectories.shape[1], action_dim=trajectories.shape[2],
+                               latent_dim=latent_dim, beta=beta, info_weight=info_weight, device=device)
+    generator.fit(trajectories, epochs=epochs, batch_size=batch_size, lr=lr, seed=seed,
+                  validation_fraction=validation_fraction, tensorboard_log=tensorboard_log, progress_bar=progress_bar,
+                  device=device, selection_samples=selection_samples, eval_every=eval_every)
+    if out is not None:
+        generator.save(os.fspath(out))
+    return generator

@@ -1,0 +1,86 @@
+"""beta-VAE generator (paper section 5.1.1, eq. 9; architecture in appendix B)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+
+from sb3_genrl.generative.networks import GaussianEncoder, make_decoder
+from sb3_genrl.generative.torch_generator import TorchTrajectoryGenerator
+
+
+def gaussian_kl_to_standard_normal(mean: torch.Tensor, log_std: torch.Tensor) -> torch.Tensor:
+    """``KL(N(mean, exp(log_std)^2) || N(0, I))`` per row, summed over the latent dimensions."""
+    return 0.5 * (mean.pow(2) + torch.exp(2.0 * log_std) - 1.0 - 2.0 * log_std).sum(dim=1)
+
+
+class BetaVAE(TorchTrajectoryGenerator):
+    """beta-VAE over motor trajectories with a standard normal prior ``p(alpha) = N(0, I)``.
+
+    Training minimises the negative of the lower bound of eq. 9, per trajectory and averaged over a minibatch::
+
+        loss = mean_{t, j} (tau_hat[t, j] - tau[t, j])^2 + beta * KL(q(alpha | tau) || N(0, I))
+
+    The reconstruction term is the squared error *averaged* over the ``T * M`` elements of the normalised trajectory
+    (a unit-variance Gaussian likelihood divided by ``T * M``), and the KL term is summed over the ``N_alpha`` latent
+    dimensions. Relative to a summed Gaussian log-likelihood this ``beta`` therefore equals ``beta_summed / (T * M)``.
+    ``alpha`` is drawn with the reparameterisation trick; :meth:`decode` uses the decoder only.
+
+    :param horizon: number of time steps ``T``
+    :param action_dim: number of joints ``M``
+    :param latent_dim: ``N_alpha`` (paper: 2, 3 or 6)
+    :param beta: weight of the KL term (paper: 0.01, 0.005 or 0.001)
+    :param device: torch device or ``"auto"``
+    """
+
+    decoder_name = "decoder"
+
+    def __init__(self, horizon: int, action_dim: int, latent_dim: int, *, beta: float,
+                 device: torch.device | str = "auto") -> None:
+        if not beta >= 0:
+            raise ValueError(f"beta must be non-negative, got {beta}")
+        self.beta = float(beta)
+        super().__init__(horizon=horizon, action_dim=action_dim, latent_dim=latent_dim, prior="normal", device=device)
+
+    def _hyperparameters(self) -> dict[str, Any]:
+        return {"beta": self.beta}
+
+    def _build_networks(self) -> nn.ModuleDict:
+        trajectory_size = self.horizon * self.action_dim
+        return nn.ModuleDict({"encoder": GaussianEncoder(trajectory_size, self.latent_dim),
+                              "decoder": make_decoder(self.latent_dim, trajectory_size)})
+
+    def _make_optimizers(self, lr: float) -> list[torch.optim.Optimizer]:
+        return [torch.optim.Adam(self.networks.parameters(), lr=lr)]
+
+    def encode(self, trajectories: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Mean and log standard deviation of ``q(alpha | tau)`` for raw ``(n, T, M)`` trajectories, float32 (eval mode)."""
+        trajectories = np.asarray(trajectories, dtype=np.float32)
+        if trajectories.ndim != 3 or trajectories.shape[1:] != (self.horizon, self.action_dim):
+            raise ValueError(f"trajectories must have shape (n, {self.horizon}, {self.action_dim}), got {trajectories.shape}")
+        if not np.all(np.isfinite(trajectories)):
+            raise ValueError("trajectories contain non-finite values (nan or inf)")
+        self.networks.eval()
+        with torch.no_grad():
+            normalised = (torch.as_tensor(trajectories, device=self.device) - self.action_mean) / self.action_std
+            mean, log_std = self.networks["encoder"](normalised.flatten(1))
+        return mean.cpu().numpy(), log_std.cpu().numpy()
+
+    def _train_step(self, batch: torch.Tensor, optimizers: list[torch.optim.Optimizer],
+                    generator: torch.Generator) -> dict[str, float]:
+        (optimizer,) = optimizers
+        # Approximate posterior q(alpha | tau) and a reparameterised sample alpha = mean + std * eps.
+        mean, log_std = self.networks["encoder"](batch)
+        alpha = mean + torch.exp(log_std) * self._noise("normal", tuple(mean.shape), generator)
+        reconstruction = self.networks["decoder"](alpha)
+        # Eq. 9: reconstruction error (mean over the T*M elements) + beta * KL to the prior.
+        reconstruction_loss = (reconstruction - batch).pow(2).mean(dim=1).mean()
+        kl = gaussian_kl_to_standard_normal(mean, log_std).mean()
+        loss = reconstruction_loss + self.beta * kl
+        optimizer.zero_grad()
+        loss.backward()
+        optimizer.step()
+        return {"loss": loss.item(), "reconstruction": reconstruction_loss.item(), "kl": kl.item()}

@@ -1,0 +1,402 @@
+"""GenRL: EM policy training in the latent space of a generative model (paper section 4, Algorithm 1)."""
+
+from __future__ import annotations
+
+import copy
+import io
+import os
+import pathlib
+from typing import Any, ClassVar, Literal, TypeVar
+
+import numpy as np
+import torch as th
+from gymnasium import spaces
+from sb3_contrib.common.utils import conjugate_gradient_solver, flat_grad
+from stable_baselines3.common.distributions import Distribution, kl_divergence
+from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
+from stable_baselines3.common.policies import ActorCriticPolicy, BasePolicy
+from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
+from stable_baselines3.common.utils import explained_variance
+from torch.nn import functional as F
+from torch.nn.utils import parameters_to_vector, vector_to_parameters
+
+from sb3_genrl.generative.base import TrajectoryGenerator
+from sb3_genrl.genrl.policies import MlpPolicy, MultiInputPolicy, default_log_std_init
+from sb3_genrl.wrappers import latent_action_env
+
+SelfGenRL = TypeVar("SelfGenRL", bound="GenRL")
+EStep = Literal["trpo", "kl_penalty"]
+
+
+class GenRL(OnPolicyAlgorithm):
+    """GenRL: train ``pi_theta(alpha | s0)`` over a generator's latent space with the paper's EM algorithm.
+
+    Paper: "GenRL" (section 4, Algorithm 1). Equation numbers are those of ``paper/genrl-paper.tex``: eq. 4 the
+    E-step objective (``eq:E_loss``), eq. 5 its TRPO form (``eq:trpo``), eq. 6 the M-step (``eq:M_loss``).
+
+    Each iteration collects ``N = n_steps * n_envs`` one-step episodes
+    (one bandit pull each: context ``s0``, latent action ``alpha ~ pi``, reward ``r`` of the decoded trajectory),
+    computes ``A = r - V(s0)``, runs the E-step (optimise a variational copy ``q_phi`` of the policy with eq. 5
+    while ``pi_theta`` stays fixed), the M-step (``theta <- phi``) and fits ``V`` to ``r``. Episodes last one step,
+    so ``gamma`` and ``gae_lambda`` play no role (both are fixed to 1; SB3's GAE then gives ``A = r - V(s0)``).
+
+    Both ``GenRL(env, generator)`` and ``GenRL("MlpPolicy", env, generator=...)`` work: when the first argument is
+    not a policy (an alias such as ``"MlpPolicy"`` or a policy class), it is taken as the env and the second as the
+    generator. A raw env (or Gymnasium id) is wrapped in :class:`~sb3_genrl.LatentActionWrapper`; a wrapped env
+    (or a VecEnv of wrapped envs) is used as is and provides the generator when none is given.
+
+    Logs (``train/``): ``mean_reward``, ``max_reward`` (of the iteration's N episodes), ``kl`` (achieved
+    ``KL(q || pi)``), ``entropy``, ``std``, ``value_loss``, ``explained_variance``, ``policy_objective`` and, for the
+    TRPO E-step, ``line_search_success``, ``accepted_fraction`` (of the full natural step) and ``step_size``.
+
+    Defaults: the TRPO numerics (``target_kl``, conjugate gradient, line search, critic epochs, value learning rate)
+    are sb3-contrib TRPO's; ``N = 64`` episodes per iteration; the initial policy std equals the prior's std
+    (``log_std_init`` 0 for a normal prior); the paper does not state these values.
+
+    :param policy: the policy (``"MlpPolicy"``, the default, or an ``ActorCriticPolicy`` class), or the env (see above)
+    :param env: the env (raw, wrapped, VecEnv of wrapped envs or Gymnasium id), or the generator (see above)
+    :param generator: the trajectory generator, or the path of a saved one (restored with
+        ``sb3_genrl.generative.load``); default: the wrapped env's
+    :param e_step: ``"trpo"`` (default: a natural-gradient step on eq. 5 with the KL bound ``target_kl`` and a
+        backtracking line search) or ``"kl_penalty"`` (eq. 5 taken literally, ``E[q/pi A] - kl_coef KL(q || pi)``,
+        maximised by Adam for ``n_e_step_epochs`` epochs)
+    :param learning_rate: Adam learning rate of the value function (default 1e-3), can be a schedule
+    :param n_steps: episodes per env per iteration; ``N = n_steps * n_envs`` (default 64)
+    :param batch_size: minibatch size of the value-function fit and of the KL-penalty E-step (default 64)
+    :param n_critic_updates: epochs of the value-function fit per iteration (default 10)
+    :param cg_max_steps: conjugate-gradient iterations of the TRPO E-step (default 15)
+    :param cg_damping: damping added to the Fisher-vector product (default 0.1)
+    :param line_search_shrinking_factor: step shrinking factor of the backtracking line search (default 0.8)
+    :param line_search_max_iter: maximum line-search iterations (default 10)
+    :param target_kl: KL bound ``delta`` of the TRPO E-step, ``KL(q || pi) < delta`` (default 0.01)
+    :param kl_coef: weight of ``KL(q || pi)`` in the KL-penalty E-step (default 1, as in eq. 5)
+    :param n_e_step_epochs: Adam epochs of the KL-penalty E-step (default 10)
+    :param e_step_learning_rate: Adam learning rate of the KL-penalty E-step (default 3e-3)
+    :param normalize_advantage: standardise the advantages of a batch before the E-step (default True)
+    :param latent_clip: action box half-width (prior stds) when wrapping a raw env with a normal-prior generator
+    :param stats_window_size: episodes averaged in the ``rollout/`` logs
+    :param tensorboard_log: TensorBoard log folder (None: no TensorBoard)
+    :param policy_kwargs: extra policy arguments (``net_arch``, ``log_std_init``, ...)
+    :param verbose: 0 no output, 1 info, 2 debug
+    :param seed: seed of the random generators (torch, numpy, env)
+    :param device: torch device ("auto": GPU when available)
+    :param _init_setup_model: build the networks now (``load()`` passes False)
+    """
+
+    policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = {"MlpPolicy": MlpPolicy, "MultiInputPolicy": MultiInputPolicy}
+    policy: ActorCriticPolicy
+
+    def __init__(
+        self,
+        policy: str | type[ActorCriticPolicy] | GymEnv = "MlpPolicy",
+        env: GymEnv | str | TrajectoryGenerator | None = None,
+        generator: TrajectoryGenerator | str | None = None,
+        *,
+        e_step: EStep = "trpo",
+        learning_rate: float | Schedule = 1e-3,
+        n_steps: int = 64,
+        batch_size: int = 64,
+        n_critic_updates: int = 10,
+        cg_max_steps: int = 15,
+        cg_damping: float = 0.1,
+        line_search_shrinking_factor: float = 0.8,
+        line_search_max_iter: int = 10,
+        target_kl: float = 0.01,
+        kl_coef: float = 1.0,
+        n_e_step_epochs: int = 10,
+        e_step_learning_rate: float = 3e-3,
+        normalize_advantage: bool = True,
+        latent_clip: float = 3.0,
+        stats_window_size: int = 100,
+        tensorboard_log: str | None = None,
+        policy_kwargs: dict[str, Any] | None = None,
+        verbose: int = 0,
+        seed: int | None = None,
+        device: th.device | str = "auto",
+        _init_setup_model: bool = True,
+    ) -> None:
+        if not self._is_policy(policy):  # GenRL(env, generator): shift the positional arguments
+            if generator is not None:
+                raise TypeError("GenRL(env, generator, generator=...) got the generator twice")
+            policy, env, generator = "MlpPolicy", policy, env  # type: ignore[assignment]
+        if e_step not in ("trpo", "kl_penalty"):
+            raise ValueError(f"e_step must be 'trpo' or 'kl_penalty', got {e_step!r}")
+        self.generator_path: str | None = None
+        if isinstance(generator, str | os.PathLike):
+            self.generator_path = os.path.abspath(generator)
+            generator = _load_generator(self.generator_path)
+        env, self.generator = latent_action_env(env, generator, latent_clip=latent_clip)  # type: ignore[arg-type]
+        policy_kwargs = dict(policy_kwargs or {})
+        if self.generator is not None:
+            policy_kwargs.setdefault("log_std_init", default_log_std_init(self.generator.prior))
+
+        super().__init__(
+            policy,  # type: ignore[arg-type]
+            env,  # type: ignore[arg-type]
+            learning_rate=learning_rate,
+            n_steps=n_steps,
+            gamma=1.0,  # one-step episodes: no discounting
+            gae_lambda=1.0,
+            ent_coef=0.0,
+            vf_coef=0.0,  # the value function is fitted separately (Algorithm 1, last line)
+            max_grad_norm=0.0,
+            use_sde=False,
+            sde_sample_freq=-1,
+            stats_window_size=stats_window_size,
+            tensorboard_log=tensorboard_log,
+            policy_kwargs=policy_kwargs,
+            verbose=verbose,
+            seed=seed,
+            device=device,
+            _init_setup_model=False,
+            supported_action_spaces=(spaces.Box,),
+        )
+        if normalize_advantage and self.env is not None and self.n_steps * self.env.num_envs < 2:
+            raise ValueError(f"normalize_advantage needs n_steps * n_envs >= 2 episodes, got {self.n_steps * self.n_envs}")
+        self.e_step = e_step
+        self.batch_size = batch_size
+        self.n_critic_updates = n_critic_updates
+        self.cg_max_steps = cg_max_steps
+        self.cg_damping = cg_damping
+        self.line_search_shrinking_factor = line_search_shrinking_factor
+        self.line_search_max_iter = line_search_max_iter
+        self.target_kl = target_kl
+        self.kl_coef = kl_coef
+        self.n_e_step_epochs = n_e_step_epochs
+        self.e_step_learning_rate = e_step_learning_rate
+        self.normalize_advantage = normalize_advantage
+        self.latent_clip = latent_clip
+
+        if _init_setup_model:
+            self._setup_model()
+
+    @classmethod
+    def _is_policy(cls, policy: Any) -> bool:
+        """Whether ``policy`` names a policy (an alias or a policy class) rather than an env."""
+        if isinstance(policy, str):
+            return policy in cls.policy_aliases
+        return isinstance(policy, type) and issubclass(policy, BasePolicy)
+
+    def train(self) -> None:
+        """One EM iteration (Algorithm 1) on the N episodes in the rollout buffer."""
+        self.policy.set_training_mode(True)
+        self._update_learning_rate(self.policy.optimizer)
+
+        # One episode per bandit pull (section 4): the buffer holds {s_i, alpha_i, r_i}, i = 1..N, with
+        # alpha_i ~ pi_theta(.|s_i). Each episode ends after one step, so returns = r_i and A_i = r_i - V(s_i).
+        data = next(self.rollout_buffer.get(batch_size=None))
+        observations, actions, log_prob_pi = data.observations, data.actions, data.old_log_prob
+        advantages = data.advantages
+        if self.normalize_advantage:
+            advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
+
+        # E-step (eq. 4-5): the variational policy q_phi starts as a copy of pi_theta (phi <- theta) and is
+        # optimised on E_{alpha ~ pi}[q/pi A] - KL(q || pi) while pi_theta stays fixed.
+        variational_policy = copy.deepcopy(self.policy)
+        if self.e_step == "trpo":
+            stats = self._trpo_e_step(variational_policy, observations, actions, log_prob_pi, advantages)
+        else:
+            stats = self._kl_penalty_e_step(variational_policy, observations, actions, log_prob_pi, advantages)
+        with th.no_grad():
+            q_distribution = variational_policy.get_distribution(observations)
+            stats["kl"] = kl_divergence(q_distribution, self._pi(observations)).mean().item()  # achieved KL(q || pi)
+
+        # M-step (eq. 6): q and pi share one architecture, so argmin_theta KL(q || pi_theta) is theta <- phi.
+        self.policy.load_state_dict(variational_policy.state_dict())
+
+        # Value function (Algorithm 1, last line): V = argmin_V' sum_i (V'(s_i) - r_i)^2, by Adam on minibatches.
+        value_losses = self._fit_value_function()
+
+        self._n_updates += 1
+        rewards, entropy = self.rollout_buffer.rewards, self._pi(observations).entropy()
+        self.logger.record("train/mean_reward", float(np.mean(rewards)))
+        self.logger.record("train/max_reward", float(np.max(rewards)))
+        for key, value in stats.items():
+            self.logger.record(f"train/{key}", value)
+        self.logger.record("train/entropy", entropy.mean().item())  # type: ignore[union-attr]
+        self.logger.record("train/value_loss", float(np.mean(value_losses)))
+        values, returns = self.rollout_buffer.values.flatten(), self.rollout_buffer.returns.flatten()
+        self.logger.record("train/explained_variance", float(explained_variance(values, returns)))
+        self.logger.record("train/std", th.exp(self.policy.log_std).mean().item())
+        self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
+
+    def _pi(self, observations: th.Tensor) -> Distribution:
+        """The fixed policy pi_theta(.|s) (no gradient)."""
+        with th.no_grad():
+            return self.policy.get_distribution(observations)
+
+    def _surrogate(
+        self, q: ActorCriticPolicy, observations: th.Tensor, actions: th.Tensor, log_prob_pi: th.Tensor, advantages: th.Tensor
+    ) -> tuple[th.Tensor, th.Tensor]:
+        """Eq. 5's terms: E_{alpha ~ pi}[q(alpha|s) / pi(alpha|s) A(s, alpha)] and E_s[KL(q(.|s) || pi(.|s))]."""
+        q_distribution = q.get_distribution(observations)
+        ratio = th.exp(q_distribution.log_prob(actions) - log_prob_pi)
+        return (ratio * advantages).mean(), kl_divergence(q_distribution, self._pi(observations)).mean()
+
+    def _trpo_e_step(self, q: ActorCriticPolicy, *batch: th.Tensor) -> dict[str, float]:
+        """E-step, TRPO variant: maximise eq. 5's surrogate subject to KL(q || pi) < target_kl (Schulman et al. 2015)."""
+        objective, kl = self._surrogate(q, *batch)
+        # Actor parameters of q: those the KL depends on (the value head is not part of q(alpha|s)).
+        named = [p for name, p in q.named_parameters() if "value" not in name]
+        grads_kl = th.autograd.grad(kl, named, create_graph=True, allow_unused=True)
+        params = [p for p, g in zip(named, grads_kl, strict=True) if g is not None]
+        grad_kl = th.cat([g.reshape(-1) for g in grads_kl if g is not None])
+        grad_objective = flat_grad(objective, params, retain_graph=True)
+
+        def fisher_vector_product(vector: th.Tensor, retain_graph: bool = True) -> th.Tensor:
+            return flat_grad((grad_kl * vector).sum(), params, retain_graph=retain_graph) + self.cg_damping * vector
+
+        # Natural-gradient direction F^-1 g (conjugate gradient), scaled so that the quadratic KL model equals target_kl.
+        direction = conjugate_gradient_solver(fisher_vector_product, grad_objective, max_iter=self.cg_max_steps)
+        curvature = float(th.dot(direction, fisher_vector_product(direction, retain_graph=False)))
+        max_step = float(np.sqrt(2 * self.target_kl / max(curvature, 1e-12)))
+
+        # Backtracking line search: accept the first step that improves the surrogate within the KL bound.
+        phi_0 = parameters_to_vector(params).detach().clone()
+        fraction, success = 1.0, False
+        with th.no_grad():
+            for _ in range(self.line_search_max_iter):
+                vector_to_parameters(phi_0 + fraction * max_step * direction, params)
+                new_objective, new_kl = self._surrogate(q, *batch)
+                if new_kl < self.target_kl and new_objective > objective:
+                    success = True
+                    break
+                fraction *= self.line_search_shrinking_factor
+            if not success:  # no acceptable step: q stays equal to pi
+                vector_to_parameters(phi_0, params)
+                new_objective, fraction = objective, 0.0
+        return {
+            "policy_objective": float(new_objective),
+            "line_search_success": float(success),
+            "accepted_fraction": fraction,
+            "step_size": fraction * max_step,
+        }
+
+    def _kl_penalty_e_step(self, q: ActorCriticPolicy, *batch: th.Tensor) -> dict[str, float]:
+        """E-step, KL-penalty variant: eq. 5 taken literally, E[q/pi A] - kl_coef KL(q || pi), by Adam."""
+        params = [p for name, p in q.named_parameters() if "value" not in name]
+        optimizer = th.optim.Adam(params, lr=self.e_step_learning_rate)
+        n = len(batch[0])
+        for _ in range(self.n_e_step_epochs):
+            permutation = th.randperm(n, device=self.device)
+            for start in range(0, n, self.batch_size):
+                indices = permutation[start : start + self.batch_size]
+                objective, kl = self._surrogate(q, *(tensor[indices] for tensor in batch))
+                optimizer.zero_grad()
+                (-(objective - self.kl_coef * kl)).backward()
+                optimizer.step()
+        with th.no_grad():
+            objective, kl = self._surrogate(q, *batch)
+        return {"policy_objective": float(objective - self.kl_coef * kl)}
+
+    def _fit_value_function(self) -> list[float]:
+        actor_params = [p for name, p in self.policy.named_parameters() if "value" not in name]
+        losses = []
+        for _ in range(self.n_critic_updates):
+            for rollout_data in self.rollout_buffer.get(self.batch_size):
+                value_loss = F.mse_loss(self.policy.predict_values(rollout_data.observations).flatten(), rollout_data.returns)
+                self.policy.optimizer.zero_grad()
+                value_loss.backward()
+                for param in actor_params:  # shared parameters stay those of the M-step
+                    param.grad = None
+                self.policy.optimizer.step()
+                losses.append(value_loss.item())
+        return losses
+
+    def predict_trajectory(self, observation: np.ndarray, deterministic: bool = True) -> np.ndarray:
+        """The trajectory ``g(alpha)`` for the policy's latent action given a context: ``(T, M)``, or ``(n, T, M)``."""
+        if self.generator is None:
+            raise ValueError("this GenRL model has no generator: pass generator= to GenRL.load()")
+        alpha, _ = self.predict(observation, deterministic=deterministic)
+        single = alpha.ndim == 1
+        trajectories = self.generator.decode(self.generator.check_latent(alpha))
+        return np.asarray(trajectories[0] if single else trajectories)
+
+    def set_env(self, env: GymEnv, force_reset: bool = True) -> None:
+        """Like SB3's ``set_env``; a raw env is wrapped with this model's generator first."""
+        env, _ = latent_action_env(env, self.generator, latent_clip=self.latent_clip)
+        super().set_env(env, force_reset=force_reset)  # type: ignore[arg-type]
+
+    def _excluded_save_params(self) -> list[str]:
+        return [*super()._excluded_save_params(), "generator"]
+
+    def save(self, path: str | pathlib.Path | io.BufferedIOBase, exclude: Any = None, include: Any = None) -> None:
+        """Save like SB3. An in-memory generator (no known path) is also saved as ``<name>.generator.pt`` beside it."""
+        if self.generator_path is None and self.generator is not None and isinstance(path, str | pathlib.Path):
+            try:
+                self.generator.save(str(_generator_file(path)))
+            except NotImplementedError:
+                pass  # a generator that cannot be saved: GenRL.load then needs generator=
+        super().save(path, exclude=exclude, include=include)
+
+    @classmethod
+    def load(  # type: ignore[override]
+        cls: type[SelfGenRL],
+        path: str | pathlib.Path | io.BufferedIOBase,
+        env: GymEnv | None = None,
+        device: th.device | str = "auto",
+        custom_objects: dict[str, Any] | None = None,
+        print_system_info: bool = False,
+        force_reset: bool = True,
+        *,
+        generator: TrajectoryGenerator | str | None = None,
+        **kwargs: Any,
+    ) -> SelfGenRL:
+        """Load like SB3. The generator is ``generator`` when given, else the saved path or ``<name>.generator.pt``.
+
+        Without any generator the model still predicts latent actions; ``predict_trajectory`` then raises.
+        """
+        from stable_baselines3.common.save_util import load_from_zip_file
+
+        data, _, _ = load_from_zip_file(path, device=device, custom_objects=custom_objects, load_data=True)
+        data = data or {}
+        if isinstance(path, io.BufferedIOBase):
+            path.seek(0)
+        generator_path = os.path.abspath(generator) if isinstance(generator, str | os.PathLike) else None
+        if generator is None:  # the saved generator path, else the file saved beside the model
+            candidates = [data.get("generator_path")]
+            candidates += [_generator_file(path)] if isinstance(path, str | pathlib.Path) else []
+            generator_path = next((str(p) for p in candidates if p is not None and os.path.isfile(p)), None)
+        if generator_path is not None:
+            generator = _load_generator(generator_path)
+        if env is not None:  # a raw env is wrapped as at training time
+            latent_clip = kwargs.get("latent_clip", data.get("latent_clip", 3.0))
+            env, generator = latent_action_env(env, generator, latent_clip=latent_clip)  # type: ignore[arg-type]
+        model = super().load(path, env, device, custom_objects, print_system_info, force_reset, **kwargs)
+        model.generator = generator  # type: ignore[assignment]
+        if isinstance(generator, TrajectoryGenerator) and generator_path is not None and model.generator_path is None:
+            model.generator_path = generator_path
+        return model
+
+    def learn(
+        self: SelfGenRL,
+        total_timesteps: int,
+        callback: MaybeCallback = None,
+        log_interval: int = 1,
+        tb_log_name: str = "GenRL",
+        reset_num_timesteps: bool = True,
+        progress_bar: bool = False,
+    ) -> SelfGenRL:
+        """Train for ``total_timesteps`` episodes (one step = one episode = one trajectory played)."""
+        return super().learn(
+            total_timesteps=total_timesteps,
+            callback=callback,
+            log_interval=log_interval,
+            tb_log_name=tb_log_name,
+            reset_num_timesteps=reset_num_timesteps,
+            progress_bar=progress_bar,
+        )
+
+
+def _generator_file(path: str | pathlib.Path) -> pathlib.Path:
+    """``dir/model.zip`` -> ``dir/model.generator.pt``."""
+    path = pathlib.Path(path)
+    if path.suffix == ".zip":
+        path = path.with_suffix("")
+    return path.with_name(path.name + ".generator.pt")
+
+
+def _load_generator(path: str) -> TrajectoryGenerator:
+    from sb3_genrl.generative import load  # imported lazily: the model classes are only needed here
+
+    return load(path)

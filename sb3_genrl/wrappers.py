@@ -1,0 +1,275 @@
+"""The latent-action wrapper: an episodic task seen as a one-step contextual bandit (paper section 4).
+
+The paper replaces the task's MDP by one whose action is the latent action ``alpha`` of a generative model and
+whose horizon is one: observe the context ``s0`` (e.g. the goal), choose ``alpha``, decode it into a whole
+open-loop trajectory ``tau = g(alpha)``, play ``tau`` and receive the terminal reward ``r(s0, tau)``.
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Callable
+from typing import Any, Literal
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from stable_baselines3.common.vec_env import VecEnv
+
+from sb3_genrl.generative.base import TrajectoryGenerator
+
+RewardMode = Literal["last", "sum"]
+
+
+class LatentActionWrapper(gym.Env):
+    """Turn an episodic Gymnasium env with per-step actions into a one-step bandit over a generator's latent space.
+
+    ``reset()`` resets the wrapped env and observes the task context. ``step(alpha)`` decodes ``alpha`` into a
+    ``(horizon, action_dim)`` trajectory, plays it and ends the episode (``terminated=True``, ``truncated=False``):
+    one episode is one bandit pull. When ``env.unwrapped`` has ``play_trajectories(trajectories, goals)`` and
+    ``get_context()`` (the GenRL tasks), the trajectory is played through that fast open-loop path for the
+    current goal; otherwise it is played step by step through ``env`` and, if the episode has not ended when the
+    trajectory does, the arm holds still (``hold_action``) until it ends or for at most ``max_hold_steps`` steps.
+
+    Observation: the task context. For envs with ``get_context()`` and ``context_space`` the goal; with a
+    ``context`` callable ``context(reset_obs)`` (and its ``context_space``); otherwise the reset observation.
+
+    Action: the latent action, ``Box(-1, 1)`` for a uniform prior and ``Box(-latent_clip, latent_clip)`` for a
+    normal prior (``+-3`` standard deviations by default). Actions outside the box are clipped, and the clip is
+    reported in ``info["latent_clipped"]``.
+
+    ``info`` after ``step``: the task's own trajectory summary (e.g. ``table_contacts``, ``reached``,
+    ``unstable`` for the GenRL tasks) plus ``reward``, ``steps_played`` (trajectory steps played),
+    ``hold_steps``, ``ended`` (whether the wrapped episode ended), ``latent_clipped`` and ``fast_path``.
+
+    :param env: the episodic task; its per-step action shape must be ``(generator.action_dim,)``
+    :param generator: the trajectory generator (see :class:`~sb3_genrl.generative.TrajectoryGenerator`)
+    :param context: ``None`` (the task's ``get_context()`` or the reset observation) or a callable mapping the
+        reset observation to the context array; a callable needs ``context_space``
+    :param context_space: the observation space of the ``context`` callable's output
+    :param reward: ``"last"`` (the reward of the last step played, the terminal reward; default) or ``"sum"``
+        (the sum of the rewards over the steps played, holding included)
+    :param latent_clip: half-width of the action box for a normal prior, in prior standard deviations (default 3)
+    :param hold_action: the per-step action played after the trajectory (step-by-step path); default zeros
+    :param max_hold_steps: at most this many hold steps after the trajectory (step-by-step path; default 1000)
+    :param use_fast_path: ``None`` (default): use ``play_trajectories`` when the task has it; ``False``: always
+        play step by step; ``True``: require the fast path
+    """
+
+    metadata: dict[str, Any] = {"render_modes": []}
+
+    def __init__(
+        self,
+        env: gym.Env,
+        generator: TrajectoryGenerator,
+        *,
+        context: Callable[[Any], np.ndarray] | None = None,
+        context_space: spaces.Space | None = None,
+        reward: RewardMode = "last",
+        latent_clip: float = 3.0,
+        hold_action: np.ndarray | None = None,
+        max_hold_steps: int = 1000,
+        use_fast_path: bool | None = None,
+    ) -> None:
+        if not isinstance(env, gym.Env):
+            raise TypeError(f"env must be a gymnasium.Env, got {type(env).__name__}")
+        if not isinstance(generator, TrajectoryGenerator):
+            raise TypeError(f"generator must be a TrajectoryGenerator, got {type(generator).__name__}")
+        if reward not in ("last", "sum"):
+            raise ValueError(f"reward must be 'last' or 'sum', got {reward!r}")
+        if not latent_clip > 0:
+            raise ValueError(f"latent_clip must be positive, got {latent_clip!r}")
+        if int(max_hold_steps) != max_hold_steps or max_hold_steps < 0:
+            raise ValueError(f"max_hold_steps must be a non-negative integer, got {max_hold_steps!r}")
+        self.env = env
+        self.generator = generator
+        self.reward_mode: RewardMode = reward
+        self.latent_clip = float(latent_clip)
+        self.max_hold_steps = int(max_hold_steps)
+
+        # Per-step actions: the generator's (T, M) trajectory is played one row (M numbers) per step.
+        step_shape = (generator.action_dim,)
+        env_shape = getattr(env.action_space, "shape", None)
+        if not isinstance(env.action_space, spaces.Box) or env_shape != step_shape:
+            raise ValueError(
+                f"generator trajectories of shape (T, M) = ({generator.horizon}, {generator.action_dim}) give per-step "
+                f"actions of shape {step_shape}, but the env's action space is {env.action_space} with shape {env_shape}"
+            )
+        hold = np.zeros(step_shape, dtype=env.action_space.dtype) if hold_action is None else np.asarray(hold_action)
+        if hold.shape != step_shape:
+            raise ValueError(f"hold_action must have the env's action shape {step_shape}, got {hold.shape}")
+        self.hold_action = hold.astype(env.action_space.dtype)
+
+        # The fast open-loop path of the GenRL tasks (one MuJoCo rollout for the whole trajectory).
+        task = env.unwrapped
+        has_fast_path = hasattr(task, "play_trajectories") and hasattr(task, "get_context")
+        if use_fast_path and not has_fast_path:
+            raise ValueError(f"use_fast_path=True but {type(task).__name__} has no play_trajectories()/get_context()")
+        self.use_fast_path = has_fast_path if use_fast_path is None else bool(use_fast_path)
+
+        # Observation: the task context s0.
+        if context is not None:
+            if not callable(context) or context_space is None:
+                raise ValueError("context must be a callable context(reset_obs) -> array, given with context_space")
+            self._context_source: Callable[[Any], Any] | str = context
+            self.observation_space = context_space
+        elif hasattr(task, "get_context") and hasattr(task, "context_space"):
+            self._context_source = "task"
+            self.observation_space = task.context_space
+        else:
+            if context_space is not None:
+                raise ValueError("context_space is only used together with a context callable")
+            self._context_source = "observation"
+            self.observation_space = env.observation_space
+
+        # Action: the latent action alpha, boxed to the prior's support (uniform) or +-latent_clip sigma (normal).
+        bound = 1.0 if generator.prior == "uniform" else self.latent_clip
+        self.action_space = spaces.Box(-bound, bound, shape=(generator.latent_dim,), dtype=np.float32)
+        self._needs_reset = True
+
+    def _observe(self, obs: Any) -> Any:
+        if self._context_source == "task":
+            context = self.env.unwrapped.get_context()
+        elif self._context_source == "observation":
+            context = obs
+        else:
+            context = self._context_source(obs)  # type: ignore[operator]
+        if isinstance(self.observation_space, spaces.Box):
+            context = np.array(context, dtype=self.observation_space.dtype).reshape(self.observation_space.shape)
+        return context
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+        """Reset the wrapped task (``options``, e.g. ``{"goal": xy}``, are passed on) and observe its context."""
+        super().reset(seed=seed)
+        obs, info = self.env.reset(seed=seed, options=options)
+        self._context = self._observe(obs)
+        self._needs_reset = False
+        return copy.deepcopy(self._context), dict(info)
+
+    def check_action(self, alpha: np.ndarray) -> tuple[np.ndarray, bool]:
+        """Return ``alpha`` as a finite ``(latent_dim,)`` array clipped to the action box, and whether it was clipped."""
+        alpha = np.asarray(alpha, dtype=np.float32)
+        if alpha.shape != self.action_space.shape:
+            raise ValueError(f"latent action must have shape {self.action_space.shape}, got {alpha.shape}")
+        if not np.all(np.isfinite(alpha)):
+            raise ValueError(f"latent action contains non-finite values (nan or inf): {alpha}")
+        clipped = np.clip(alpha, self.action_space.low, self.action_space.high)
+        return clipped, bool(np.any(clipped != alpha))
+
+    def trajectory(self, alpha: np.ndarray) -> np.ndarray:
+        """Decode one latent action (clipped to the action box) into its ``(horizon, action_dim)`` trajectory."""
+        alpha, _ = self.check_action(alpha)
+        return self._decode(alpha[None])[0]
+
+    def _decode(self, alphas: np.ndarray) -> np.ndarray:
+        g = self.generator
+        trajectories = np.asarray(g.decode(g.check_latent(alphas)))
+        expected = (len(alphas), g.horizon, g.action_dim)
+        if trajectories.shape != expected:
+            raise ValueError(f"generator.decode returned shape {trajectories.shape}, expected {expected}")
+        return trajectories
+
+    def step(self, action: np.ndarray) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        """Decode ``action`` (the latent action), play the whole trajectory and end the episode."""
+        if self._needs_reset:
+            raise RuntimeError("LatentActionWrapper: call reset() before step(); each episode is a single step")
+        alpha, latent_clipped = self.check_action(action)
+        tau = self._decode(alpha[None])[0]
+        if self.use_fast_path:
+            info = self._play_fast(tau)
+        else:
+            info = self._play_steps(tau)
+        info["latent_clipped"] = latent_clipped
+        self._needs_reset = True
+        return copy.deepcopy(self._context), info["reward"], True, False, info
+
+    def _play_fast(self, tau: np.ndarray) -> dict[str, Any]:
+        task = self.env.unwrapped
+        goal = np.asarray(task.get_context(), dtype=np.float64)
+        rewards, infos = task.play_trajectories(tau[None], goal[None])
+        info = dict(infos[0])
+        info.update(reward=float(rewards[0]), steps_played=len(tau), hold_steps=0, ended=True, fast_path=True)
+        return info
+
+    def _play_steps(self, tau: np.ndarray) -> dict[str, Any]:
+        rewards: list[float] = []
+        info: dict[str, Any] = {}
+        ended = False
+        steps_played = hold_steps = 0
+        for u in tau:
+            _, r, terminated, truncated, info = self.env.step(u.astype(self.env.action_space.dtype))
+            rewards.append(float(r))
+            steps_played += 1
+            if terminated or truncated:
+                ended = True
+                break
+        while not ended and hold_steps < self.max_hold_steps:  # hold still until the task ends
+            _, r, terminated, truncated, info = self.env.step(self.hold_action.copy())
+            rewards.append(float(r))
+            hold_steps += 1
+            ended = bool(terminated or truncated)
+        reward = rewards[-1] if self.reward_mode == "last" else float(np.sum(rewards))
+        info = dict(info)
+        info.update(reward=float(reward), steps_played=steps_played, hold_steps=hold_steps, ended=ended, fast_path=False)
+        return info
+
+    def play_batch(self, alphas: np.ndarray, goals: np.ndarray, *, n_threads: int = 1) -> tuple[np.ndarray, list[dict]]:
+        """Play many latent actions ``(B, latent_dim)`` for goals ``(B, goal_dim)`` through the task's fast path.
+
+        Does not touch the current episode. Returns the ``(B,)`` terminal rewards and one info dict per trajectory.
+        Needs a task with ``play_trajectories`` (raises ``ValueError`` otherwise); actions are clipped to the box.
+        """
+        task = self.env.unwrapped
+        if not hasattr(task, "play_trajectories"):
+            raise ValueError(f"{type(task).__name__} has no play_trajectories(); play_batch needs the fast path")
+        alphas = self.generator.check_latent(alphas)
+        goals = np.asarray(goals, dtype=np.float64)
+        if goals.ndim != 2 or len(goals) != len(alphas):
+            raise ValueError(f"goals must have shape ({len(alphas)}, goal_dim), got {goals.shape}")
+        alphas = np.clip(alphas, self.action_space.low, self.action_space.high)
+        rewards, infos = task.play_trajectories(self._decode(alphas), goals, n_threads=n_threads)
+        return np.asarray(rewards, dtype=np.float64), list(infos)
+
+    def render(self) -> Any:
+        return self.env.render()
+
+    def close(self) -> None:
+        self.env.close()
+
+
+def latent_action_env(
+    env: gym.Env | VecEnv | str | None, generator: TrajectoryGenerator | None, *, latent_clip: float = 3.0
+) -> tuple[gym.Env | VecEnv | None, TrajectoryGenerator | None]:
+    """Return ``(env, generator)`` with ``env`` a latent-action env (used by GenRL for what users pass it).
+
+    A raw env (or Gymnasium id) is wrapped in :class:`LatentActionWrapper`; an env that already is one (possibly
+    inside further wrappers), or a VecEnv of such envs, is returned as is, with its generator when none is given.
+    ``None`` stays ``None``. Raises ``ValueError`` for a raw env without generator, a VecEnv of raw envs, or a
+    generator whose shapes differ from the wrapped env's.
+    """
+    if generator is not None and not isinstance(generator, TrajectoryGenerator):
+        raise TypeError(f"generator must be a TrajectoryGenerator or a file path, got {type(generator).__name__}")
+    if env is None:
+        return None, generator
+    if isinstance(env, str):
+        env = gym.make(env)
+    if isinstance(env, VecEnv):
+        try:
+            env_generator = env.get_attr("generator", indices=[0])[0]
+        except AttributeError as error:
+            raise ValueError("a VecEnv must hold LatentActionWrapper envs; wrap each env before vectorising") from error
+    elif isinstance(env.unwrapped, LatentActionWrapper):
+        env_generator = env.unwrapped.generator
+    else:
+        if generator is None:
+            raise ValueError(f"a generator is needed to wrap {env} (or pass an env already wrapped in LatentActionWrapper)")
+        return LatentActionWrapper(env, generator, latent_clip=latent_clip), generator
+    if not isinstance(env_generator, TrajectoryGenerator):
+        raise ValueError("the env's generator attribute is not a TrajectoryGenerator")
+    if generator is not None and generator is not env_generator:
+        shapes = [(g.latent_dim, g.horizon, g.action_dim) for g in (generator, env_generator)]
+        if shapes[0] != shapes[1]:
+            raise ValueError(f"generator (latent_dim, T, M) = {shapes[0]} differs from the wrapped env's {shapes[1]}")
+    return env, generator if generator is not None else env_generator
+
+

@@ -1,0 +1,295 @@
+"""Tests of sb3_genrl.generative: training on a synthetic two-factor family, save/load, validation, presets, CLI."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+import sb3_genrl
+from sb3_genrl.cli import main as cli_main
+from sb3_genrl.generative import (
+    PRESETS,
+    BetaVAE,
+    InfoGAN,
+    TrajectoryGenerator,
+    load,
+    load_trajectories,
+    make_generator,
+    train_generator,
+)
+from sb3_genrl.generative.common import normalisation_statistics, selection_mse, split_train_validation
+from sb3_genrl.generative.synthetic import sine_ramp_basis, sine_ramp_trajectories
+
+HORIZON, ACTION_DIM = 20, 3
+EPOCHS = 30
+
+
+@pytest.fixture(scope="module", autouse=True)
+def single_torch_thread():
+    # Small networks train faster on one thread, and the tests then share a busy machine gracefully.
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+@pytest.fixture(scope="module")
+def family() -> tuple[np.ndarray, np.ndarray]:
+    train, _ = sine_ramp_trajectories(2000, HORIZON, ACTION_DIM, rng=0)
+    test, _ = sine_ramp_trajectories(200, HORIZON, ACTION_DIM, rng=1)
+    return train, test
+
+
+@pytest.fixture(scope="module")
+def vae(family) -> BetaVAE:
+    return BetaVAE(HORIZON, ACTION_DIM, 2, beta=0.01, device="cpu").fit(family[0], epochs=EPOCHS, seed=0,
+                                                                         progress_bar=False, eval_every=5)
+
+
+@pytest.fixture(scope="module")
+def gan(family) -> InfoGAN:
+    return InfoGAN(HORIZON, ACTION_DIM, 2, info_weight=1.5, device="cpu").fit(family[0], epochs=EPOCHS, seed=0,
+                                                                               progress_bar=False, eval_every=5)
+
+
+def family_residual(trajectories: np.ndarray) -> np.ndarray:
+    """Mean squared residual of each trajectory after a least-squares fit of the family's two factors (a, b)."""
+    sine, ramp = sine_ramp_basis(HORIZON, ACTION_DIM)
+    basis = np.stack([sine.ravel(), ramp.ravel()], axis=1)
+    flat = trajectories.reshape(len(trajectories), -1).T.astype(np.float64)
+    coefficients, *_ = np.linalg.lstsq(basis, flat, rcond=None)
+    return ((flat - basis @ coefficients) ** 2).mean(axis=0)
+
+
+def test_synthetic_family_has_two_factors():
+    trajectories, factors = sine_ramp_trajectories(5, HORIZON, ACTION_DIM, rng=3)
+    assert family_residual(trajectories).max() < 1e-10
+    t, j = 7, 2
+    expected = factors[:, 0] * np.sin(2 * np.pi * t / HORIZON + 2 * np.pi * j / ACTION_DIM) + factors[:, 1] * t / HORIZON
+    np.testing.assert_allclose(trajectories[:, t, j], expected, rtol=1e-5)
+
+
+def test_vae_reconstructs_held_out_and_samples_stay_in_family(vae, family):
+    _, test = family
+    variance = test.var()
+    mean, log_std = vae.encode(test)
+    assert mean.shape == log_std.shape == (len(test), 2)
+    reconstruction = vae.decode(mean)
+    assert reconstruction.dtype == np.float32 and reconstruction.shape == test.shape
+    assert np.mean((reconstruction - test) ** 2) / variance < 0.1
+    samples = vae.decode(vae.sample_prior(300, rng=0))
+    assert family_residual(samples).mean() / variance < 0.05
+    # samples are spread over the family, not one trajectory
+    assert samples.reshape(300, -1).std(axis=0).mean() > 0.3 * test.reshape(len(test), -1).std(axis=0).mean()
+
+
+def test_vae_history_and_model_selection(vae, family):
+    assert [entry["epoch"] for entry in vae.history] == list(range(5, EPOCHS + 1, 5))
+    assert {"loss", "reconstruction", "kl", "selection_mse"} <= set(vae.history[0])
+    best = min(vae.history, key=lambda entry: entry["selection_mse"])
+    assert vae.best_epoch == best["epoch"]
+    # loss = reconstruction + beta * KL (eq. 9), per epoch average
+    entry = vae.history[-1]
+    assert entry["loss"] == pytest.approx(entry["reconstruction"] + 0.01 * entry["kl"], rel=1e-4)
+    assert vae.history[-1]["reconstruction"] < vae.history[0]["reconstruction"]
+
+
+def test_infogan_trains_without_collapse(gan, family):
+    train, _ = family
+    samples = gan.decode(gan.sample_prior(500, rng=0))
+    assert np.all(np.isfinite(samples))
+    data_std = train.reshape(len(train), -1).std(axis=0)
+    moving = data_std > 1e-3  # e.g. joint 0 at t = 0 is 0 in every trajectory
+    ratio = samples.reshape(500, -1).std(axis=0)[moving] / data_std[moving]
+    assert np.median(ratio) > 0.3
+    assert {"discriminator", "generator", "info", "selection_mse"} <= set(gan.history[-1])
+
+
+def test_decode_is_deterministic_and_matches_decode_torch(vae, gan):
+    for model in (vae, gan):
+        alpha = model.sample_prior(16, rng=5)
+        first, second = model.decode(alpha), model.decode(alpha)
+        np.testing.assert_array_equal(first, second)
+        # eval-mode batch norm: a trajectory does not depend on the rest of the batch (up to float32 kernel rounding)
+        np.testing.assert_allclose(model.decode(alpha[:1]), first[:1], atol=1e-5)
+        with torch.no_grad():
+            np.testing.assert_allclose(model.decode_torch(torch.as_tensor(alpha)).numpy(), first, rtol=1e-6)
+        assert model.decode(alpha[0]).shape == (1, HORIZON, ACTION_DIM)
+
+
+@pytest.mark.parametrize("name", ["vae", "gan"])
+def test_save_load_round_trip(name, vae, gan, tmp_path):
+    model = vae if name == "vae" else gan
+    path = tmp_path / "model.pt"
+    model.save(str(path))
+    restored = load(path, device="cpu")
+    assert type(restored) is type(model) and isinstance(restored, TrajectoryGenerator)
+    assert restored.config() == model.config() and restored.prior == model.prior
+    assert restored.saved_version == sb3_genrl.__version__
+    assert restored.best_epoch == model.best_epoch and restored.history == model.history
+    alpha = model.sample_prior(10, rng=1)
+    np.testing.assert_array_equal(restored.decode(alpha), model.decode(alpha))
+    payload = torch.load(path, weights_only=True)
+    assert payload["format"] == "sb3_genrl.generative.TrajectoryGenerator"
+    assert json.loads(payload["config"])["latent_dim"] == 2
+
+
+def test_load_rejects_foreign_files(tmp_path):
+    random_bytes = tmp_path / "random.pt"
+    random_bytes.write_bytes(np.random.default_rng(0).bytes(4096))
+    text = tmp_path / "notes.txt"
+    text.write_text("not a model\n")
+    unmarked = tmp_path / "unmarked.pt"
+    torch.save({"weights": torch.zeros(3)}, unmarked)
+    for path in (random_bytes, text):
+        with pytest.raises(ValueError, match="torch.load could not read it") as error:
+            load(path)
+        assert str(path) in str(error.value)
+    with pytest.raises(ValueError, match="lacks the format marker") as error:
+        load(unmarked)
+    assert str(unmarked) in str(error.value)
+    with pytest.raises(FileNotFoundError):
+        load(tmp_path / "missing.pt")
+
+
+def test_latent_validation(vae):
+    with pytest.raises(ValueError, match="shape"):
+        vae.decode(np.zeros((4, 3), dtype=np.float32))
+    with pytest.raises(ValueError, match="shape"):
+        vae.decode(np.zeros((2, 2, 2), dtype=np.float32))
+    for bad in (np.nan, np.inf):
+        alpha = np.zeros((4, 2), dtype=np.float32)
+        alpha[1, 0] = bad
+        with pytest.raises(ValueError, match="non-finite"):
+            vae.decode(alpha)
+    with pytest.raises(ValueError, match="shape"):
+        vae.decode_torch(torch.zeros(3))
+
+
+def test_training_data_validation():
+    model = BetaVAE(HORIZON, ACTION_DIM, 2, beta=0.01, device="cpu")
+    with pytest.raises(ValueError, match=r"\(N, 20, 3\)"):
+        model.fit(np.zeros((10, HORIZON, 4)), epochs=1, progress_bar=False)
+    with pytest.raises(ValueError, match=r"\(N, 20, 3\)"):
+        model.fit(np.zeros((10, HORIZON * ACTION_DIM)), epochs=1, progress_bar=False)
+    data = np.zeros((10, HORIZON, ACTION_DIM))
+    data[3, 4, 1] = np.nan
+    with pytest.raises(ValueError, match="non-finite"):
+        model.fit(data, epochs=1, progress_bar=False)
+    with pytest.raises(ValueError, match="validation_fraction"):
+        model.fit(np.zeros((10, HORIZON, ACTION_DIM)), epochs=1, validation_fraction=1.0, progress_bar=False)
+
+
+@pytest.mark.parametrize("model_class, kwargs", [(BetaVAE, {"beta": 0.005}), (InfoGAN, {"info_weight": 0.1})])
+def test_same_seed_same_weights(model_class, kwargs):
+    data, _ = sine_ramp_trajectories(120, 6, 2, rng=0)
+
+    def weights(seed: int) -> dict[str, torch.Tensor]:
+        model = model_class(6, 2, 2, **kwargs, device="cpu")
+        return model.fit(data, epochs=2, batch_size=32, seed=seed, progress_bar=False).state_tensors()
+
+    first, second, other = weights(3), weights(3), weights(4)
+    assert first.keys() == second.keys()
+    for key in first:
+        torch.testing.assert_close(first[key], second[key], rtol=0, atol=0)
+    assert any(not torch.equal(first[key], other[key]) for key in first if first[key].is_floating_point())
+
+
+def test_presets_match_paper_table_1():
+    expected_vae = [(2, 0.01), (2, 0.005), (2, 0.001), (3, 0.01), (3, 0.005), (3, 0.001), (6, 0.01), (6, 0.005),
+                    (6, 0.001)]
+    expected_gan = [(2, 0.1), (2, 1.5), (2, 3.5), (3, 0.1), (3, 1.5), (3, 3.5), (6, 0.1), (6, 1.5), (6, 3.5)]
+    for index, (latent_dim, beta) in enumerate(expected_vae, start=1):
+        assert PRESETS[f"VAE{index}"] == {"model": "vae", "latent_dim": latent_dim, "beta": beta}
+    for index, (latent_dim, info_weight) in enumerate(expected_gan, start=1):
+        assert PRESETS[f"GAN{index}"] == {"model": "gan", "latent_dim": latent_dim, "info_weight": info_weight}
+    assert len(PRESETS) == 18
+    model = make_generator("VAE6", horizon=69, action_dim=7, device="cpu")
+    assert isinstance(model, BetaVAE) and (model.latent_dim, model.beta, model.prior) == (3, 0.001, "normal")
+    model = make_generator("GAN5", horizon=78, action_dim=7, device="cpu")
+    assert isinstance(model, InfoGAN) and (model.latent_dim, model.info_weight, model.prior) == (3, 1.5, "uniform")
+    assert model.decode(np.zeros((2, 3))).shape == (2, 78, 7)
+    model = make_generator("gan", horizon=5, action_dim=2, latent_dim=4, info_weight=0.5, device="cpu")
+    assert (model.latent_dim, model.info_weight) == (4, 0.5)
+    with pytest.raises(ValueError, match="beta"):
+        make_generator("vae", horizon=5, action_dim=2, latent_dim=2)
+    with pytest.raises(ValueError, match="latent_dim"):
+        make_generator("VAE1", horizon=5, action_dim=2, latent_dim=3)
+    with pytest.raises(ValueError, match="unknown generator"):
+        make_generator("VAE10", horizon=5, action_dim=2)
+
+
+def test_selection_mse_matches_brute_force():
+    rng = np.random.default_rng(0)
+    generated, reference = rng.normal(size=(7, 4, 3)), rng.normal(size=(11, 4, 3))
+    expected = []
+    for trajectory in generated:
+        distances = [np.sum((trajectory - other) ** 2) for other in reference]
+        expected.append(np.mean((trajectory - reference[int(np.argmin(distances))]) ** 2))
+    assert selection_mse(generated, reference) == pytest.approx(np.mean(expected), rel=1e-10)
+    assert selection_mse(generated, reference, chunk_size=3) == pytest.approx(np.mean(expected), rel=1e-10)
+    assert selection_mse(reference[:3], reference) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_split_and_normalisation_statistics():
+    data = np.random.default_rng(0).normal(loc=2.0, size=(50, 4, 3)).astype(np.float32)
+    data[:, :, 2] = 5.0  # a joint that never moves
+    train, held_out = split_train_validation(data, 0.1, np.random.default_rng(0))
+    assert (len(train), len(held_out)) == (45, 5)
+    assert sorted(map(bytes, np.concatenate([train, held_out]))) == sorted(map(bytes, data))
+    mean, std = normalisation_statistics(train)
+    np.testing.assert_allclose(mean, train.reshape(-1, 3).mean(axis=0), rtol=1e-5)
+    np.testing.assert_allclose(std[:2], train.reshape(-1, 3).std(axis=0)[:2], rtol=1e-5)
+    assert std[2] == 1.0
+
+
+def test_train_generator_and_cli_write_loadable_models(tmp_path, capsys):
+    data, _ = sine_ramp_trajectories(100, 6, 2, rng=0)
+    npy = tmp_path / "demos.npy"
+    np.save(npy, data)
+    out = tmp_path / "gan.pt"
+    code = cli_main(["train-generator", "--data", str(npy), "--preset", "GAN2", "--epochs", "2", "--batch-size", "32",
+                     "--no-progress-bar", "--out", str(out), "--tensorboard-log", str(tmp_path / "tb")])
+    assert code == 0 and "InfoGAN" in capsys.readouterr().out
+    model = load(out)
+    assert isinstance(model, InfoGAN) and (model.latent_dim, model.info_weight, model.horizon) == (2, 1.5, 6)
+    assert any((tmp_path / "tb").iterdir())
+    npz = tmp_path / "demos.npz"
+    np.savez(npz, actions=data)
+    vae = train_generator(npz, latent_dim=3, beta=0.001, epochs=1, batch_size=32, out=tmp_path / "vae.pt")
+    assert load(tmp_path / "vae.pt").config() == vae.config() == {"horizon": 6, "action_dim": 2, "latent_dim": 3,
+                                                                   "beta": 0.001}
+    assert cli_main(["train-generator", "--data", str(tmp_path / "missing.npy"), "--out", str(out)]) == 2
+    assert cli_main(["train-generator", "--data", str(npy), "--model", "vae", "--out", str(out)]) == 2
+    assert "needs" in capsys.readouterr().err
+
+
+def test_infogan_noise_is_fixed_at_decode(tmp_path):
+    data, _ = sine_ramp_trajectories(80, 6, 2, rng=0)
+    model = InfoGAN(6, 2, 2, info_weight=1.0, noise_dim=3, device="cpu").fit(data, epochs=1, batch_size=32, seed=0,
+                                                                            progress_bar=False)
+    assert model.networks["generator"][0].in_features == 5
+    alpha = model.sample_prior(4, rng=0)
+    with torch.no_grad():
+        expected = model.networks["generator"](torch.cat([torch.as_tensor(alpha), torch.zeros(4, 3)], dim=1))
+    expected = (expected.view(4, 6, 2) * model.action_std + model.action_mean).numpy()
+    np.testing.assert_allclose(model.decode(alpha), expected, rtol=1e-6)
+    model.save(tmp_path / "gan.pt")
+    restored = load(tmp_path / "gan.pt")
+    assert restored.noise_dim == 3
+    np.testing.assert_array_equal(restored.decode(alpha), model.decode(alpha))
+
+
+def test_dataset_directory_is_read_with_load_actions(tmp_path, monkeypatch):
+    import sb3_genrl.data
+
+    data, _ = sine_ramp_trajectories(4, 6, 2, rng=0)
+    calls = []
+    monkeypatch.setattr(sb3_genrl.data, "load_actions", lambda path: calls.append(path) or data)
+    np.testing.assert_array_equal(load_trajectories(tmp_path), data)
+    assert calls == [str(tmp_path)]
+    with pytest.raises(ValueError, match="neither"):
+        load_trajectories(__file__)

@@ -1,0 +1,186 @@
+"""Tests of sb3_genrl.genrl: GenRL on a toy contextual bandit with a known optimum, save/load, seeding, train_policy."""
+
+from __future__ import annotations
+
+import csv
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch as th
+from stable_baselines3.common.vec_env import DummyVecEnv
+from test_wrapper import (  # noqa: F401  (one_torch_thread: an autouse fixture)
+    ContextReachEnv,
+    FastReachEnv,
+    LinearGenerator,
+    ReachEnv,
+    load_linear_generator,
+    one_torch_thread,
+    optimal_latent,
+)
+
+from sb3_genrl import GenRL, LatentActionWrapper
+from sb3_genrl.cli import main as cli_main
+from sb3_genrl.genrl import genrl as genrl_module
+from sb3_genrl.genrl import train_policy
+
+GOALS = np.array([[0.5, -0.3], [-0.6, 0.4], [0.0, 0.6], [0.3, 0.3]], dtype=np.float32)
+TOY_ID = "GenRLTest/FastReach-v0"
+
+
+@pytest.mark.parametrize("e_step", ["trpo", "kl_penalty"])
+def test_converges_to_known_optimum(e_step):
+    model = GenRL(FastReachEnv(), LinearGenerator(), e_step=e_step, seed=0)
+    before = np.array([model.predict(goal, deterministic=True)[0] for goal in GOALS])
+    model.learn(3200)  # 50 EM iterations of N = 64 episodes
+    after = np.array([model.predict(goal, deterministic=True)[0] for goal in GOALS])
+    optimum = np.array([optimal_latent(goal) for goal in GOALS])
+    assert np.abs(before - optimum).max() > 0.5
+    np.testing.assert_allclose(after, optimum, atol=0.15)
+    assert model.logger.name_to_value["train/mean_reward"] > -0.25  # about -1.7 for the initial policy
+
+
+def test_train_logs_and_kl_bound():
+    model = GenRL(FastReachEnv(), LinearGenerator(), seed=0, target_kl=0.02)
+    model.learn(128)
+    logs = model.logger.name_to_value
+    for key in ("mean_reward", "max_reward", "kl", "entropy", "value_loss", "policy_objective", "line_search_success",
+                "step_size", "accepted_fraction"):
+        assert np.isfinite(logs[f"train/{key}"]), key
+    assert 0 < logs["train/kl"] < 0.02
+    assert logs["train/max_reward"] >= logs["train/mean_reward"]
+
+
+def test_constructor_forms_and_defaults():
+    generator = LinearGenerator()
+    for model in (
+        GenRL(FastReachEnv(), generator),
+        GenRL("MlpPolicy", FastReachEnv(), generator=generator),
+        GenRL("MlpPolicy", FastReachEnv(), generator),
+        GenRL(env=FastReachEnv(), generator=generator),
+        GenRL(LatentActionWrapper(FastReachEnv(), generator)),
+        GenRL(DummyVecEnv([lambda: LatentActionWrapper(FastReachEnv(), generator)] * 2)),
+    ):
+        assert model.generator is generator
+        assert model.n_steps == 64 and model.e_step == "trpo"
+        assert th.exp(model.policy.log_std).detach().numpy() == pytest.approx([1.0, 1.0])  # the prior's std
+    uniform = GenRL(ContextReachEnv(), LinearGenerator(prior="uniform"))
+    assert th.exp(uniform.policy.log_std).detach().numpy() == pytest.approx([3**-0.5] * 2, rel=1e-5)
+    assert uniform.action_space.high.tolist() == [1.0, 1.0]
+    gym.register(TOY_ID, entry_point=FastReachEnv) if TOY_ID not in gym.registry else None
+    assert isinstance(GenRL(TOY_ID, generator).env.envs[0].unwrapped, LatentActionWrapper)
+
+
+def test_bad_arguments_raise():
+    with pytest.raises(ValueError, match="generator is needed"):
+        GenRL(FastReachEnv())
+    with pytest.raises(ValueError, match="LatentActionWrapper"):
+        GenRL(DummyVecEnv([FastReachEnv]), LinearGenerator())
+    with pytest.raises(ValueError, match="e_step"):
+        GenRL(FastReachEnv(), LinearGenerator(), e_step="adam")
+    with pytest.raises(TypeError, match="twice"):
+        GenRL(FastReachEnv(), LinearGenerator(), generator=LinearGenerator())
+    with pytest.raises(ValueError, match=r"\(2, 5, 2\).*\(2, 7, 2\)"):
+        GenRL(LatentActionWrapper(FastReachEnv(episode_length=7), LinearGenerator(horizon=7)), LinearGenerator())
+
+
+def test_works_with_step_by_step_env_and_n_envs():
+    env = DummyVecEnv([lambda: LatentActionWrapper(ReachEnv(), LinearGenerator(), context=lambda obs: obs[:2],
+                                                   context_space=ContextReachEnv.context_space)] * 2)
+    model = GenRL(env, e_step="kl_penalty", n_steps=16, seed=1).learn(64)
+    assert model.num_timesteps == 64 and model.rollout_buffer.buffer_size * model.n_envs == 32
+
+
+def test_same_seed_same_run():
+    runs = []
+    for _ in range(2):
+        model = GenRL(FastReachEnv(), LinearGenerator(), seed=7).learn(192)
+        runs.append((th.nn.utils.parameters_to_vector(model.policy.parameters()).detach(),
+                     model.rollout_buffer.actions.copy()))
+    th.testing.assert_close(runs[0][0], runs[1][0], rtol=0, atol=0)
+    np.testing.assert_array_equal(runs[0][1], runs[1][1])
+    other = GenRL(FastReachEnv(), LinearGenerator(), seed=8).learn(192)
+    assert not np.array_equal(other.rollout_buffer.actions, runs[0][1])
+
+
+def test_save_load_predict_round_trip(tmp_path, monkeypatch):
+    generator = LinearGenerator()
+    model = GenRL(FastReachEnv(), generator, seed=0).learn(128)
+    expected = model.predict(GOALS, deterministic=True)[0]
+    model.save(tmp_path / "policy.zip")
+    # An in-memory generator is saved beside the model and restored with sb3_genrl.generative.load.
+    assert (tmp_path / "policy.generator.pt").exists()
+    monkeypatch.setattr(genrl_module, "_load_generator", load_linear_generator)
+    loaded = GenRL.load(tmp_path / "policy.zip")
+    np.testing.assert_array_equal(loaded.predict(GOALS, deterministic=True)[0], expected)
+    assert loaded.predict_trajectory(GOALS[0]).shape == (5, 2)
+    np.testing.assert_allclose(loaded.predict_trajectory(GOALS[0]), generator.decode(expected[0])[0], rtol=1e-6)
+    assert loaded.predict_trajectory(GOALS).shape == (4, 5, 2)
+    # generator= overrides, a raw env is wrapped, and training goes on.
+    override = GenRL.load(tmp_path / "policy.zip", env=FastReachEnv(), generator=generator)
+    assert override.generator is generator
+    np.testing.assert_array_equal(override.predict(GOALS, deterministic=True)[0], expected)
+    override.learn(64, reset_num_timesteps=False)
+    assert override.num_timesteps == 192
+
+
+def test_load_without_generator_still_predicts(tmp_path):
+    model = GenRL(FastReachEnv(), _UnsavableGenerator(), seed=0)
+    model.save(tmp_path / "policy")
+    loaded = GenRL.load(tmp_path / "policy")
+    assert loaded.predict(GOALS[0], deterministic=True)[0].shape == (2,)
+    with pytest.raises(ValueError, match="generator"):
+        loaded.predict_trajectory(GOALS[0])
+
+
+class _UnsavableGenerator(LinearGenerator):
+    def save(self, path: str) -> None:
+        raise NotImplementedError
+
+
+def test_generator_path_is_kept(tmp_path, monkeypatch):
+    generator_file = tmp_path / "gen.npz"
+    LinearGenerator().save(str(generator_file))
+    monkeypatch.setattr(genrl_module, "_load_generator", load_linear_generator)
+    model = GenRL(FastReachEnv(), str(generator_file), seed=0)
+    assert model.generator_path == str(generator_file)
+    model.save(tmp_path / "policy.zip")
+    assert not (tmp_path / "policy.generator.pt").exists()
+    assert GenRL.load(tmp_path / "policy.zip").generator_path == str(generator_file)
+
+
+def test_train_policy_writes_curve_model_and_logs(tmp_path, capsys):
+    if TOY_ID not in gym.registry:
+        gym.register(TOY_ID, entry_point=FastReachEnv)
+    result = train_policy(TOY_ID, LinearGenerator(), episodes=96, seed=0, out_dir=tmp_path, batch_episodes=32)
+    assert result["episodes"] == 96 and result["iterations"] == 3
+    with open(result["csv_path"]) as file:
+        rows = list(csv.DictReader(file))
+    assert [float(row["episodes"]) for row in rows] == [32, 64, 96]
+    assert all(np.isfinite(float(row["mean_reward"])) and float(row["kl"]) >= 0 for row in rows)
+    assert (tmp_path / "learning_curve.png").stat().st_size > 0
+    assert len((tmp_path / "episodes.csv").read_text().splitlines()) == 1 + 96
+    assert any((tmp_path / "tensorboard").rglob("events.out.tfevents.*"))
+    assert GenRL.load(result["model_path"], generator=LinearGenerator()).predict(GOALS[0])[0].shape == (2,)
+    with pytest.raises(ValueError, match="unknown task"):
+        train_policy("curling", LinearGenerator(), episodes=10, out_dir=tmp_path)
+    argv = ["train-policy", "--task", "curling", "--generator", "x.pt", "--episodes", "8", "--out", str(tmp_path)]
+    assert cli_main(argv) == 2
+    assert "unknown task" in capsys.readouterr().err
+
+
+def test_on_paper_task_with_saved_generator(tmp_path):
+    """A short run on the hockey task with an untrained beta-VAE saved to a file, then load -> predict_trajectory."""
+    from sb3_genrl.generative import make_generator
+
+    generator = make_generator("VAE1", horizon=69, action_dim=7, device="cpu")
+    generator.save(str(tmp_path / "vae.pt"))
+    model = GenRL("GenRL/Hockey-v0", str(tmp_path / "vae.pt"), n_steps=16, seed=0).learn(32)
+    assert model.generator_path == str(tmp_path / "vae.pt") and model.env.get_attr("use_fast_path")[0]
+    assert np.isfinite(model.logger.name_to_value["train/mean_reward"])
+    model.save(tmp_path / "policy.zip")
+    loaded = GenRL.load(tmp_path / "policy.zip", env=gym.make("GenRL/Hockey-v0"))
+    goal = np.array([1.0, 0.1], dtype=np.float32)
+    np.testing.assert_array_equal(loaded.predict(goal, deterministic=True)[0], model.predict(goal, deterministic=True)[0])
+    assert loaded.predict_trajectory(goal).shape == (69, 7)
+

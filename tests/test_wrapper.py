@@ -1,0 +1,279 @@
+"""Tests of sb3_genrl.wrappers.LatentActionWrapper on toy reaching tasks with a known optimum.
+
+The toys here (a linear generator and a point-mass reaching task) are also used by ``tests/test_genrl.py``.
+"""
+
+from __future__ import annotations
+
+import re
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch as th
+from gymnasium import spaces
+from gymnasium.utils.env_checker import check_env as gym_check_env
+from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+from sb3_genrl import LatentActionWrapper
+from sb3_genrl.generative import TrajectoryGenerator
+
+
+@pytest.fixture(autouse=True)
+def one_torch_thread():
+    """Small networks on shared CPUs run much faster on one thread."""
+    threads = th.get_num_threads()
+    th.set_num_threads(1)
+    yield
+    th.set_num_threads(threads)
+
+
+# u_t = w_t * R alpha + c / T with sum_t w_t = 1: the trajectory's displacement is R alpha + c.
+R = np.array([[0.8, 0.3], [-0.2, 0.9]])
+C = np.array([0.1, -0.1])
+
+
+def optimal_latent(goal: np.ndarray) -> np.ndarray:
+    """The latent action whose trajectory ends exactly on ``goal`` (reward 0, the maximum)."""
+    return np.linalg.solve(R, np.asarray(goal) - C)
+
+
+class LinearGenerator(TrajectoryGenerator):
+    """A linear "generator" of 2-D velocity trajectories: tau_t = w_t R alpha + c / T."""
+
+    def __init__(self, horizon: int = 5, prior: str = "normal") -> None:
+        super().__init__(horizon=horizon, action_dim=2, latent_dim=2, prior=prior)  # type: ignore[arg-type]
+        self.weights = np.linspace(1.0, 2.0, horizon) / np.linspace(1.0, 2.0, horizon).sum()
+
+    def decode(self, alpha: np.ndarray) -> np.ndarray:
+        alpha = self.check_latent(alpha).astype(np.float64)
+        displacement = alpha @ R.T  # (n, 2)
+        return (self.weights[None, :, None] * displacement[:, None, :] + C / self.horizon).astype(np.float32)
+
+    def save(self, path: str) -> None:
+        with open(path, "wb") as file:  # exactly at ``path`` (np.savez would append ".npz" to a name)
+            np.savez(file, horizon=self.horizon, prior=self.prior)
+
+
+def load_linear_generator(path: str) -> LinearGenerator:
+    with np.load(path) as data:
+        return LinearGenerator(horizon=int(data["horizon"]), prior=str(data["prior"]))
+
+
+class ReachEnv(gym.Env):
+    """A point mass moved by per-step velocities in [-1, 1]^2; terminal reward -||position - goal||^2.
+
+    Observation: goal and position. Episodes last ``episode_length`` steps; every earlier step costs ``step_cost``.
+    """
+
+    metadata = {"render_modes": []}
+
+    def __init__(self, episode_length: int = 5, step_cost: float = 0.0) -> None:
+        self.episode_length = episode_length
+        self.step_cost = step_cost
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
+        self.observation_space = spaces.Box(-10.0, 10.0, shape=(4,), dtype=np.float32)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        goal = (options or {}).get("goal")
+        self.goal = self.np_random.uniform(-0.8, 0.8, size=2) if goal is None else np.asarray(goal, dtype=np.float64)
+        self.position = np.zeros(2)
+        self.t = 0
+        return self._obs(), {}
+
+    def _obs(self):
+        return np.concatenate([self.goal, self.position]).astype(np.float32)
+
+    def step(self, action):
+        self.position = self.position + np.clip(action, -1.0, 1.0)
+        self.t += 1
+        terminated = self.t >= self.episode_length
+        reward = -float(np.sum((self.position - self.goal) ** 2)) if terminated else -self.step_cost
+        return self._obs(), reward, terminated, False, {"reached": self.position.copy()}
+
+
+class ContextReachEnv(ReachEnv):
+    """ReachEnv with the GenRL task context interface (``context_space``, ``get_context``)."""
+
+    context_space = spaces.Box(-0.8, 0.8, shape=(2,), dtype=np.float32)
+
+    def get_context(self) -> np.ndarray:
+        return self.goal.astype(np.float32)
+
+
+class FastReachEnv(ContextReachEnv):
+    """ContextReachEnv with the fast open-loop path ``play_trajectories``."""
+
+    def play_trajectories(self, trajectories, goals, *, n_threads=1):
+        reached = np.clip(trajectories, -1.0, 1.0).sum(axis=1)
+        rewards = -np.sum((reached - goals) ** 2, axis=1)
+        return rewards, [{"reward": float(r), "reached": p} for r, p in zip(rewards, reached, strict=True)]
+
+
+def checked_without_warnings(env: gym.Env, allowed: tuple[str, ...] = ()) -> None:
+    """Run Gymnasium's check_env and fail on any warning outside ``allowed`` (as Gymnasium's own tests do)."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        gym_check_env(env, skip_render_check=True)
+    unexpected = [str(w.message) for w in caught if not any(re.search(a, str(w.message)) for a in allowed)]
+    assert not unexpected, unexpected
+
+
+NORMALIZED_BOX = "we recommend using a symmetric and normalized space"  # the +-3 sigma box of a normal prior
+
+
+@pytest.mark.parametrize("env_class", [ReachEnv, ContextReachEnv, FastReachEnv])
+@pytest.mark.parametrize("prior", ["normal", "uniform"])
+def test_check_env(env_class, prior):
+    env = LatentActionWrapper(env_class(), LinearGenerator(prior=prior))
+    checked_without_warnings(env, allowed=(NORMALIZED_BOX,) if prior == "normal" else ())
+    with warnings.catch_warnings():
+        warnings.simplefilter("error" if prior == "uniform" else "ignore")
+        sb3_check_env(env)
+
+
+def test_spaces_and_context():
+    normal = LatentActionWrapper(FastReachEnv(), LinearGenerator(prior="normal"), latent_clip=2.5)
+    assert normal.action_space == spaces.Box(-2.5, 2.5, shape=(2,), dtype=np.float32)
+    assert normal.observation_space == FastReachEnv.context_space
+    obs, _ = normal.reset(seed=0, options={"goal": [0.3, -0.2]})
+    np.testing.assert_allclose(obs, [0.3, -0.2], rtol=1e-6)
+    uniform = LatentActionWrapper(ReachEnv(), LinearGenerator(prior="uniform"))
+    assert uniform.action_space == spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
+    assert uniform.reset(seed=0)[0].shape == (4,)  # no context interface: the reset observation
+    goal_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
+    custom = LatentActionWrapper(ReachEnv(), LinearGenerator(), context=lambda obs: obs[:2], context_space=goal_space)
+    obs, _ = custom.reset(seed=0, options={"goal": [0.5, 0.5]})
+    np.testing.assert_allclose(obs, [0.5, 0.5])
+    with pytest.raises(ValueError, match="context_space"):
+        LatentActionWrapper(ReachEnv(), LinearGenerator(), context=lambda o: o[:2])
+
+
+@pytest.mark.parametrize("env_class", [ReachEnv, FastReachEnv])
+def test_optimal_latent_gets_maximal_reward(env_class):
+    env = LatentActionWrapper(env_class(), LinearGenerator())
+    for goal in ([0.5, -0.3], [-0.7, 0.2]):
+        env.reset(seed=1, options={"goal": goal})
+        _, reward, terminated, truncated, info = env.step(optimal_latent(goal))
+        assert (terminated, truncated) == (True, False)
+        assert reward == pytest.approx(0.0, abs=1e-10)
+        assert info["fast_path"] == (env_class is FastReachEnv)
+        assert info["steps_played"] == 5 and not info["latent_clipped"]
+        np.testing.assert_allclose(info["reached"], goal, atol=1e-6)
+
+
+def test_fast_path_matches_step_by_step():
+    alpha = np.array([0.7, -1.3], dtype=np.float32)
+    rewards = []
+    for use_fast_path in (True, False):
+        env = LatentActionWrapper(FastReachEnv(), LinearGenerator(), use_fast_path=use_fast_path)
+        env.reset(seed=3)
+        rewards.append(env.step(alpha)[1])
+    assert rewards[0] == pytest.approx(rewards[1], rel=1e-6)
+    env = LatentActionWrapper(FastReachEnv(), LinearGenerator())
+    batch_rewards, infos = env.play_batch(np.stack([alpha, alpha]), np.array([[0.0, 0.0], [0.5, 0.5]]))
+    assert batch_rewards.shape == (2,) and len(infos) == 2
+    reached = LinearGenerator().decode(alpha).sum(axis=1)[0]
+    np.testing.assert_allclose(batch_rewards[1], -np.sum((reached - 0.5) ** 2), rtol=1e-5)
+
+
+def test_shape_mismatch_names_both_shapes():
+    with pytest.raises(ValueError, match=r"\(5, 3\).*\(2,\)"):
+        LatentActionWrapper(ReachEnv(), _ThreeJointGenerator())
+
+
+class _ThreeJointGenerator(LinearGenerator):
+    def __init__(self) -> None:
+        TrajectoryGenerator.__init__(self, horizon=5, action_dim=3, latent_dim=2, prior="normal")
+
+
+@pytest.mark.parametrize("bad", [[np.nan, 0.0], [0.0, np.inf]])
+def test_non_finite_latent_raises(bad):
+    env = LatentActionWrapper(FastReachEnv(), LinearGenerator())
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="non-finite"):
+        env.step(np.array(bad, dtype=np.float32))
+    with pytest.raises(ValueError, match="shape"):
+        env.step(np.zeros(3, dtype=np.float32))
+
+
+def test_latent_clipping_reported():
+    env = LatentActionWrapper(FastReachEnv(), LinearGenerator(), latent_clip=3.0)
+    env.reset(seed=0)
+    *_, info = env.step(np.array([5.0, 0.0], dtype=np.float32))
+    assert info["latent_clipped"]
+    env.reset(seed=0)
+    clipped_reward = env.step(np.array([3.0, 0.0], dtype=np.float32))[1]
+    env.reset(seed=0)
+    assert env.step(np.array([7.0, 0.0], dtype=np.float32))[1] == pytest.approx(clipped_reward)
+
+
+def test_reward_sum_vs_last_and_hold():
+    goal, alpha = [0.2, 0.1], np.array([0.3, 0.4], dtype=np.float32)
+    reached = LinearGenerator().decode(alpha).sum(axis=1)[0]
+    hold = np.array([0.1, 0.0], dtype=np.float32)
+    last = LatentActionWrapper(ReachEnv(episode_length=8, step_cost=0.5), LinearGenerator(), hold_action=hold)
+    total = LatentActionWrapper(ReachEnv(episode_length=8, step_cost=0.5), LinearGenerator(), reward="sum", hold_action=hold)
+    results = []
+    for env in (last, total):
+        env.reset(seed=0, options={"goal": goal})
+        results.append(env.step(alpha))
+    terminal = -np.sum((reached + [0.3, 0.0] - goal) ** 2)  # 3 hold steps of (0.1, 0)
+    assert results[0][1] == pytest.approx(terminal, rel=1e-5)
+    assert results[1][1] == pytest.approx(terminal - 7 * 0.5, rel=1e-5)
+    assert results[0][4]["hold_steps"] == 3 and results[0][4]["steps_played"] == 5 and results[0][4]["ended"]
+    # An episode that does not end is held for max_hold_steps and reported as not ended.
+    endless = LatentActionWrapper(ReachEnv(episode_length=100), LinearGenerator(), max_hold_steps=4)
+    endless.reset(seed=0)
+    *_, info = endless.step(alpha)
+    assert info["hold_steps"] == 4 and not info["ended"]
+    # An episode shorter than the trajectory stops early.
+    short = LatentActionWrapper(ReachEnv(episode_length=3), LinearGenerator())
+    short.reset(seed=0)
+    assert short.step(alpha)[4]["steps_played"] == 3
+
+
+def test_seeded_reset_and_step_without_reset():
+    env = LatentActionWrapper(FastReachEnv(), LinearGenerator())
+    first = env.reset(seed=42)[0]
+    np.testing.assert_array_equal(first, env.reset(seed=42)[0])
+    env.step(env.action_space.sample())
+    with pytest.raises(RuntimeError, match="reset"):
+        env.step(env.action_space.sample())
+
+
+@pytest.mark.parametrize("algo", ["PPO", "SAC", "TRPO"])
+def test_sb3_algorithms_train_on_wrapped_env(algo):
+    from sb3_contrib import TRPO
+    from stable_baselines3 import PPO, SAC
+
+    env = LatentActionWrapper(FastReachEnv(), LinearGenerator())
+    if algo == "SAC":
+        model = SAC("MlpPolicy", env, learning_starts=50, batch_size=32, seed=0)
+    else:
+        model = {"PPO": PPO, "TRPO": TRPO}[algo]("MlpPolicy", env, n_steps=64, batch_size=32, seed=0)
+    model.learn(200)
+    action, _ = model.predict(env.reset(seed=0)[0], deterministic=True)
+    assert action.shape == (2,) and np.all(np.isfinite(action))
+
+
+@pytest.mark.parametrize("task", ["GenRL/Hockey-v0", "GenRL/Basketball-v0"])
+def test_on_paper_tasks(task):
+    """The wrapper over the paper's tasks (untrained beta-VAE): env checks, and fast path == step-by-step path."""
+    from sb3_genrl.generative import make_generator
+
+    horizon = gym.make(task).unwrapped.horizon
+    generator = make_generator("VAE1", horizon=horizon, action_dim=7, device="cpu")
+    env = LatentActionWrapper(gym.make(task), generator)
+    assert env.use_fast_path and env.observation_space == env.env.unwrapped.context_space
+    checked_without_warnings(env, allowed=(NORMALIZED_BOX,))
+    alpha = np.full(generator.latent_dim, 0.5, dtype=np.float32)
+    slow = LatentActionWrapper(gym.make(task), generator, use_fast_path=False)
+    env.reset(seed=3)
+    slow.reset(seed=3)
+    fast_result, slow_result = env.step(alpha), slow.step(alpha)
+    assert fast_result[1] == pytest.approx(slow_result[1], abs=1e-6)
+    assert fast_result[4]["steps_played"] == slow_result[4]["steps_played"] == horizon
+
