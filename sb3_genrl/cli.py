@@ -38,6 +38,26 @@ def build_parser() -> argparse.ArgumentParser:
     play.add_argument("--out", required=True, help="output directory (report.md, GIFs, frame strips)")
     play.set_defaults(func=_play_command)
 
+    baseline = sub.add_parser("baseline", help="train PPO (BC), SAC (prefilled) or a stock algorithm on the latent space")
+    baseline.add_argument("algorithm", choices=("ppo", "sac", "latent-ppo", "latent-sac", "latent-trpo"))
+    baseline.add_argument("--task", required=True, help="hockey or basketball")
+    baseline.add_argument("--demos", default=None, help="demonstration dataset (ppo, sac)")
+    baseline.add_argument("--demo-episodes", type=int, default=None, help="use the first N demonstrations (default all)")
+    baseline.add_argument("--generator", default=None, help="generator file (latent-ppo, latent-sac, latent-trpo)")
+    baseline.add_argument("--episodes", type=int, required=True, help="budget of episodes")
+    baseline.add_argument("--seed", type=int, default=0, help="random seed")
+    baseline.add_argument("--bc-epochs", type=int, default=5, help="behaviour cloning epochs (ppo)")
+    baseline.add_argument("--device", default="auto", help="torch device (default: auto)")
+    baseline.add_argument("--no-progress-bar", action="store_true", help="hide the progress bar")
+    baseline.add_argument("--out", required=True, help="output directory")
+    baseline.set_defaults(func=_baseline_command)
+
+    compare = sub.add_parser("compare", help="GenRL vs baselines over seeds: reward curves and table contacts")
+    compare.add_argument("--task", default=None, help="only runs of this task")
+    compare.add_argument("--runs", nargs="+", required=True, help="run directories (several seeds per method)")
+    compare.add_argument("--out", required=True, help="output directory")
+    compare.set_defaults(func=_compare_command)
+
     train_policy = sub.add_parser("train-policy", help="train a GenRL policy over a generator's latent space (Algorithm 1)")
     train_policy.add_argument("--task", required=True, help="hockey, basketball or a registered Gymnasium id")
     train_policy.add_argument("--generator", required=True, help="file of a trained generator")
@@ -81,6 +101,26 @@ def _evaluate_command(args: argparse.Namespace) -> int:
         print(f"{row['model']}: precision {row['precision']:.3f}, recall {row['recall']:.3f}, "
               f"delta_1 {row['delta_1']:.3f}, mean delta {row['mean_delta']:.3f}")
     print(f"wrote {args.out}/results.md, results.csv, precision_recall.png, disentanglement.png")
+    return 0
+
+
+def _baseline_command(args: argparse.Namespace) -> int:
+    from sb3_genrl.baselines.train import train_baseline
+
+    summary = train_baseline(args.algorithm, args.task, episodes=args.episodes, out_dir=args.out, seed=args.seed,
+                             demos=args.demos, demo_episodes=args.demo_episodes, generator=args.generator,
+                             bc_epochs=args.bc_epochs, device=args.device, progress_bar=not args.no_progress_bar)
+    if "bc_mean_reward" in summary:
+        print(f"behaviour cloning alone: mean reward {summary['bc_mean_reward']:.4g}")
+    print(f"{args.algorithm} on {args.task}: {summary['episodes_played']} episodes, final mean reward "
+          f"{summary['final_mean_reward']:.4g}, best {summary['best_mean_reward']:.4g} -> {args.out}")
+    return 0
+
+
+def _compare_command(args: argparse.Namespace) -> int:
+    from sb3_genrl.baselines.compare import compare_runs
+
+    print(compare_runs(args.runs, args.out, task=args.task).read_text())
     return 0
 
 

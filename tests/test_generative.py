@@ -20,7 +20,7 @@ from sb3_genrl.generative import (
     make_generator,
     train_generator,
 )
-from sb3_genrl.generative.common import normalisation_statistics, selection_mse, split_train_validation
+from sb3_genrl.generative.common import MIN_STD, normalisation_statistics, selection_mse, split_train_validation
 from sb3_genrl.generative.synthetic import sine_ramp_basis, sine_ramp_trajectories
 
 HORIZON, ACTION_DIM = 20, 3
@@ -241,9 +241,13 @@ def test_split_and_normalisation_statistics():
     assert (len(train), len(held_out)) == (45, 5)
     assert sorted(map(bytes, np.concatenate([train, held_out]))) == sorted(map(bytes, data))
     mean, std = normalisation_statistics(train)
-    np.testing.assert_allclose(mean, train.reshape(-1, 3).mean(axis=0), rtol=1e-5)
-    np.testing.assert_allclose(std[:2], train.reshape(-1, 3).std(axis=0)[:2], rtol=1e-5)
-    assert std[2] == 1.0
+    assert mean.shape == std.shape == (4, 3)
+    for t in range(4):
+        for j in range(2):
+            assert mean[t, j] == pytest.approx(np.mean(train[:, t, j], dtype=np.float64), rel=1e-5)
+            assert std[t, j] == pytest.approx(np.std(train[:, t, j], dtype=np.float64), rel=1e-5)
+    np.testing.assert_array_equal(mean[:, 2], 5.0)
+    np.testing.assert_allclose(std[:, 2], MIN_STD, rtol=1e-6)
 
 
 def test_train_generator_and_cli_write_loadable_models(tmp_path, capsys):

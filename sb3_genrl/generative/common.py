@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 # A joint whose training actions never change gets a unit scale instead of a zero one.
-_MIN_STD = 1e-8
+MIN_STD = 1e-6  # floor of the normalisation's standard deviation (raw action units)
 
 
 def check_trajectories(trajectories: np.ndarray, horizon: int, action_dim: int) -> np.ndarray:
@@ -56,17 +56,18 @@ def split_train_validation(trajectories: np.ndarray, validation_fraction: float,
 
 
 def normalisation_statistics(trajectories: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per-joint mean and standard deviation over all trajectories and time steps.
+    """Mean and standard deviation of every (time step, joint) entry over the trajectories.
 
-    The models see ``(tau - mean) / std`` with one ``mean`` and ``std`` per joint (shape ``(M,)``), so the
-    shape of a trajectory over time is kept and a joint that never moves gets ``std = 1``.
+    The models see ``(tau - mean) / std`` entry by entry, so each output is learnt on the scale of its own
+    spread. This matters because actions are joint position *changes*: the commanded position is their running
+    sum, so an error in an entry that hardly varies in the demonstrations (a joint held still) would add up over
+    the horizon. An entry that never varies gets ``std = MIN_STD`` and is reproduced exactly.
 
     :param trajectories: ``(N, T, M)`` array in raw action units
-    :return: ``(mean, std)``, two float32 arrays of shape ``(M,)``
+    :return: ``(mean, std)``, two float32 arrays of shape ``(T, M)``
     """
-    mean = trajectories.mean(axis=(0, 1), dtype=np.float64)
-    std = trajectories.std(axis=(0, 1), dtype=np.float64)
-    std = np.where(std < _MIN_STD, 1.0, std)
+    mean = trajectories.mean(axis=0, dtype=np.float64)
+    std = np.maximum(trajectories.std(axis=0, dtype=np.float64), MIN_STD)
     return mean.astype(np.float32), std.astype(np.float32)
 
 

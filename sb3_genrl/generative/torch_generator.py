@@ -33,9 +33,9 @@ SelfTorchTrajectoryGenerator = TypeVar("SelfTorchTrajectoryGenerator", bound="To
 class TorchTrajectoryGenerator(TrajectoryGenerator, abc.ABC):
     """A neural trajectory generator whose decoder maps ``alpha`` to a normalised, flattened trajectory.
 
-    Training data are normalised per joint (one mean and one standard deviation per joint over all trajectories
-    and time steps of the training split); the statistics are part of the model and :meth:`decode` returns raw action
-    units.
+    Training data are normalised entry by entry (a mean and a standard deviation per time step and joint over the
+    training split, see :func:`~sb3_genrl.generative.common.normalisation_statistics`); the statistics are part
+    of the model and :meth:`decode` returns raw action units.
 
     :param horizon: number of time steps ``T``
     :param action_dim: number of joints ``M``
@@ -51,8 +51,8 @@ class TorchTrajectoryGenerator(TrajectoryGenerator, abc.ABC):
         super().__init__(horizon=horizon, action_dim=action_dim, latent_dim=latent_dim, prior=prior)
         self.networks: nn.ModuleDict
         self._reset(0, device)  # untrained weights from seed 0; fit() draws them again from its own seed
-        self.action_mean = torch.zeros(self.action_dim, device=self.device)
-        self.action_std = torch.ones(self.action_dim, device=self.device)
+        self.action_mean = torch.zeros(self.horizon, self.action_dim, device=self.device)
+        self.action_std = torch.ones(self.horizon, self.action_dim, device=self.device)
         self.history: list[dict[str, float]] = []
         self.best_epoch: int | None = None
         self.seed: int | None = None
@@ -229,8 +229,9 @@ class TorchTrajectoryGenerator(TrajectoryGenerator, abc.ABC):
             mean, std = state.pop("action_mean"), state.pop("action_std")
         except KeyError as error:
             raise ValueError(f"missing normalisation statistics {error}") from None
-        if tuple(mean.shape) != (self.action_dim,) or tuple(std.shape) != (self.action_dim,):
-            raise ValueError(f"normalisation statistics must have shape ({self.action_dim},), got "
+        expected = (self.horizon, self.action_dim)
+        if tuple(mean.shape) != expected or tuple(std.shape) != expected:
+            raise ValueError(f"normalisation statistics must have shape {expected}, got "
                              f"{tuple(mean.shape)} and {tuple(std.shape)}")
         prefix = "networks."
         networks_state = {key[len(prefix):]: value for key, value in state.items() if key.startswith(prefix)}

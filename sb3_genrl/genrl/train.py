@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import json
 import math
 import os
 import pathlib
@@ -97,8 +98,8 @@ def train_policy(
 ) -> dict[str, Any]:
     """Train a GenRL policy for ``episodes`` episodes on ``task`` and write everything to ``out_dir``.
 
-    Writes ``genrl_policy.zip`` (the model), ``learning_curve.csv`` (one row per iteration, written as training
-    goes), ``learning_curve.png``, ``episodes.csv`` (one row per episode, as the baselines write it) and
+    Writes ``genrl_policy.zip`` (the model), ``summary.json``, ``learning_curve.csv`` (one row per iteration,
+    written as training goes), ``learning_curve.png``, ``episodes.csv`` (one row per episode, as the baselines write it) and
     TensorBoard logs under ``tensorboard/``.
 
     :param task: ``"hockey"``, ``"basketball"`` or a registered Gymnasium id
@@ -142,7 +143,10 @@ def train_policy(
     mean_rewards = [row["mean_reward"] for row in curve.rows]
     plot_curves({"GenRL": (episodes_played, np.array(mean_rewards), None)}, out / "learning_curve.png",
                 ylabel="mean reward per iteration", title=f"GenRL on {env_id} (seed {seed})")
-    return {
+    result = {
+        "algorithm": "genrl",
+        "task": task,
+        "seed": seed,
         "model_path": str(out / "genrl_policy.zip"),
         "csv_path": str(curve.csv_path),
         "png_path": str(out / "learning_curve.png"),
@@ -153,3 +157,5 @@ def train_policy(
         "final_mean_reward": mean_rewards[-1] if mean_rewards else math.nan,
         "best_mean_reward": max(mean_rewards) if mean_rewards else math.nan,
     }
+    (out / "summary.json").write_text(json.dumps(result, indent=2))
+    return result

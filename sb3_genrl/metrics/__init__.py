@@ -1,1 +1,23 @@
-"""sb3_genrl.metrics"""
+"""Evaluation of generative models (paper section 5.2): precision and recall, DwPR, correlation with policy scores."""
+
+from sb3_genrl.metrics.correlation import CorrelationRow, CorrelationTable, correlation_table, pearson
+from sb3_genrl.metrics.dwpr import DwPR, default_intervention_values, dwpr
+from sb3_genrl.metrics.evaluate import GeneratorEvaluation, evaluate_generators, load_real_trajectories
+from sb3_genrl.metrics.plots import labelled_scatter
+from sb3_genrl.metrics.precision_recall import PrecisionRecall, precision_recall
+
+__all__ = [
+    "CorrelationRow",
+    "CorrelationTable",
+    "DwPR",
+    "GeneratorEvaluation",
+    "PrecisionRecall",
+    "correlation_table",
+    "default_intervention_values",
+    "dwpr",
+    "evaluate_generators",
+    "labelled_scatter",
+    "load_real_trajectories",
+    "pearson",
+    "precision_recall",
+]

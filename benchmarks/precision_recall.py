@@ -1,0 +1,152 @@
+"""Benchmark of sb3_genrl.metrics.precision_recall against prdc and against the bound of its matrix products.
+
+Each measurement runs in a fresh subprocess that creates the data (Gaussian, ``--dim`` values per sample), records
+its peak resident memory (``ru_maxrss``), runs one method and reports the time and the growth of the peak memory.
+Methods:
+
+- ``ours``: ``precision_recall(real, generated, k)`` on the CPU (torch, float32 blocks);
+- ``prdc``: ``prdc.compute_prdc`` (full distance matrices with scikit-learn; same definition of precision and
+  recall except that it counts a point inside a ball with ``<`` where we use ``<=``, which differs only on exact
+  ties, absent from continuous random data), used as a correctness cross-check;
+- ``matmul``: the three distance matrix products real-real, generated-generated and real-generated alone
+  (blocked ``torch.mm`` with our block size), the bound an exact method has to pay.
+
+Usage: ``python benchmarks/precision_recall.py [--sizes 5000 15000] [--skip-50k] [--out PATH]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import resource
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+DEFAULT_OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "precision_recall.json")
+LARGE_SIZE = 50000
+
+
+def _data(size: int, dim: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    real = rng.standard_normal((size, dim), dtype=np.float32)
+    generated = rng.standard_normal((size, dim), dtype=np.float32)
+    return real, generated
+
+
+def _peak_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # kilobytes on Linux
+
+
+def _worker(method: str, size: int, dim: int, k: int, seed: int) -> dict:
+    import torch
+
+    from sb3_genrl.metrics import precision_recall
+    from sb3_genrl.metrics.precision_recall import DEFAULT_MEMORY_BUDGET_MB, block_size
+
+    real, generated = _data(size, dim, seed)
+    if method == "prdc":
+        import contextlib
+        import io
+
+        from prdc import compute_prdc
+    baseline = _peak_mb()
+    start = time.perf_counter()
+    result: dict = {}
+    if method == "ours":
+        measures = precision_recall(real, generated, k, device="cpu")
+        result = {"precision": measures.precision, "recall": measures.recall}
+    elif method == "prdc":
+        with contextlib.redirect_stdout(io.StringIO()):
+            measures = compute_prdc(real, generated, k)
+        result = {"precision": float(measures["precision"]), "recall": float(measures["recall"])}
+    elif method == "matmul":
+        block = block_size(size, None, DEFAULT_MEMORY_BUDGET_MB)
+        x, y = torch.from_numpy(real), torch.from_numpy(generated)
+        with torch.no_grad():
+            for a, b in ((x, x), (y, y), (x, y)):
+                for i in range(0, size, block):
+                    for j in range(0, size, block):
+                        torch.mm(a[i:i + block], b[j:j + block].T)
+    else:
+        raise ValueError(f"unknown method {method!r}")
+    seconds = time.perf_counter() - start
+    return {"method": method, "size": size, "seconds": seconds, "peak_mb": _peak_mb() - baseline, **result,
+            "torch_threads": torch.get_num_threads()}
+
+
+def _run(method: str, size: int, args: argparse.Namespace) -> dict:
+    command = [sys.executable, os.path.abspath(__file__), "--worker", method, "--size", str(size), "--dim",
+               str(args.dim), "--k", str(args.k), "--seed", str(args.seed)]
+    completed = subprocess.run(command, capture_output=True, text=True, check=False)
+    if completed.returncode != 0:
+        return {"method": method, "size": size, "error": completed.stderr.strip().splitlines()[-1:]}
+    return json.loads(completed.stdout.strip().splitlines()[-1])
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sizes", type=int, nargs="+", default=[5000, 15000], help="set sizes (real = generated)")
+    parser.add_argument("--skip-50k", action="store_true", help="skip the 50000 vs 50000 run of ours")
+    parser.add_argument("--skip-prdc", action="store_true", help="skip prdc")
+    parser.add_argument("--dim", type=int, default=483, help="values per sample (69 steps x 7 joints)")
+    parser.add_argument("--k", type=int, default=3, help="neighbourhood size")
+    parser.add_argument("--seed", type=int, default=0, help="data seed")
+    parser.add_argument("--out", default=DEFAULT_OUT, help="JSON output path")
+    parser.add_argument("--worker", default=None, help=argparse.SUPPRESS)
+    parser.add_argument("--size", type=int, default=None, help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.worker is not None:
+        print(json.dumps(_worker(args.worker, args.size, args.dim, args.k, args.seed)))
+        return 0
+
+    runs = []
+    methods = ["matmul", "ours"] + ([] if args.skip_prdc else ["prdc"])
+    for size in args.sizes:
+        for method in methods:
+            runs.append(_run(method, size, args))
+            print(json.dumps(runs[-1]), flush=True)
+    if not args.skip_50k:
+        runs.append(_run("ours", LARGE_SIZE, args))
+        print(json.dumps(runs[-1]), flush=True)
+
+    def find(method: str, size: int) -> dict | None:
+        return next((r for r in runs if r["method"] == method and r["size"] == size and "seconds" in r), None)
+
+    summary = []
+    print("\n| N vs N | method | time (s) | peak memory (MiB) | precision | recall | time / matmul bound |")
+    print("|---:|---|---:|---:|---:|---:|---:|")
+    for run in runs:
+        if "seconds" not in run:
+            print(f"| {run['size']} | {run['method']} | failed: {run['error']} | | | | |")
+            continue
+        bound = find("matmul", run["size"])
+        ratio = run["seconds"] / bound["seconds"] if bound else float("nan")
+        precision = f"{run['precision']:.4f}" if "precision" in run else ""
+        recall = f"{run['recall']:.4f}" if "recall" in run else ""
+        print(f"| {run['size']} | {run['method']} | {run['seconds']:.2f} | {run['peak_mb']:.0f} | {precision} | {recall} "
+              f"| {ratio:.2f} |")
+    for size in sorted({run["size"] for run in runs}):
+        ours, prdc_run, bound = find("ours", size), find("prdc", size), find("matmul", size)
+        entry = {"size": size}
+        if ours and bound:
+            entry["ours_over_matmul_bound"] = ours["seconds"] / bound["seconds"]
+        if ours and prdc_run:
+            entry["speedup_over_prdc"] = prdc_run["seconds"] / ours["seconds"]
+            entry["same_values_as_prdc"] = (ours["precision"], ours["recall"]) == (prdc_run["precision"], prdc_run["recall"])
+        summary.append(entry)
+        print(json.dumps(entry))
+    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+    with open(args.out, "w") as file:
+        json.dump({"dim": args.dim, "k": args.k, "seed": args.seed, "cpu_count": os.cpu_count(),
+                   "machine": platform.processor() or platform.machine(), "runs": runs, "summary": summary}, file, indent=2)
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,166 @@
+"""Correlation of generator measures with policy performance (paper section 6.4, tables 3-5).
+
+Pearson's R and its two-sided p-value between each evaluation measure (precision, recall, delta_1, mean delta, ...)
+and the policy score of each generative model (the best reward of its GenRL policies), per model type and for all
+models together.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import math
+import os
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+from scipy.stats import pearsonr
+
+DEFAULT_MEASURES = ("precision", "recall", "delta_1", "delta_2", "mean_delta")
+ALL_MODELS = "ALL"
+_COLUMNS = ("group", "measure", "num_models", "pearson_r", "p_value", "note")
+
+
+@dataclasses.dataclass(frozen=True)
+class CorrelationRow:
+    """Pearson's R between one measure and the score within one group of models.
+
+    :param group: model type (e.g. ``"VAE"``) or ``"ALL"``
+    :param measure: name of the measure
+    :param num_models: number of models with finite values used
+    :param pearson_r: Pearson's correlation coefficient, ``nan`` when undefined (see ``note``)
+    :param p_value: two-sided p-value of the null hypothesis of no correlation, ``nan`` when undefined
+    :param note: why the value is undefined or which models were left out, empty otherwise
+    """
+
+    group: str
+    measure: str
+    num_models: int
+    pearson_r: float
+    p_value: float
+    note: str = ""
+
+
+def _format(value: float, digits: int) -> str:
+    return "nan" if math.isnan(value) else f"{value:.{digits}f}"
+
+
+@dataclasses.dataclass(frozen=True)
+class CorrelationTable:
+    """Rows of :func:`correlation_table`, one per (group, measure), groups in order then measures in order."""
+
+    rows: tuple[CorrelationRow, ...]
+
+    def get(self, group: str, measure: str) -> CorrelationRow:
+        """The row of ``group`` and ``measure``, or a ``KeyError``."""
+        for row in self.rows:
+            if row.group == group and row.measure == measure:
+                return row
+        raise KeyError(f"no row for group {group!r} and measure {measure!r}")
+
+    def to_markdown(self, digits: int = 3) -> str:
+        """A Markdown table, one line per (group, measure), values rounded to ``digits`` decimals."""
+        lines = ["| group | measure | models | Pearson's R | p-value | note |", "|---|---|---:|---:|---:|---|"]
+        for row in self.rows:
+            lines.append(f"| {row.group} | {row.measure} | {row.num_models} | {_format(row.pearson_r, digits)} | "
+                         f"{_format(row.p_value, digits)} | {row.note} |")
+        return "\n".join(lines) + "\n"
+
+    def to_csv(self, path: str | os.PathLike) -> None:
+        """Write the rows to ``path`` as CSV with full float precision (``nan`` for undefined values)."""
+        with open(path, "w", newline="") as file:
+            writer = csv.writer(file)
+            writer.writerow(_COLUMNS)
+            for row in self.rows:
+                writer.writerow([row.group, row.measure, row.num_models, repr(row.pearson_r), repr(row.p_value), row.note])
+
+
+def pearson(x: np.ndarray, y: np.ndarray) -> tuple[float, float, str]:
+    """Pearson's R and two-sided p-value of paired finite samples, ``(nan, nan, note)`` when undefined."""
+    x = np.asarray(x, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    if len(x) < 3:
+        return math.nan, math.nan, f"fewer than 3 models ({len(x)})"
+    if np.ptp(x) == 0 or np.ptp(y) == 0:
+        return math.nan, math.nan, "constant values"
+    result = pearsonr(x, y)
+    return float(result.statistic), float(result.pvalue), ""
+
+
+def _records(measures: Sequence[Mapping] | Mapping[str, Mapping[str, float]], scores: Mapping[str, float] | None,
+             model_types: Mapping[str, str] | None, score_key: str, type_key: str, model_key: str) -> list[dict]:
+    if isinstance(measures, Mapping):
+        if scores is None:
+            raise ValueError("scores (model name -> policy score) are required when measures is a mapping")
+        records = []
+        for model, values in measures.items():
+            if model not in scores:
+                raise ValueError(f"no score for model {model!r}")
+            record = {model_key: model, **values, score_key: scores[model]}
+            if model_types is not None:
+                record[type_key] = model_types[model]
+            records.append(record)
+        return records
+    records = [dict(record) for record in measures]
+    for index, record in enumerate(records):
+        if score_key not in record:
+            raise ValueError(f"record {index} ({record.get(model_key, '?')}) has no {score_key!r} value")
+        if model_types is not None and model_key in record and record[model_key] in model_types:
+            record[type_key] = model_types[record[model_key]]
+    return records
+
+
+def correlation_table(measures: Sequence[Mapping] | Mapping[str, Mapping[str, float]],
+                      scores: Mapping[str, float] | None = None, model_types: Mapping[str, str] | None = None, *,
+                      measure_names: Sequence[str] | None = None, score_key: str = "score", type_key: str = "type",
+                      model_key: str = "model", include_all: bool = True) -> CorrelationTable:
+    """Pearson's R and p-value of each measure against the policy score, per model type and for all models.
+
+    Input, either form:
+
+    - a list of records, e.g. ``{"model": "VAE1", "type": "VAE", "precision": 0.9, "recall": 0.4, "score": 12.0}``;
+    - a mapping ``model -> {measure: value}`` with ``scores`` (``model -> score``) and optionally ``model_types``
+      (``model -> type``).
+
+    Groups are the model types in order of first appearance, then ``"ALL"`` (all models, also the only group when
+    no types are given). Models with a non-finite measure or score are left out of that measure's row (named in
+    its note). Fewer than 3 models or a constant column give ``nan`` with a note instead of an error.
+
+    :param measures: records or a mapping, as above
+    :param scores: model name -> policy score, for the mapping form
+    :param model_types: model name -> model type (e.g. ``"VAE"``, ``"GAN"``)
+    :param measure_names: measures to correlate; default: those of ``precision, recall, delta_1, delta_2,
+        mean_delta`` present in every record
+    :param score_key: key of the score in the records
+    :param type_key: key of the model type in the records
+    :param model_key: key of the model name in the records
+    :param include_all: add the ``"ALL"`` group when there are model types
+    :return: a :class:`CorrelationTable`
+    """
+    records = _records(measures, scores, model_types, score_key, type_key, model_key)
+    if not records:
+        raise ValueError("no models given")
+    if measure_names is None:
+        measure_names = [name for name in DEFAULT_MEASURES if all(name in record for record in records)]
+        if not measure_names:
+            raise ValueError(f"the records hold none of the measures {DEFAULT_MEASURES}; pass measure_names")
+    for name in measure_names:
+        missing = [record.get(model_key, index) for index, record in enumerate(records) if name not in record]
+        if missing:
+            raise ValueError(f"measure {name!r} is missing for models {missing}")
+    types = list(dict.fromkeys(str(record[type_key]) for record in records if type_key in record))
+    groups = [(group, [r for r in records if str(r.get(type_key)) == group]) for group in types]
+    if include_all or not groups:
+        groups.append((ALL_MODELS, records))
+    rows = []
+    for group, members in groups:
+        for name in measure_names:
+            x = np.array([float(record[name]) for record in members])
+            y = np.array([float(record[score_key]) for record in members])
+            finite = np.isfinite(x) & np.isfinite(y)
+            r, p, note = pearson(x[finite], y[finite])
+            if not finite.all():
+                left_out = [str(member.get(model_key, "?")) for member, ok in zip(members, finite, strict=True) if not ok]
+                note = "; ".join(filter(None, [note, f"left out (non-finite): {', '.join(left_out)}"]))
+            rows.append(CorrelationRow(group, name, int(finite.sum()), r, p, note))
+    return CorrelationTable(tuple(rows))

@@ -1,0 +1,326 @@
+"""Improved precision and recall of Kynkaanniemi et al. (2019), exact and memory-bounded (paper section 5.2.1).
+
+A set's manifold is the union of balls around its points, each with radius equal to the distance to the point's
+``k``-th nearest neighbour within its own set. Precision is the share of generated samples inside the real manifold,
+recall the share of real samples inside the generated manifold (paper eq. (prec_and_recall)).
+
+Distances are computed block by block as ``|x|^2 + |y|^2 - 2 x.y^T`` with float32 matrix products (BLAS or GPU);
+no ``N x N`` matrix is ever held. Float32 rounding does not change a result: every decision whose float32 margin lies
+within the worst-case rounding bound is settled with the direct float64 sum of squared coordinate differences of
+the original values, which also decides exact ties.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import NamedTuple
+
+import numpy as np
+import torch
+from stable_baselines3.common.utils import get_device
+
+# Unit roundoff of float32.
+_U32 = 2.0**-24
+DEFAULT_MEMORY_BUDGET_MB = 256.0
+# Bytes of temporaries per element of a distance block (the block, a margin buffer, reductions).
+_BYTES_PER_BLOCK_ELEMENT = 12
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class PrecisionRecall:
+    """Result of :func:`precision_recall`.
+
+    :param precision: share of generated samples inside the real manifold, in [0, 1]
+    :param recall: share of real samples inside the generated manifold, in [0, 1]
+    :param k: neighbourhood size used for the radii
+    :param num_real: number of real samples
+    :param num_generated: number of generated samples
+    :param real_radii: ``(num_real,)`` float64 distances to the k-th nearest real neighbour, when requested
+    :param generated_radii: ``(num_generated,)`` float64 distances to the k-th nearest generated neighbour, when requested
+    """
+
+    precision: float
+    recall: float
+    k: int
+    num_real: int
+    num_generated: int
+    real_radii: np.ndarray | None = None
+    generated_radii: np.ndarray | None = None
+
+
+class _PreparedSet(NamedTuple):
+    """A point set on the device: original values, centred float32 values and their squared norms."""
+
+    original: torch.Tensor  # (n, d) float32 or float64 as given, used (in float64) for the exact direct distances
+    centred: torch.Tensor  # (n, d) float32, used for the fast matrix products
+    sq_norms: torch.Tensor  # (n,) float32
+
+
+def as_points(samples: np.ndarray, name: str) -> np.ndarray:
+    """Return ``samples`` ``(N, D)`` or ``(N, T, M)`` as a finite ``(N, T*M)`` array, or raise a ``ValueError``.
+
+    Float32 (and narrower float) samples stay float32, which float64 holds exactly; other types become float64.
+    """
+    array = np.asarray(samples)
+    dtype = np.float32 if array.dtype in (np.float16, np.float32) else np.float64
+    array = array.astype(dtype, copy=False)
+    if array.ndim < 2:
+        raise ValueError(f"{name} must have shape (N, D) or (N, T, M), got shape {array.shape}")
+    array = array.reshape(array.shape[0], -1)
+    if array.shape[0] == 0 or array.shape[1] == 0:
+        raise ValueError(f"{name} must hold at least one non-empty sample, got shape {array.shape}")
+    if not np.all(np.isfinite(array)):
+        raise ValueError(f"{name} contains non-finite values (nan or inf)")
+    return array
+
+
+def block_size(num_points: int, batch_size: int | None, memory_budget_mb: float) -> int:
+    """Edge length of the square distance blocks: ``batch_size`` if given, else from the budget, balanced over blocks."""
+    if batch_size is not None:
+        if int(batch_size) != batch_size or batch_size < 1:
+            raise ValueError(f"batch_size must be a positive integer, got {batch_size!r}")
+        return int(min(batch_size, num_points))
+    if memory_budget_mb <= 0:
+        raise ValueError(f"memory_budget_mb must be positive, got {memory_budget_mb!r}")
+    edge = max(1, int((memory_budget_mb * 2**20 / _BYTES_PER_BLOCK_ELEMENT) ** 0.5))
+    num_blocks = -(-num_points // edge)
+    return -(-num_points // num_blocks)
+
+
+def prepare(points: np.ndarray, shift: np.ndarray, device: torch.device) -> _PreparedSet:
+    """Move a ``(N, D)`` point set to ``device`` and translate it by ``-shift`` (in float64, then rounded to float32)."""
+    original = torch.as_tensor(points, device=device)
+    shift_t = torch.as_tensor(shift, dtype=torch.float64, device=device)
+    centred = torch.empty(original.shape, dtype=torch.float32, device=device)
+    sq_norms = torch.empty(len(original), dtype=torch.float32, device=device)
+    step = max(1, 2**22 // max(1, original.shape[1]))  # rows per float64 chunk (32 MiB)
+    for start in range(0, len(original), step):
+        centred[start:start + step] = original[start:start + step].double() - shift_t
+        sq_norms[start:start + step] = (centred[start:start + step].double() ** 2).sum(1)
+    return _PreparedSet(original, centred, sq_norms)
+
+
+def _float32_tolerance(dim: int) -> float:
+    # Error bound of a float32 squared distance |x|^2 + |y|^2 - 2 x.y, relative to |x|^2 + |y|^2: the dot
+    # products (gamma_D each) plus the rounding of the centred inputs and of the additions.
+    return (2 * dim + 16) * _U32
+
+
+def _pair_factors(a: _PreparedSet, a_offset: torch.Tensor, b: _PreparedSet, b_offset: torch.Tensor
+                  ) -> tuple[torch.Tensor, torch.Tensor]:
+    """Factors with ``left[i] . right[j] = a_offset[i] + b_offset[j] - 2 a_i . b_j``.
+
+    One float32 matrix product of blocks of these factors gives a block of squared distances (offsets ``|x|^2``)
+    or of margins, without any further pass over the block.
+    """
+    left = torch.cat([a.centred, a_offset[:, None], torch.ones_like(a_offset)[:, None]], dim=1)
+    right = torch.cat([-2.0 * b.centred, torch.ones_like(b_offset)[:, None], b_offset[:, None]], dim=1)
+    return left, right
+
+
+def _direct_sq_pairs(a: torch.Tensor, b: torch.Tensor, a_rows: torch.Tensor, b_rows: torch.Tensor, chunk: int) -> torch.Tensor:
+    """Float64 squared distances ``|a[a_rows[p]] - b[b_rows[p]]|^2`` as the direct sum of squared differences."""
+    out = torch.empty(len(a_rows), dtype=torch.float64, device=a.device)
+    for p0 in range(0, len(a_rows), chunk):
+        diff = a[a_rows[p0:p0 + chunk]].double() - b[b_rows[p0:p0 + chunk]].double()
+        out[p0:p0 + chunk] = (diff * diff).sum(1)
+    return out
+
+
+def _kth_per_row(rows: torch.Tensor, values: torch.Tensor, num_rows: int, k: int) -> torch.Tensor:
+    """The k-th smallest of ``values`` per row index in ``rows`` (every row index in range occurs at least k times)."""
+    order = torch.argsort(values, stable=True)
+    order = order[torch.argsort(rows[order], stable=True)]
+    counts = torch.bincount(rows, minlength=num_rows)
+    starts = torch.cumsum(counts, 0) - counts
+    return values[order][starts + k - 1]
+
+
+def _row_chunk(block: int, num_others: int) -> int:
+    # Rows recomputed at once against a whole set: a (rows, num_others) float32 buffer within the block budget.
+    return max(1, block * block // num_others)
+
+
+def _merge_topk(values: torch.Tensor, indices: torch.Tensor, new_values: torch.Tensor, new_indices: torch.Tensor,
+                keep: int) -> tuple[torch.Tensor, torch.Tensor]:
+    best = torch.topk(torch.cat([values, new_values], dim=1), keep, dim=1, largest=False)
+    return best.values, torch.gather(torch.cat([indices, new_indices], dim=1), 1, best.indices)
+
+
+def _exact_sq_radii_rows(points: _PreparedSet, factors: tuple[torch.Tensor, torch.Tensor], rows: torch.Tensor, k: int,
+                         tol: torch.Tensor, block: int) -> torch.Tensor:
+    """Exact squared k-th neighbour distances of ``rows``: every neighbour whose float32 value is within twice the
+    error bound of the float32 k-th value is a candidate, and the candidates are compared by direct distances."""
+    left, right = factors
+    exact = torch.empty(len(rows), dtype=torch.float64, device=rows.device)
+    step = _row_chunk(block, len(right))
+    for r0 in range(0, len(rows), step):
+        r = rows[r0:r0 + step]
+        sq = torch.mm(left[r], right.T)
+        sq[torch.arange(len(r), device=sq.device), r] = torch.inf
+        kth = torch.topk(sq, k, dim=1, largest=False).values[:, -1]
+        r_idx, c_idx = (sq <= (kth + 2 * tol[r])[:, None]).nonzero(as_tuple=True)
+        values = _direct_sq_pairs(points.original, points.original, r[r_idx], c_idx, step)
+        exact[r0:r0 + step] = _kth_per_row(r_idx, values, len(r), k)
+    return exact
+
+
+def squared_radii(points: _PreparedSet, k: int, block: int) -> torch.Tensor:
+    """Exact squared distance of every point to its k-th nearest neighbour in its own set (own index excluded).
+
+    One pass over the upper block triangle of the set's float32 distance matrix keeps a running top-(k+1) per
+    row: each off-diagonal block serves its rows and, transposed, its columns. When the (k+1)-th float32 value is
+    clear of the k-th by twice the error bound, the kept candidates hold every possible k-th neighbour and their
+    direct distances give the exact radius; other rows are recomputed (:func:`_exact_sq_radii_rows`).
+    """
+    n, dim = points.centred.shape
+    keep = min(k + 1, n - 1)
+    device = points.centred.device
+    left, right = _pair_factors(points, points.sq_norms, points, points.sq_norms)
+    values = torch.full((n, keep), torch.inf, device=device)
+    indices = torch.full((n, keep), -1, dtype=torch.long, device=device)
+    for i0 in range(0, n, block):
+        i1 = min(i0 + block, n)
+        for j0 in range(i0, n, block):
+            j1 = min(j0 + block, n)
+            sq = torch.mm(left[i0:i1], right[j0:j1].T)
+            if j0 == i0:
+                sq.fill_diagonal_(torch.inf)
+            best = torch.topk(sq, min(keep, j1 - j0), dim=1, largest=False)
+            values[i0:i1], indices[i0:i1] = _merge_topk(values[i0:i1], indices[i0:i1], best.values, best.indices + j0, keep)
+            if j0 != i0:
+                best = torch.topk(sq.T.contiguous(), min(keep, i1 - i0), dim=1, largest=False)
+                values[j0:j1], indices[j0:j1] = _merge_topk(values[j0:j1], indices[j0:j1], best.values,
+                                                            best.indices + i0, keep)
+    tol = _float32_tolerance(dim) * (points.sq_norms + points.sq_norms.max())
+    certain = (values[:, k] - values[:, k - 1]) > 2 * tol if keep > k else torch.ones(n, dtype=torch.bool, device=device)
+    # Among the first k candidates of a certain row, only those within twice the bound of the k-th can be the
+    # farthest; the exact radius is the largest of their direct distances.
+    r_idx, c_idx = ((values[:, :k] >= (values[:, k - 1] - 2 * tol)[:, None]) & certain[:, None]).nonzero(as_tuple=True)
+    direct = _direct_sq_pairs(points.original, points.original, r_idx, indices[r_idx, c_idx], block)
+    exact = torch.zeros(n, dtype=torch.float64, device=device).scatter_reduce_(0, r_idx, direct, "amax")
+    rows = (~certain).nonzero(as_tuple=True)[0]
+    if len(rows):
+        exact[rows] = _exact_sq_radii_rows(points, (left, right), rows, k, tol, block)
+    return exact
+
+
+def _exact_inside(points: _PreparedSet, rows: torch.Tensor, others: _PreparedSet, other_sq_radii: torch.Tensor,
+                  tol: torch.Tensor, block: int) -> torch.Tensor:
+    """Exact test of ``rows`` of ``points`` against the balls of ``others``: margins clear of 0 by the float32 bound
+    ``tol`` decide, the others are settled by direct distances."""
+    left, right = _pair_factors(points, points.sq_norms, others, others.sq_norms - other_sq_radii.float())
+    inside = torch.zeros(len(rows), dtype=torch.bool, device=rows.device)
+    step = _row_chunk(block, len(right))
+    for r0 in range(0, len(rows), step):
+        r = rows[r0:r0 + step]
+        margin = torch.mm(left[r], right.T)
+        inside[r0:r0 + step] = (margin < -tol[r, None]).any(1)
+        r_idx, c_idx = (margin.abs() <= tol[r, None]).nonzero(as_tuple=True)
+        direct = _direct_sq_pairs(points.original, others.original, r[r_idx], c_idx, step)
+        inside[r0 + r_idx[direct <= other_sq_radii[c_idx]]] = True
+    return inside
+
+
+def membership(real: _PreparedSet, real_sq_radii: torch.Tensor, generated: _PreparedSet, generated_sq_radii: torch.Tensor,
+               block: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """Which generated samples lie in the real manifold and which real samples lie in the generated one.
+
+    One pass over the real-generated float32 blocks keeps, for each sample, the smallest margin
+    ``|x - y|^2 - radius^2`` over the other set; samples whose margin is within the error bound of 0 are
+    recomputed and their borderline pairs settled by direct distances (:func:`_exact_inside`).
+
+    :return: ``(generated_inside_real, real_inside_generated)`` boolean tensors
+    """
+    n_real, n_gen = real.centred.shape[0], generated.centred.shape[0]
+    device = real.centred.device
+    r_real = real_sq_radii.float()
+    r_gen = generated_sq_radii.float()
+    # Real row i, generated column j: q = |x_i - y_j|^2 - r_real_i - r_gen_j, so that the smallest q of a column
+    # plus r_gen_j is that generated sample's margin and the smallest q of a row plus r_real_i the real one's.
+    left, right = _pair_factors(real, real.sq_norms - r_real, generated, generated.sq_norms - r_gen)
+    gen_margin = torch.full((n_gen,), torch.inf, device=device)
+    real_margin = torch.full((n_real,), torch.inf, device=device)
+    for i0 in range(0, n_real, block):
+        i1 = min(i0 + block, n_real)
+        for j0 in range(0, n_gen, block):
+            j1 = min(j0 + block, n_gen)
+            q = torch.mm(left[i0:i1], right[j0:j1].T)
+            torch.minimum(gen_margin[j0:j1], q.amin(0), out=gen_margin[j0:j1])
+            torch.minimum(real_margin[i0:i1], q.amin(1), out=real_margin[i0:i1])
+    gen_margin += r_gen
+    real_margin += r_real
+    results = []
+    for points, margin, own_radii, others, other_radii in ((generated, gen_margin, r_gen, real, real_sq_radii),
+                                                           (real, real_margin, r_real, generated, generated_sq_radii)):
+        tol = _float32_tolerance(points.centred.shape[1]) * (points.sq_norms + own_radii + others.sq_norms.max()
+                                                             + other_radii.max().float())
+        inside = margin < -tol
+        rows = (margin.abs() <= tol).nonzero(as_tuple=True)[0]
+        if len(rows):
+            inside[rows] = _exact_inside(points, rows, others, other_radii, tol, block)
+        results.append(inside)
+    return results[0], results[1]
+
+
+def precision_recall(real: np.ndarray, generated: np.ndarray, k: int = 3, *, batch_size: int | None = None,
+                     device: torch.device | str = "auto", return_radii: bool = False,
+                     memory_budget_mb: float = DEFAULT_MEMORY_BUDGET_MB) -> PrecisionRecall:
+    """Improved precision and recall (Kynkaanniemi et al. 2019) of ``generated`` against ``real``, exactly.
+
+    A sample's radius is the distance to its ``k``-th nearest neighbour in its own set, excluding exactly the
+    sample's own index: a duplicate of the sample counts as a neighbour at distance 0 (so ``k`` copies of a
+    point give it radius 0). A sample is inside the other set's manifold when its distance to at least one point of
+    that set is ``<=`` that point's radius: ties count as inside, as in the original implementation (the ``prdc``
+    package uses ``<`` instead, which differs only on exact ties).
+
+    Float precision: blocks are computed in float32 as ``|x|^2 + |y|^2 - 2 x.y^T`` after centring both sets on
+    the real set's mean. Each float32 value is within a worst-case rounding bound (``(2D + 16) * 2**-24`` times
+    ``|x|^2 + |y|^2``, plus the radii for margins) of the exact one. Every comparison that this bound leaves open (a
+    radius whose k-th and (k+1)-th float32 candidates are that close, a sample whose margin to a ball is that
+    close to 0) is settled with the direct float64 sum of squared differences of the original values. Results
+    therefore equal a float64 brute force computation, exact ties and duplicates included; only the few borderline
+    samples (typically a few percent) cost extra work.
+
+    Memory: square blocks of ``batch_size`` rows and columns (by default the largest fitting
+    ``memory_budget_mb``) are streamed; the memory used does not grow with ``N^2``.
+
+    :param real: real samples ``(N, D)`` or ``(N, T, M)`` (flattened per sample)
+    :param generated: generated samples with the same per-sample size
+    :param k: neighbourhood size (paper: 3), ``1 <= k < min(len(real), len(generated))``
+    :param batch_size: edge length of the distance blocks; ``None`` chooses it from ``memory_budget_mb``
+    :param device: torch device; ``"auto"`` uses a GPU when there is one
+    :param return_radii: also return the k-th neighbour distances of both sets
+    :param memory_budget_mb: memory for the distance blocks in MiB, used when ``batch_size`` is ``None``
+    :return: a :class:`PrecisionRecall`
+    """
+    real_points = as_points(real, "real")
+    gen_points = as_points(generated, "generated")
+    if real_points.shape[1] != gen_points.shape[1]:
+        raise ValueError(f"real and generated samples must have the same size, got {real_points.shape[1]} "
+                         f"and {gen_points.shape[1]} values per sample")
+    if int(k) != k or k < 1:
+        raise ValueError(f"k must be a positive integer, got {k!r}")
+    k = int(k)
+    smallest = min(len(real_points), len(gen_points))
+    if k >= smallest:
+        raise ValueError(f"k must be smaller than both set sizes (a point is not its own neighbour), got k={k} "
+                         f"with {len(real_points)} real and {len(gen_points)} generated samples")
+    torch_device = get_device(device)
+    block = block_size(max(len(real_points), len(gen_points)), batch_size, memory_budget_mb)
+    shift = real_points.mean(0, dtype=np.float64)
+    real_set = prepare(real_points, shift, torch_device)
+    gen_set = prepare(gen_points, shift, torch_device)
+    with torch.no_grad():
+        real_radii = squared_radii(real_set, k, block)
+        gen_radii = squared_radii(gen_set, k, block)
+        gen_inside, real_inside = membership(real_set, real_radii, gen_set, gen_radii, block)
+    return PrecisionRecall(
+        precision=float(gen_inside.double().mean()),
+        recall=float(real_inside.double().mean()),
+        k=int(k),
+        num_real=len(real_points),
+        num_generated=len(gen_points),
+        real_radii=real_radii.sqrt().cpu().numpy() if return_radii else None,
+        generated_radii=gen_radii.sqrt().cpu().numpy() if return_radii else None,
+    )

@@ -1,0 +1,253 @@
+"""Tests of sb3_genrl.metrics against brute-force references on small sets."""
+
+from __future__ import annotations
+
+import csv
+import importlib
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial.distance import cdist
+from scipy.stats import norm
+
+from sb3_genrl.generative.base import TrajectoryGenerator
+from sb3_genrl.metrics import (
+    correlation_table,
+    default_intervention_values,
+    dwpr,
+    evaluate_generators,
+    precision_recall,
+)
+
+
+def brute_force(real: np.ndarray, generated: np.ndarray, k: int) -> tuple[float, float, np.ndarray, np.ndarray]:
+    """Reference: full float64 distance matrices, own index excluded, ties inside (<=)."""
+    real = real.reshape(len(real), -1).astype(np.float64)
+    generated = generated.reshape(len(generated), -1).astype(np.float64)
+    radii = []
+    for points in (real, generated):
+        distances = cdist(points, points)
+        np.fill_diagonal(distances, np.inf)
+        radii.append(np.sort(distances, axis=1)[:, k - 1])
+    cross = cdist(real, generated)
+    precision = (cross <= radii[0][:, None]).any(0).mean()
+    recall = (cross <= radii[1][None, :]).any(1).mean()
+    return float(precision), float(recall), radii[0], radii[1]
+
+
+class LinearGenerator(TrajectoryGenerator):
+    """tau = reshape(alpha @ weights): each latent dimension moves the trajectory along one row of ``weights``."""
+
+    def __init__(self, weights: np.ndarray, horizon: int, action_dim: int, prior: str = "normal") -> None:
+        super().__init__(horizon=horizon, action_dim=action_dim, latent_dim=weights.shape[0], prior=prior)
+        self.weights = np.asarray(weights, dtype=np.float32)
+
+    def decode(self, alpha: np.ndarray) -> np.ndarray:
+        alpha = self.check_latent(alpha)
+        return (alpha @ self.weights).reshape(len(alpha), self.horizon, self.action_dim)
+
+    def save(self, path: str) -> None:
+        raise NotImplementedError
+
+
+def two_factor_generator(ignored_dims: int = 1) -> LinearGenerator:
+    """Dimension 0 alone sets the first half of the trajectory, dimension 1 the second half, others do nothing."""
+    horizon, action_dim = 4, 2
+    weights = np.zeros((2 + ignored_dims, horizon * action_dim), dtype=np.float32)
+    weights[0, :4] = 1.0
+    weights[1, 4:] = 1.0
+    return LinearGenerator(weights, horizon, action_dim)
+
+
+def grid_points(rng: np.random.Generator, n: int, dim: int) -> np.ndarray:
+    """Integer points on a small grid: exact duplicates and exactly tied distances."""
+    return rng.integers(0, 3, size=(n, dim)).astype(np.float32)
+
+
+@pytest.mark.parametrize("kind", ["gaussian", "grid", "offset_grid", "trajectories"])
+@pytest.mark.parametrize("k", [1, 3, 5])
+def test_precision_recall_matches_brute_force(kind: str, k: int) -> None:
+    rng = np.random.default_rng(k)
+    if kind == "gaussian":
+        real, generated = rng.normal(size=(70, 6)), rng.normal(0.4, 1.2, size=(45, 6))
+    elif kind == "grid":
+        real, generated = grid_points(rng, 60, 3), grid_points(rng, 50, 3)
+    elif kind == "offset_grid":  # exact ties that float32 values far from the origin cannot resolve
+        real = 1000.0 + grid_points(rng, 60, 4).astype(np.float64) / 4
+        generated = 1000.0 + grid_points(rng, 50, 4).astype(np.float64) / 4
+    else:  # (N, T, M) with a large common offset, where float32 cancellation is worst
+        real = 100.0 + rng.normal(size=(50, 4, 3)).astype(np.float32)
+        generated = 100.0 + rng.normal(size=(40, 4, 3)).astype(np.float32)
+    expected = brute_force(real, generated, k)
+    for batch_size in (1, 4, 17, None):
+        result = precision_recall(real, generated, k, batch_size=batch_size, device="cpu", return_radii=True)
+        assert (result.precision, result.recall) == expected[:2], (batch_size, result)
+        np.testing.assert_allclose(result.real_radii, expected[2], rtol=1e-12, atol=0)
+        np.testing.assert_allclose(result.generated_radii, expected[3], rtol=1e-12, atol=0)
+        assert (result.k, result.num_real, result.num_generated) == (k, len(real), len(generated))
+
+
+def test_duplicates_count_as_neighbours() -> None:
+    # Every real point appears 3 times: with k = 2 the radii are 0 and only exact copies are inside.
+    base = np.array([[0.0, 0.0], [5.0, 0.0], [0.0, 5.0]])
+    real = np.repeat(base, 3, axis=0)
+    generated = np.array([[0.0, 0.0], [5.0, 0.0], [0.1, 0.0], [2.0, 2.0]])
+    result = precision_recall(real, generated, k=2, batch_size=2, device="cpu", return_radii=True)
+    np.testing.assert_array_equal(result.real_radii, np.zeros(9))
+    assert result.precision == 0.5
+    assert (result.precision, result.recall) == brute_force(real, generated, 2)[:2]
+
+
+def test_identical_and_disjoint_sets() -> None:
+    rng = np.random.default_rng(0)
+    points = rng.normal(size=(40, 5))
+    same = precision_recall(points, points.copy(), k=3, batch_size=8, device="cpu")
+    assert same.precision == same.recall == 1.0
+    far = precision_recall(points, points + 1000.0, k=3, device="cpu")
+    assert far.precision == far.recall == 0.0
+
+
+def test_precision_recall_rejects_bad_inputs() -> None:
+    points = np.zeros((10, 3))
+    with pytest.raises(ValueError, match="same size"):
+        precision_recall(points, np.zeros((10, 4)))
+    with pytest.raises(ValueError, match="k must be a positive"):
+        precision_recall(points, points, k=0)
+    with pytest.raises(ValueError, match="smaller than both"):
+        precision_recall(points, np.zeros((3, 3)), k=3)
+    bad = points.copy()
+    bad[2, 1] = np.nan
+    with pytest.raises(ValueError, match="non-finite"):
+        precision_recall(points, bad)
+    with pytest.raises(ValueError, match="shape"):
+        precision_recall(np.zeros(10), points)
+    with pytest.raises(ValueError, match="batch_size"):
+        precision_recall(points, points, batch_size=0)
+
+
+def test_default_intervention_values() -> None:
+    np.testing.assert_allclose(default_intervention_values("normal", 5), norm.ppf([0.1, 0.3, 0.5, 0.7, 0.9]), rtol=1e-6)
+    np.testing.assert_allclose(default_intervention_values("uniform", 5), [-0.8, -0.4, 0.0, 0.4, 0.8], atol=1e-7)
+    with pytest.raises(ValueError):
+        default_intervention_values("normal", 0)
+
+
+def test_dwpr_separates_decisive_and_ignored_dimensions() -> None:
+    generator = two_factor_generator(ignored_dims=1)
+    result = dwpr(generator, n=150, interventions=5, k=3, seed=0, device="cpu")
+    assert result.delta.shape == (3,)
+    np.testing.assert_allclose(result.delta, result.precision - result.recall)
+    # Dimensions 0 and 1 each fix one half of the trajectory: realistic but covering little of the reference.
+    assert result.delta[0] > 0.4 and result.delta[1] > 0.4
+    # Dimension 2 is ignored: fixing it changes nothing, recall stays high and delta is near 0.
+    assert abs(result.delta[2]) < 0.1 and result.recall[2] > 0.8
+    assert result.delta_1 == pytest.approx(result.delta[:2].max())
+    assert result.delta_2 == pytest.approx(result.delta[:2].min())
+    assert result.mean_delta == pytest.approx((result.delta_1 + result.delta_2) / 2)
+    np.testing.assert_allclose(result.intervention_values, default_intervention_values("normal", 5))
+    again = dwpr(generator, n=150, interventions=5, k=3, seed=0, device="cpu")
+    np.testing.assert_array_equal(again.delta, result.delta)
+
+
+def test_dwpr_single_dimension_and_explicit_values() -> None:
+    generator = LinearGenerator(np.ones((1, 6), dtype=np.float32), horizon=3, action_dim=2, prior="uniform")
+    result = dwpr(generator, n=40, k=2, seed=1, intervention_values=[-0.5, 0.5], device="cpu")
+    assert result.delta_2 == 0.0 and result.mean_delta == pytest.approx(result.delta_1 / 2)
+    np.testing.assert_allclose(result.intervention_values, [-0.5, 0.5])
+    with pytest.raises(ValueError):
+        dwpr(generator, n=0)
+
+
+def test_correlation_table_against_numpy() -> None:
+    rng = np.random.default_rng(3)
+    records = []
+    for index in range(8):
+        kind = "VAE" if index % 2 == 0 else "GAN"
+        records.append({"model": f"{kind}{index}", "type": kind, "precision": rng.uniform(), "recall": rng.uniform(),
+                        "delta_1": rng.uniform(), "mean_delta": 0.5, "score": rng.normal()})
+    table = correlation_table(records, measure_names=["precision", "recall", "mean_delta"])
+    assert [row.group for row in table.rows[::3]] == ["VAE", "GAN", "ALL"]
+    for group in ("VAE", "GAN", "ALL"):
+        members = [r for r in records if group == "ALL" or r["type"] == group]
+        for name in ("precision", "recall"):
+            x = [r[name] for r in members]
+            y = [r["score"] for r in members]
+            row = table.get(group, name)
+            assert row.pearson_r == pytest.approx(np.corrcoef(x, y)[0, 1], abs=1e-12)
+            assert row.num_models == len(members)
+    constant = table.get("ALL", "mean_delta")
+    assert math.isnan(constant.pearson_r) and "constant" in constant.note
+    # Known values: x = 1..5, y = (2, 4, 5, 4, 5) has R = sqrt(0.6) and, with t = 2.1213 on 3 degrees of freedom,
+    # a two-sided p-value of 0.1240.
+    x, y = [1, 2, 3, 4, 5], [2, 4, 5, 4, 5]
+    row = correlation_table({f"m{i}": {"recall": x[i]} for i in range(5)}, {f"m{i}": y[i] for i in range(5)}).rows[0]
+    assert (row.group, row.measure, row.num_models) == ("ALL", "recall", 5)
+    assert row.pearson_r == pytest.approx(math.sqrt(0.6), abs=1e-12)
+    assert row.p_value == pytest.approx(0.1240, abs=1e-4)
+
+
+def test_correlation_table_few_models_and_rendering(tmp_path) -> None:
+    records = [{"model": "VAE1", "type": "VAE", "recall": 0.1, "score": 1.0},
+               {"model": "VAE2", "type": "VAE", "recall": 0.4, "score": 3.0},
+               {"model": "GAN1", "type": "GAN", "recall": 0.3, "score": 2.0},
+               {"model": "GAN2", "type": "GAN", "recall": float("nan"), "score": 2.5}]
+    table = correlation_table(records)
+    vae = table.get("VAE", "recall")
+    assert math.isnan(vae.pearson_r) and "fewer than 3" in vae.note
+    assert "GAN2" in table.get("ALL", "recall").note and table.get("ALL", "recall").num_models == 3
+    path = tmp_path / "table.csv"
+    table.to_csv(path)
+    with open(path) as file:
+        rows = list(csv.DictReader(file))
+    for row, expected in zip(rows, table.rows, strict=True):
+        for key, value in (("pearson_r", expected.pearson_r), ("p_value", expected.p_value)):
+            assert float(row[key]) == value or (math.isnan(value) and math.isnan(float(row[key])))
+        assert (row["group"], row["measure"], int(row["num_models"])) == (expected.group, expected.measure,
+                                                                           expected.num_models)
+    markdown = table.to_markdown(digits=4)
+    lines = markdown.strip().splitlines()[2:]
+    assert len(lines) == len(table.rows)
+    for line, expected in zip(lines, table.rows, strict=True):
+        cells = [cell.strip() for cell in line.strip("|").split("|")]
+        assert cells[:3] == [expected.group, expected.measure, str(expected.num_models)]
+        for cell, value in zip(cells[3:5], (expected.pearson_r, expected.p_value), strict=True):
+            assert (cell == "nan" and math.isnan(value)) or float(cell) == pytest.approx(value, abs=5e-5)
+    with pytest.raises(ValueError, match="no 'score'"):
+        correlation_table([{"model": "x", "recall": 1.0}])
+
+
+def test_evaluate_generators_writes_table_and_plots(tmp_path) -> None:
+    generators = {"A": two_factor_generator(ignored_dims=0), "B": two_factor_generator(ignored_dims=1)}
+    real = generators["A"].decode(generators["A"].sample_prior(300, 5))
+    np.save(tmp_path / "real.npy", real)
+    out = tmp_path / "eval"
+    evaluations = evaluate_generators(generators, tmp_path / "real.npy", n=200, k=3, dwpr_n=40, interventions=3,
+                                      seed=0, out_dir=out, device="cpu")
+    assert [evaluation.name for evaluation in evaluations] == ["A", "B"]
+    for name in ("results.csv", "results.md", "results.json", "precision_recall.png", "disentanglement.png"):
+        assert (out / name).stat().st_size > 0
+    with open(out / "results.csv") as file:
+        rows = list(csv.DictReader(file))
+    assert [row["model"] for row in rows] == ["A", "B"]
+    assert float(rows[0]["precision"]) == evaluations[0].precision_recall.precision
+    assert float(rows[1]["mean_delta"]) == evaluations[1].dwpr.mean_delta
+    assert evaluations[0].precision_recall.precision > 0.8  # same distribution as the real set
+    with pytest.raises(ValueError, match="horizon"):
+        evaluate_generators([LinearGenerator(np.ones((1, 3)), 3, 1)], real, n=50, dwpr_n=10, out_dir=out)
+
+
+def test_cli_evaluate(tmp_path, capsys) -> None:
+    generative = importlib.import_module("sb3_genrl.generative")
+    if not hasattr(generative, "load") or not hasattr(generative, "make_generator"):
+        pytest.skip("sb3_genrl.generative.load / make_generator are not available: cannot write a generator file")
+    from sb3_genrl.cli import main
+
+    generator = generative.make_generator("vae", horizon=4, action_dim=2, latent_dim=2, beta=1.0, device="cpu")
+    generator.save(str(tmp_path / "vae.pt"))
+    np.save(tmp_path / "real.npy", np.random.default_rng(0).normal(size=(120, 4, 2)).astype(np.float32))
+    code = main(["evaluate", str(tmp_path / "vae.pt"), "--data", str(tmp_path / "real.npy"), "--out",
+                 str(tmp_path / "out"), "--n", "100", "--dwpr-n", "20", "--k", "3", "--seed", "0", "--device", "cpu"])
+    assert code == 0
+    assert "vae: precision" in capsys.readouterr().out
+    assert (tmp_path / "out" / "results.md").exists() and (tmp_path / "out" / "disentanglement.png").exists()
