@@ -38,6 +38,38 @@ def build_parser() -> argparse.ArgumentParser:
     play.add_argument("--out", required=True, help="output directory (report.md, GIFs, frame strips)")
     play.set_defaults(func=_play_command)
 
+    quick = sub.add_parser("quickstart", help="demonstrations -> VAE -> evaluation -> GenRL policy -> report, in minutes")
+    quick.add_argument("--out", required=True, help="output folder (a rerun resumes it)")
+    quick.add_argument("--task", choices=("hockey", "basketball"), default="hockey")
+    quick.add_argument("--demos", type=int, default=2000, help="demonstrations to generate")
+    quick.add_argument("--epochs", type=int, default=60, help="beta-VAE training epochs")
+    quick.add_argument("--episodes", type=int, default=3000, help="GenRL episodes")
+    quick.add_argument("--seed", type=int, default=0, help="random seed")
+    quick.add_argument("--no-video", action="store_true", help="skip rendering the policy")
+    quick.add_argument("--device", default="auto", help="torch device (default: auto)")
+    quick.set_defaults(func=_quickstart_command)
+
+    study = sub.add_parser("study", help="the paper's experiments at a scale, with tables, plots and report.md")
+    study.add_argument("--task", choices=("hockey", "basketball", "all"), default="all")
+    study.add_argument("--scale", choices=("smoke", "small", "paper"), default="small")
+    study.add_argument("--out", required=True, help="study folder (a rerun resumes it)")
+    study.add_argument("--executor", choices=("local", "ray"), default="local", help="worker processes or Ray tasks")
+    study.add_argument("--address", default=None, help="Ray cluster address (ray executor)")
+    study.add_argument("--workers", type=int, default=None, help="local worker processes (default: the cores)")
+    study.add_argument("--models", nargs="+", default=None, help="a subset of VAE1..VAE9 GAN1..GAN9 (default all)")
+    study.add_argument("--device", default="auto", help="torch device (default: auto)")
+    study.set_defaults(func=_study_command)
+
+    video = sub.add_parser("video", help="render a GenRL policy (or a generator's random trajectories) to MP4 or GIF")
+    video.add_argument("--task", required=True, choices=("hockey", "basketball"))
+    source = video.add_mutually_exclusive_group(required=True)
+    source.add_argument("--policy", help="a GenRL run folder or model zip")
+    source.add_argument("--generator", help="a generator file (random latent actions)")
+    video.add_argument("--goals", type=int, default=6, help="episodes (goals) to show")
+    video.add_argument("--seed", type=int, default=0, help="seed of the goals (and of the latent actions)")
+    video.add_argument("--out", required=True, help="output file, .mp4 or .gif")
+    video.set_defaults(func=_video_command)
+
     baseline = sub.add_parser("baseline", help="train PPO (BC), SAC (prefilled) or a stock algorithm on the latent space")
     baseline.add_argument("algorithm", choices=("ppo", "sac", "latent-ppo", "latent-sac", "latent-trpo"))
     baseline.add_argument("--task", required=True, help="hockey or basketball")
@@ -121,6 +153,35 @@ def _compare_command(args: argparse.Namespace) -> int:
     from sb3_genrl.baselines.compare import compare_runs
 
     print(compare_runs(args.runs, args.out, task=args.task).read_text())
+    return 0
+
+
+def _study_command(args: argparse.Namespace) -> int:
+    from sb3_genrl.study import MODELS, run_study
+
+    report = run_study(args.task, args.scale, args.out, executor=args.executor, address=args.address,
+                       workers=args.workers, models=tuple(args.models) if args.models else MODELS, device=args.device,
+                       log=print)
+    print(f"wrote {report}")
+    return 0
+
+
+def _video_command(args: argparse.Namespace) -> int:
+    from sb3_genrl.envs.video import record_video
+
+    result = record_video(args.task, args.out, policy=args.policy, generator=args.generator, goals=args.goals,
+                          seed=args.seed)
+    print(f"wrote {result['video']} (rewards {', '.join(f'{r:.3f}' for r in result['rewards'])})")
+    return 0
+
+
+def _quickstart_command(args: argparse.Namespace) -> int:
+    from sb3_genrl.study.quickstart import quickstart
+
+    report = quickstart(args.out, task=args.task, demo_episodes=args.demos, epochs=args.epochs,
+                        policy_episodes=args.episodes, seed=args.seed, video=not args.no_video, device=args.device,
+                        log=print)
+    print(f"wrote {report}")
     return 0
 
 

@@ -71,6 +71,9 @@ class GenRL(OnPolicyAlgorithm):
     :param target_kl: KL bound ``delta`` of the TRPO E-step, ``KL(q || pi) < delta`` (default 0.01)
     :param kl_coef: weight of ``KL(q || pi)`` in the KL-penalty E-step (default 1, as in eq. 5)
     :param n_e_step_epochs: Adam epochs of the KL-penalty E-step (default 10)
+    :param n_em_iterations: E-step/M-step pairs per batch, Algorithm 1's inner "repeat" loop (default 1); each
+        E-step is bounded relative to the policy of the previous M-step, and importance ratios stay relative to the
+        policy that collected the batch
     :param e_step_learning_rate: Adam learning rate of the KL-penalty E-step (default 3e-3)
     :param normalize_advantage: standardise the advantages of a batch before the E-step (default True)
     :param latent_clip: action box half-width (prior stds) when wrapping a raw env with a normal-prior generator
@@ -104,6 +107,7 @@ class GenRL(OnPolicyAlgorithm):
         target_kl: float = 0.01,
         kl_coef: float = 1.0,
         n_e_step_epochs: int = 10,
+        n_em_iterations: int = 1,
         e_step_learning_rate: float = 3e-3,
         normalize_advantage: bool = True,
         latent_clip: float = 3.0,
@@ -163,6 +167,9 @@ class GenRL(OnPolicyAlgorithm):
         self.target_kl = target_kl
         self.kl_coef = kl_coef
         self.n_e_step_epochs = n_e_step_epochs
+        if int(n_em_iterations) != n_em_iterations or n_em_iterations < 1:
+            raise ValueError(f"n_em_iterations must be a positive integer, got {n_em_iterations!r}")
+        self.n_em_iterations = int(n_em_iterations)
         self.e_step_learning_rate = e_step_learning_rate
         self.normalize_advantage = normalize_advantage
         self.latent_clip = latent_clip
@@ -190,19 +197,20 @@ class GenRL(OnPolicyAlgorithm):
         if self.normalize_advantage:
             advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
 
-        # E-step (eq. 4-5): the variational policy q_phi starts as a copy of pi_theta (phi <- theta) and is
-        # optimised on E_{alpha ~ pi}[q/pi A] - KL(q || pi) while pi_theta stays fixed.
-        variational_policy = copy.deepcopy(self.policy)
-        if self.e_step == "trpo":
-            stats = self._trpo_e_step(variational_policy, observations, actions, log_prob_pi, advantages)
-        else:
-            stats = self._kl_penalty_e_step(variational_policy, observations, actions, log_prob_pi, advantages)
-        with th.no_grad():
-            q_distribution = variational_policy.get_distribution(observations)
-            stats["kl"] = kl_divergence(q_distribution, self._pi(observations)).mean().item()  # achieved KL(q || pi)
+        for _ in range(self.n_em_iterations):  # Algorithm 1's inner loop: repeat E-step and M-step on the batch
+            # E-step (eq. 4-5): the variational policy q_phi starts as a copy of pi_theta (phi <- theta) and is
+            # optimised on E_{alpha ~ pi}[q/pi A] - KL(q || pi) while pi_theta stays fixed.
+            variational_policy = copy.deepcopy(self.policy)
+            if self.e_step == "trpo":
+                stats = self._trpo_e_step(variational_policy, observations, actions, log_prob_pi, advantages)
+            else:
+                stats = self._kl_penalty_e_step(variational_policy, observations, actions, log_prob_pi, advantages)
+            with th.no_grad():
+                q_distribution = variational_policy.get_distribution(observations)
+                stats["kl"] = kl_divergence(q_distribution, self._pi(observations)).mean().item()  # achieved KL(q || pi)
 
-        # M-step (eq. 6): q and pi share one architecture, so argmin_theta KL(q || pi_theta) is theta <- phi.
-        self.policy.load_state_dict(variational_policy.state_dict())
+            # M-step (eq. 6): q and pi share one architecture, so argmin_theta KL(q || pi_theta) is theta <- phi.
+            self.policy.load_state_dict(variational_policy.state_dict())
 
         # Value function (Algorithm 1, last line): V = argmin_V' sum_i (V'(s_i) - r_i)^2, by Adam on minibatches.
         value_losses = self._fit_value_function()

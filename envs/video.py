@@ -1,0 +1,62 @@
+"""Videos of a trained GenRL policy or of a generator's random trajectories, rendered offscreen."""
+
+from __future__ import annotations
+
+import os
+import pathlib
+
+import numpy as np
+from sb3_genrl.envs.demonstrations import make_env
+from sb3_genrl.envs.showcase import frame_strip, save_animation
+
+
+def record_video(task: str, out: str | os.PathLike, *, policy: str | os.PathLike | None = None,
+                 generator: str | os.PathLike | None = None, goals: int = 6, seed: int = 0, width: int = 480,
+                 height: int = 352, fps: int = 25, strip: bool = True) -> dict:
+    """Play ``goals`` episodes and write them one after the other as an MP4 or GIF (by ``out``'s suffix).
+
+    With ``policy`` (a GenRL run folder or model zip) the policy picks each goal's latent action
+    (deterministically); with ``generator`` (a generator file) the latent actions are random prior samples. The goal
+    is marked in red. A strip of frames (``<out>_strip.png``) is written beside the video unless ``strip=False``.
+
+    :return: ``video``, ``strip`` paths and per-episode ``rewards``
+    """
+    if (policy is None) == (generator is None):
+        raise ValueError("give exactly one of policy= (a GenRL run) or generator= (a generator file)")
+    if goals < 1:
+        raise ValueError(f"goals must be at least 1, got {goals}")
+    env = type(make_env(task))(render_mode="rgb_array", width=width, height=height)
+    rng = np.random.default_rng(seed)
+    goal_list = np.array([env.sample_goal(rng) for _ in range(goals)])
+    if policy is not None:
+        from sb3_genrl import GenRL
+
+        path = pathlib.Path(policy)
+        model = GenRL.load(path / "genrl_policy.zip" if path.is_dir() else path, device="cpu")
+        alphas, _ = model.predict(goal_list.astype(np.float32), deterministic=True)
+        trajectories = model.generator.decode(alphas)
+    else:
+        from sb3_genrl.generative import load
+
+        model_generator = load(generator, device="cpu")
+        if model_generator.horizon != env.horizon:
+            raise ValueError(f"the generator's horizon {model_generator.horizon} is not the {task} task's {env.horizon}")
+        trajectories = model_generator.decode(model_generator.sample_prior(goals, rng))
+    rewards, _ = env.play_trajectories(trajectories, goal_list)
+    frames: list[np.ndarray] = []
+    firsts = []
+    for trajectory, goal in zip(trajectories, goal_list, strict=True):
+        episode = env.episode_frames(trajectory, goal)
+        firsts.append(len(frames))
+        frames += episode + [episode[-1]] * (fps // 2)  # hold the end for half a second
+    env.close()
+    video = save_animation(frames, out, fps=fps)
+    result = {"video": str(video), "rewards": rewards.tolist()}
+    if strip:
+        strip_path = video.with_name(video.stem + "_strip.png")
+        import imageio.v3 as iio
+
+        ends = [frames[i - 1] for i in [*firsts[1:], len(frames)]]
+        iio.imwrite(strip_path, frame_strip(ends, n=min(6, len(ends))))
+        result["strip"] = str(strip_path)
+    return result
