@@ -149,16 +149,18 @@ class ArmTaskEnv(gym.Env, EzPickle):
             raise ValueError(f"action must have shape (7,), got {action.shape}")
         if not np.all(np.isfinite(action)):
             raise ValueError(f"action contains non-finite values: {action}")
-        self._command, clipped = _next_command(self._command, action[None], self.max_joint_delta)
+        previous = self._command
+        command, clipped = _next_command(self._command[None], action[None], self.max_joint_delta)
+        self._command = command[0]
         self._clipped_steps += int(clipped[0])
-        self.data.ctrl[:] = self._command
-        unstable = self._simulate(self.frame_skip)
+        unstable = self._simulate(_ramp(previous[None], self._command[None], self.frame_skip)[0])
         self._t += 1
         if not unstable and self._t == self.horizon:
+            hold = np.repeat(self._command[None], self.frame_skip, axis=0)
             for _ in range(self.settle_steps):
                 if self._settled(self._rows[-1]):
                     break
-                if self._simulate(self.frame_skip):
+                if self._simulate(hold):
                     break
         terminated = unstable or self._t == self.horizon
         reward, info = 0.0, {}
@@ -167,9 +169,11 @@ class ArmTaskEnv(gym.Env, EzPickle):
             self._done = True
         return self._get_obs(), reward, terminated, False, info
 
-    def _simulate(self, n: int) -> bool:
-        """Step the physics ``n`` times, recording each sensor row; True when the simulation went unstable."""
-        for _ in range(n):
+    def _simulate(self, targets: np.ndarray) -> bool:
+        """Step the physics once per row of ``targets`` (commanded joint positions), recording each sensor row;
+        True when the simulation went unstable."""
+        for target in targets:
+            self.data.ctrl[:] = target
             mujoco.mj_step(self.model, self.data)
             self._rows.append(self.data.sensordata.copy())
             if _unstable(np.asarray(self._rows[-2:])):
@@ -228,14 +232,15 @@ class ArmTaskEnv(gym.Env, EzPickle):
         self.reset(options={"goal": goal})
         frames = [self.render()]
         for t, action in enumerate(trajectory):
-            self._command, _ = _next_command(self._command, action[None], self.max_joint_delta)
-            self.data.ctrl[:] = self._command
-            if self._simulate(self.frame_skip):
+            previous = self._command
+            self._command = _next_command(self._command[None], action[None], self.max_joint_delta)[0][0]
+            if self._simulate(_ramp(previous[None], self._command[None], self.frame_skip)[0]):
                 break
             if (t + 1) % every == 0:
                 frames.append(self.render())
+        hold = np.repeat(self._command[None], self.frame_skip, axis=0)
         for t in range(self.settle_steps):
-            if self._settled(self._rows[-1]) or self._simulate(self.frame_skip):
+            if self._settled(self._rows[-1]) or self._simulate(hold):
                 break
             if (t + 1) % every == 0:
                 frames.append(self.render())
@@ -288,7 +293,8 @@ class ArmTaskEnv(gym.Env, EzPickle):
                 command, clip_t = _next_command(command, batch[:, t], self.max_joint_delta)
                 commands[:, t] = command
                 clipped += clip_t
-            controls = np.repeat(commands, self.frame_skip, axis=1)
+            previous = np.concatenate([np.tile(self.home_qpos(), (len(batch), 1, 1)), commands[:, :-1]], axis=1)
+            controls = _ramp(previous, commands, self.frame_skip).reshape(len(batch), -1, 7)
             hold = np.repeat(commands[:, -1:], self.settle_steps * self.frame_skip, axis=1)
             controls = np.concatenate([controls, hold], axis=1)
             _, sensordata = rollout.rollout(self.model, datas, self.initial_state[None], controls,
@@ -323,6 +329,13 @@ def _next_command(command: np.ndarray, delta: np.ndarray, max_delta: float) -> t
     new = np.clip(target, JOINT_RANGE[:, 0], JOINT_RANGE[:, 1])
     clipped = np.any(step != delta, axis=1) | np.any(new != target, axis=1)
     return new, clipped
+
+
+def _ramp(previous: np.ndarray, new: np.ndarray, frame_skip: int) -> np.ndarray:
+    """Commanded positions of each physics step: a linear ramp from ``previous`` to ``new`` over a control step,
+    as a robot's joint interpolator does. ``(..., 7)`` inputs give ``(..., frame_skip, 7)``."""
+    fraction = np.arange(1, frame_skip + 1, dtype=np.float64) / frame_skip
+    return previous[..., None, :] + fraction[:, None] * (new - previous)[..., None, :]
 
 
 def _unstable_rows(rows: np.ndarray) -> np.ndarray:

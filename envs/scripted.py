@@ -32,7 +32,7 @@ def scripted_hit(*, strength: float = 1.0, direction: float = 0.0, swing_start: 
     """
     trajectory = np.zeros((HOCKEY_HORIZON, 7))
     trajectory[:, 4] = bump(HOCKEY_HORIZON, 4, 8, direction)
-    backswing = 0.32 * strength
+    backswing = 0.35 * strength
     trajectory[:, 5] = bump(HOCKEY_HORIZON, 10, 10, backswing)
     trajectory[:, 5] += bump(HOCKEY_HORIZON, swing_start, 6, -2 * backswing)  # through the puck
     trajectory[:, 5] += bump(HOCKEY_HORIZON, swing_start + 10, 12, backswing)  # back to vertical, slowly

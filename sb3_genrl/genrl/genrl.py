@@ -49,9 +49,12 @@ class GenRL(OnPolicyAlgorithm):
     ``KL(q || pi)``), ``entropy``, ``std``, ``value_loss``, ``explained_variance``, ``policy_objective`` and, for the
     TRPO E-step, ``line_search_success``, ``accepted_fraction`` (of the full natural step) and ``step_size``.
 
-    Defaults: the TRPO numerics (``target_kl``, conjugate gradient, line search, critic epochs, value learning rate)
-    are sb3-contrib TRPO's; ``N = 64`` episodes per iteration; the initial policy std equals the prior's std
-    (``log_std_init`` 0 for a normal prior); the paper does not state these values.
+    Defaults (the paper states none): the TRPO numerics (``target_kl``, conjugate gradient, line search) are
+    sb3-contrib TRPO's; ``N = 64`` episodes per iteration; the initial policy std equals the prior's
+    (``log_std_init`` 0 for a normal prior). The value function is fitted harder than sb3-contrib does (50 epochs
+    at 3e-3 instead of 10 at 1e-3) and the E/M pair is repeated 3 times per batch: once the policy is narrow, a
+    pull's advantage is small next to the value function's error. On hockey this lowered the median distance of
+    the deterministic policy after 3000 episodes from 6.8 cm to 4.8 cm.
 
     :param policy: the policy (``"MlpPolicy"``, the default, or an ``ActorCriticPolicy`` class), or the env (see above)
     :param env: the env (raw, wrapped, VecEnv of wrapped envs or Gymnasium id), or the generator (see above)
@@ -60,10 +63,10 @@ class GenRL(OnPolicyAlgorithm):
     :param e_step: ``"trpo"`` (default: a natural-gradient step on eq. 5 with the KL bound ``target_kl`` and a
         backtracking line search) or ``"kl_penalty"`` (eq. 5 taken literally, ``E[q/pi A] - kl_coef KL(q || pi)``,
         maximised by Adam for ``n_e_step_epochs`` epochs)
-    :param learning_rate: Adam learning rate of the value function (default 1e-3), can be a schedule
+    :param learning_rate: Adam learning rate of the value function (default 3e-3), can be a schedule
     :param n_steps: episodes per env per iteration; ``N = n_steps * n_envs`` (default 64)
     :param batch_size: minibatch size of the value-function fit and of the KL-penalty E-step (default 64)
-    :param n_critic_updates: epochs of the value-function fit per iteration (default 10)
+    :param n_critic_updates: epochs of the value-function fit per iteration (default 50)
     :param cg_max_steps: conjugate-gradient iterations of the TRPO E-step (default 15)
     :param cg_damping: damping added to the Fisher-vector product (default 0.1)
     :param line_search_shrinking_factor: step shrinking factor of the backtracking line search (default 0.8)
@@ -71,7 +74,7 @@ class GenRL(OnPolicyAlgorithm):
     :param target_kl: KL bound ``delta`` of the TRPO E-step, ``KL(q || pi) < delta`` (default 0.01)
     :param kl_coef: weight of ``KL(q || pi)`` in the KL-penalty E-step (default 1, as in eq. 5)
     :param n_e_step_epochs: Adam epochs of the KL-penalty E-step (default 10)
-    :param n_em_iterations: E-step/M-step pairs per batch, Algorithm 1's inner "repeat" loop (default 1); each
+    :param n_em_iterations: E-step/M-step pairs per batch, Algorithm 1's inner "repeat" loop (default 3); each
         E-step is bounded relative to the policy of the previous M-step, and importance ratios stay relative to the
         policy that collected the batch
     :param e_step_learning_rate: Adam learning rate of the KL-penalty E-step (default 3e-3)
@@ -96,10 +99,10 @@ class GenRL(OnPolicyAlgorithm):
         generator: TrajectoryGenerator | str | None = None,
         *,
         e_step: EStep = "trpo",
-        learning_rate: float | Schedule = 1e-3,
+        learning_rate: float | Schedule = 3e-3,
         n_steps: int = 64,
         batch_size: int = 64,
-        n_critic_updates: int = 10,
+        n_critic_updates: int = 50,
         cg_max_steps: int = 15,
         cg_damping: float = 0.1,
         line_search_shrinking_factor: float = 0.8,
@@ -107,7 +110,7 @@ class GenRL(OnPolicyAlgorithm):
         target_kl: float = 0.01,
         kl_coef: float = 1.0,
         n_e_step_epochs: int = 10,
-        n_em_iterations: int = 1,
+        n_em_iterations: int = 3,
         e_step_learning_rate: float = 3e-3,
         normalize_advantage: bool = True,
         latent_clip: float = 3.0,
