@@ -264,15 +264,18 @@ class ArmTaskEnv(gym.Env, EzPickle):
         return float(rewards[0]), infos[0]
 
     def play_trajectories(
-        self, trajectories: np.ndarray, goals: np.ndarray, *, n_threads: int = 1, chunk: int = 256
-    ) -> tuple[np.ndarray, list[dict[str, Any]]]:
+        self, trajectories: np.ndarray, goals: np.ndarray, *, n_threads: int = 1, chunk: int = 256,
+        return_joint_states: bool = False,
+    ) -> tuple[np.ndarray, list[dict[str, Any]]] | tuple[np.ndarray, list[dict[str, Any]], np.ndarray]:
         """Play a batch of open-loop trajectories with :mod:`mujoco.rollout` (no per-step Python).
 
         :param trajectories: ``(B, horizon, 7)`` joint position deltas in radians (one trajectory may be ``(horizon, 7)``)
         :param goals: ``(B, 2)`` goal positions in metres (or one ``(2,)`` goal for all)
         :param n_threads: simulation threads; ``mujoco.rollout`` splits the batch between them
         :param chunk: trajectories simulated per call, bounding memory (each keeps every physics step's sensors)
-        :return: rewards ``(B,)`` and one info dict per trajectory
+        :param return_joint_states: also return the joint part of the step env's observations, ``(B, horizon + 1,
+            14)`` float32 (positions then velocities at each control step boundary, the last after the settle phase)
+        :return: rewards ``(B,)`` and one info dict per trajectory (and the joint states when asked)
         """
         trajectories = self._check_trajectories(trajectories)
         goals = np.broadcast_to(np.asarray(goals, dtype=np.float64), (len(trajectories), 2)) if np.ndim(goals) == 1 \
@@ -284,6 +287,7 @@ class ArmTaskEnv(gym.Env, EzPickle):
         datas = [mujoco.MjData(self.model) for _ in range(n_threads)]
         rewards = np.empty(len(trajectories))
         infos: list[dict[str, Any]] = []
+        joint_states = np.empty((len(trajectories), self.horizon + 1, 14), np.float32) if return_joint_states else None
         for start in range(0, len(trajectories), chunk):
             batch = trajectories[start:start + chunk]
             commands = np.empty_like(batch)
@@ -297,14 +301,27 @@ class ArmTaskEnv(gym.Env, EzPickle):
             controls = _ramp(previous, commands, self.frame_skip).reshape(len(batch), -1, 7)
             hold = np.repeat(commands[:, -1:], self.settle_steps * self.frame_skip, axis=1)
             controls = np.concatenate([controls, hold], axis=1)
-            _, sensordata = rollout.rollout(self.model, datas, self.initial_state[None], controls,
-                                            initial_warmstart=np.zeros((1, self.model.nv)))
+            states, sensordata = rollout.rollout(self.model, datas, self.initial_state[None], controls,
+                                                 initial_warmstart=np.zeros((1, self.model.nv)))
             for i, rows in enumerate(sensordata):
-                rows = rows[: self._episode_length(rows)]
-                reward, info = self._finish(rows, goals[start + i], int(clipped[i]))
+                length = self._episode_length(rows)
+                reward, info = self._finish(rows[:length], goals[start + i], int(clipped[i]))
                 rewards[start + i] = reward
                 infos.append(info)
+                if joint_states is not None:
+                    joint_states[start + i] = self._joint_states(states[i], length)
+        if joint_states is not None:
+            return rewards, infos, joint_states
         return rewards, infos
+
+    def _joint_states(self, states: np.ndarray, length: int) -> np.ndarray:
+        """Joint positions and velocities (as :meth:`_get_obs` clips them) after each control step of a rollout."""
+        steps = np.minimum(np.arange(1, self.horizon + 1) * self.frame_skip, length) - 1
+        steps[-1] = length - 1
+        rows = np.concatenate([self.initial_state[None], states[steps]])
+        qpos = np.clip(rows[:, 1 + self._joint_qpos], JOINT_RANGE[:, 0], JOINT_RANGE[:, 1])
+        qvel = np.clip(rows[:, 1 + self.model.nq + self._joint_qvel], -MAX_JOINT_SPEED, MAX_JOINT_SPEED)
+        return np.concatenate([qpos, qvel], axis=1)
 
     def _episode_length(self, rows: np.ndarray) -> int:
         """Number of physics steps the step path runs for these rows: it stops at instability or when settled."""

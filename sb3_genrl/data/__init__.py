@@ -1,1 +1,15 @@
-"""sb3_genrl.data"""
+"""Demonstration datasets (Minari directories) and their loaders: action arrays for the generators, transitions
+for the PPO and SAC baselines."""
+
+from sb3_genrl.data.minari_io import (
+    dataset_info,
+    load_actions,
+    load_arrays,
+    load_reached,
+    load_transitions,
+    read_metadata,
+    write_dataset,
+)
+
+__all__ = ["dataset_info", "load_actions", "load_arrays", "load_reached", "load_transitions", "read_metadata",
+           "write_dataset"]

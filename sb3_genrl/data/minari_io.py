@@ -1,0 +1,247 @@
+"""Demonstration datasets on disk: a Minari dataset directory with the episodes also stored as bulk arrays.
+
+Layout of a dataset directory ``DIR`` (what :func:`write_dataset` writes and the loaders read)::
+
+    DIR/data/metadata.json        Minari's dataset metadata plus a "genrl" entry (task, horizon, seed, version, ...)
+    DIR/data/main_data.hdf5       Minari's HDF5 episode storage (written when h5py, ``minari[hdf5]``, is installed)
+    DIR/data/genrl_episodes.npz   every episode as stacked arrays, for loading 40K episodes in about a second
+
+``minari.MinariDataset("DIR/data")`` opens it with Minari's own API when the HDF5 storage is there (without h5py
+the metadata says ``"data_format": "none"`` and ``"genrl": {"storage": ["npz"]}``, and only these loaders read it).
+The arrays of ``genrl_episodes.npz`` (N episodes, horizon T, action dimension M, observation dimension D):
+``observations (N, T+1, D) float32``, ``actions (N, T, M) float32``, ``rewards (N, T) float64``,
+``terminations`` and ``truncations (N, T) bool``, ``reached (N, 2)`` and ``sampled_goals (N, 2) float64``.
+
+A dataset is written into a temporary sibling directory and renamed into place at the end, so a directory that
+carries a ``metadata.json`` with a ``"genrl"`` entry is complete. This module does not import the tasks: the task
+and horizon come from the dataset's own metadata.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import os
+import secrets
+import shutil
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+ARRAYS_FILE = "genrl_episodes.npz"
+METADATA_FILE = "metadata.json"
+_ARRAY_KEYS = ("observations", "actions", "rewards", "terminations", "truncations", "reached", "sampled_goals")
+
+
+def _data_dir(path: str | os.PathLike[str]) -> Path:
+    """The directory holding ``metadata.json``: ``path/data`` (a dataset directory) or ``path`` itself."""
+    path = Path(path)
+    if not path.exists():
+        raise ValueError(f"no demonstration dataset at {str(path)!r}: the path does not exist")
+    if not path.is_dir():
+        raise ValueError(f"{str(path)!r} is not a demonstration dataset: expected a Minari dataset directory, got a file")
+    for candidate in (path / "data", path):
+        if (candidate / METADATA_FILE).is_file():
+            return candidate
+    raise ValueError(f"{str(path)!r} is not a Minari dataset directory: no data/{METADATA_FILE} in it")
+
+
+def read_metadata(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """The raw metadata of a demonstration dataset (Minari's keys plus ``"genrl"``).
+
+    :param path: the dataset directory (or its ``data`` folder)
+    :raises ValueError: if the path is not a complete sb3-genrl demonstration dataset
+    """
+    data_dir = _data_dir(path)
+    try:
+        metadata = json.loads((data_dir / METADATA_FILE).read_text())
+    except (OSError, json.JSONDecodeError) as error:
+        raise ValueError(f"cannot read the dataset metadata {str(data_dir / METADATA_FILE)!r}: {error}") from None
+    if not isinstance(metadata, dict) or not isinstance(metadata.get("genrl"), dict):
+        raise ValueError(f"{str(path)!r} is a Minari dataset but not an sb3-genrl demonstration dataset "
+                         "(its metadata has no 'genrl' entry)")
+    return metadata
+
+
+def dataset_info(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """Summary of a demonstration dataset.
+
+    :param path: the dataset directory
+    :return: ``task``, ``horizon``, ``episodes``, ``seed``, ``version`` (of sb3-genrl that wrote it), ``dataset_id``
+        and the rest of the ``"genrl"`` metadata entry
+    """
+    metadata = read_metadata(path)
+    info = dict(metadata["genrl"])
+    info.setdefault("episodes", metadata.get("total_episodes"))
+    info["dataset_id"] = metadata.get("dataset_id")
+    return info
+
+
+def _check_expected(info: dict[str, Any], path: str | os.PathLike[str], task: str | None, horizon: int | None) -> None:
+    if task is not None and info.get("task") != task:
+        raise ValueError(f"dataset {str(path)!r} holds demonstrations of task {info.get('task')!r}, not {task!r}")
+    if horizon is not None and info.get("horizon") != horizon:
+        raise ValueError(f"dataset {str(path)!r} has horizon {info.get('horizon')}, expected {horizon}")
+
+
+def load_arrays(path: str | os.PathLike[str], *, task: str | None = None, horizon: int | None = None,
+                keys: tuple[str, ...] = _ARRAY_KEYS) -> dict[str, np.ndarray]:
+    """All episodes of a dataset as stacked arrays (see the module docstring for their names and shapes).
+
+    :param path: the dataset directory
+    :param task: if given, raise unless the dataset holds this task's demonstrations
+    :param horizon: if given, raise unless the dataset's episodes have this many steps
+    :param keys: the arrays to read (default: all)
+    """
+    info = dataset_info(path)
+    _check_expected(info, path, task, horizon)
+    arrays_file = _data_dir(path) / ARRAYS_FILE
+    if arrays_file.is_file():
+        with np.load(arrays_file) as stored:
+            missing = [key for key in keys if key not in stored.files]
+            if missing:
+                raise ValueError(f"{str(arrays_file)!r} lacks the arrays {missing}")
+            return {key: stored[key] for key in keys}
+    arrays = _load_with_minari(_data_dir(path))
+    return {key: arrays[key] for key in keys}
+
+
+def _load_with_minari(data_dir: Path) -> dict[str, np.ndarray]:
+    """Read the episodes through Minari's storage API (slower: one call per episode)."""
+    from minari.dataset.minari_storage import MinariStorage
+
+    try:
+        storage = MinariStorage.read(data_dir)
+    except (ImportError, KeyError, ValueError) as error:
+        raise ValueError(f"cannot read the episodes of {str(data_dir)!r}: no {ARRAYS_FILE} and Minari's storage "
+                         f"failed ({error})") from None
+    episodes = list(storage.get_episodes(range(storage.total_episodes)))
+    arrays = {key: np.stack([episode[key] for episode in episodes]) for key in _ARRAY_KEYS[:5]}
+    metadata = list(storage.get_episode_metadata(range(storage.total_episodes)))
+    for key in ("reached", "sampled_goals"):
+        arrays[key] = np.array([m.get(key, [np.nan, np.nan]) for m in metadata], dtype=np.float64)
+    return arrays
+
+
+def load_actions(path: str | os.PathLike[str], *, task: str | None = None, horizon: int | None = None) -> np.ndarray:
+    """The demonstrations' action sequences, the training data of the trajectory generators.
+
+    :param path: the dataset directory
+    :param task: if given, raise unless the dataset holds this task's demonstrations
+    :param horizon: if given, raise unless the episodes have this many steps
+    :return: ``(N, T, M)`` float32 joint position deltas (rad per control step)
+    """
+    actions = load_arrays(path, task=task, horizon=horizon, keys=("actions",))["actions"]
+    return np.ascontiguousarray(actions, dtype=np.float32)
+
+
+def load_reached(path: str | os.PathLike[str]) -> np.ndarray:
+    """Where each demonstration ended (the hockey puck's rest point, the ball's crossing of the rim height).
+
+    :param path: the dataset directory
+    :return: ``(N, 2)`` positions (x, y) in metres
+    """
+    return load_arrays(path, keys=("reached",))["reached"]
+
+
+def load_transitions(path: str | os.PathLike[str], *, task: str | None = None) -> dict[str, np.ndarray]:
+    """The demonstrations as flat transitions, for behaviour cloning and replay-buffer prefilling.
+
+    :param path: the dataset directory
+    :param task: if given, raise unless the dataset holds this task's demonstrations
+    :return: ``observations (N*T, D)``, ``actions (N*T, M)``, ``rewards (N*T,)``, ``next_observations (N*T, D)``
+        and ``dones (N*T,)`` (True on each episode's last step), episode by episode in time order
+    """
+    arrays = load_arrays(path, task=task, keys=("observations", "actions", "rewards", "terminations", "truncations"))
+    observations = arrays["observations"]
+    n, steps = arrays["actions"].shape[:2]
+    return {
+        "observations": observations[:, :-1].reshape(n * steps, -1),
+        "actions": arrays["actions"].reshape(n * steps, -1),
+        "rewards": arrays["rewards"].reshape(-1).astype(np.float32),
+        "next_observations": observations[:, 1:].reshape(n * steps, -1),
+        "dones": (arrays["terminations"] | arrays["truncations"]).reshape(-1),
+    }
+
+
+def write_dataset(path: str | os.PathLike[str], arrays: dict[str, np.ndarray], *, dataset_id: str,
+                  observation_space: gym.spaces.Box, action_space: gym.spaces.Box, genrl: dict[str, Any],
+                  description: str = "") -> Path:
+    """Write a demonstration dataset atomically (temporary sibling directory, renamed at the end).
+
+    :param path: the dataset directory to create; it must not exist, or be empty
+    :param arrays: the arrays named in the module docstring
+    :param dataset_id: Minari dataset id, ``namespace/name-vN``
+    :param observation_space: the step env's observation space
+    :param action_space: the step env's action space
+    :param genrl: the ``"genrl"`` metadata entry (at least ``task``, ``horizon``, ``seed``, ``version``)
+    :param description: Minari's dataset description
+    :return: the dataset directory
+    """
+    from minari.dataset.minari_dataset import parse_dataset_id
+    from minari.serialization import serialize_space
+
+    parse_dataset_id(dataset_id)  # raises on a malformed id
+    missing = [key for key in _ARRAY_KEYS if key not in arrays]
+    if missing:
+        raise ValueError(f"write_dataset needs the arrays {list(_ARRAY_KEYS)}; missing {missing}")
+    path = Path(path)
+    if path.exists() and (not path.is_dir() or any(path.iterdir())):
+        raise ValueError(f"{str(path)!r} already exists and is not an empty directory; choose another output path")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    n, steps = arrays["actions"].shape[:2]
+    tmp = path.parent / f".{path.name}.partial-{os.getpid()}-{secrets.token_hex(4)}"
+    tmp.mkdir()
+    try:
+        data_dir = tmp / "data"
+        data_dir.mkdir()
+        np.savez(data_dir / ARRAYS_FILE, **{key: arrays[key] for key in _ARRAY_KEYS})
+        has_hdf5 = importlib.util.find_spec("h5py") is not None
+        if has_hdf5:
+            _write_minari_hdf5(data_dir, arrays, observation_space, action_space)
+        metadata = json.loads((data_dir / METADATA_FILE).read_text()) if has_hdf5 else {
+            "data_format": "none", "jpeg_encoding": False,
+            "observation_space": serialize_space(observation_space), "action_space": serialize_space(action_space)}
+        import minari
+
+        metadata.update(dataset_id=dataset_id, total_episodes=int(n), total_steps=int(n * steps),
+                        minari_version=minari.__version__, description=description,
+                        algorithm_name="scripted expert with joint-velocity perturbations",
+                        genrl={**genrl, "episodes": int(n), "storage": ["npz"] + (["hdf5"] if has_hdf5 else [])})
+        (data_dir / METADATA_FILE).write_text(json.dumps(metadata, indent=1, default=_json_default))
+        if path.exists():
+            path.rmdir()
+        os.replace(tmp, path)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return path
+
+
+def _write_minari_hdf5(data_dir: Path, arrays: dict[str, np.ndarray], observation_space: gym.spaces.Box,
+                       action_space: gym.spaces.Box) -> None:
+    """Minari's own HDF5 episode storage, through its storage API."""
+    from minari.data_collector.episode_buffer import EpisodeBuffer
+    from minari.dataset.minari_storage import MinariStorage
+
+    storage = MinariStorage.new(data_dir, observation_space=observation_space, action_space=action_space,
+                                data_format="hdf5", jpeg_encoding=False)
+    buffers = (EpisodeBuffer(id=i, observations=arrays["observations"][i], actions=arrays["actions"][i],
+                             rewards=arrays["rewards"][i], terminations=arrays["terminations"][i],
+                             truncations=arrays["truncations"][i], infos={})
+               for i in range(len(arrays["actions"])))
+    storage.update_episodes(buffers)
+    storage.update_episode_metadata([{"reached": r, "sampled_goals": g}
+                                     for r, g in zip(arrays["reached"], arrays["sampled_goals"], strict=True)])
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, set):
+        return sorted(value)
+    raise TypeError(f"cannot store {type(value).__name__} in the dataset metadata")

@@ -1,0 +1,140 @@
+"""Demonstration datasets on disk (sb3_genrl.data): round trip, metadata, bad paths, foreign tasks."""
+
+from __future__ import annotations
+
+import ast
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from gymnasium import spaces
+
+from sb3_genrl.data import dataset_info, load_actions, load_arrays, load_reached, load_transitions, write_dataset
+
+N, T, M, D = 5, 6, 7, 16
+
+
+def _arrays(seed: int = 0) -> dict[str, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    terminations = np.zeros((N, T), dtype=bool)
+    terminations[:, -1] = True
+    rewards = np.zeros((N, T))
+    rewards[:, -1] = -rng.uniform(size=N)
+    return {"observations": rng.normal(size=(N, T + 1, D)).astype(np.float32),
+            "actions": rng.uniform(-0.4, 0.4, size=(N, T, M)).astype(np.float32), "rewards": rewards,
+            "terminations": terminations, "truncations": np.zeros((N, T), dtype=bool),
+            "reached": rng.normal(size=(N, 2)), "sampled_goals": rng.normal(size=(N, 2))}
+
+
+def _write(path: Path, arrays: dict[str, np.ndarray], task: str = "hockey") -> Path:
+    return write_dataset(path, arrays, dataset_id=f"genrl/{task}-v0",
+                         observation_space=spaces.Box(-np.inf, np.inf, (D,), np.float32),
+                         action_space=spaces.Box(-0.5, 0.5, (M,), np.float32),
+                         genrl={"task": task, "horizon": T, "seed": 3, "version": "0.test"})
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, np.ndarray]]:
+    arrays = _arrays()
+    return _write(tmp_path_factory.mktemp("data") / "hockey", arrays), arrays
+
+
+def test_round_trip(dataset: tuple[Path, dict[str, np.ndarray]]) -> None:
+    path, arrays = dataset
+    actions = load_actions(path, task="hockey", horizon=T)
+    assert actions.dtype == np.float32 and actions.shape == (N, T, M)
+    np.testing.assert_array_equal(actions, arrays["actions"])
+    np.testing.assert_array_equal(load_reached(path), arrays["reached"])
+    loaded = load_arrays(path)
+    for key, value in arrays.items():
+        np.testing.assert_array_equal(loaded[key], value)
+
+
+def test_transitions(dataset: tuple[Path, dict[str, np.ndarray]]) -> None:
+    path, arrays = dataset
+    transitions = load_transitions(path, task="hockey")
+    assert transitions["observations"].shape == (N * T, D) and transitions["actions"].shape == (N * T, M)
+    # Independent computation: episode i, step t is row i * T + t.
+    for i in range(N):
+        for t in range(T):
+            row = i * T + t
+            np.testing.assert_array_equal(transitions["observations"][row], arrays["observations"][i, t])
+            np.testing.assert_array_equal(transitions["next_observations"][row], arrays["observations"][i, t + 1])
+            np.testing.assert_array_equal(transitions["actions"][row], arrays["actions"][i, t])
+            assert transitions["rewards"][row] == np.float32(arrays["rewards"][i, t])
+            assert transitions["dones"][row] == (t == T - 1)
+
+
+def test_info_and_metadata(dataset: tuple[Path, dict[str, np.ndarray]]) -> None:
+    path, _ = dataset
+    info = dataset_info(path)
+    assert (info["task"], info["horizon"], info["episodes"], info["seed"], info["version"]) == ("hockey", T, N, 3, "0.test")
+    assert info["dataset_id"] == "genrl/hockey-v0"
+    metadata = json.loads((path / "data" / "metadata.json").read_text())
+    assert metadata["total_episodes"] == N and metadata["total_steps"] == N * T
+    assert dataset_info(path / "data")["task"] == "hockey"  # the data folder itself works too
+
+
+def test_wrong_task_or_horizon(dataset: tuple[Path, dict[str, np.ndarray]]) -> None:
+    path, _ = dataset
+    with pytest.raises(ValueError, match="task 'hockey', not 'basketball'"):
+        load_actions(path, task="basketball")
+    with pytest.raises(ValueError, match="horizon 6, expected 69"):
+        load_actions(path, horizon=69)
+    with pytest.raises(ValueError, match="not 'basketball'"):
+        load_transitions(path, task="basketball")
+
+
+def test_not_a_dataset(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="does not exist"):
+        load_actions(tmp_path / "missing")
+    (tmp_path / "file.npy").write_bytes(b"not a dataset")
+    with pytest.raises(ValueError, match="got a file"):
+        load_actions(tmp_path / "file.npy")
+    with pytest.raises(ValueError, match="not a Minari dataset directory"):
+        dataset_info(tmp_path)
+    foreign = tmp_path / "foreign" / "data"
+    foreign.mkdir(parents=True)
+    (foreign / "metadata.json").write_text(json.dumps({"dataset_id": "other/thing-v0", "total_episodes": 1}))
+    with pytest.raises(ValueError, match="no 'genrl' entry"):
+        load_actions(tmp_path / "foreign")
+    (foreign / "metadata.json").write_text("{broken")
+    with pytest.raises(ValueError, match="cannot read the dataset metadata"):
+        load_actions(tmp_path / "foreign")
+
+
+def test_write_refuses_existing_and_leaves_nothing_half_written(tmp_path: Path) -> None:
+    (tmp_path / "taken").mkdir()
+    (tmp_path / "taken" / "x").write_text("x")
+    with pytest.raises(ValueError, match="already exists"):
+        _write(tmp_path / "taken", _arrays())
+    broken = _arrays()
+    del broken["reached"]
+    with pytest.raises(ValueError, match="missing"):
+        _write(tmp_path / "new", broken)
+    with pytest.raises(ValueError, match="Malformed dataset ID"):
+        write_dataset(tmp_path / "bad-id", _arrays(), dataset_id="not an id", observation_space=spaces.Box(0, 1, (D,)),
+                      action_space=spaces.Box(0, 1, (M,)), genrl={"task": "hockey", "horizon": T})
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["taken"]
+
+
+def test_minari_reads_it(dataset: tuple[Path, dict[str, np.ndarray]]) -> None:
+    pytest.importorskip("h5py")
+    import minari
+
+    path, arrays = dataset
+    episodes = list(minari.MinariDataset(path / "data").iterate_episodes())
+    assert len(episodes) == N
+    np.testing.assert_array_equal(episodes[1].actions, arrays["actions"][1])
+    np.testing.assert_array_equal(episodes[1].observations, arrays["observations"][1])
+
+
+def test_core_does_not_import_the_tasks() -> None:
+    import sb3_genrl.data
+
+    for source in Path(sb3_genrl.data.__file__).parent.glob("*.py"):
+        for node in ast.walk(ast.parse(source.read_text())):
+            names = [alias.name for alias in node.names] if isinstance(node, ast.Import) else \
+                [node.module or ""] if isinstance(node, ast.ImportFrom) else []
+            assert not any(name.startswith(("sb3_genrl.envs", "sb3_genrl.baselines")) for name in names), source

@@ -1,0 +1,148 @@
+"""The demonstration generator (envs/demonstrations.py), the coverage report (envs/coverage.py) and ``genrl demos``."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from sb3_genrl.envs.coverage import CELL_SIZE, coverage_fraction, coverage_report, covered_cells, region_cells
+from sb3_genrl.envs.demonstrations import make_demonstrations, make_env, sample_trajectories, simulate, within_limits
+
+from sb3_genrl.cli import main
+from sb3_genrl.data import dataset_info, load_arrays
+
+EPISODES = 8
+
+
+@pytest.fixture(scope="module")
+def hockey_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return make_demonstrations("hockey", EPISODES, tmp_path_factory.mktemp("demos") / "hockey", seed=5, n_threads=2,
+                               progress_bar=False, chunk=12)
+
+
+@pytest.mark.parametrize("task", ["hockey", "basketball"])
+def test_sampling_is_seeded_and_within_limits(task: str) -> None:
+    env = make_env(task)
+    first = sample_trajectories(task, 16, np.random.default_rng(1), home=env.home_qpos())
+    again = sample_trajectories(task, 16, np.random.default_rng(1), home=env.home_qpos())
+    other = sample_trajectories(task, 16, np.random.default_rng(2), home=env.home_qpos())
+    assert first.shape == (16, env.horizon, 7) and first.dtype == np.float32
+    np.testing.assert_array_equal(first, again)
+    assert not np.array_equal(first, other)
+    assert within_limits(first.astype(np.float64), env.home_qpos()).all()
+    assert np.abs(first).max() < env.max_joint_delta
+    with pytest.raises(ValueError, match="unknown task"):
+        sample_trajectories("golf", 1, np.random.default_rng(0))
+
+
+@pytest.mark.parametrize("task", ["hockey", "basketball"])
+def test_simulate_matches_play_trajectories_and_step(task: str) -> None:
+    env = make_env(task)
+    rng = np.random.default_rng(3)
+    actions = sample_trajectories(task, 2, rng, home=env.home_qpos())
+    goals = np.stack([env.sample_goal(rng) for _ in range(2)])
+    rewards, infos, joints = simulate(env, actions, goals, n_threads=2)
+    expected_rewards, expected_infos = env.play_trajectories(actions, goals)
+    np.testing.assert_array_equal(rewards, expected_rewards)
+    for info, expected in zip(infos, expected_infos, strict=True):
+        np.testing.assert_array_equal(info["reached"], expected["reached"])
+    # The joint readings are the step env's observations (after the goal) at every control step.
+    env.reset(options={"goal": goals[0]})
+    observations = [env._get_obs()]
+    for action in actions[0]:
+        observation, reward, terminated, _, _ = env.step(action)
+        observations.append(observation)
+    assert terminated and reward == rewards[0]
+    np.testing.assert_array_equal(np.array(observations)[:, 2:], joints[0])
+
+
+def test_stored_episodes_are_valid_replays(hockey_dataset: Path) -> None:
+    arrays = load_arrays(hockey_dataset, task="hockey")
+    assert arrays["actions"].shape == (EPISODES, 69, 7) and arrays["observations"].shape == (EPISODES, 70, 16)
+    env = make_env("hockey")
+    rewards, infos = env.play_trajectories(arrays["actions"], arrays["reached"])
+    np.testing.assert_array_equal(rewards, 0.0)  # each demonstration's goal is the point it reached
+    for i, info in enumerate(infos):
+        np.testing.assert_array_equal(info["reached"], arrays["reached"][i])
+        assert info["table_contacts"] == 0 and not info["joint_limit_clipped"] and not info["unstable"]
+    for i in (0, EPISODES - 1):  # through the step env: the same observations, rewards and terminal flags
+        observation, _ = env.reset(options={"goal": arrays["reached"][i]})
+        observations, step_rewards, ends = [observation], [], []
+        for action in arrays["actions"][i]:
+            observation, reward, terminated, truncated, _ = env.step(action)
+            observations.append(observation)
+            step_rewards.append(reward)
+            ends.append(terminated)
+        np.testing.assert_array_equal(np.array(observations), arrays["observations"][i])
+        np.testing.assert_array_equal(step_rewards, arrays["rewards"][i])
+        np.testing.assert_array_equal(ends, arrays["terminations"][i])
+
+
+def test_determinism_threads_and_seeds(hockey_dataset: Path, tmp_path: Path) -> None:
+    same = make_demonstrations("hockey", EPISODES, tmp_path / "same", seed=5, n_threads=1, progress_bar=False, chunk=5)
+    other = make_demonstrations("hockey", EPISODES, tmp_path / "other", seed=6, n_threads=2, progress_bar=False, chunk=12)
+    reference, repeated = load_arrays(hockey_dataset), load_arrays(same)
+    for key in reference:
+        np.testing.assert_array_equal(reference[key], repeated[key])
+    assert not np.array_equal(reference["actions"], load_arrays(other)["actions"])
+    info = dataset_info(hockey_dataset)
+    assert (info["task"], info["horizon"], info["seed"], info["episodes"]) == ("hockey", 69, 5, EPISODES)
+    with pytest.raises(ValueError, match="already exists"):
+        make_demonstrations("hockey", 1, same, progress_bar=False)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["other", "same"]  # no temporary directories left
+
+
+def _brute_force_coverage(points: np.ndarray, task: str) -> float:
+    centres = region_cells(task)
+    covered = [any(np.hypot(*(p - c)) <= CELL_SIZE[task] for p in points) for c in centres]
+    return float(np.mean(covered))
+
+
+@pytest.mark.parametrize("task", ["hockey", "basketball"])
+def test_coverage_against_brute_force(task: str) -> None:
+    centres = region_cells(task)
+    assert len(centres) == (13 * 16 if task == "hockey" else len(centres))
+    assert coverage_fraction(centres, task) == 1.0
+    corner = centres[np.argmin(centres.sum(axis=1))][None]
+    assert 0 < coverage_fraction(corner, task) < 0.05
+    assert coverage_fraction(np.zeros((0, 2)), task) == 0.0
+    rng = np.random.default_rng(0)
+    low, high = centres.min(axis=0) - 0.3, centres.max(axis=0) + 0.3
+    points = rng.uniform(low, high, size=(60, 2))
+    assert coverage_fraction(points, task) == pytest.approx(_brute_force_coverage(points, task))
+    assert covered_cells(points, task).shape == (len(centres),)
+
+
+def test_basketball_region_cells() -> None:
+    centres = region_cells("basketball")
+    radius = np.linalg.norm(centres, axis=1)
+    assert np.all((radius >= 1) & (radius <= 8) & (centres[:, 0] >= 0))
+    area = np.pi / 2 * (8**2 - 1**2)
+    assert len(centres) * 0.25**2 == pytest.approx(area, rel=0.03)
+
+
+def test_coverage_report_files(hockey_dataset: Path, tmp_path: Path) -> None:
+    report = coverage_report(hockey_dataset, None, tmp_path / "report")
+    assert report["task"] == "hockey" and report["episodes"] == EPISODES and report["cells"] == 208
+    assert json.loads((tmp_path / "report" / "coverage.json").read_text())["coverage"] == report["coverage"]
+    assert (tmp_path / "report" / "coverage.png").stat().st_size > 0
+    assert (hockey_dataset / "coverage.json").is_file()  # written by make_demonstrations
+    with pytest.raises(ValueError, match="not 'basketball'"):
+        coverage_report(hockey_dataset, "basketball", tmp_path / "other")
+
+
+def test_cli_demos(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "cli"
+    assert main(["demos", "--task", "basketball", "--episodes", "3", "--out", str(out), "--seed", "1", "--threads", "2",
+                 "--no-progress-bar"]) == 0
+    printed = capsys.readouterr().out
+    assert "3 basketball demonstrations" in printed and str(out) in printed and "coverage:" in printed
+    assert dataset_info(out)["task"] == "basketball"
+    arrays = load_arrays(out, task="basketball")
+    rewards, infos = make_env("basketball").play_trajectories(arrays["actions"], arrays["reached"])
+    np.testing.assert_array_equal(rewards, 0.0)  # hindsight goals: every demonstration succeeds
+    assert all(info["crossings"] > 0 and not info["joint_limit_clipped"] for info in infos)
+    assert main(["demos", "--task", "basketball", "--episodes", "3", "--out", str(out), "--no-progress-bar"]) == 2
+    assert "already exists" in capsys.readouterr().err
