@@ -44,7 +44,7 @@ def _joint(i: int, axis: str) -> str:
 def arm_mjcf(tool: str) -> str:
     """The arm's kinematic tree with ``tool`` (MJCF body content) mounted on the flange (the flange's +z axis)."""
     return f"""
-    <body name="base" pos="0 0 0">
+    <body name="base" pos="0 0 0" childclass="arm">
       <geom name="pedestal" type="cylinder" size="0.09 0.2" pos="0 0 0.2" rgba="0.25 0.25 0.28 1"/>
       <body name="link1" pos="0 0 0.4" gravcomp="1">
         {_joint(1, "0 0 1")}
@@ -96,7 +96,12 @@ def task_mjcf(*, name: str, tool: str, world: str, sensors: str, camera: str) ->
     <material name="grid" texture="grid" texrepeat="8 8" reflectance="0.05"/>
   </asset>
   <default>
-    <geom contype="1" conaffinity="1" friction="0.8 0.005 0.0001" solref="0.004 1"/>
+    <!-- The world's geoms collide with everything; the arm's (and its tool's) with the world only, not with
+         each other: its links touch where they are jointed, as a real arm's housings do. -->
+    <geom contype="1" conaffinity="3" friction="0.8 0.005 0.0001" solref="0.004 1"/>
+    <default class="arm">
+      <geom contype="2" conaffinity="1"/>
+    </default>
   </default>
   <worldbody>
     <light pos="0 0 4" dir="0 0 -1" diffuse="0.7 0.7 0.7"/>
