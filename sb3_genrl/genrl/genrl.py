@@ -21,7 +21,7 @@ from torch.nn import functional as F
 from torch.nn.utils import parameters_to_vector, vector_to_parameters
 
 from sb3_genrl.generative.base import TrajectoryGenerator
-from sb3_genrl.genrl.policies import MlpPolicy, MultiInputPolicy, default_log_std_init
+from sb3_genrl.genrl.policies import BoxScaler, MlpPolicy, MultiInputPolicy, default_log_std_init
 from sb3_genrl.wrappers import latent_action_env
 
 SelfGenRL = TypeVar("SelfGenRL", bound="GenRL")
@@ -136,6 +136,8 @@ class GenRL(OnPolicyAlgorithm):
         policy_kwargs = dict(policy_kwargs or {})
         if self.generator is not None:
             policy_kwargs.setdefault("log_std_init", default_log_std_init(self.generator.prior))
+        if isinstance(getattr(env, "observation_space", None), spaces.Box):
+            policy_kwargs.setdefault("features_extractor_class", BoxScaler)  # bounded contexts onto [-1, 1]
 
         super().__init__(
             policy,  # type: ignore[arg-type]

@@ -39,8 +39,8 @@ SCALES: dict[str, StudyScale] = {
     "smoke": StudyScale(demo_episodes=160, generator_epochs=2, eval_every=1, pr_samples=100, dwpr_samples=40,
                         policy_episodes=32, batch_episodes=16, seeds=3, baseline_episodes=2),
     # A 2-core CPU in well under an hour per task.
-    "small": StudyScale(demo_episodes=4000, generator_epochs=60, eval_every=10, pr_samples=2000, dwpr_samples=1000,
-                        policy_episodes=768, batch_episodes=64, seeds=3, baseline_episodes=256),
+    "small": StudyScale(demo_episodes=4000, generator_epochs=150, eval_every=10, pr_samples=2000, dwpr_samples=1000,
+                        policy_episodes=960, batch_episodes=64, seeds=3, baseline_episodes=192),
     # The paper's sizes (sections 6.1.2-6.1.4): a GPU or a cluster.
     "paper": StudyScale(demo_episodes=40000, generator_epochs=5000, eval_every=50, pr_samples=15000, dwpr_samples=10000,
                         policy_episodes=10000, batch_episodes=64, seeds=3, baseline_episodes=10000),
