@@ -27,15 +27,6 @@ HORIZON, ACTION_DIM = 20, 3
 EPOCHS = 30
 
 
-@pytest.fixture(scope="module", autouse=True)
-def single_torch_thread():
-    # Small networks train faster on one thread, and the tests then share a busy machine gracefully.
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
-
-
 @pytest.fixture(scope="module")
 def family() -> tuple[np.ndarray, np.ndarray]:
     train, _ = sine_ramp_trajectories(2000, HORIZON, ACTION_DIM, rng=0)

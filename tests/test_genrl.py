@@ -9,13 +9,12 @@ import numpy as np
 import pytest
 import torch as th
 from stable_baselines3.common.vec_env import DummyVecEnv
-from test_wrapper import (  # noqa: F401  (one_torch_thread: an autouse fixture)
+from test_wrapper import (
     ContextReachEnv,
     FastReachEnv,
     LinearGenerator,
     ReachEnv,
     load_linear_generator,
-    one_torch_thread,
     optimal_latent,
 )
 

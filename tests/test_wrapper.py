@@ -11,23 +11,12 @@ import warnings
 import gymnasium as gym
 import numpy as np
 import pytest
-import torch as th
 from gymnasium import spaces
 from gymnasium.utils.env_checker import check_env as gym_check_env
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 from sb3_genrl import LatentActionWrapper
 from sb3_genrl.generative import TrajectoryGenerator
-
-
-@pytest.fixture(autouse=True)
-def one_torch_thread():
-    """Small networks on shared CPUs run much faster on one thread."""
-    threads = th.get_num_threads()
-    th.set_num_threads(1)
-    yield
-    th.set_num_threads(threads)
-
 
 # u_t = w_t * R alpha + c / T with sum_t w_t = 1: the trajectory's displacement is R alpha + c.
 R = np.array([[0.8, 0.3], [-0.2, 0.9]])
