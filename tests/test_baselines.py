@@ -52,18 +52,14 @@ def test_behaviour_cloning_lowers_loss_and_imitates(demos):
     assert history[-1] < history[0] and after < before - 1.0
     assert cloned_mse < 0.25 * untrained_mse
 
-    # Closed loop: the cloned policy reproduces the first demonstration's joint motion better than an untrained one.
-    def joint_error(policy_model):
-        env = HockeyEnv()
-        obs, _ = env.reset(options={"goal": demos["observations"][0, :2]})
-        error = 0.0
-        for t in range(69):
-            action, _ = policy_model.predict(obs, deterministic=True)
-            obs, *_ = env.step(action)
-            error += np.sum((obs[2:9] - demos["next_observations"][t, 2:9]) ** 2)
-        return error
-
-    assert joint_error(model) < 0.5 * joint_error(PPO("MlpPolicy", HockeyEnv(), seed=1, device="cpu"))
+    # The first demonstration, action by action along its own states: the cloned policy's mean reproduces it far
+    # better than an untrained policy's.
+    first = slice(0, 69)
+    untrained = PPO("MlpPolicy", HockeyEnv(), seed=1, device="cpu")
+    with th.no_grad():
+        errors = [((m.policy.get_distribution(obs[first]).distribution.mean - act[first]) ** 2).sum().item()
+                  for m in (model, untrained)]
+    assert errors[0] < 0.25 * errors[1]
 
 
 def test_prefilled_buffer_holds_exactly_the_demonstrations(demos):
