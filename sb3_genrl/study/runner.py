@@ -11,21 +11,22 @@ from typing import Any
 
 from sb3_genrl.study.jobs import baseline_job, generator_job
 from sb3_genrl.study.report import write_task_report
-from sb3_genrl.study.scales import SCALES
+from sb3_genrl.study.scales import SCALES, StudyScale
 
 TASKS = ("hockey", "basketball")
 MODELS = tuple(f"VAE{i}" for i in range(1, 10)) + tuple(f"GAN{i}" for i in range(1, 10))
 
 
-def run_study(task: str, scale: str, out_dir: str | os.PathLike, *, executor: str = "local", address: str | None = None,
-              workers: int | None = None, models: tuple[str, ...] = MODELS, device: str = "auto",
+def run_study(task: str, scale: str | StudyScale, out_dir: str | os.PathLike, *, executor: str = "local",
+              address: str | None = None, workers: int | None = None, models: tuple[str, ...] = MODELS, device: str = "auto",
               log: Callable[[str], None] | None = None) -> pathlib.Path:
     """Run the paper's experiments at a scale and write ``report.md`` (per task, and an index for ``task="all"``).
 
     Results are written as they complete and finished work is skipped on a rerun, so an interrupted study resumes.
 
     :param task: ``hockey``, ``basketball`` or ``all``
-    :param scale: ``smoke``, ``small`` or ``paper`` (see :data:`~sb3_genrl.study.scales.SCALES`)
+    :param scale: ``smoke``, ``small`` or ``paper`` (see :data:`~sb3_genrl.study.scales.SCALES`), or a
+        :class:`~sb3_genrl.study.scales.StudyScale` of one's own
     :param out_dir: the study folder
     :param executor: ``local`` (worker processes) or ``ray`` (Ray tasks, one per generator and per baseline run)
     :param address: the Ray cluster's address (``ray`` executor; ``None`` starts a local Ray)
@@ -37,17 +38,18 @@ def run_study(task: str, scale: str, out_dir: str | os.PathLike, *, executor: st
     """
     if task not in (*TASKS, "all"):
         raise ValueError(f"unknown task {task!r}; expected one of {TASKS} or 'all'")
-    if scale not in SCALES:
-        raise ValueError(f"unknown scale {scale!r}; expected one of {sorted(SCALES)}")
+    if not isinstance(scale, StudyScale) and scale not in SCALES:
+        raise ValueError(f"unknown scale {scale!r}; expected one of {sorted(SCALES)} or a StudyScale")
     if executor not in ("local", "ray"):
         raise ValueError(f"executor must be 'local' or 'ray', got {executor!r}")
     unknown = [m for m in models if m not in MODELS]
     if unknown:
         raise ValueError(f"unknown models {unknown}; expected names among {MODELS}")
-    preset = SCALES[scale]
+    preset = scale if isinstance(scale, StudyScale) else SCALES[scale]
     out = pathlib.Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "study.json").write_text(json.dumps({"task": task, "scale": scale, **preset.as_dict()}, indent=2))
+    scale_name = "custom" if isinstance(scale, StudyScale) else scale
+    (out / "study.json").write_text(json.dumps({"task": task, "scale": scale_name, **preset.as_dict()}, indent=2))
     run = _ray_map(address) if executor == "ray" else _local_map(workers or len(os.sched_getaffinity(0)))
     log = log or (lambda _line: None)
     reports = []
