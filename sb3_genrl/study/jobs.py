@@ -89,14 +89,17 @@ def generator_job(task: str, name: str, scale: dict[str, Any], dataset: str, tas
 
 
 def baseline_job(algorithm: str, task: str, seed: int, episodes: int, dataset: str, demo_episodes: int, run_dir: str,
-                 device: str = "auto", torch_threads: int = 1) -> str:
-    """One PPO (behaviour cloning) or SAC (prefilled) run of the comparison; skipped when already done."""
+                 device: str = "auto", torch_threads: int = 1, generator: str | None = None) -> str:
+    """One run of the comparison: PPO (behaviour cloning), SAC (prefilled), or a stock algorithm on the latent
+    space of ``generator`` (``latent-ppo``, ``latent-sac``, ``latent-trpo``); skipped when already done."""
     import torch
 
     from sb3_genrl.baselines.train import train_baseline
 
     torch.set_num_threads(torch_threads)
     if not (pathlib.Path(run_dir) / "summary.json").exists():
-        train_baseline(algorithm, task, episodes=episodes, out_dir=run_dir, seed=seed, demos=dataset,
-                       demo_episodes=demo_episodes, device=device)
+        latent = algorithm.startswith("latent-")
+        train_baseline(algorithm, task, episodes=episodes, out_dir=run_dir, seed=seed,
+                       demos=None if latent else dataset, demo_episodes=None if latent else demo_episodes,
+                       generator=generator if latent else None, device=device)
     return run_dir

@@ -14,6 +14,8 @@ from sb3_genrl.study.report import write_task_report
 from sb3_genrl.study.scales import SCALES, StudyScale
 
 TASKS = ("hockey", "basketball")
+# PPO and SAC on the feedback task with the demonstrations, and stock algorithms on the best generator's latent space.
+BASELINES = ("ppo", "sac", "latent-ppo", "latent-sac", "latent-trpo")
 MODELS = tuple(f"VAE{i}" for i in range(1, 10)) + tuple(f"GAN{i}" for i in range(1, 10))
 
 
@@ -84,9 +86,10 @@ def _run_task(task: str, scale: dict[str, Any], task_dir: pathlib.Path, run, mod
 
         best = max(rows, key=lambda r: r["score"])["model"]
         runs_dir = task_dir / "comparison"
+        generator = str(task_dir / "generators" / f"{best}.pt")
         jobs = [(baseline_job, (algorithm, task, seed, scale["baseline_episodes"], str(dataset), scale["demo_episodes"],
-                                str(runs_dir / f"{algorithm}_seed{seed}"), device))
-                for algorithm in ("ppo", "sac") for seed in range(scale["seeds"])]
+                                str(runs_dir / f"{algorithm}_seed{seed}"), device, 1, generator))
+                for algorithm in BASELINES for seed in range(scale["seeds"])]
         baseline_runs = list(run(jobs))
         genrl_runs = [str(p) for p in sorted((task_dir / "policies" / best).glob("seed*"))]
         comparison = compare_runs(genrl_runs + baseline_runs, runs_dir, task=task)
