@@ -33,6 +33,7 @@ from sb3_genrl.baselines.prefill import prefill_replay_buffer
 from sb3_genrl.envs import TASK_IDS
 from stable_baselines3 import PPO, SAC
 from stable_baselines3.common.evaluation import evaluate_policy
+from stable_baselines3.common.monitor import Monitor
 
 from sb3_genrl.callbacks import EpisodeRecorder
 from sb3_genrl.curves import write_learning_curve
@@ -98,7 +99,7 @@ def train_baseline(
             model = PPO("MlpPolicy", env, n_steps=16 * horizon, batch_size=4 * horizon, **common)
             summary["bc_loss"] = behaviour_cloning(model.policy, transitions["observations"], transitions["actions"],
                                                    epochs=bc_epochs, seed=seed)
-            eval_env = gym.make(env_id)
+            eval_env = Monitor(gym.make(env_id))
             eval_env.reset(seed=seed + 10_000)
             summary["bc_mean_reward"], summary["bc_std_reward"] = (float(v) for v in evaluate_policy(
                 model, eval_env, n_eval_episodes=eval_episodes, deterministic=True))
