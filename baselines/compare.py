@@ -86,7 +86,8 @@ def compare_runs(run_dirs: list[str | os.PathLike], out_dir: str | os.PathLike, 
         cells = [row["method"], row["seeds"], f"{row['reward_at_budget']:.3f} +- {row['reward_at_budget_std']:.3f}",
                  row["episodes"], f"{row['final_mean_reward']:.3f} +- {row['final_std']:.3f}",
                  f"{row['best_mean_reward']:.3f}",
-                 f"{row['table_contacts_per_episode']:.2f} +- {row['table_contacts_std']:.2f}"]
+                 "n/a" if np.isnan(row["table_contacts_per_episode"])
+                 else f"{row['table_contacts_per_episode']:.2f} +- {row['table_contacts_std']:.2f}"]
         lines.append("| " + " | ".join(map(str, cells)) + " |")
     lines += ["", "![reward vs episodes](reward_vs_episodes.png)", "", "![table contacts](table_contacts.png)", ""]
     path = out / "comparison.md"
