@@ -119,6 +119,14 @@ def test_write_refuses_existing_and_leaves_nothing_half_written(tmp_path: Path) 
     assert sorted(p.name for p in tmp_path.iterdir()) == ["taken"]
 
 
+def test_relative_output_path(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    arrays = _arrays()
+    path = _write(Path("runs") / "demos", arrays)
+    assert path.is_absolute() and path == tmp_path / "runs" / "demos"
+    np.testing.assert_array_equal(load_actions(Path("runs") / "demos"), arrays["actions"])
+
+
 def test_minari_reads_it(dataset: tuple[Path, dict[str, np.ndarray]]) -> None:
     pytest.importorskip("h5py")
     import minari

@@ -187,7 +187,7 @@ def write_dataset(path: str | os.PathLike[str], arrays: dict[str, np.ndarray], *
     missing = [key for key in _ARRAY_KEYS if key not in arrays]
     if missing:
         raise ValueError(f"write_dataset needs the arrays {list(_ARRAY_KEYS)}; missing {missing}")
-    path = Path(path)
+    path = Path(path).absolute()  # Minari's storage resolves relative paths against its own directory
     if path.exists() and (not path.is_dir() or any(path.iterdir())):
         raise ValueError(f"{str(path)!r} already exists and is not an empty directory; choose another output path")
     path.parent.mkdir(parents=True, exist_ok=True)
