@@ -25,7 +25,7 @@ def bump(length: int, start: int, duration: int, total: float) -> np.ndarray:
 def scripted_hit(*, strength: float = 1.0, direction: float = 0.0, swing_start: int = 25) -> np.ndarray:
     """A hockey hit: turn the swing plane by ``direction`` (rad, forearm roll), wind up the wrist, swing through.
 
-    :param strength: scales the swing's amplitude and speed; 0.7-1.3 sends the puck to x = 0.65-1.3 m, weaker hits
+    :param strength: scales the swing's amplitude and speed; 0.75-1.3 sends the puck to x = 0.65-1.3 m, weaker hits
         fall short of the goal region
     :param direction: the shot's angle (rad) from the x axis, positive to the robot's right (negative y)
     :param swing_start: control step at which the forward swing starts
