@@ -54,12 +54,12 @@ ACTION_MARGIN = 0.95  # trajectories use at most this share of the action box
 JOINT_MARGIN = 0.05  # rad kept from each joint limit
 
 
-def make_env(task: str) -> ArmTaskEnv:
-    """The task's env (unwrapped) by short name, ``"hockey"`` or ``"basketball"``."""
+def make_env(task: str, **kwargs: Any) -> ArmTaskEnv:
+    """The task's env (unwrapped) by short name, ``"hockey"`` or ``"basketball"``, with constructor ``kwargs``."""
     if task == "hockey":
-        return HockeyEnv()
+        return HockeyEnv(**kwargs)
     if task == "basketball":
-        return BasketballEnv()
+        return BasketballEnv(**kwargs)
     raise ValueError(f"unknown task {task!r}; expected one of {sorted(TASK_IDS)}")
 
 

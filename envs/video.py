@@ -25,7 +25,7 @@ def record_video(task: str, out: str | os.PathLike, *, policy: str | os.PathLike
         raise ValueError("give exactly one of policy= (a GenRL run) or generator= (a generator file)")
     if goals < 1:
         raise ValueError(f"goals must be at least 1, got {goals}")
-    env = type(make_env(task))(render_mode="rgb_array", width=width, height=height)
+    env = make_env(task, render_mode="rgb_array", width=width, height=height)
     rng = np.random.default_rng(seed)
     goal_list = np.array([env.sample_goal(rng) for _ in range(goals)])
     if policy is not None:
