@@ -109,6 +109,8 @@ def build_parser() -> argparse.ArgumentParser:
     train_generator.add_argument("--latent-dim", type=int, default=None, help="latent dimension N_alpha")
     train_generator.add_argument("--beta", type=float, default=None, help="KL weight of the beta-VAE")
     train_generator.add_argument("--info-weight", type=float, default=None, help="information weight lambda of InfoGAN")
+    train_generator.add_argument("--std-floor", type=float, default=None,
+                                 help="floor of each normalisation std as a fraction of the largest (default 0.05)")
     train_generator.add_argument("--epochs", type=int, default=5000, help="training epochs (paper: 5000)")
     train_generator.add_argument("--batch-size", type=int, default=256, help="minibatch size (paper: 256)")
     train_generator.add_argument("--lr", type=float, default=2e-4, help="Adam learning rate (paper: 2e-4)")
@@ -196,7 +198,7 @@ def _train_generator_command(args: argparse.Namespace) -> int:
     from sb3_genrl.generative import train_generator
 
     generator = train_generator(args.data, model=args.model, preset=args.preset, latent_dim=args.latent_dim,
-                                beta=args.beta, info_weight=args.info_weight, epochs=args.epochs,
+                                beta=args.beta, info_weight=args.info_weight, std_floor=args.std_floor, epochs=args.epochs,
                                 batch_size=args.batch_size, lr=args.lr, seed=args.seed, eval_every=args.eval_every,
                                 out=args.out, tensorboard_log=args.tensorboard_log,
                                 progress_bar=not args.no_progress_bar, device=args.device)

@@ -241,6 +241,20 @@ def test_split_and_normalisation_statistics():
     np.testing.assert_allclose(std[:, 2], MIN_STD, rtol=1e-6)
 
 
+def test_normalisation_std_floor_is_relative_to_the_largest_std():
+    rng = np.random.default_rng(1)
+    data = rng.normal(size=(200, 3, 2)) * np.array([[1.0, 0.01], [5.0, 0.2], [0.5, 2.0]])  # per-entry spreads
+    mean, std = normalisation_statistics(data, std_floor=0.1)
+    raw = data.std(axis=0)  # brute force: each entry's std, then max(std, 0.1 * largest)
+    np.testing.assert_allclose(mean, data.mean(axis=0), rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(std, np.maximum(raw, 0.1 * raw.max()), rtol=1e-5)
+    assert std[0, 1] == pytest.approx(0.1 * raw.max(), rel=1e-5) and std[1, 0] == pytest.approx(raw[1, 0], rel=1e-5)
+    with pytest.raises(ValueError, match="std_floor"):
+        normalisation_statistics(data, std_floor=1.5)
+    with pytest.raises(ValueError, match="std_floor"):
+        BetaVAE(3, 2, 2, beta=0.01, std_floor=-0.1)
+
+
 def test_train_generator_and_cli_write_loadable_models(tmp_path, capsys):
     data, _ = sine_ramp_trajectories(100, 6, 2, rng=0)
     npy = tmp_path / "demos.npy"
@@ -256,7 +270,12 @@ def test_train_generator_and_cli_write_loadable_models(tmp_path, capsys):
     np.savez(npz, actions=data)
     vae = train_generator(npz, latent_dim=3, beta=0.001, epochs=1, batch_size=32, out=tmp_path / "vae.pt")
     assert load(tmp_path / "vae.pt").config() == vae.config() == {"horizon": 6, "action_dim": 2, "latent_dim": 3,
-                                                                   "beta": 0.001}
+                                                                   "std_floor": 0.05, "beta": 0.001}
+    assert cli_main(["train-generator", "--data", str(npz), "--preset", "VAE1", "--std-floor", "0.2", "--epochs", "1",
+                     "--batch-size", "32", "--no-progress-bar", "--out", str(tmp_path / "vae_floor.pt")]) == 0
+    floored = load(tmp_path / "vae_floor.pt")
+    assert floored.std_floor == 0.2
+    assert float(floored.action_std.min()) >= 0.2 * float(floored.action_std.max()) * (1 - 1e-6)
     assert cli_main(["train-generator", "--data", str(tmp_path / "missing.npy"), "--out", str(out)]) == 2
     assert cli_main(["train-generator", "--data", str(npy), "--model", "vae", "--out", str(out)]) == 2
     assert "needs" in capsys.readouterr().err

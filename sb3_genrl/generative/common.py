@@ -10,6 +10,8 @@ import numpy as np
 
 # A joint whose training actions never change gets a unit scale instead of a zero one.
 MIN_STD = 1e-6  # floor of the normalisation's standard deviation (raw action units)
+# Default floor of each entry's normalisation std, as a fraction of the largest entry's (see normalisation_statistics).
+STD_FLOOR = 0.05
 
 
 def check_trajectories(trajectories: np.ndarray, horizon: int, action_dim: int) -> np.ndarray:
@@ -55,19 +57,24 @@ def split_train_validation(trajectories: np.ndarray, validation_fraction: float,
     return trajectories[permutation[n_held_out:]], trajectories[permutation[:n_held_out]]
 
 
-def normalisation_statistics(trajectories: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def normalisation_statistics(trajectories: np.ndarray, std_floor: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Mean and standard deviation of every (time step, joint) entry over the trajectories.
 
     The models see ``(tau - mean) / std`` entry by entry, so each output is learnt on the scale of its own
-    spread. This matters because actions are joint position *changes*: the commanded position is their running
-    sum, so an error in an entry that hardly varies in the demonstrations (a joint held still) would add up over
-    the horizon. An entry that never varies gets ``std = MIN_STD`` and is reproduced exactly.
+    spread. ``std_floor`` bounds each std from below by that fraction of the largest one: an entry that varies
+    much less than the motion (noise on a joint held still) then stays small after normalisation instead of
+    weighing as much as the motion in the models' losses. An entry that never varies gets at least
+    ``std = MIN_STD`` and is reproduced exactly.
 
-    :param trajectories: ``(N, T, M)`` array in raw action units
+    :param trajectories: ``(N, T, M)`` array
+    :param std_floor: floor of each std as a fraction of the largest, in ``[0, 1]``
     :return: ``(mean, std)``, two float32 arrays of shape ``(T, M)``
     """
+    if not 0.0 <= std_floor <= 1.0:
+        raise ValueError(f"std_floor must be in [0, 1], got {std_floor!r}")
     mean = trajectories.mean(axis=0, dtype=np.float64)
-    std = np.maximum(trajectories.std(axis=0, dtype=np.float64), MIN_STD)
+    std = trajectories.std(axis=0, dtype=np.float64)
+    std = np.maximum(std, max(std_floor * float(std.max()), MIN_STD))
     return mean.astype(np.float32), std.astype(np.float32)
 
 

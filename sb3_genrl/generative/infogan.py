@@ -8,6 +8,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from sb3_genrl.generative.common import STD_FLOOR
 from sb3_genrl.generative.networks import DiscriminatorWithQ, make_decoder
 from sb3_genrl.generative.torch_generator import TorchTrajectoryGenerator
 
@@ -39,20 +40,22 @@ class InfoGAN(TorchTrajectoryGenerator):
     :param latent_dim: ``N_alpha`` (paper: 2, 3 or 6)
     :param info_weight: ``lambda``, weight of the mutual-information term (paper: 0.1, 1.5 or 3.5)
     :param noise_dim: extra incompressible noise inputs of the generator (default 0, as in the paper)
+    :param std_floor: floor of each normalisation std, a fraction of the largest (see :class:`TorchTrajectoryGenerator`)
     :param device: torch device or ``"auto"``
     """
 
     decoder_name = "generator"
 
     def __init__(self, horizon: int, action_dim: int, latent_dim: int, *, info_weight: float, noise_dim: int = 0,
-                 device: torch.device | str = "auto") -> None:
+                 std_floor: float = STD_FLOOR, device: torch.device | str = "auto") -> None:
         if not info_weight >= 0:
             raise ValueError(f"info_weight must be non-negative, got {info_weight}")
         if int(noise_dim) != noise_dim or noise_dim < 0:
             raise ValueError(f"noise_dim must be a non-negative integer, got {noise_dim!r}")
         self.info_weight = float(info_weight)
         self.noise_dim = int(noise_dim)
-        super().__init__(horizon=horizon, action_dim=action_dim, latent_dim=latent_dim, prior="uniform", device=device)
+        super().__init__(horizon=horizon, action_dim=action_dim, latent_dim=latent_dim, prior="uniform",
+                         std_floor=std_floor, device=device)
 
     def _hyperparameters(self) -> dict[str, Any]:
         return {"info_weight": self.info_weight, "noise_dim": self.noise_dim}

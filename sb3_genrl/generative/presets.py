@@ -73,7 +73,7 @@ def resolve_generator_spec(preset_or_kind: str, *, latent_dim: int | None = None
 
 
 def make_generator(preset_or_kind: str, *, horizon: int, action_dim: int, latent_dim: int | None = None,
-                   beta: float | None = None, info_weight: float | None = None,
+                   beta: float | None = None, info_weight: float | None = None, std_floor: float | None = None,
                    device: torch.device | str = "auto") -> TorchTrajectoryGenerator:
     """Build an untrained generator from a preset of paper table 1 or a model kind.
 
@@ -83,12 +83,14 @@ def make_generator(preset_or_kind: str, *, horizon: int, action_dim: int, latent
     :param latent_dim: ``N_alpha``; required for a kind, must match a preset
     :param beta: KL weight of a VAE; required for ``"vae"``, must match a preset
     :param info_weight: ``lambda`` of an InfoGAN; required for ``"gan"``, must match a preset
+    :param std_floor: floor of each normalisation std as a fraction of the largest (``None``: the model's default)
     :param device: torch device or ``"auto"``
     """
     from sb3_genrl.generative.infogan import InfoGAN
     from sb3_genrl.generative.vae import BetaVAE
 
     spec = resolve_generator_spec(preset_or_kind, latent_dim=latent_dim, beta=beta, info_weight=info_weight)
+    extra = {} if std_floor is None else {"std_floor": std_floor}
     if spec["model"] == "vae":
-        return BetaVAE(horizon, action_dim, spec["latent_dim"], beta=spec["beta"], device=device)
-    return InfoGAN(horizon, action_dim, spec["latent_dim"], info_weight=spec["info_weight"], device=device)
+        return BetaVAE(horizon, action_dim, spec["latent_dim"], beta=spec["beta"], device=device, **extra)
+    return InfoGAN(horizon, action_dim, spec["latent_dim"], info_weight=spec["info_weight"], device=device, **extra)

@@ -19,6 +19,7 @@ from tqdm.auto import tqdm
 
 from sb3_genrl.generative.base import Prior, TrajectoryGenerator
 from sb3_genrl.generative.common import (
+    STD_FLOOR,
     check_trajectories,
     minibatch_indices,
     normalisation_statistics,
@@ -47,8 +48,11 @@ class TorchTrajectoryGenerator(TrajectoryGenerator, abc.ABC):
     decoder_name: str = "decoder"
 
     def __init__(self, *, horizon: int, action_dim: int, latent_dim: int, prior: Prior,
-                 device: torch.device | str = "auto") -> None:
+                 std_floor: float = STD_FLOOR, device: torch.device | str = "auto") -> None:
         super().__init__(horizon=horizon, action_dim=action_dim, latent_dim=latent_dim, prior=prior)
+        if not 0.0 <= std_floor <= 1.0:
+            raise ValueError(f"std_floor must be in [0, 1] (a fraction of the largest std), got {std_floor!r}")
+        self.std_floor = float(std_floor)
         self.networks: nn.ModuleDict
         self._reset(0, device)  # untrained weights from seed 0; fit() draws them again from its own seed
         self.action_mean = torch.zeros(self.horizon, self.action_dim, device=self.device)
@@ -88,7 +92,15 @@ class TorchTrajectoryGenerator(TrajectoryGenerator, abc.ABC):
     def config(self) -> dict[str, Any]:
         """Constructor arguments that rebuild this model (without the device)."""
         return {"horizon": self.horizon, "action_dim": self.action_dim, "latent_dim": self.latent_dim,
-                **self._hyperparameters()}
+                "std_floor": self.std_floor, **self._hyperparameters()}
+
+    def normalise(self, trajectories: torch.Tensor) -> torch.Tensor:
+        """Raw ``(n, T, M)`` trajectories -> what the networks see, normalised and flattened ``(n, T*M)``."""
+        return ((trajectories - self.action_mean) / self.action_std).flatten(1)
+
+    def denormalise(self, normalised: torch.Tensor) -> torch.Tensor:
+        """Inverse of :meth:`normalise`: normalised, flattened ``(n, T*M)`` -> raw ``(n, T, M)`` trajectories."""
+        return normalised.view(-1, self.horizon, self.action_dim) * self.action_std + self.action_mean
 
     def decode_torch(self, alpha: torch.Tensor) -> torch.Tensor:
         """Differentiable decoding of a ``(n, latent_dim)`` tensor into ``(n, T, M)`` raw actions on ``self.device``.
@@ -100,9 +112,7 @@ class TorchTrajectoryGenerator(TrajectoryGenerator, abc.ABC):
         if not bool(torch.isfinite(alpha).all()):
             raise ValueError("latent actions contain non-finite values (nan or inf)")
         self.networks.eval()
-        decoder_input = self._decoder_input(alpha.to(self.device, torch.float32))
-        normalised = self.decoder(decoder_input).view(-1, self.horizon, self.action_dim)
-        return normalised * self.action_std + self.action_mean
+        return self.denormalise(self.decoder(self._decoder_input(alpha.to(self.device, torch.float32))))
 
     def decode(self, alpha: np.ndarray) -> np.ndarray:
         """Map latent actions ``(n, latent_dim)`` to float32 trajectories ``(n, T, M)`` in raw action units (CPU)."""
@@ -148,10 +158,10 @@ class TorchTrajectoryGenerator(TrajectoryGenerator, abc.ABC):
         minibatch_indices(len(train), batch_size, np.arange(len(train)))  # validates batch_size early
 
         self._reset(self.seed, device)
-        mean, std = normalisation_statistics(train)
+        mean, std = normalisation_statistics(train, std_floor=self.std_floor)
         self.action_mean = torch.as_tensor(mean, device=self.device)
         self.action_std = torch.as_tensor(std, device=self.device)
-        train_tensor = ((torch.as_tensor(train, device=self.device) - self.action_mean) / self.action_std).flatten(1)
+        train_tensor = self.normalise(torch.as_tensor(train, device=self.device))
         optimizers = self._make_optimizers(lr)
         noise_generator = torch.Generator().manual_seed(self.seed)
         selection_latents = self.sample_prior(selection_samples, rng)

@@ -58,7 +58,8 @@ def load_trajectories(data: np.ndarray | str | os.PathLike[str]) -> np.ndarray:
 
 def train_generator(data: np.ndarray | str | os.PathLike[str], *, model: str | None = None, preset: str | None = None,
                     latent_dim: int | None = None, beta: float | None = None, info_weight: float | None = None,
-                    epochs: int = EPOCHS, batch_size: int = BATCH_SIZE, lr: float = LEARNING_RATE, seed: int | None = 0,
+                    std_floor: float | None = None, epochs: int = EPOCHS, batch_size: int = BATCH_SIZE,
+                    lr: float = LEARNING_RATE, seed: int | None = 0,
                     validation_fraction: float = 0.1, eval_every: int = 10, selection_samples: int = SELECTION_SAMPLES,
                     out: str | os.PathLike[str] | None = None, tensorboard_log: str | None = None,
                     progress_bar: bool = False, device: torch.device | str = "auto") -> TorchTrajectoryGenerator:
@@ -72,6 +73,8 @@ def train_generator(data: np.ndarray | str | os.PathLike[str], *, model: str | N
     :param latent_dim: ``N_alpha``
     :param beta: KL weight (VAE)
     :param info_weight: ``lambda`` (InfoGAN)
+    :param std_floor: floor of each normalisation std as a fraction of the largest (``None``: the model's default,
+        :data:`~sb3_genrl.generative.common.STD_FLOOR`)
     :param epochs: training epochs (paper: 5000)
     :param batch_size: minibatch size (paper: 256)
     :param lr: Adam learning rate (paper: 2e-4)
@@ -94,7 +97,8 @@ def train_generator(data: np.ndarray | str | os.PathLike[str], *, model: str | N
         spec = {"preset_or_kind": model or "vae"}
     trajectories = load_trajectories(data)
     generator = make_generator(**spec, horizon=trajectories.shape[1], action_dim=trajectories.shape[2],
-                               latent_dim=latent_dim, beta=beta, info_weight=info_weight, device=device)
+                               latent_dim=latent_dim, beta=beta, info_weight=info_weight, std_floor=std_floor,
+                               device=device)
     generator.fit(trajectories, epochs=epochs, batch_size=batch_size, lr=lr, seed=seed,
                   validation_fraction=validation_fraction, tensorboard_log=tensorboard_log, progress_bar=progress_bar,
                   device=device, selection_samples=selection_samples, eval_every=eval_every)

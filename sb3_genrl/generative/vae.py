@@ -8,6 +8,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from sb3_genrl.generative.common import STD_FLOOR
 from sb3_genrl.generative.networks import GaussianEncoder, make_decoder
 from sb3_genrl.generative.torch_generator import TorchTrajectoryGenerator
 
@@ -33,17 +34,19 @@ class BetaVAE(TorchTrajectoryGenerator):
     :param action_dim: number of joints ``M``
     :param latent_dim: ``N_alpha`` (paper: 2, 3 or 6)
     :param beta: weight of the KL term (paper: 0.01, 0.005 or 0.001)
+    :param std_floor: floor of each normalisation std, a fraction of the largest (see :class:`TorchTrajectoryGenerator`)
     :param device: torch device or ``"auto"``
     """
 
     decoder_name = "decoder"
 
     def __init__(self, horizon: int, action_dim: int, latent_dim: int, *, beta: float,
-                 device: torch.device | str = "auto") -> None:
+                 std_floor: float = STD_FLOOR, device: torch.device | str = "auto") -> None:
         if not beta >= 0:
             raise ValueError(f"beta must be non-negative, got {beta}")
         self.beta = float(beta)
-        super().__init__(horizon=horizon, action_dim=action_dim, latent_dim=latent_dim, prior="normal", device=device)
+        super().__init__(horizon=horizon, action_dim=action_dim, latent_dim=latent_dim, prior="normal",
+                         std_floor=std_floor, device=device)
 
     def _hyperparameters(self) -> dict[str, Any]:
         return {"beta": self.beta}
@@ -65,8 +68,8 @@ class BetaVAE(TorchTrajectoryGenerator):
             raise ValueError("trajectories contain non-finite values (nan or inf)")
         self.networks.eval()
         with torch.no_grad():
-            normalised = (torch.as_tensor(trajectories, device=self.device) - self.action_mean) / self.action_std
-            mean, log_std = self.networks["encoder"](normalised.flatten(1))
+            normalised = self.normalise(torch.as_tensor(trajectories, device=self.device))
+            mean, log_std = self.networks["encoder"](normalised)
         return mean.cpu().numpy(), log_std.cpu().numpy()
 
     def _train_step(self, batch: torch.Tensor, optimizers: list[torch.optim.Optimizer],
