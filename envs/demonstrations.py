@@ -3,7 +3,7 @@
 The paper recorded a few kinesthetic demonstrations and made 40K episodes from them with random changes of the
 joint velocities of different strengths and orientations. Here the expert is a family of smooth base motions
 (:func:`sb3_genrl.envs.scripted.scripted_hit` for hockey, :func:`throw_motion` for basketball) with random
-parameters (strength, direction or yaw, timing), and the perturbation (:func:`perturbation`) adds to its per-step
+parameters (strength, direction or yaw; for basketball also timing), and the perturbation (:func:`perturbation`) adds to its per-step
 joint position deltas (joint velocities times the control step) a few raised-cosine velocity bumps, each on a
 random joint, at a random time, of random width, sign and size, the sizes scaled by one random level per episode.
 Trajectories outside the action box or the joint ranges are redrawn before simulation (nothing relies on the
@@ -36,8 +36,11 @@ from tqdm.auto import tqdm
 # (which lower the hockey blade onto the table) get the smallest.
 HOCKEY_PERTURBATION = np.array([0.04, 0.02, 0.04, 0.02, 0.05, 0.04, 0.05])
 BASKETBALL_PERTURBATION = np.array([0.06, 0.04, 0.06, 0.04, 0.06, 0.04, 0.06])
-# Control step at which the hit or throw starts: a narrow window, since timing changes nothing in the outcome.
-HOCKEY_SWING_START = (24, 29)
+# Control step at which the hit or throw starts. Hockey hits all start at one step: timing changes nothing in the
+# outcome, and whole-step shifts split the demonstrations into one cluster per start step, which a 2-D generator then
+# lays out as separate patches of its latent space (each patch covering part of the goal region), so the latent
+# action that reaches a goal jumps between patches. Basketball throws keep a narrow window.
+HOCKEY_SWING_START = 25
 BASKETBALL_THROW_START = (28, 35)
 # Hockey aims: a target drawn uniformly in the goal region widened by HOCKEY_AIM_MARGIN (m) on each side, hit from
 # the puck's start at HOCKEY_PUCK_X with direction = the target's bearing and a strength for its distance, read
@@ -113,7 +116,7 @@ def _hockey_base(rng: np.random.Generator) -> np.ndarray:
     offset = target - np.array([HOCKEY_PUCK_X, 0.0])
     strength = np.interp(np.linalg.norm(offset), *HOCKEY_DISTANCE_TO_STRENGTH) * rng.uniform(0.95, 1.05)
     return scripted_hit(strength=strength, direction=float(np.arctan2(-offset[1], offset[0])),
-                        swing_start=int(rng.integers(*HOCKEY_SWING_START)))
+                        swing_start=HOCKEY_SWING_START)
 
 
 def _basketball_base(rng: np.random.Generator) -> np.ndarray:
