@@ -43,7 +43,7 @@ def build_parser() -> argparse.ArgumentParser:
     quick.add_argument("--task", choices=("hockey", "basketball"), default="hockey")
     quick.add_argument("--demos", type=int, default=4000, help="demonstrations to generate")
     quick.add_argument("--epochs", type=int, default=300, help="beta-VAE training epochs")
-    quick.add_argument("--episodes", type=int, default=6000, help="GenRL episodes")
+    quick.add_argument("--episodes", type=int, default=3000, help="GenRL episodes")
     quick.add_argument("--seed", type=int, default=0, help="random seed")
     quick.add_argument("--no-video", action="store_true", help="skip rendering the policy")
     quick.add_argument("--device", default="auto", help="torch device (default: auto)")
