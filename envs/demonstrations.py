@@ -3,12 +3,12 @@
 The paper recorded a few kinesthetic demonstrations and made 40K episodes from them with random changes of the
 joint velocities of different strengths and orientations. Here the expert is a family of smooth base motions
 (:func:`sb3_genrl.envs.scripted.scripted_hit` for hockey, :func:`throw_motion` for basketball) with random
-parameters (strength, direction or yaw; for basketball also timing), and the perturbation (:func:`perturbation`) adds to its per-step
-joint position deltas (joint velocities times the control step) a few raised-cosine velocity bumps, each on a
-random joint, at a random time, of random width, sign and size, the sizes scaled by one random level per episode.
-Trajectories outside the action box or the joint ranges are redrawn before simulation (nothing relies on the
-env's clipping); after simulation only valid episodes are kept: stable, no clipping, for hockey no stick-table
-contact, for basketball a ball that comes down through the rim's height.
+parameters (strength, direction or yaw; for basketball also timing), and the perturbation (:func:`perturbation`)
+adds to its per-step joint position deltas (joint velocities times the control step) a few raised-cosine velocity
+bumps, each on a random joint, at a random time, of random width, sign and size, the sizes scaled by one random
+level per episode. Trajectories outside the action box or the joint ranges are redrawn before simulation (nothing
+relies on the env's clipping); after simulation only valid episodes are kept: stable, no clipping, for hockey no
+stick-table contact, for basketball a ball that comes down through the rim's height.
 
 Every stored demonstration is a successful one: its goal is the point it reached (hindsight relabelling; the
 randomly drawn goal it was simulated with is kept as ``sampled_goals``), so its terminal reward is ``-0.0``.

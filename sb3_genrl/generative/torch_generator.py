@@ -38,10 +38,19 @@ class TorchTrajectoryGenerator(TrajectoryGenerator, abc.ABC):
     training split, see :func:`~sb3_genrl.generative.common.normalisation_statistics`); the statistics are part
     of the model and :meth:`decode` returns raw action units.
 
+    ``std_floor`` bounds every entry's std from below by that fraction of the largest entry's std. Without it, an
+    entry that hardly varies in the demonstrations (a joint held still but for small perturbations) weighs, once
+    normalised, as much as the motion that matters, and a low-dimensional latent space spends itself on the
+    perturbations. On the hockey demonstrations (two moving joints; perturbations of the other five 300 times
+    smaller) the best of a 41 x 41 grid of a 2-D beta-VAE's latent actions lands 13.9 cm from a goal on average
+    with floor 0, and 1.6-1.8 cm with floors from 0.03 to 0.3.
+
     :param horizon: number of time steps ``T``
     :param action_dim: number of joints ``M``
     :param latent_dim: ``N_alpha``
     :param prior: ``"normal"`` or ``"uniform"``
+    :param std_floor: floor of each entry's normalisation std, as a fraction of the largest entry's (default
+        :data:`~sb3_genrl.generative.common.STD_FLOOR`, 0.05)
     :param device: torch device or ``"auto"`` (CUDA when available), as in Stable-Baselines3
     """
 
