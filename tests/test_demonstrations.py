@@ -146,3 +146,14 @@ def test_cli_demos(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert all(info["crossings"] > 0 and not info["joint_limit_clipped"] for info in infos)
     assert main(["demos", "--task", "basketball", "--episodes", "3", "--out", str(out), "--no-progress-bar"]) == 2
     assert "already exists" in capsys.readouterr().err
+
+
+def test_hockey_hits_all_swing_at_the_same_step():
+    # Whole-step differences in swing timing split the demonstrations into clusters that a 2-D generator lays out
+    # as separate latent patches; every scripted hit therefore swings through the puck at the same control step.
+    from sb3_genrl.envs.demonstrations import HOCKEY_SWING_START, _hockey_base
+
+    rng = np.random.default_rng(3)
+    fastest_steps = {int(np.argmin(_hockey_base(rng)[:, 5])) for _ in range(200)}
+    assert len(fastest_steps) == 1
+    assert HOCKEY_SWING_START <= fastest_steps.pop() < HOCKEY_SWING_START + 6  # inside the 6-step forward swing
