@@ -30,6 +30,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 from sb3_genrl import GenRL, LatentActionWrapper, __version__  # noqa: E402
 from sb3_genrl.generative import load, train_generator  # noqa: E402
+from sb3_genrl.genrl import evaluate_on_goals  # noqa: E402
 
 DEFAULT_OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "genrl_hockey.json")
 TARGET_CM = 5.0  # the acceptance bound on the mean final distance
@@ -66,11 +67,7 @@ def run_seed(generator_path: str, seed: int, args: argparse.Namespace, work: str
     model.learn(args.episodes, callback=evaluation, progress_bar=True)
     seconds = time.perf_counter() - start
     # Final: the deterministic policy on the same held-out goals for every seed (fast path).
-    task = eval_env.env.unwrapped
-    rng = np.random.default_rng(12345)
-    goals = np.array([task.sample_goal(rng) for _ in range(args.final_goals)], dtype=np.float32)
-    latents, _ = model.predict(goals, deterministic=True)
-    rewards, infos = task.play_trajectories(generator.decode(latents), goals)
+    _, rewards, infos = evaluate_on_goals(model, "hockey", goals=args.final_goals, seed=12345)
     distances = -rewards * 100
     episodes = [int(n) for n in evaluation.evaluations_timesteps]
     curve_cm = [float(-np.mean(r) * 100) for r in evaluation.evaluations_results]

@@ -179,23 +179,6 @@ def sample_trajectories(task: str, n: int, rng: np.random.Generator, *, home: np
     return np.concatenate(out)[:n] if out else np.zeros((0, 0, 7), dtype=np.float32)
 
 
-def simulate(env: ArmTaskEnv, trajectories: np.ndarray, goals: np.ndarray, *, n_threads: int = 1,
-             chunk: int = 128) -> tuple[np.ndarray, list[dict[str, Any]], np.ndarray]:
-    """Play trajectories like :meth:`ArmTaskEnv.play_trajectories` and also return the step env's joint readings.
-
-    The joint part of the observations is read from the same rollout's physics states at each control step
-    boundary (the last one after the settle phase, as :meth:`ArmTaskEnv.step` returns it).
-
-    :param env: the task env
-    :param trajectories: ``(B, T, 7)`` joint position deltas
-    :param goals: ``(B, 2)`` goals
-    :param n_threads: simulation threads
-    :param chunk: trajectories per rollout call (bounds memory)
-    :return: rewards ``(B,)``, infos, and joint readings ``(B, T+1, 14)`` float32 (positions then velocities)
-    """
-    return env.play_trajectories(trajectories, goals, n_threads=n_threads, chunk=chunk, return_joint_states=True)
-
-
 def is_valid(task: str, info: dict[str, Any]) -> bool:
     """Whether a simulated episode may be a demonstration: stable, unclipped, and for hockey without stick-table
     contact, for basketball with the ball coming down through the rim's height."""
@@ -250,7 +233,7 @@ def make_demonstrations(task: str, episodes: int, out_dir: str | os.PathLike[str
             actions = np.concatenate([sample_trajectories(task, 1, r, home=home, max_joint_delta=env.max_joint_delta)
                                       for r in rngs])
             goals = np.stack([env.sample_goal(r) for r in rngs])
-            _, infos, joints = simulate(env, actions, goals, n_threads=n_threads)
+            _, infos, joints = env.play_trajectories(actions, goals, n_threads=n_threads, return_joint_states=True)
             drawn += size
             valid = np.flatnonzero([is_valid(task, info) for info in infos])[: episodes - count]
             reached = np.array([infos[i]["reached"] for i in valid]).reshape(-1, 2)

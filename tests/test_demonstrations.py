@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from sb3_genrl.envs.coverage import CELL_SIZE, coverage_fraction, coverage_report, covered_cells, region_cells
-from sb3_genrl.envs.demonstrations import make_demonstrations, make_env, sample_trajectories, simulate, within_limits
+from sb3_genrl.envs.demonstrations import make_demonstrations, make_env, sample_trajectories, within_limits
 
 from sb3_genrl.cli import main
 from sb3_genrl.data import dataset_info, load_arrays
@@ -38,12 +38,12 @@ def test_sampling_is_seeded_and_within_limits(task: str) -> None:
 
 
 @pytest.mark.parametrize("task", ["hockey", "basketball"])
-def test_simulate_matches_play_trajectories_and_step(task: str) -> None:
+def test_joint_states_match_play_trajectories_and_step(task: str) -> None:
     env = make_env(task)
     rng = np.random.default_rng(3)
     actions = sample_trajectories(task, 2, rng, home=env.home_qpos())
     goals = np.stack([env.sample_goal(rng) for _ in range(2)])
-    rewards, infos, joints = simulate(env, actions, goals, n_threads=2)
+    rewards, infos, joints = env.play_trajectories(actions, goals, n_threads=2, return_joint_states=True)
     expected_rewards, expected_infos = env.play_trajectories(actions, goals)
     np.testing.assert_array_equal(rewards, expected_rewards)
     for info, expected in zip(infos, expected_infos, strict=True):

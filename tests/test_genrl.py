@@ -183,3 +183,24 @@ def test_on_paper_task_with_saved_generator(tmp_path):
     np.testing.assert_array_equal(loaded.predict(goal, deterministic=True)[0], model.predict(goal, deterministic=True)[0])
     assert loaded.predict_trajectory(goal).shape == (69, 7)
 
+
+
+def test_evaluate_on_goals_plays_the_deterministic_policy(tmp_path):
+    from sb3_genrl.generative import make_generator
+    from sb3_genrl.genrl import evaluate_on_goals
+
+    generator = make_generator("VAE1", horizon=69, action_dim=7, device="cpu")
+    model = GenRL("GenRL/Hockey-v0", generator, n_steps=8, seed=0)
+    goals, rewards, infos = evaluate_on_goals(model, "hockey", goals=5, seed=7)
+    # Independently: the goals from the same seed, each played step by step through the wrapped env.
+    task = gym.make("GenRL/Hockey-v0").unwrapped
+    rng = np.random.default_rng(7)
+    np.testing.assert_array_equal(goals, np.array([task.sample_goal(rng) for _ in range(5)], dtype=np.float32))
+    for goal, reward, info in zip(goals, rewards, infos, strict=True):
+        task.reset(options={"goal": goal})
+        for action in model.predict_trajectory(goal):
+            _, step_reward, terminated, _, step_info = task.step(action)
+        assert terminated and step_reward == pytest.approx(reward, abs=1e-9)
+        assert step_info["table_contacts"] == info["table_contacts"]
+    with pytest.raises(ValueError, match="unknown task"):
+        evaluate_on_goals(model, "golf")

@@ -82,6 +82,30 @@ def resolve_task(task: str) -> str:
     raise ValueError(f"unknown task {task!r}: expected one of {sorted(TASK_IDS)} or a registered Gymnasium id")
 
 
+def evaluate_on_goals(model: GenRL, task: str, goals: int = 100, seed: int = 0,
+                      ) -> tuple[np.ndarray, np.ndarray, list[dict[str, Any]]]:
+    """Play the policy's deterministic latent actions for ``goals`` random goals through the task's fast path.
+
+    :param model: a trained GenRL model with its generator
+    :param task: ``"hockey"``, ``"basketball"`` or a registered id of a task with ``sample_goal`` and
+        ``play_trajectories``
+    :param goals: number of goals, drawn with ``np.random.default_rng(seed)``
+    :param seed: seed of the goals
+    :return: the goals ``(goals, 2)``, the rewards (minus the final distance, m) and the episodes' infos
+    """
+    if model.generator is None:
+        raise ValueError("this GenRL model has no generator: pass generator= to GenRL.load()")
+    env = gym.make(resolve_task(task)).unwrapped
+    if not hasattr(env, "play_trajectories") or not hasattr(env, "sample_goal"):
+        raise ValueError(f"task {task!r} has no sample_goal()/play_trajectories() fast path")
+    rng = np.random.default_rng(seed)
+    goal_array = np.array([env.sample_goal(rng) for _ in range(goals)], dtype=np.float32)
+    latents, _ = model.predict(goal_array, deterministic=True)
+    rewards, infos = env.play_trajectories(model.generator.decode(latents), goal_array)
+    env.close()
+    return goal_array, rewards, infos
+
+
 def train_policy(
     task: str,
     generator: TrajectoryGenerator | str,

@@ -9,8 +9,6 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-import numpy as np
-
 # Paper table 1's VAE1 (N_alpha = 2, beta = 0.01). Of the 2-D VAEs, its stronger prior term lays the hockey
 # demonstrations out as one unfolded sheet (shot distance along one latent axis, direction along the other); with
 # beta = 0.001 (VAE3) the sheet often folds over itself, and GenRL's Gaussian policy then stalls at the fold.
@@ -37,7 +35,7 @@ def quickstart(out_dir: str | os.PathLike, *, task: str = "hockey", demo_episode
 
     from sb3_genrl.envs.demonstrations import make_demonstrations
     from sb3_genrl.generative import load, train_generator
-    from sb3_genrl.genrl import train_policy
+    from sb3_genrl.genrl import GenRL, evaluate_on_goals, train_policy
     from sb3_genrl.metrics import evaluate_generators
 
     # The models are small: one torch thread is as fast as several and leaves the other cores to MuJoCo.
@@ -77,7 +75,9 @@ def quickstart(out_dir: str | os.PathLike, *, task: str = "hockey", demo_episode
                                    height=240, fps=20))
     summary = json.loads((policy / "summary.json").read_text())
     measures = json.loads((evaluation / "results.json").read_text())
-    final_distance = _deterministic_distance(task, policy, seed)
+    _, rewards, _ = evaluate_on_goals(GenRL.load(policy / "genrl_policy.zip", device="cpu"), task, goals=100,
+                                      seed=seed + 12345)
+    final_distance = float(-rewards.mean())
     coverage = json.loads(next(dataset.glob("**/coverage.json")).read_text()) if any(dataset.glob("**/coverage.json")) \
         else {}
     generator = load(model_path, device="cpu")
@@ -105,17 +105,3 @@ def _measure_line(measures: list[dict[str, Any]]) -> str:
     row = measures[0]
     return ", ".join(f"{key} {row[key]:.3f}" for key in ("precision", "recall", "delta_1", "delta_2", "mean_delta")
                      if key in row)
-
-
-def _deterministic_distance(task: str, policy_dir: pathlib.Path, seed: int, goals: int = 100) -> float:
-    """Mean final distance of the policy's deterministic latent actions on ``goals`` fresh goals (fast path)."""
-    from sb3_genrl import GenRL
-    from sb3_genrl.envs.demonstrations import make_env
-
-    env = make_env(task)
-    model = GenRL.load(policy_dir / "genrl_policy.zip", device="cpu")
-    rng = np.random.default_rng(seed + 12345)
-    goal_list = np.array([env.sample_goal(rng) for _ in range(goals)])
-    alphas, _ = model.predict(goal_list.astype(np.float32), deterministic=True)
-    rewards, _ = env.play_trajectories(model.generator.decode(alphas), goal_list)
-    return float(-rewards.mean())
