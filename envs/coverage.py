@@ -99,8 +99,8 @@ def _plot(reached: np.ndarray, spec: TaskSpec, covered: np.ndarray, path: Path, 
     FigureCanvasAgg(figure)
     axes = figure.add_subplot()
     shown = reached[np.random.default_rng(0).permutation(len(reached))[:20000]] if len(reached) > 20000 else reached
-    axes.scatter(shown[:, 0], shown[:, 1], s=1, alpha=0.3, color="tab:blue", label="reached")
-    axes.scatter(*centres[~covered].T, s=8, marker="x", color="tab:red", label="uncovered cell")
+    axes.scatter(shown[:, 0], shown[:, 1], s=1, alpha=0.3, color="C0", label="reached")
+    axes.scatter(*centres[~covered].T, s=8, marker="x", color="C3", label="uncovered cell")
     if spec.region_patch is None:
         low, size = np.asarray(spec.goal_low), np.asarray(spec.goal_high) - np.asarray(spec.goal_low)
         axes.add_patch(Rectangle(tuple(low), size[0], size[1], fill=False, color="k", label="goal region"))

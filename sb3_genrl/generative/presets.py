@@ -10,7 +10,7 @@ import torch
 if TYPE_CHECKING:  # the models import their defaults from here
     from sb3_genrl.generative.torch_generator import TorchTrajectoryGenerator
 
-# Section 6.1.2: latent dimensions N_alpha and the regularisation weights of the grid (table 1, "tab:models").
+# Section 6.1.2: latent dimensions N_alpha and the regularisation weights of the grid (paper table 1).
 LATENT_DIMS = (2, 3, 6)
 BETAS = (0.01, 0.005, 0.001)
 INFO_WEIGHTS = (0.1, 1.5, 3.5)
