@@ -22,10 +22,10 @@ def temporary_sibling(path: str | os.PathLike[str]) -> Path:
     the suffix, such as ``savefig`` or SB3's ``save``, then write the same format).
 
     :param path: the final path
-    :return: ``folder/.<stem>.partial-<pid>-<random><suffix>``
+    :return: ``folder/.<stem>-partial-<pid>-<random><suffix>``
     """
     path = Path(path)
-    return path.with_name(f".{path.stem}.partial-{os.getpid()}-{secrets.token_hex(4)}{path.suffix}")
+    return path.with_name(f".{path.stem}-partial-{os.getpid()}-{secrets.token_hex(4)}{path.suffix}")
 
 
 def _fsync(path: Path) -> None:

@@ -204,3 +204,24 @@ def test_evaluate_on_goals_plays_the_deterministic_policy(tmp_path):
         assert step_info["table_contacts"] == info["table_contacts"]
     with pytest.raises(ValueError, match="unknown task"):
         evaluate_on_goals(model, "golf")
+
+
+def test_interrupted_save_keeps_the_previous_policy_file(tmp_path, monkeypatch):
+    from stable_baselines3.common import base_class
+
+    model = GenRL(FastReachEnv(), LinearGenerator(), seed=0)
+    model.save(tmp_path / "policy")  # SB3 adds .zip
+    before = (tmp_path / "policy.zip").read_bytes()
+    real_save = base_class.save_to_zip_file
+
+    def killed_save(save_path, *args, **kwargs):
+        real_save(save_path, *args, **kwargs)
+        with open(save_path, "r+b") as file:
+            file.truncate(100)  # what a kill during the write leaves behind
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(base_class, "save_to_zip_file", killed_save)
+    with pytest.raises(KeyboardInterrupt):
+        model.save(tmp_path / "policy.zip")
+    assert (tmp_path / "policy.zip").read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["policy.generator.pt", "policy.zip"]

@@ -251,3 +251,23 @@ def test_cli_evaluate(tmp_path, capsys) -> None:
     assert code == 0
     assert "vae: precision" in capsys.readouterr().out
     assert (tmp_path / "out" / "results.md").exists() and (tmp_path / "out" / "disentanglement.png").exists()
+
+
+def test_interrupted_outputs_leave_no_partial_file(tmp_path, monkeypatch) -> None:
+    from matplotlib.figure import Figure
+
+    from sb3_genrl.metrics.plots import labelled_scatter
+
+    def killed_savefig(self, path, **kwargs):
+        with open(path, "wb") as file:
+            file.write(b"\x89PNG half")  # what a kill during the write leaves behind
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(Figure, "savefig", killed_savefig)
+    with pytest.raises(KeyboardInterrupt):
+        labelled_scatter([0.1, 0.2], [0.3, 0.4], ["a", "b"], tmp_path / "plot.png", xlabel="x", ylabel="y")
+    table = correlation_table([{"model": f"m{i}", "precision": i, "recall": 1 - i, "score": i} for i in range(4)])
+    monkeypatch.setattr("csv.writer", lambda *args, **kwargs: (_ for _ in ()).throw(KeyboardInterrupt()))
+    with pytest.raises(KeyboardInterrupt):
+        table.to_csv(tmp_path / "table.csv")
+    assert list(tmp_path.iterdir()) == []

@@ -22,6 +22,7 @@ from torch.nn.utils import parameters_to_vector, vector_to_parameters
 
 from sb3_genrl.generative.base import TrajectoryGenerator
 from sb3_genrl.genrl.policies import BoxScaler, MlpPolicy, MultiInputPolicy, default_log_std_init
+from sb3_genrl.utils import atomic_path
 from sb3_genrl.wrappers import latent_action_env
 
 SelfGenRL = TypeVar("SelfGenRL", bound="GenRL")
@@ -335,13 +336,22 @@ class GenRL(OnPolicyAlgorithm):
         return [*super()._excluded_save_params(), "generator"]
 
     def save(self, path: str | pathlib.Path | io.BufferedIOBase, exclude: Any = None, include: Any = None) -> None:
-        """Save like SB3. An in-memory generator (no known path) is also saved as ``<name>.generator.pt`` beside it."""
-        if self.generator_path is None and self.generator is not None and isinstance(path, str | pathlib.Path):
+        """Save like SB3, atomically for a file path (a ``.zip`` suffix is added when there is none, as SB3 does).
+
+        An in-memory generator (no known path) is also saved as ``<name>.generator.pt`` beside it.
+        """
+        if not isinstance(path, str | pathlib.Path):
+            super().save(path, exclude=exclude, include=include)
+            return
+        final = pathlib.Path(path)
+        final = final if final.suffix else final.with_name(final.name + ".zip")
+        if self.generator_path is None and self.generator is not None:
             try:
-                self.generator.save(str(_generator_file(path)))
+                self.generator.save(str(_generator_file(final)))
             except NotImplementedError:
                 pass  # a generator that cannot be saved: GenRL.load then needs generator=
-        super().save(path, exclude=exclude, include=include)
+        with atomic_path(final) as tmp:
+            super().save(tmp, exclude=exclude, include=include)
 
     @classmethod
     def load(  # type: ignore[override]

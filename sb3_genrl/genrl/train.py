@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import csv
-import json
 import math
 import os
 import pathlib
@@ -17,6 +16,7 @@ from sb3_genrl.callbacks import EpisodeRecorder
 from sb3_genrl.curves import plot_curves
 from sb3_genrl.generative.base import TrajectoryGenerator
 from sb3_genrl.genrl.genrl import EStep, GenRL
+from sb3_genrl.utils import atomic_write_json
 
 # The paper's tasks (section 6.1.1), by name. Kept here as ids: the core library does not import ``envs``
 # (``import sb3_genrl`` registers them with Gymnasium).
@@ -181,5 +181,5 @@ def train_policy(
         "final_mean_reward": mean_rewards[-1] if mean_rewards else math.nan,
         "best_mean_reward": max(mean_rewards) if mean_rewards else math.nan,
     }
-    (out / "summary.json").write_text(json.dumps(result, indent=2))
+    atomic_write_json(out / "summary.json", result)
     return result
