@@ -67,7 +67,8 @@ def test_constructor_forms_and_defaults():
     assert th.exp(uniform.policy.log_std).detach().numpy() == pytest.approx([3**-0.5] * 2, rel=1e-5)
     assert uniform.action_space.high.tolist() == [1.0, 1.0]
     gym.register(TOY_ID, entry_point=FastReachEnv) if TOY_ID not in gym.registry else None
-    assert isinstance(GenRL(TOY_ID, generator).env.envs[0].unwrapped, LatentActionWrapper)
+    vec_env = GenRL(TOY_ID, generator).env
+    assert vec_env.get_attr("generator") == [generator] and isinstance(vec_env.envs[0].unwrapped, FastReachEnv)
 
 
 def test_bad_arguments_raise():

@@ -146,8 +146,7 @@ def train_policy(
         raise ValueError(f"batch_episodes must be an integer >= 2, got {batch_episodes!r}")
     env_id = resolve_task(task)
     out = pathlib.Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    model = GenRL(
+    model = GenRL(  # built first: a generator that does not fit the task is refused before anything is written
         gym.make(env_id),
         generator,
         e_step=e_step,
@@ -159,6 +158,7 @@ def train_policy(
         verbose=verbose,
         **genrl_kwargs,
     )
+    out.mkdir(parents=True, exist_ok=True)
     curve = LearningCurveCallback(out / "learning_curve.csv")
     callbacks = [EpisodeRecorder(out / "episodes.csv"), curve]
     model.learn(total_timesteps=int(episodes), callback=callbacks, progress_bar=progress_bar, tb_log_name="GenRL")
