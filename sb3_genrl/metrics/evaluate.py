@@ -85,7 +85,8 @@ def _as_generator(model: str | os.PathLike | TrajectoryGenerator, device: torch.
 
 
 def write_results(evaluations: Sequence[GeneratorEvaluation], out_dir: str | os.PathLike) -> None:
-    """Write ``results.csv``, ``results.md``, ``results.json`` and the two scatter plots into ``out_dir``."""
+    """Write ``results.csv``, ``results.md``, the two scatter plots and, last, ``results.json`` into ``out_dir``
+    (each file atomically)."""
     out = Path(out_dir)
     rows = [evaluation.row() for evaluation in evaluations]
     table = io.StringIO()
@@ -97,19 +98,19 @@ def write_results(evaluations: Sequence[GeneratorEvaluation], out_dir: str | os.
     lines = ["| " + " | ".join(TABLE_COLUMNS) + " |", "|---" + "|---:" * (len(TABLE_COLUMNS) - 1) + "|"]
     lines += ["| " + " | ".join([str(row["model"])] + [f"{row[c]:.3f}" for c in TABLE_COLUMNS[1:]]) + " |" for row in rows]
     atomic_write_text(out / "results.md", "\n".join(lines) + "\n")
-    details = [{**evaluation.row(), "delta": evaluation.dwpr.delta.tolist(),
-                "dwpr_precision": evaluation.dwpr.precision.tolist(), "dwpr_recall": evaluation.dwpr.recall.tolist(),
-                "intervention_values": evaluation.dwpr.intervention_values.tolist(), "k": evaluation.dwpr.k,
-                "num_real": evaluation.precision_recall.num_real,
-                "num_generated": evaluation.precision_recall.num_generated, "dwpr_n": evaluation.dwpr.n}
-               for evaluation in evaluations]
-    atomic_write_json(out / "results.json", details)
     labels = [str(row["model"]) for row in rows]
     labelled_scatter([row["precision"] for row in rows], [row["recall"] for row in rows], labels,
                      out / "precision_recall.png", xlabel="precision", ylabel="recall", title="Precision and recall")
     labelled_scatter([row["delta_1"] for row in rows], [row["mean_delta"] for row in rows], labels,
                      out / "disentanglement.png", xlabel="delta_1", ylabel="mean delta (delta tilde)",
                      title="Disentanglement (DwPR)")
+    details = [{**evaluation.row(), "delta": evaluation.dwpr.delta.tolist(),
+                "dwpr_precision": evaluation.dwpr.precision.tolist(), "dwpr_recall": evaluation.dwpr.recall.tolist(),
+                "intervention_values": evaluation.dwpr.intervention_values.tolist(), "k": evaluation.dwpr.k,
+                "num_real": evaluation.precision_recall.num_real,
+                "num_generated": evaluation.precision_recall.num_generated, "dwpr_n": evaluation.dwpr.n}
+               for evaluation in evaluations]
+    atomic_write_json(out / "results.json", details)  # last: its presence marks a complete evaluation
 
 
 def evaluate_generators(models: Sequence[str | os.PathLike | TrajectoryGenerator] | Mapping[str, str | os.PathLike
