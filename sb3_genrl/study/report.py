@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import csv
+import io
 import json
+import os
 import pathlib
 from typing import Any
 
@@ -11,6 +13,7 @@ import numpy as np
 
 from sb3_genrl.curves import mean_std_over_seeds, plot_curves, read_curve
 from sb3_genrl.metrics import correlation_table, labelled_scatter
+from sb3_genrl.study.state import write_text
 
 MEASURES = ("precision", "recall", "delta_1", "delta_2", "mean_delta")
 
@@ -27,10 +30,11 @@ def _markdown_table(header: list[str], rows: list[list[Any]]) -> str:
 
 
 def _write_csv(path: pathlib.Path, header: list[str], rows: list[list[Any]]) -> None:
-    with path.open("w", newline="") as file:
-        writer = csv.writer(file)
-        writer.writerow(header)
-        writer.writerows(rows)
+    text = io.StringIO(newline="")
+    writer = csv.writer(text)
+    writer.writerow(header)
+    writer.writerows(rows)
+    write_text(path, text.getvalue())
 
 
 def write_task_report(task: str, rows: list[dict[str, Any]], task_dir: str | pathlib.Path, *,
@@ -55,7 +59,9 @@ def write_task_report(task: str, rows: list[dict[str, Any]], task_dir: str | pat
 
     # Tables 2-3: Pearson R and p-value of each measure against the best reward, per model type and for all.
     correlations = correlation_table(rows, measure_names=list(MEASURES), score_key="score")
-    correlations.to_csv(tables / "correlation.csv")
+    tmp = tables / f".correlation.csv.tmp-{os.getpid()}"
+    correlations.to_csv(tmp)
+    os.replace(tmp, tables / "correlation.csv")
 
     # Plots: learning curves per generator (mean +- std over seeds), precision/recall, disentanglement.
     for kind in ("VAE", "GAN"):
@@ -98,7 +104,7 @@ def write_task_report(task: str, rows: list[dict[str, Any]], task_dir: str | pat
     markdown = {"table1_models.md": _markdown_table(header1, table1), "measures.md": _markdown_table(header_m, table_m),
                 "correlation.md": correlations.to_markdown()}
     for name, text in markdown.items():
-        (tables / name).write_text(text + "\n")
+        write_text(tables / name, text + "\n")
     report = root / "report.md"
-    report.write_text("\n".join(lines))
+    write_text(report, "\n".join(lines))
     return report
