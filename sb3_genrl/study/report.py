@@ -86,7 +86,7 @@ def write_task_report(task: str, rows: list[dict[str, Any]], task_dir: str | pat
 
     best = max(rows, key=lambda r: r["score"])
     lines = [f"# GenRL study: {task}", "",
-             f"Scale: `{json.dumps(scale)}`", "",
+             f"Settings (as recorded with each stage): `{json.dumps(scale)}`", "",
              f"Best generator: **{best['model']}** (best reward {best['score']:.3f}, i.e. {-best['score'] * 100:.1f} cm).",
              "", "## Table 1: generators and GenRL reward", "",
              "Best reward = the highest mean reward of a GenRL iteration, over all seeds (paper section 6.1.3).", "",

@@ -77,10 +77,10 @@ def run_study(task: str, scale: str | StudyScale, out_dir: str | os.PathLike, *,
     log = log or (lambda _line: None)
     with folder_lock(out):
         refuse_conflicts(out, [line for name in tasks for line in _conflicts(name, settings, out / name)])
-        write_json(out / "study.json", {"task": task, "scale": "custom" if isinstance(scale, StudyScale) else scale,
-                                        **settings})
         run = _ray_map(address, connect_timeout) if executor == "ray" else \
             _local_map(workers or len(os.sched_getaffinity(0)))
+        write_json(out / "study.json", {"task": task, "scale": "custom" if isinstance(scale, StudyScale) else scale,
+                                        **settings})
         reports = [_run_task(name, settings, out / name, run, models, device, log) for name in tasks]
     if len(reports) == 1:
         return reports[0]

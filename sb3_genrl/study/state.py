@@ -100,8 +100,8 @@ def settings_conflicts(where: str | os.PathLike, recorded: Mapping[str, Any] | N
     """
     if recorded is None:
         return [f"{where}: no recorded settings (written by an older version of sb3-genrl)"] if output_exists else []
-    differing = [f"{key} {_show(recorded.get(key, 'unset'))} (recorded) vs {_show(value)} (this run)"
-                 for key, value in wanted.items() if _normal(recorded.get(key, "unset")) != _normal(value)]
+    differing = [f"{key} {_show(recorded[key]) if key in recorded else 'unset'} (recorded) vs {_show(value)} (this run)"
+                 for key, value in wanted.items() if key not in recorded or _normal(recorded[key]) != _normal(value)]
     return [f"{where}: {', '.join(differing)}"] if differing else []
 
 
