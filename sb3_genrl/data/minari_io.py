@@ -173,9 +173,8 @@ def write_dataset(path: str | os.PathLike[str], arrays: dict[str, np.ndarray], *
                   description: str = "", extra_files: Callable[[Path], Any] | None = None) -> Path:
     """Write a demonstration dataset atomically (temporary sibling directory, renamed at the end).
 
-    The temporary directory is ``.NAME.partial-PID-HEX`` beside ``path``. One left behind by a writer that was
-    killed is removed by the next write to the same ``path`` once its PID is no longer running (the PID of a
-    process on this machine; only partial directories of ``path`` are touched).
+    The temporary directory ``.NAME.partial-PID-HEX`` of a killed writer is removed by the next write of ``path``
+    (:func:`remove_stale_partials`).
 
     :param path: the dataset directory to create; it must not exist, or be empty
     :param arrays: the arrays named in the module docstring

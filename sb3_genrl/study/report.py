@@ -7,6 +7,7 @@ import io
 import json
 import os
 import pathlib
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -37,6 +38,12 @@ def _write_csv(path: pathlib.Path, header: list[str], rows: list[list[Any]]) -> 
     write_text(path, text.getvalue())
 
 
+def _atomically(path: pathlib.Path, write: Callable[[pathlib.Path], Any]) -> None:
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    write(tmp)
+    os.replace(tmp, path)
+
+
 def write_task_report(task: str, rows: list[dict[str, Any]], task_dir: str | pathlib.Path, *,
                       scale: dict[str, Any], comparison: pathlib.Path | None = None) -> pathlib.Path:
     """Tables 1-5 for one task (Markdown and CSV), the plots, and ``report.md`` linking them."""
@@ -59,9 +66,7 @@ def write_task_report(task: str, rows: list[dict[str, Any]], task_dir: str | pat
 
     # Tables 2-3: Pearson R and p-value of each measure against the best reward, per model type and for all.
     correlations = correlation_table(rows, measure_names=list(MEASURES), score_key="score")
-    tmp = tables / f".correlation.csv.tmp-{os.getpid()}"
-    correlations.to_csv(tmp)
-    os.replace(tmp, tables / "correlation.csv")
+    _atomically(tables / "correlation.csv", correlations.to_csv)
 
     # Plots: learning curves per generator (mean +- std over seeds), precision/recall, disentanglement.
     for kind in ("VAE", "GAN"):
