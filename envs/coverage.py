@@ -7,7 +7,6 @@ its centre.
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 from typing import Any
@@ -15,6 +14,8 @@ from typing import Any
 import numpy as np
 from sb3_genrl.envs import TaskSpec, get_task
 from scipy.spatial import cKDTree
+
+from sb3_genrl.utils import atomic_path, atomic_write_json
 
 
 def in_goal_region(points: np.ndarray, task: str | TaskSpec) -> np.ndarray:
@@ -86,11 +87,9 @@ def coverage_report(source: np.ndarray | str | os.PathLike[str], task: str | Tas
               "covered_cells": int(covered.sum()), "coverage": float(covered.mean()),
               "in_region": float(in_goal_region(reached, spec).mean()) if len(reached) else 0.0,
               "json": str(named / "coverage.json"), "png": str(named / "coverage.png")}
-    for name, write in (("coverage.png", lambda tmp: _plot(reached, spec, covered, tmp, report["coverage"])),
-                        ("coverage.json", lambda tmp: tmp.write_text(json.dumps(report, indent=1)))):
-        tmp = out_dir / f".{name}.tmp-{os.getpid()}.{name.rsplit('.', 1)[1]}"  # keeps the suffix Matplotlib reads
-        write(tmp)
-        os.replace(tmp, out_dir / name)
+    with atomic_path(out_dir / "coverage.png") as tmp:
+        _plot(reached, spec, covered, tmp, report["coverage"])
+    atomic_write_json(out_dir / "coverage.json", report, indent=1)
     return report
 
 

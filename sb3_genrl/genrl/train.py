@@ -7,7 +7,6 @@ the functions so that the core library (:class:`~sb3_genrl.GenRL`) never imports
 from __future__ import annotations
 
 import csv
-import json
 import math
 import os
 import pathlib
@@ -21,6 +20,7 @@ from sb3_genrl.callbacks import EpisodeRecorder
 from sb3_genrl.curves import plot_curves
 from sb3_genrl.generative.base import TrajectoryGenerator
 from sb3_genrl.genrl.genrl import EStep, GenRL
+from sb3_genrl.utils import atomic_write_json
 
 
 class LearningCurveCallback(BaseCallback):
@@ -138,8 +138,7 @@ def train_policy(
 
     spec = get_task(task)
     out = pathlib.Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    model = GenRL(
+    model = GenRL(  # built first: a generator that does not fit the task is refused before anything is written
         gym.make(spec.env_id),
         generator,
         e_step=e_step,
@@ -151,6 +150,7 @@ def train_policy(
         verbose=verbose,
         **genrl_kwargs,
     )
+    out.mkdir(parents=True, exist_ok=True)
     curve = LearningCurveCallback(out / "learning_curve.csv")
     callbacks = [EpisodeRecorder(out / "episodes.csv"), curve]
     model.learn(total_timesteps=int(episodes), callback=callbacks, progress_bar=progress_bar, tb_log_name="GenRL")
@@ -173,5 +173,5 @@ def train_policy(
         "final_mean_reward": mean_rewards[-1] if mean_rewards else math.nan,
         "best_mean_reward": max(mean_rewards) if mean_rewards else math.nan,
     }
-    (out / "summary.json").write_text(json.dumps(result, indent=2))
+    atomic_write_json(out / "summary.json", result)
     return result

@@ -10,7 +10,6 @@ pool or Ray can run it.
 from __future__ import annotations
 
 import json
-import os
 import pathlib
 from typing import Any
 
@@ -23,8 +22,8 @@ from sb3_genrl.study.state import (
     read_settings,
     refuse_conflicts,
     settings_conflicts,
-    write_json,
 )
+from sb3_genrl.utils import atomic_write_json
 
 # Fixed settings of the study's stages (recorded with each stage, see sb3_genrl.study.runner).
 GENERATOR_SEED = 0
@@ -59,11 +58,9 @@ def generator_job(task: str, name: str, scale: dict[str, Any], dataset: str, tas
 
     # Generator (paper 6.1.2, appendix B): trained on the demonstrations' action trajectories.
     model_path = root / "generators" / f"{name}.pt"
-    if not model_path.exists():
-        tmp = model_path.with_name(f".{name}.pt.tmp-{os.getpid()}")
+    if not model_path.exists():  # the file is written atomically: it exists only once training is complete
         train_generator(dataset, preset=name, epochs=scale["generator_epochs"], eval_every=scale["eval_every"],
-                        seed=GENERATOR_SEED, out=tmp, device=device)
-        os.replace(tmp, model_path)
+                        seed=GENERATOR_SEED, out=model_path, device=device)
     generator = load(model_path, device=device)
     fingerprint = file_fingerprint(model_path)
 
@@ -99,7 +96,7 @@ def _evaluation(generator: Any, name: str, fingerprint: str, scale: dict[str, An
     result = evaluate_generator(generator, real, n=scale["pr_samples"], k=K, dwpr_n=scale["dwpr_samples"],
                                 interventions=INTERVENTIONS, seed=EVALUATION_SEED, name=name, device=device)
     evaluation = {**result.details(), "generator": fingerprint}
-    write_json(path, evaluation)
+    atomic_write_json(path, evaluation)
     return evaluation
 
 

@@ -17,8 +17,8 @@ from sb3_genrl.study.state import (
     read_settings,
     refuse_conflicts,
     settings_conflicts,
-    write_text,
 )
+from sb3_genrl.utils import atomic_write_text
 
 # Paper table 1's VAE1 (N_alpha = 2, beta = 0.01). Of the 2-D VAEs, its stronger prior term lays the hockey
 # demonstrations out as one unfolded sheet (shot distance along one latent axis, direction along the other); with
@@ -121,12 +121,10 @@ def _run_stages(out: pathlib.Path, settings: dict[str, dict[str, Any]], device: 
         timings[name] = time.perf_counter() - start
         log(f"{name}: {'done' if not done else 'already there'} ({timings[name]:.0f} s)")
 
-    def train() -> None:
-        tmp = out / f".vae.pt.tmp-{os.getpid()}"
+    def train() -> None:  # the file is written atomically: it exists only once training is complete
         train_generator(dataset, preset=generator["preset"], epochs=generator["epochs"],
-                        eval_every=generator["eval_every"], seed=generator["seed"], out=tmp, progress_bar=True,
+                        eval_every=generator["eval_every"], seed=generator["seed"], out=model_path, progress_bar=True,
                         device=device, tensorboard_log=str(out / "tensorboard"))
-        os.replace(tmp, model_path)
 
     stage("demonstrations", {}, lambda: make_demonstrations(demos["task"], demos["episodes"], dataset,
                                                             seed=demos["seed"], progress_bar=True))
@@ -182,7 +180,7 @@ def _write_report(out: pathlib.Path, task: str, seed: int, video: bool, timings:
         lines += ["![policy](policy.gif)", "", "![policy frames](policy_strip.png)", ""]
     lines += ["Stage times (s): " + ", ".join(f"{k} {v:.0f}" for k, v in timings.items()), ""]
     report = out / "report.md"
-    write_text(report, "\n".join(lines))
+    atomic_write_text(report, "\n".join(lines))
     return report
 
 

@@ -5,16 +5,14 @@ from __future__ import annotations
 import csv
 import io
 import json
-import os
 import pathlib
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from sb3_genrl.curves import mean_std_over_seeds, plot_curves, read_curve
 from sb3_genrl.metrics import correlation_table, labelled_scatter
-from sb3_genrl.study.state import write_text
+from sb3_genrl.utils import atomic_write_text
 
 MEASURES = ("precision", "recall", "delta_1", "delta_2", "mean_delta")
 
@@ -35,13 +33,7 @@ def _write_csv(path: pathlib.Path, header: list[str], rows: list[list[Any]]) -> 
     writer = csv.writer(text)
     writer.writerow(header)
     writer.writerows(rows)
-    write_text(path, text.getvalue())
-
-
-def _atomically(path: pathlib.Path, write: Callable[[pathlib.Path], Any]) -> None:
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    write(tmp)
-    os.replace(tmp, path)
+    atomic_write_text(path, text.getvalue(), newline="")
 
 
 def write_task_report(task: str, rows: list[dict[str, Any]], task_dir: str | pathlib.Path, *,
@@ -66,7 +58,7 @@ def write_task_report(task: str, rows: list[dict[str, Any]], task_dir: str | pat
 
     # Tables 2-3: Pearson R and p-value of each measure against the best reward, per model type and for all.
     correlations = correlation_table(rows, measure_names=list(MEASURES), score_key="score")
-    _atomically(tables / "correlation.csv", correlations.to_csv)
+    correlations.to_csv(tables / "correlation.csv")
 
     # Plots: learning curves per generator (mean +- std over seeds), precision/recall, disentanglement.
     for kind in ("VAE", "GAN"):
@@ -109,7 +101,7 @@ def write_task_report(task: str, rows: list[dict[str, Any]], task_dir: str | pat
     markdown = {"table1_models.md": _markdown_table(header1, table1), "measures.md": _markdown_table(header_m, table_m),
                 "correlation.md": correlations.to_markdown()}
     for name, text in markdown.items():
-        write_text(tables / name, text + "\n")
+        atomic_write_text(tables / name, text + "\n")
     report = root / "report.md"
-    write_text(report, "\n".join(lines))
+    atomic_write_text(report, "\n".join(lines))
     return report

@@ -27,9 +27,8 @@ from sb3_genrl.study.state import (
     read_settings,
     refuse_conflicts,
     settings_conflicts,
-    write_json,
-    write_text,
 )
+from sb3_genrl.utils import atomic_write_json, atomic_write_text
 
 # PPO and SAC on the feedback task with the demonstrations, and stock algorithms on the best generator's latent space.
 BASELINES = ("ppo", "sac", "latent-ppo", "latent-sac", "latent-trpo")
@@ -79,13 +78,13 @@ def run_study(task: str, scale: str | StudyScale, out_dir: str | os.PathLike, *,
         refuse_conflicts(out, [line for name in tasks for line in _conflicts(name, settings, out / name)])
         run = _ray_map(address, connect_timeout) if executor == "ray" else \
             _local_map(workers or len(os.sched_getaffinity(0)))
-        write_json(out / "study.json", {"task": task, "scale": "custom" if isinstance(scale, StudyScale) else scale,
+        atomic_write_json(out / "study.json", {"task": task, "scale": "custom" if isinstance(scale, StudyScale) else scale,
                                         **settings})
         reports = [_run_task(name, settings, out / name, run, models, device, log) for name in tasks]
     if len(reports) == 1:
         return reports[0]
     index = out / "report.md"
-    write_text(index, "# GenRL study\n\n" + "\n".join(f"- [{p.parent.name}]({p.parent.name}/report.md)"
+    atomic_write_text(index, "# GenRL study\n\n" + "\n".join(f"- [{p.parent.name}]({p.parent.name}/report.md)"
                                                          for p in reports) + "\n")
     return index
 
@@ -148,7 +147,7 @@ def _run_task(task: str, scale: dict[str, Any], task_dir: pathlib.Path, run, mod
         rows.append(row)
         log(f"{task}: {row['model']} precision {row['precision']:.3f} recall {row['recall']:.3f} "
             f"mean delta {row['mean_delta']:.3f} best reward {row['score']:.3f}")
-    write_json(task_dir / "results.json", rows)
+    atomic_write_json(task_dir / "results.json", rows)
 
     comparison = None
     if scale["baseline_episodes"] > 0:

@@ -10,8 +10,8 @@
   system releases it when the holder exits, however it exits.
 - **Worker exit** (:func:`exit_with_parent`): worker processes end when the process that started them dies.
 
-These helpers stand alone (JSON written atomically, the lock, the parent watch) so that they can move to a shared
-utilities module.
+The lock and the parent watch stand alone, so that they can move to :mod:`sb3_genrl.utils` beside the atomic
+writers.
 """
 
 from __future__ import annotations
@@ -30,6 +30,8 @@ from typing import Any
 
 import numpy as np
 
+from sb3_genrl.utils import atomic_write_json
+
 STAGE_FILE = "stage.json"
 LOCK_FILE = ".lock"
 
@@ -40,30 +42,6 @@ class SettingsConflictError(ValueError):
 
 class FolderInUseError(ValueError):
     """Another process holds the lock of the folder (see :func:`folder_lock`)."""
-
-
-def write_json(path: str | os.PathLike, value: Any) -> None:
-    """Write ``value`` as JSON atomically (a temporary file in the same folder, then ``os.replace``).
-
-    :param path: the file to write
-    :param value: a JSON-serialisable value
-    """
-    write_text(path, json.dumps(value, indent=2) + "\n")
-
-
-def write_text(path: str | os.PathLike, text: str) -> None:
-    """Write ``text`` atomically (a temporary file in the same folder, then ``os.replace``).
-
-    :param path: the file to write
-    :param text: its content
-    """
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    try:
-        tmp.write_text(text)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
 
 
 def read_settings(record: str | os.PathLike) -> dict[str, Any] | None:
@@ -141,8 +119,7 @@ def check_and_record(record: str | os.PathLike, wanted: Mapping[str, Any], *, ou
     refuse_conflicts(folder, settings_conflicts(record.parent if record.name == STAGE_FILE else record, recorded,
                                                 wanted, output_exists=output_exists))
     if recorded is None:
-        record.parent.mkdir(parents=True, exist_ok=True)
-        write_json(record, dict(wanted))
+        atomic_write_json(record, dict(wanted))
 
 
 def dataset_fingerprint(dataset: str | os.PathLike) -> str:
