@@ -89,7 +89,7 @@ def train_baseline(
     else:
         if demos is None:
             raise ValueError(f"{algorithm} needs demonstrations (demos=...)")
-        transitions = _demonstrations(demos, demo_episodes)
+        transitions = _demonstrations(demos, demo_episodes, task)
         summary["demo_transitions"] = len(transitions["observations"])
         env = gym.make(env_id)
         horizon = env.unwrapped.horizon
@@ -117,13 +117,13 @@ def train_baseline(
     return summary
 
 
-def _demonstrations(demos: Any, demo_episodes: int | None) -> dict[str, np.ndarray]:
+def _demonstrations(demos: Any, demo_episodes: int | None, task: str) -> dict[str, np.ndarray]:
     if isinstance(demos, dict):
         transitions = demos
     else:
         from sb3_genrl.data import load_transitions
 
-        transitions = load_transitions(demos)
+        transitions = load_transitions(demos, task=task)  # refuses another task's demonstrations
     if demo_episodes is None:
         return transitions
     ends = np.flatnonzero(np.asarray(transitions["dones"]))

@@ -7,7 +7,6 @@ its centre.
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 from typing import Any
@@ -15,6 +14,8 @@ from typing import Any
 import numpy as np
 from sb3_genrl.envs import TaskSpec, get_task
 from scipy.spatial import cKDTree
+
+from sb3_genrl.utils import atomic_path, atomic_write_json
 
 
 def in_goal_region(points: np.ndarray, task: str | TaskSpec) -> np.ndarray:
@@ -55,12 +56,14 @@ def coverage_fraction(reached: np.ndarray, task: str | TaskSpec) -> float:
 
 
 def coverage_report(source: np.ndarray | str | os.PathLike[str], task: str | TaskSpec | None,
-                    out_dir: str | os.PathLike[str]) -> dict[str, Any]:
+                    out_dir: str | os.PathLike[str], *, final_dir: str | os.PathLike[str] | None = None) -> dict[str, Any]:
     """Write ``coverage.json`` and ``coverage.png`` (reached points over the goal region) into ``out_dir``.
 
     :param source: a dataset directory or the reached points ``(N, 2)``
     :param task: a task name from :data:`sb3_genrl.envs.TASKS` (or its spec); read from the dataset when None
     :param out_dir: where to write the two files (created if needed)
+    :param final_dir: the folder the report names as the files' location (default ``out_dir``), for a report
+        written into a temporary folder that is renamed to ``final_dir`` afterwards
     :return: the report: ``task``, ``episodes``, ``cell_size``, ``cells``, ``covered_cells``, ``coverage``,
         ``in_region`` (share of reached points inside the region) and the two file paths
     """
@@ -78,13 +81,15 @@ def coverage_report(source: np.ndarray | str | os.PathLike[str], task: str | Tas
     spec = get_task(task)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
+    named = out_dir if final_dir is None else Path(final_dir)
     covered = covered_cells(reached, spec)
     report = {"task": spec.name, "episodes": int(len(reached)), "cell_size": spec.cell_size, "cells": int(len(covered)),
               "covered_cells": int(covered.sum()), "coverage": float(covered.mean()),
               "in_region": float(in_goal_region(reached, spec).mean()) if len(reached) else 0.0,
-              "json": str(out_dir / "coverage.json"), "png": str(out_dir / "coverage.png")}
-    _plot(reached, spec, covered, out_dir / "coverage.png", report["coverage"])
-    (out_dir / "coverage.json").write_text(json.dumps(report, indent=1))
+              "json": str(named / "coverage.json"), "png": str(named / "coverage.png")}
+    with atomic_path(out_dir / "coverage.png") as tmp:
+        _plot(reached, spec, covered, tmp, report["coverage"])
+    atomic_write_json(out_dir / "coverage.json", report, indent=1)
     return report
 
 

@@ -115,7 +115,10 @@ def make_demonstrations(task: str | TaskSpec, episodes: int, out_dir: str | os.P
     trajectories are simulated in chunks until enough are valid and the first ``episodes`` valid ones are kept. So
     the result depends on ``seed`` only (not on ``n_threads`` or ``chunk``), and a smaller set with the same seed
     is a prefix of a larger one. The dataset directory is written
-    atomically (see :func:`sb3_genrl.data.write_dataset`), with a coverage report beside its ``data`` folder.
+    atomically (see :func:`sb3_genrl.data.write_dataset`) together with its coverage report (``coverage.json`` and
+    ``coverage.png`` beside its ``data`` folder), so a dataset is never visible without its report. While it runs,
+    the sibling lock file ``.NAME.lock`` keeps a second writer of the same directory out
+    (:func:`sb3_genrl.study.state.folder_lock`); temporary directories left by a killed writer are removed.
 
     :param task: a task name from :data:`sb3_genrl.envs.TASKS` (or its spec)
     :param episodes: number of demonstrations (paper: 40000)
@@ -126,17 +129,44 @@ def make_demonstrations(task: str | TaskSpec, episodes: int, out_dir: str | os.P
     :param chunk: trajectories drawn and simulated per round
     :return: the dataset directory
     """
+    from sb3_genrl.study.state import folder_lock
+
+    if episodes < 1:
+        raise ValueError(f"episodes must be at least 1, got {episodes}")
+    out_dir = Path(out_dir).absolute()
+    with folder_lock(out_dir, lock_file=out_dir.parent / f".{out_dir.name}.lock"):
+        _refuse_existing(out_dir)
+        return _make_demonstrations(get_task(task), episodes, out_dir, seed, n_threads, progress_bar, chunk)
+
+
+def _refuse_existing(out_dir: Path) -> None:
+    """Raise unless ``out_dir`` is missing or an empty directory, saying what is in the way."""
+    from sb3_genrl.data import dataset_info
+
+    if not out_dir.exists() or (out_dir.is_dir() and not any(out_dir.iterdir())):
+        return
+    try:
+        info = dataset_info(out_dir)
+    except ValueError:
+        raise ValueError(f"{str(out_dir)!r} already exists and is not an empty directory; choose another output "
+                         "path") from None
+    held = f"{info.get('episodes')} {info.get('task')} demonstrations, seed {info.get('seed')}"
+    if not (out_dir / "coverage.json").is_file():
+        raise ValueError(f"{str(out_dir)!r} already exists: it holds a dataset ({held}) without its coverage report, "
+                         "left by an interrupted run of an older sb3-genrl version, which wrote the report after the "
+                         "dataset. Delete the folder and rerun, or add the report with "
+                         "sb3_genrl.envs.coverage.coverage_report(path, None, path)")
+    raise ValueError(f"{str(out_dir)!r} already exists and holds a complete dataset ({held}); choose another output "
+                     "path, or delete it to make it again")
+
+
+def _make_demonstrations(spec: TaskSpec, episodes: int, out_dir: Path, seed: int, n_threads: int | None,
+                         progress_bar: bool, chunk: int) -> Path:
     from sb3_genrl.envs.coverage import coverage_report
 
     import sb3_genrl
     from sb3_genrl.data import write_dataset
 
-    if episodes < 1:
-        raise ValueError(f"episodes must be at least 1, got {episodes}")
-    out_dir = Path(out_dir)
-    if out_dir.exists() and (not out_dir.is_dir() or any(out_dir.iterdir())):
-        raise ValueError(f"{str(out_dir)!r} already exists and is not an empty directory; choose another output path")
-    spec = get_task(task)
     task = spec.name
     env = spec.make_env()
     began = time.perf_counter()
@@ -148,11 +178,10 @@ def make_demonstrations(task: str | TaskSpec, episodes: int, out_dir: str | os.P
              "goal": "reached (hindsight: each demonstration's goal is the point it reached)",
              "observation": "goal xy, 7 joint positions, 7 joint velocities", "max_joint_delta": env.max_joint_delta,
              "seconds": round(time.perf_counter() - began, 1)}
-    path = write_dataset(out_dir, arrays, dataset_id=f"genrl/{task}-v0", observation_space=env.observation_space,
+    return write_dataset(out_dir, arrays, dataset_id=f"genrl/{task}-v0", observation_space=env.observation_space,
                          action_space=env.action_space, genrl=genrl,
-                         description=f"{episodes} perturbed scripted demonstrations of {spec.env_id} (sb3-genrl)")
-    coverage_report(arrays["reached"], spec, path)
-    return path
+                         description=f"{episodes} perturbed scripted demonstrations of {spec.env_id} (sb3-genrl)",
+                         extra_files=lambda tmp: coverage_report(arrays["reached"], spec, tmp, final_dir=out_dir))
 
 
 def _valid_episodes(spec: TaskSpec, env: ArmTaskEnv, episodes: int, seed: int, n_threads: int, chunk: int,

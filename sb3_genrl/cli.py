@@ -58,6 +58,7 @@ def build_parser() -> argparse.ArgumentParser:
     study.add_argument("--out", required=True, help="study folder (a rerun resumes it)")
     study.add_argument("--executor", choices=("local", "ray"), default="local", help="worker processes or Ray tasks")
     study.add_argument("--address", default=None, help="Ray cluster address (ray executor)")
+    study.add_argument("--ray-timeout", type=float, default=30.0, help="seconds to connect to --address (default 30)")
     study.add_argument("--workers", type=int, default=None, help="local worker processes (default: the cores)")
     study.add_argument("--models", nargs="+", default=None, help="a subset of VAE1..VAE9 GAN1..GAN9 (default all)")
     study.add_argument("--device", default="auto", help="torch device (default: auto)")
@@ -166,7 +167,7 @@ def _study_command(args: argparse.Namespace) -> int:
 
     report = run_study(args.task, args.scale, args.out, executor=args.executor, address=args.address,
                        workers=args.workers, models=tuple(args.models) if args.models else MODELS, device=args.device,
-                       log=print)
+                       connect_timeout=args.ray_timeout, log=print)
     print(f"wrote {report}")
     return 0
 

@@ -103,3 +103,39 @@ def test_baseline_bad_input(tmp_path, demos):
         train_baseline("ppo", "golf", episodes=1, out_dir=tmp_path, demos=demos)
     with pytest.raises(ValueError, match="demo_episodes"):
         train_baseline("ppo", "hockey", episodes=1, out_dir=tmp_path, demos=demos, demo_episodes=100)
+
+
+def _dataset_of(demos: dict[str, np.ndarray], path, task: str, horizon: int = 69):
+    """The transitions as a dataset on disk that records ``task`` (the episodes themselves are hockey hits)."""
+    from gymnasium import spaces
+
+    from sb3_genrl.data import write_dataset
+
+    n = len(demos["observations"]) // horizon
+    episodes = {key: value.reshape(n, horizon, *value.shape[1:]) for key, value in demos.items()}
+    arrays = {"observations": np.concatenate([episodes["observations"], episodes["next_observations"][:, -1:]], axis=1),
+              "actions": episodes["actions"], "rewards": episodes["rewards"].astype(np.float64),
+              "terminations": episodes["dones"].astype(bool), "truncations": np.zeros((n, horizon), dtype=bool),
+              "reached": np.zeros((n, 2)), "sampled_goals": np.zeros((n, 2))}
+    return write_dataset(path, arrays, dataset_id=f"genrl/{task}-v0", genrl={"task": task, "horizon": horizon},
+                         observation_space=spaces.Box(-np.inf, np.inf, (16,), np.float32),
+                         action_space=spaces.Box(-0.5, 0.5, (7,), np.float32))
+
+
+def test_baselines_refuse_another_tasks_demonstrations(demos, tmp_path, capsys):
+    from sb3_genrl.cli import main
+
+    hockey = _dataset_of(demos, tmp_path / "hockey_demos", "hockey")
+    basketball = _dataset_of(demos, tmp_path / "basketball_demos", "basketball")
+    for algorithm, task, dataset, other in (("ppo", "hockey", basketball, "basketball"),
+                                            ("sac", "basketball", hockey, "hockey")):
+        out = tmp_path / f"{algorithm}_run"
+        assert main(["baseline", algorithm, "--task", task, "--demos", str(dataset), "--episodes", "1",
+                     "--out", str(out)]) == 2
+        error = capsys.readouterr().err
+        assert str(dataset) in error and repr(other) in error and repr(task) in error, error
+        assert not (out / "summary.json").exists()
+    # The dataset of the task itself is accepted: its transitions are the ones the baseline is given.
+    summary = train_baseline("sac", "hockey", episodes=1, out_dir=tmp_path / "sac_ok", demos=hockey, device="cpu",
+                             window=1)
+    assert summary["demo_transitions"] == len(demos["observations"])

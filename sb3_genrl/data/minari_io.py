@@ -21,12 +21,14 @@ tasks: the task and horizon come from the dataset's own metadata.
 
 from __future__ import annotations
 
+import glob
 import importlib.util
 import json
 import os
 import secrets
 import shutil
 import zipfile
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -207,8 +209,11 @@ def load_transitions(path: str | os.PathLike[str], *, task: str | None = None) -
 
 def write_dataset(path: str | os.PathLike[str], arrays: dict[str, np.ndarray], *, dataset_id: str,
                   observation_space: gym.spaces.Box, action_space: gym.spaces.Box, genrl: dict[str, Any],
-                  description: str = "") -> Path:
+                  description: str = "", extra_files: Callable[[Path], Any] | None = None) -> Path:
     """Write a demonstration dataset atomically (temporary sibling directory, renamed at the end).
+
+    The temporary directory ``.NAME.partial-PID-HEX`` of a killed writer is removed by the next write of ``path``
+    (:func:`remove_stale_partials`).
 
     :param path: the dataset directory to create; it must not exist, or be empty
     :param arrays: the arrays named in the module docstring
@@ -217,6 +222,8 @@ def write_dataset(path: str | os.PathLike[str], arrays: dict[str, np.ndarray], *
     :param action_space: the step env's action space
     :param genrl: the ``"genrl"`` metadata entry (at least ``task``, ``horizon``, ``seed``, ``version``)
     :param description: Minari's dataset description
+    :param extra_files: called with the temporary directory before it is renamed into place, to add files (such as
+        a coverage report) that a complete dataset must never be without
     :return: the dataset directory
     """
     from minari.dataset.minari_dataset import parse_dataset_id
@@ -230,6 +237,7 @@ def write_dataset(path: str | os.PathLike[str], arrays: dict[str, np.ndarray], *
     if path.exists() and (not path.is_dir() or any(path.iterdir())):
         raise ValueError(f"{str(path)!r} already exists and is not an empty directory; choose another output path")
     path.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale_partials(path)
     n, steps = arrays["actions"].shape[:2]
     tmp = path.parent / f".{path.name}.partial-{os.getpid()}-{secrets.token_hex(4)}"
     tmp.mkdir()
@@ -250,6 +258,8 @@ def write_dataset(path: str | os.PathLike[str], arrays: dict[str, np.ndarray], *
                         algorithm_name="scripted expert with joint-velocity perturbations",
                         genrl={**genrl, "episodes": int(n), "storage": ["npz"] + (["hdf5"] if has_hdf5 else [])})
         (data_dir / METADATA_FILE).write_text(json.dumps(metadata, indent=1, default=_json_default))
+        if extra_files is not None:
+            extra_files(tmp)
         if path.exists():
             path.rmdir()
         os.replace(tmp, path)
@@ -257,6 +267,39 @@ def write_dataset(path: str | os.PathLike[str], arrays: dict[str, np.ndarray], *
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     return path
+
+
+def remove_stale_partials(path: str | os.PathLike[str]) -> list[Path]:
+    """Remove the temporary directories (``.NAME.partial-PID-HEX``) of earlier writes of ``path`` whose writer
+    process is no longer running, and only those.
+
+    :param path: the dataset directory
+    :return: the removed directories
+    """
+    path = Path(path).absolute()
+    removed = []
+    for candidate in path.parent.glob(f".{glob.escape(path.name)}.partial-*-*"):
+        pid = candidate.name[len(path.name) + len(".partial-") + 1:].split("-", 1)[0]
+        if candidate.is_dir() and pid.isdigit() and not _running(int(pid)):
+            shutil.rmtree(candidate, ignore_errors=True)
+            removed.append(candidate)
+    return removed
+
+
+def _running(pid: int) -> bool:
+    """Whether a process with this PID runs on this machine (a zombie counts as ended)."""
+    if pid == os.getpid() or os.name == "nt":  # on Windows, os.kill(pid, 0) would end the process: keep it
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OSError):
+        return True  # it exists (another user's), or we cannot tell: keep its directory
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except (OSError, IndexError):
+        return True
 
 
 def _write_minari_hdf5(data_dir: Path, arrays: dict[str, np.ndarray], observation_space: gym.spaces.Box,

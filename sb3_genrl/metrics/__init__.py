@@ -2,7 +2,13 @@
 
 from sb3_genrl.metrics.correlation import CorrelationRow, CorrelationTable, correlation_table, pearson
 from sb3_genrl.metrics.dwpr import DwPR, default_intervention_values, dwpr
-from sb3_genrl.metrics.evaluate import GeneratorEvaluation, evaluate_generators, load_real_trajectories
+from sb3_genrl.metrics.evaluate import (
+    GeneratorEvaluation,
+    evaluate_generator,
+    evaluate_generators,
+    load_real_trajectories,
+    real_subset,
+)
 from sb3_genrl.metrics.plots import labelled_scatter
 from sb3_genrl.metrics.precision_recall import PrecisionRecall, precision_recall
 
@@ -15,9 +21,11 @@ __all__ = [
     "correlation_table",
     "default_intervention_values",
     "dwpr",
+    "evaluate_generator",
     "evaluate_generators",
     "labelled_scatter",
     "load_real_trajectories",
     "pearson",
     "precision_recall",
+    "real_subset",
 ]

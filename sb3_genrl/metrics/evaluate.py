@@ -11,6 +11,7 @@ import io
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -43,6 +44,13 @@ class GeneratorEvaluation:
         """The table row: model, precision, recall, delta_1, delta_2, mean_delta."""
         return {"model": self.name, "precision": self.precision_recall.precision, "recall": self.precision_recall.recall,
                 "delta_1": self.dwpr.delta_1, "delta_2": self.dwpr.delta_2, "mean_delta": self.dwpr.mean_delta}
+
+    def details(self) -> dict[str, Any]:
+        """The row plus the per-dimension DwPR values and the sample sizes (JSON-ready)."""
+        return {**self.row(), "delta": self.dwpr.delta.tolist(), "dwpr_precision": self.dwpr.precision.tolist(),
+                "dwpr_recall": self.dwpr.recall.tolist(), "intervention_values": self.dwpr.intervention_values.tolist(),
+                "k": self.dwpr.k, "num_real": self.precision_recall.num_real,
+                "num_generated": self.precision_recall.num_generated, "dwpr_n": self.dwpr.n}
 
 
 def load_real_trajectories(data: str | os.PathLike | np.ndarray) -> np.ndarray:
@@ -104,13 +112,57 @@ def write_results(evaluations: Sequence[GeneratorEvaluation], out_dir: str | os.
     labelled_scatter([row["delta_1"] for row in rows], [row["mean_delta"] for row in rows], labels,
                      out / "disentanglement.png", xlabel="delta_1", ylabel="mean delta (delta tilde)",
                      title="Disentanglement (DwPR)")
-    details = [{**evaluation.row(), "delta": evaluation.dwpr.delta.tolist(),
-                "dwpr_precision": evaluation.dwpr.precision.tolist(), "dwpr_recall": evaluation.dwpr.recall.tolist(),
-                "intervention_values": evaluation.dwpr.intervention_values.tolist(), "k": evaluation.dwpr.k,
-                "num_real": evaluation.precision_recall.num_real,
-                "num_generated": evaluation.precision_recall.num_generated, "dwpr_n": evaluation.dwpr.n}
-               for evaluation in evaluations]
+    details = [evaluation.details() for evaluation in evaluations]
     atomic_write_json(out / "results.json", details)  # last: its presence marks a complete evaluation
+
+
+def real_subset(real: np.ndarray, n: int, seed: int | np.random.SeedSequence = 0) -> np.ndarray:
+    """The real trajectories that precision and recall compare against: ``n`` drawn without replacement (in their
+    original order), or all of them when there are at most ``n``.
+
+    The subset depends on ``seed`` and the data only, so every model evaluated with the same seed is compared with
+    the same fixed random subset (paper section 6.1.2).
+
+    :param real: real trajectories ``(N, T, M)``
+    :param n: subset size
+    :param seed: seed of the draw
+    """
+    if len(real) <= n:
+        return real
+    return real[np.sort(np.random.default_rng(seed).choice(len(real), size=n, replace=False))]
+
+
+def evaluate_generator(generator: TrajectoryGenerator, real: np.ndarray, *, n: int = DEFAULT_SAMPLES, k: int = 3,
+                       dwpr_n: int = DEFAULT_DWPR_SAMPLES, interventions: int = DEFAULT_INTERVENTIONS, seed: int = 0,
+                       name: str = "model", device: torch.device | str = "auto",
+                       batch_size: int | None = None) -> GeneratorEvaluation:
+    """Precision/recall of ``n`` prior samples of one generator against ``real``, and its DwPR.
+
+    This is the one evaluation of a generator: :func:`evaluate_generators` (``genrl evaluate``, the quickstart)
+    and the study call it. The prior samples and the DwPR draws come from ``seed`` alone (not from the model's
+    place in a list), so a model gets the same measures evaluated alone or with others.
+
+    :param generator: the trained generator
+    :param real: the real trajectories ``(N, T, M)`` to compare with, all of them (see :func:`real_subset`)
+    :param n: generated samples for precision and recall (paper: 15000)
+    :param k: neighbourhood size (paper: 3)
+    :param dwpr_n: prior samples per intervention for DwPR (paper: 10000)
+    :param interventions: number of DwPR interventions per latent dimension (paper: 5)
+    :param seed: seed of the prior samples and of DwPR
+    :param name: the model's name in the result
+    :param device: torch device for the distances; ``"auto"`` uses a GPU when there is one
+    :param batch_size: edge length of the distance blocks (default: from the memory budget)
+    """
+    if np.ndim(real) != 3:
+        raise ValueError(f"real trajectories must have shape (N, T, M), got {np.shape(real)}")
+    if (generator.horizon, generator.action_dim) != real.shape[1:]:
+        raise ValueError(f"model {name!r} generates (horizon, action_dim) = {(generator.horizon, generator.action_dim)}"
+                         f", the real trajectories have {real.shape[1:]}")
+    prior_rng, dwpr_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
+    generated = decode_batched(generator, generator.sample_prior(n, prior_rng))
+    pr = precision_recall(real, generated, k, batch_size=batch_size, device=device)
+    disentanglement = dwpr(generator, dwpr_n, interventions, k, seed=dwpr_rng, batch_size=batch_size, device=device)
+    return GeneratorEvaluation(name, pr, disentanglement)
 
 
 def evaluate_generators(models: Sequence[str | os.PathLike | TrajectoryGenerator] | Mapping[str, str | os.PathLike
@@ -120,10 +172,11 @@ def evaluate_generators(models: Sequence[str | os.PathLike | TrajectoryGenerator
                         batch_size: int | None = None) -> list[GeneratorEvaluation]:
     """Precision/recall against real trajectories and DwPR of each generator, written as each model completes.
 
-    The real set is ``n`` trajectories drawn once without replacement (all of them when there are fewer) and
-    shared by every model; each model decodes ``n`` prior samples. Files in ``out_dir``: ``results.csv`` and
-    ``results.md`` (precision, recall, delta_1, delta_2, mean_delta per model), ``results.json`` (also the
-    per-dimension deltas), ``precision_recall.png`` and ``disentanglement.png`` (the paper's scatter plots).
+    The real set is ``n`` trajectories drawn once with ``seed`` (:func:`real_subset`) and shared by every model;
+    each model is evaluated by :func:`evaluate_generator` with the same ``seed``. Files in ``out_dir``:
+    ``results.csv`` and ``results.md`` (precision, recall, delta_1, delta_2, mean_delta per model),
+    ``results.json`` (also the per-dimension deltas), ``precision_recall.png`` and ``disentanglement.png`` (the
+    paper's scatter plots).
 
     :param models: generator files (loaded with ``sb3_genrl.generative.load``) or generator objects, or a mapping
         name -> either; names default to file stems
@@ -144,22 +197,13 @@ def evaluate_generators(models: Sequence[str | os.PathLike | TrajectoryGenerator
     real = load_real_trajectories(data)
     if real.ndim != 3:
         raise ValueError(f"real trajectories must have shape (N, T, M), got {real.shape}")
-    rng = np.random.default_rng(seed)
-    if len(real) > n:
-        real = real[np.sort(rng.choice(len(real), size=n, replace=False))]
+    real = real_subset(real, n, seed)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     evaluations: list[GeneratorEvaluation] = []
-    for index, (name, model) in enumerate(named):
-        generator = _as_generator(model, device)
-        if (generator.horizon, generator.action_dim) != real.shape[1:]:
-            raise ValueError(f"model {name!r} generates (horizon, action_dim) = {(generator.horizon, generator.action_dim)}"
-                             f", the real trajectories have {real.shape[1:]}")
-        model_seed = np.random.SeedSequence([seed, index])
-        prior_rng, dwpr_rng = (np.random.default_rng(s) for s in model_seed.spawn(2))
-        generated = decode_batched(generator, generator.sample_prior(n, prior_rng))
-        pr = precision_recall(real, generated, k, batch_size=batch_size, device=device)
-        disentanglement = dwpr(generator, dwpr_n, interventions, k, seed=dwpr_rng, batch_size=batch_size, device=device)
-        evaluations.append(GeneratorEvaluation(name, pr, disentanglement))
+    for name, model in named:
+        evaluations.append(evaluate_generator(_as_generator(model, device), real, n=n, k=k, dwpr_n=dwpr_n,
+                                              interventions=interventions, seed=seed, name=name, device=device,
+                                              batch_size=batch_size))
         write_results(evaluations, out)
     return evaluations

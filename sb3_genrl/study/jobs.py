@@ -1,25 +1,37 @@
 """One generator's share of the study: train it, evaluate it, train GenRL with it over seeds.
 
 Every stage writes its result file when it completes and is skipped when that file exists, so an interrupted study
-resumes where it stopped. The job is a plain function of plain arguments, so a process pool or Ray can run it.
+resumes where it stopped. The study's runner checks and records each stage's settings before any job starts
+(:mod:`sb3_genrl.study.state`); a job also ties its evaluation and policies to the generator file they used (its
+fingerprint) and refuses to reuse them for another. The job is a plain function of plain arguments, so a process
+pool or Ray can run it.
 """
 
 from __future__ import annotations
 
 import json
-import os
 import pathlib
 from typing import Any
 
 import numpy as np
 
-PR_SEED = 0  # the real subset for precision/recall is drawn once, the same for every model (paper 6.1.2)
+from sb3_genrl.study.state import (
+    STAGE_FILE,
+    check_and_record,
+    file_fingerprint,
+    read_settings,
+    refuse_conflicts,
+    settings_conflicts,
+)
+from sb3_genrl.utils import atomic_write_json
 
-
-def _write_json(path: pathlib.Path, value: dict) -> None:
-    tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(value, indent=2))
-    os.replace(tmp, path)
+# Fixed settings of the study's stages (recorded with each stage, see sb3_genrl.study.runner).
+GENERATOR_SEED = 0
+# Every model is evaluated with seed 0: the real subset for precision/recall is drawn once from it, the same for every
+# model (paper 6.1.2: a fixed, randomly chosen set of training trajectories), and so are the prior samples and DwPR.
+EVALUATION_SEED = 0
+K = 3  # neighbourhood size of precision/recall and DwPR (paper: 3)
+INTERVENTIONS = 5  # DwPR interventions per latent dimension (paper: 5)
 
 
 def generator_job(task: str, name: str, scale: dict[str, Any], dataset: str, task_dir: str, device: str = "auto",
@@ -37,10 +49,7 @@ def generator_job(task: str, name: str, scale: dict[str, Any], dataset: str, tas
     """
     import torch
 
-    from sb3_genrl.data import load_actions
     from sb3_genrl.generative import PRESETS, load, train_generator
-    from sb3_genrl.genrl import train_policy
-    from sb3_genrl.metrics import dwpr, precision_recall
 
     torch.set_num_threads(torch_threads)
     root = pathlib.Path(task_dir)
@@ -49,43 +58,56 @@ def generator_job(task: str, name: str, scale: dict[str, Any], dataset: str, tas
 
     # Generator (paper 6.1.2, appendix B): trained on the demonstrations' action trajectories.
     model_path = root / "generators" / f"{name}.pt"
-    if not model_path.exists():
-        tmp = model_path.with_suffix(".pt.tmp")
+    if not model_path.exists():  # the file is written atomically: it exists only once training is complete
         train_generator(dataset, preset=name, epochs=scale["generator_epochs"], eval_every=scale["eval_every"],
-                        seed=0, out=tmp, device=device)
-        os.replace(tmp, model_path)
+                        seed=GENERATOR_SEED, out=model_path, device=device)
     generator = load(model_path, device=device)
+    fingerprint = file_fingerprint(model_path)
 
-    # Evaluation (paper 5.2): precision/recall against a fixed real subset, and DwPR.
-    evaluation_path = root / "evaluation" / f"{name}.json"
-    if not evaluation_path.exists():
-        real = load_actions(dataset)
-        pick = np.random.default_rng(PR_SEED).permutation(len(real))[: scale["pr_samples"]]
-        generated = generator.decode(generator.sample_prior(len(pick), np.random.default_rng(1)))
-        pr = precision_recall(real[pick], generated, k=3, device=device)
-        disentanglement = dwpr(generator, n=scale["dwpr_samples"], interventions=5, k=3, seed=0, device=device)
-        _write_json(evaluation_path, {
-            "precision": pr.precision, "recall": pr.recall, "delta_1": disentanglement.delta_1,
-            "delta_2": disentanglement.delta_2, "mean_delta": disentanglement.mean_delta,
-            "delta": disentanglement.delta.tolist(), "dwpr_precision": disentanglement.precision.tolist(),
-            "dwpr_recall": disentanglement.recall.tolist(),
-            "intervention_values": disentanglement.intervention_values.tolist()})
-    evaluation = json.loads(evaluation_path.read_text())
+    evaluation = _evaluation(generator, name, fingerprint, scale, dataset, root, device)
 
-    # GenRL (paper 6.1.3): one policy per seed.
+    # GenRL (paper 6.1.3): one policy per seed, all from this generator file.
+    policies = root / "policies" / name
+    check_and_record(policies / STAGE_FILE, {"generator": fingerprint}, folder=root,
+                     output_exists=any(policies.glob("seed*/summary.json")))
     rewards = []
     for seed in range(scale["seeds"]):
-        run_dir = root / "policies" / name / f"seed{seed}"
-        if not (run_dir / "summary.json").exists():
-            train_policy(task, str(model_path), episodes=scale["policy_episodes"], seed=seed, out_dir=run_dir,
-                         batch_episodes=scale["batch_episodes"], device=device)
-        rewards.append(json.loads((run_dir / "summary.json").read_text())["best_mean_reward"])
+        rewards.append(_policy_reward(task, model_path, seed, scale, policies / f"seed{seed}", device))
 
     spec = PRESETS[name]
     return {"model": name, "type": "VAE" if name.startswith("VAE") else "GAN", "latent_dim": spec["latent_dim"],
             "beta": spec.get("beta"), "info_weight": spec.get("info_weight"), **{
                 key: evaluation[key] for key in ("precision", "recall", "delta_1", "delta_2", "mean_delta")},
             "rewards": rewards, "score": float(np.max(rewards))}
+
+
+def _evaluation(generator: Any, name: str, fingerprint: str, scale: dict[str, Any], dataset: str,
+                root: pathlib.Path, device: str) -> dict[str, Any]:
+    """Precision/recall against the fixed real subset and DwPR (paper 5.2), or the stored result of this file."""
+    from sb3_genrl.data import load_actions
+    from sb3_genrl.metrics import evaluate_generator, real_subset
+
+    path = root / "evaluation" / f"{name}.json"
+    stored = read_settings(path)
+    if stored is not None:
+        refuse_conflicts(root, settings_conflicts(path, stored, {"generator": fingerprint}))
+        return stored
+    real = real_subset(load_actions(dataset), scale["pr_samples"], EVALUATION_SEED)
+    result = evaluate_generator(generator, real, n=scale["pr_samples"], k=K, dwpr_n=scale["dwpr_samples"],
+                                interventions=INTERVENTIONS, seed=EVALUATION_SEED, name=name, device=device)
+    evaluation = {**result.details(), "generator": fingerprint}
+    atomic_write_json(path, evaluation)
+    return evaluation
+
+
+def _policy_reward(task: str, model_path: pathlib.Path, seed: int, scale: dict[str, Any], run_dir: pathlib.Path,
+                   device: str) -> float:
+    from sb3_genrl.genrl import train_policy
+
+    if not (run_dir / "summary.json").exists():
+        train_policy(task, str(model_path), episodes=scale["policy_episodes"], seed=seed, out_dir=run_dir,
+                     batch_episodes=scale["batch_episodes"], device=device)
+    return float(json.loads((run_dir / "summary.json").read_text())["best_mean_reward"])
 
 
 def baseline_job(algorithm: str, task: str, seed: int, episodes: int, dataset: str, demo_episodes: int, run_dir: str,

@@ -9,10 +9,25 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from sb3_genrl.study.state import (
+    check_and_record,
+    dataset_fingerprint,
+    file_fingerprint,
+    folder_lock,
+    read_settings,
+    refuse_conflicts,
+    settings_conflicts,
+)
+from sb3_genrl.utils import atomic_write_text
+
 # Paper table 1's VAE1 (N_alpha = 2, beta = 0.01). Of the 2-D VAEs, its stronger prior term lays the hockey
 # demonstrations out as one unfolded sheet (shot distance along one latent axis, direction along the other); with
 # beta = 0.001 (VAE3) the sheet often folds over itself, and GenRL's Gaussian policy then stalls at the fold.
 QUICKSTART_PRESET = "VAE1"
+
+
+QUICKSTART_BATCH = 64  # GenRL episodes per EM iteration
+VIDEO = {"goals": 4, "width": 320, "height": 240, "fps": 20}
 
 
 def quickstart(out_dir: str | os.PathLike, *, task: str, demo_episodes: int = 4000, epochs: int = 300,
@@ -20,7 +35,11 @@ def quickstart(out_dir: str | os.PathLike, *, task: str, demo_episodes: int = 40
                video: bool = True, device: str = "auto", log: Callable[[str], None] | None = None) -> pathlib.Path:
     """Run the whole GenRL workflow at a small size and write ``report.md`` in ``out_dir``.
 
-    Each stage is skipped when its output exists, so a rerun resumes. Defaults take about four minutes on a 2-core CPU.
+    Each stage is skipped when its output exists, so a rerun resumes. Each stage also records the settings that
+    made it (``vae.stage.json``, ``evaluation/stage.json``, ``policy/stage.json``, ``video.stage.json``; the
+    dataset's own metadata) and the fingerprint of its input, and a rerun with other settings raises
+    :class:`~sb3_genrl.study.state.SettingsConflictError` before any work; one process at a time may work in
+    ``out_dir`` (:class:`~sb3_genrl.study.state.FolderInUseError`). Defaults take about four minutes on a 2-core CPU.
 
     :param out_dir: output folder (a rerun resumes it)
     :param task: a task name from :data:`sb3_genrl.envs.TASKS`
@@ -29,64 +48,127 @@ def quickstart(out_dir: str | os.PathLike, *, task: str, demo_episodes: int = 40
     :param policy_episodes: GenRL episodes
     :param pr_samples: samples per set for precision and recall
     :param dwpr_samples: samples per intervention for DwPR
+    :param seed: seed of the demonstrations, the generator, the evaluation and the policy (the video uses seed + 1)
     :param video: also render the trained policy (a GIF and a strip of frames)
+    :param device: torch device
+    :param log: called with a line after each stage
     :return: the report's path
     """
     import torch
 
-    from sb3_genrl.envs.demonstrations import make_demonstrations
-    from sb3_genrl.generative import load, train_generator
-    from sb3_genrl.genrl import GenRL, evaluate_on_goals, train_policy
-    from sb3_genrl.metrics import evaluate_generators
+    import sb3_genrl
 
     # The models are small: one torch thread is as fast as several and leaves the other cores to MuJoCo.
     torch.set_num_threads(1)
-    log = log or (lambda _line: None)
     out = pathlib.Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    settings = {
+        "demonstrations": {"task": task, "episodes": demo_episodes, "seed": seed, "version": sb3_genrl.__version__},
+        "generator": {"preset": QUICKSTART_PRESET, "epochs": epochs, "eval_every": 10, "seed": seed},
+        "evaluation": {"n": pr_samples, "dwpr_n": dwpr_samples, "k": 3, "interventions": 5, "seed": seed},
+        "policy": {"task": task, "episodes": policy_episodes, "batch_episodes": QUICKSTART_BATCH, "seed": seed},
+        "video": {**VIDEO, "seed": seed + 1}}
+    if not video:
+        del settings["video"]
+    with folder_lock(out):
+        refuse_conflicts(out, [line for name, wanted in settings.items()
+                               for line in settings_conflicts(*_recorded(out, name), wanted,
+                                                              output_exists=_done(out, name))])
+        timings = _run_stages(out, settings, device, log or (lambda _line: None))
+        return _write_report(out, task, seed, video, timings)
+
+
+# Where each stage writes (checked for "done") and where it records its settings.
+_OUTPUTS = {"demonstrations": "demonstrations", "generator": "vae.pt", "evaluation": "evaluation/results.json",
+            "policy": "policy/summary.json", "video": "policy.gif"}
+_RECORDS = {"generator": "vae.stage.json", "evaluation": "evaluation/stage.json", "policy": "policy/stage.json",
+            "video": "video.stage.json"}
+
+
+def _done(out: pathlib.Path, stage: str) -> bool:
+    path = out / _OUTPUTS[stage]
+    return path.is_dir() and any(path.iterdir()) if stage == "demonstrations" else path.exists()
+
+
+def _recorded(out: pathlib.Path, stage: str) -> tuple[pathlib.Path, dict[str, Any] | None]:
+    """Where a stage's settings are recorded, and what is recorded (None: nothing)."""
+    if stage == "demonstrations":
+        from sb3_genrl.data import dataset_info
+
+        dataset = out / "demonstrations"
+        return dataset, dataset_info(dataset) if _done(out, stage) else None
+    return out / _RECORDS[stage], read_settings(out / _RECORDS[stage])
+
+
+def _run_stages(out: pathlib.Path, settings: dict[str, dict[str, Any]], device: str,
+                log: Callable[[str], None]) -> dict[str, float]:
+    from sb3_genrl.envs.demonstrations import make_demonstrations
+    from sb3_genrl.generative import train_generator
+    from sb3_genrl.genrl import train_policy
+    from sb3_genrl.metrics import evaluate_generators
+
+    dataset, model_path, policy = out / "demonstrations", out / "vae.pt", out / "policy"
+    demos, generator, evaluation, policy_settings = (settings[name] for name in (
+        "demonstrations", "generator", "evaluation", "policy"))
     timings: dict[str, float] = {}
 
-    def stage(name: str, done: bool, work: Callable[[], Any]) -> None:
+    def stage(name: str, made_from: dict[str, str], work: Callable[[], Any]) -> None:
         start = time.perf_counter()
+        done = _done(out, name)
+        if name != "demonstrations":
+            check_and_record(out / _RECORDS[name], {**settings[name], **made_from}, output_exists=done, folder=out)
         if not done:
             work()
         timings[name] = time.perf_counter() - start
         log(f"{name}: {'done' if not done else 'already there'} ({timings[name]:.0f} s)")
 
-    dataset = out / "demonstrations"
-    stage("demonstrations", dataset.exists(),
-          lambda: make_demonstrations(task, demo_episodes, dataset, seed=seed, progress_bar=True))
-    model_path = out / "vae.pt"
-    stage("generator", model_path.exists(),
-          lambda: train_generator(dataset, preset=QUICKSTART_PRESET, epochs=epochs, eval_every=10, seed=seed, out=model_path,
-                                  progress_bar=True, device=device, tensorboard_log=str(out / "tensorboard")))
-    evaluation = out / "evaluation"
-    stage("evaluation", (evaluation / "results.json").exists(),
-          lambda: evaluate_generators({QUICKSTART_PRESET: model_path}, dataset, n=pr_samples, dwpr_n=dwpr_samples, seed=seed,
-                                      out_dir=evaluation, device=device))
-    policy = out / "policy"
-    stage("policy", (policy / "summary.json").exists(),
-          lambda: train_policy(task, str(model_path), episodes=policy_episodes, seed=seed, out_dir=policy,
-                               device=device, progress_bar=True))
-    if video:
+    def train() -> None:  # the file is written atomically: it exists only once training is complete
+        train_generator(dataset, preset=generator["preset"], epochs=generator["epochs"],
+                        eval_every=generator["eval_every"], seed=generator["seed"], out=model_path, progress_bar=True,
+                        device=device, tensorboard_log=str(out / "tensorboard"))
+
+    stage("demonstrations", {}, lambda: make_demonstrations(demos["task"], demos["episodes"], dataset,
+                                                            seed=demos["seed"], progress_bar=True))
+    stage("generator", {"dataset": dataset_fingerprint(dataset)}, train)
+    made_from = {"dataset": dataset_fingerprint(dataset), "generator": file_fingerprint(model_path)}
+    stage("evaluation", made_from, lambda: evaluate_generators(
+        {QUICKSTART_PRESET: model_path}, dataset, n=evaluation["n"], k=evaluation["k"], dwpr_n=evaluation["dwpr_n"],
+        interventions=evaluation["interventions"], seed=evaluation["seed"], out_dir=out / "evaluation", device=device))
+    stage("policy", {"generator": made_from["generator"]}, lambda: train_policy(
+        policy_settings["task"], str(model_path), episodes=policy_settings["episodes"],
+        batch_episodes=policy_settings["batch_episodes"], seed=policy_settings["seed"], out_dir=policy, device=device,
+        progress_bar=True))
+    if "video" in settings:
         from sb3_genrl.video import record_video
 
-        stage("video", (out / "policy.gif").exists(),
-              lambda: record_video(task, out / "policy.gif", policy=policy, goals=4, seed=seed + 1, width=320,
-                                   height=240, fps=20))
-    summary = json.loads((policy / "summary.json").read_text())
-    measures = json.loads((evaluation / "results.json").read_text())
-    _, rewards, _ = evaluate_on_goals(GenRL.load(policy / "genrl_policy.zip", device="cpu"), task, goals=100,
+        shown = settings["video"]
+        stage("video", {"policy": file_fingerprint(policy / "genrl_policy.zip")}, lambda: record_video(
+            policy_settings["task"], out / "policy.gif", policy=policy, goals=shown["goals"], seed=shown["seed"],
+            width=shown["width"], height=shown["height"], fps=shown["fps"]))
+    return timings
+
+
+def _write_report(out: pathlib.Path, task: str, seed: int, video: bool, timings: dict[str, float]) -> pathlib.Path:
+    """``report.md``, with every number read from what the stages recorded."""
+    from sb3_genrl.data import dataset_info
+    from sb3_genrl.generative import load
+    from sb3_genrl.genrl import GenRL, evaluate_on_goals
+
+    dataset = out / "demonstrations"
+    summary = json.loads((out / "policy" / "summary.json").read_text())
+    measures = json.loads((out / "evaluation" / "results.json").read_text())
+    generator_settings = read_settings(out / _RECORDS["generator"])
+    _, rewards, _ = evaluate_on_goals(GenRL.load(out / "policy" / "genrl_policy.zip", device="cpu"), task, goals=100,
                                       seed=seed + 12345)
     final_distance = float(-rewards.mean())
-    coverage = json.loads(next(dataset.glob("**/coverage.json")).read_text()) if any(dataset.glob("**/coverage.json")) \
-        else {}
-    generator = load(model_path, device="cpu")
+    coverage_file = dataset / "coverage.json"
+    coverage = json.loads(coverage_file.read_text()) if coverage_file.is_file() else {}
+    generator = load(out / "vae.pt", device="cpu")
     lines = [f"# GenRL quickstart: {task}", "",
-             f"1. **Demonstrations**: {demo_episodes} valid episodes from the scripted expert and its perturbations"
-             + (f" (goal-region coverage {coverage['coverage']:.1%})" if "coverage" in coverage else "") + ".",
-             f"2. **Generator**: beta-VAE (preset {QUICKSTART_PRESET}: N_alpha = {generator.latent_dim}, "
-             f"beta = {generator.beta}), {epochs} epochs, "
+             f"1. **Demonstrations**: {dataset_info(dataset)['episodes']} valid episodes from the scripted expert and its"
+             " perturbations" + (f" (goal-region coverage {coverage['coverage']:.1%})" if "coverage" in coverage else "")
+             + ".",
+             f"2. **Generator**: beta-VAE (preset {generator_settings['preset']}: N_alpha = {generator.latent_dim}, "
+             f"beta = {generator.beta}), {generator_settings['epochs']} epochs, "
              f"best checkpoint at epoch {generator.best_epoch}.",
              f"3. **Evaluation**: {_measure_line(measures)}.",
              f"4. **GenRL**: {summary['episodes']} episodes; best iteration mean reward {summary['best_mean_reward']:.3f},"
@@ -98,7 +180,7 @@ def quickstart(out_dir: str | os.PathLike, *, task: str, demo_episodes: int = 40
         lines += ["![policy](policy.gif)", "", "![policy frames](policy_strip.png)", ""]
     lines += ["Stage times (s): " + ", ".join(f"{k} {v:.0f}" for k, v in timings.items()), ""]
     report = out / "report.md"
-    report.write_text("\n".join(lines))
+    atomic_write_text(report, "\n".join(lines))
     return report
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import io
 import json
 import pathlib
 from typing import Any
@@ -11,6 +12,7 @@ import numpy as np
 
 from sb3_genrl.curves import mean_std_over_seeds, plot_curves, read_curve
 from sb3_genrl.metrics import correlation_table, labelled_scatter
+from sb3_genrl.utils import atomic_write_text
 
 MEASURES = ("precision", "recall", "delta_1", "delta_2", "mean_delta")
 
@@ -27,10 +29,11 @@ def _markdown_table(header: list[str], rows: list[list[Any]]) -> str:
 
 
 def _write_csv(path: pathlib.Path, header: list[str], rows: list[list[Any]]) -> None:
-    with path.open("w", newline="") as file:
-        writer = csv.writer(file)
-        writer.writerow(header)
-        writer.writerows(rows)
+    text = io.StringIO(newline="")
+    writer = csv.writer(text)
+    writer.writerow(header)
+    writer.writerows(rows)
+    atomic_write_text(path, text.getvalue(), newline="")
 
 
 def write_task_report(task: str, rows: list[dict[str, Any]], task_dir: str | pathlib.Path, *,
@@ -80,7 +83,7 @@ def write_task_report(task: str, rows: list[dict[str, Any]], task_dir: str | pat
 
     best = max(rows, key=lambda r: r["score"])
     lines = [f"# GenRL study: {task}", "",
-             f"Scale: `{json.dumps(scale)}`", "",
+             f"Settings (as recorded with each stage): `{json.dumps(scale)}`", "",
              f"Best generator: **{best['model']}** (best reward {best['score']:.3f}, i.e. {-best['score'] * 100:.1f} cm).",
              "", "## Table 1: generators and GenRL reward", "",
              "Best reward = the highest mean reward of a GenRL iteration, over all seeds (paper section 6.1.3).", "",
@@ -98,7 +101,7 @@ def write_task_report(task: str, rows: list[dict[str, Any]], task_dir: str | pat
     markdown = {"table1_models.md": _markdown_table(header1, table1), "measures.md": _markdown_table(header_m, table_m),
                 "correlation.md": correlations.to_markdown()}
     for name, text in markdown.items():
-        (tables / name).write_text(text + "\n")
+        atomic_write_text(tables / name, text + "\n")
     report = root / "report.md"
-    report.write_text("\n".join(lines))
+    atomic_write_text(report, "\n".join(lines))
     return report

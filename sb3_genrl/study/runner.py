@@ -1,29 +1,50 @@
-"""``genrl study``: demonstrations -> 18 generators -> evaluation -> GenRL over seeds -> baselines -> report."""
+"""``genrl study``: demonstrations -> 18 generators -> evaluation -> GenRL over seeds -> baselines -> report.
+
+A study folder is resumable and guarded (:mod:`sb3_genrl.study.state`): one process at a time holds it (a lock),
+each stage records the settings that made it, and a rerun whose settings differ from a stage's record is refused
+before any work, with the stage folders and settings named. The reports read their numbers from these records.
+"""
 
 from __future__ import annotations
 
-import json
 import os
 import pathlib
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any
 
-from sb3_genrl.study.jobs import baseline_job, generator_job
+from sb3_genrl.study.cluster import DEFAULT_CONNECT_TIMEOUT
+from sb3_genrl.study.jobs import EVALUATION_SEED, GENERATOR_SEED, INTERVENTIONS, K, baseline_job, generator_job
 from sb3_genrl.study.report import write_task_report
 from sb3_genrl.study.scales import SCALES, StudyScale
+from sb3_genrl.study.state import (
+    STAGE_FILE,
+    check_and_record,
+    dataset_fingerprint,
+    exit_with_parent,
+    file_fingerprint,
+    folder_lock,
+    read_settings,
+    refuse_conflicts,
+    settings_conflicts,
+)
+from sb3_genrl.utils import atomic_write_json, atomic_write_text
 
 # PPO and SAC on the feedback task with the demonstrations, and stock algorithms on the best generator's latent space.
 BASELINES = ("ppo", "sac", "latent-ppo", "latent-sac", "latent-trpo")
 MODELS = tuple(f"VAE{i}" for i in range(1, 10)) + tuple(f"GAN{i}" for i in range(1, 10))
+DEMONSTRATION_SEED = 0
 
 
 def run_study(task: str, scale: str | StudyScale, out_dir: str | os.PathLike, *, executor: str = "local",
               address: str | None = None, workers: int | None = None, models: tuple[str, ...] = MODELS, device: str = "auto",
-              log: Callable[[str], None] | None = None) -> pathlib.Path:
+              connect_timeout: float = DEFAULT_CONNECT_TIMEOUT, log: Callable[[str], None] | None = None) -> pathlib.Path:
     """Run the paper's experiments at a scale and write ``report.md`` (per task, and an index for ``task="all"``).
 
     Results are written as they complete and finished work is skipped on a rerun, so an interrupted study resumes.
+    A rerun with settings that differ from those recorded in the folder raises
+    :class:`~sb3_genrl.study.state.SettingsConflictError` before any work; a folder that another process is
+    working in raises :class:`~sb3_genrl.study.state.FolderInUseError`.
 
     :param task: a task name from :data:`sb3_genrl.envs.TASKS`, or ``all`` for every registered task
     :param scale: ``smoke``, ``small`` or ``paper`` (see :data:`~sb3_genrl.study.scales.SCALES`), or a
@@ -34,6 +55,7 @@ def run_study(task: str, scale: str | StudyScale, out_dir: str | os.PathLike, *,
     :param workers: local worker processes (default: the available cores)
     :param models: the generators to study (default: the 18 of paper table 1)
     :param device: torch device of every job
+    :param connect_timeout: seconds allowed to connect to the Ray cluster at ``address``
     :param log: called with a line of progress after each finished job
     :return: the report's path
     """
@@ -48,38 +70,84 @@ def run_study(task: str, scale: str | StudyScale, out_dir: str | os.PathLike, *,
     unknown = [m for m in models if m not in MODELS]
     if unknown:
         raise ValueError(f"unknown models {unknown}; expected names among {MODELS}")
-    preset = scale if isinstance(scale, StudyScale) else SCALES[scale]
+    settings = (scale if isinstance(scale, StudyScale) else SCALES[scale]).as_dict()
+    tasks = tuple(TASKS) if task == "all" else (task,)
     out = pathlib.Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    scale_name = "custom" if isinstance(scale, StudyScale) else scale
-    (out / "study.json").write_text(json.dumps({"task": task, "scale": scale_name, **preset.as_dict()}, indent=2))
-    run = _ray_map(address) if executor == "ray" else _local_map(workers or len(os.sched_getaffinity(0)))
     log = log or (lambda _line: None)
-    reports = []
-    for name in tuple(TASKS) if task == "all" else (task,):
-        reports.append(_run_task(name, preset.as_dict(), out / name, run, models, device, log))
+    with folder_lock(out):
+        refuse_conflicts(out, [line for name in tasks for line in _conflicts(name, settings, out / name)])
+        run = _ray_map(address, connect_timeout) if executor == "ray" else \
+            _local_map(workers or len(os.sched_getaffinity(0)))
+        atomic_write_json(out / "study.json", {"task": task, "scale": "custom" if isinstance(scale, StudyScale) else scale,
+                                        **settings})
+        reports = [_run_task(name, settings, out / name, run, models, device, log) for name in tasks]
     if len(reports) == 1:
         return reports[0]
     index = out / "report.md"
-    index.write_text("# GenRL study\n\n" + "\n".join(f"- [{p.parent.name}]({p.parent.name}/report.md)" for p in reports)
-                     + "\n")
+    atomic_write_text(index, "# GenRL study\n\n" + "\n".join(f"- [{p.parent.name}]({p.parent.name}/report.md)"
+                                                         for p in reports) + "\n")
     return index
+
+
+def _demonstration_settings(task: str, scale: dict[str, Any]) -> dict[str, Any]:
+    import sb3_genrl
+
+    return {"task": task, "episodes": scale["demo_episodes"], "seed": DEMONSTRATION_SEED,
+            "version": sb3_genrl.__version__}
+
+
+def _stages(task_dir: pathlib.Path, scale: dict[str, Any], dataset: str | None) -> list[tuple[pathlib.Path, dict, bool]]:
+    """Each stage's record, this run's settings for it and whether it has output. ``dataset`` is the fingerprint
+    of the demonstrations (None: not known yet, left out of the settings)."""
+    made_from = {} if dataset is None else {"dataset": dataset}
+    generators, evaluation, policies, comparison = (task_dir / name for name in (
+        "generators", "evaluation", "policies", "comparison"))
+    stages = [
+        (generators / STAGE_FILE, {"epochs": scale["generator_epochs"], "eval_every": scale["eval_every"],
+                                   "seed": GENERATOR_SEED, **made_from}, any(generators.glob("*.pt"))),
+        (evaluation / STAGE_FILE, {"n": scale["pr_samples"], "dwpr_n": scale["dwpr_samples"], "k": K,
+                                   "interventions": INTERVENTIONS, "seed": EVALUATION_SEED, **made_from},
+         any(path.name != STAGE_FILE for path in evaluation.glob("*.json"))),
+        (policies / STAGE_FILE, {"episodes": scale["policy_episodes"], "batch_episodes": scale["batch_episodes"]},
+         any(policies.glob("*/seed*/summary.json")))]
+    if scale["baseline_episodes"] > 0:
+        stages.append((comparison / STAGE_FILE, {"episodes": scale["baseline_episodes"],
+                                                 "demo_episodes": scale["demo_episodes"], **made_from},
+                       any(comparison.glob("*/summary.json"))))
+    return stages
+
+
+def _conflicts(task: str, scale: dict[str, Any], task_dir: pathlib.Path) -> list[str]:
+    """What of ``task_dir`` was made with other settings than ``scale`` (checked before any work)."""
+    from sb3_genrl.data import dataset_info
+
+    dataset = task_dir / "demonstrations"
+    lines = []
+    if dataset.is_dir() and any(dataset.iterdir()):
+        lines += settings_conflicts(dataset, dataset_info(dataset), _demonstration_settings(task, scale))
+    for record, wanted, exists in _stages(task_dir, scale, None):
+        lines += settings_conflicts(record.parent, read_settings(record), wanted, output_exists=exists)
+    return lines
 
 
 def _run_task(task: str, scale: dict[str, Any], task_dir: pathlib.Path, run, models, device, log) -> pathlib.Path:
     from sb3_genrl.envs.demonstrations import make_demonstrations
 
     dataset = task_dir / "demonstrations"
-    if not dataset.exists():
-        make_demonstrations(task, scale["demo_episodes"], dataset, seed=0, progress_bar=False)
+    if not dataset.is_dir() or not any(dataset.iterdir()):
+        make_demonstrations(task, scale["demo_episodes"], dataset, seed=DEMONSTRATION_SEED, progress_bar=False)
     log(f"{task}: {scale['demo_episodes']} demonstrations in {dataset}")
+    fingerprint = dataset_fingerprint(dataset)
+    stages = _stages(task_dir, scale, fingerprint)
+    for record, wanted, exists in stages[:3]:
+        check_and_record(record, wanted, output_exists=exists, folder=task_dir)
     jobs = [(generator_job, (task, name, scale, str(dataset), str(task_dir), device)) for name in models]
     rows = []
     for row in run(jobs):
         rows.append(row)
         log(f"{task}: {row['model']} precision {row['precision']:.3f} recall {row['recall']:.3f} "
             f"mean delta {row['mean_delta']:.3f} best reward {row['score']:.3f}")
-    (task_dir / "results.json").write_text(json.dumps(rows, indent=2))
+    atomic_write_json(task_dir / "results.json", rows)
 
     comparison = None
     if scale["baseline_episodes"] > 0:
@@ -88,14 +156,32 @@ def _run_task(task: str, scale: dict[str, Any], task_dir: pathlib.Path, run, mod
         best = max(rows, key=lambda r: r["score"])["model"]
         runs_dir = task_dir / "comparison"
         generator = str(task_dir / "generators" / f"{best}.pt")
+        record, wanted, exists = stages[3]
+        check_and_record(record, {**wanted, "generator": f"{best} {file_fingerprint(generator)}"},
+                         output_exists=exists, folder=task_dir)
         jobs = [(baseline_job, (algorithm, task, seed, scale["baseline_episodes"], str(dataset), scale["demo_episodes"],
                                 str(runs_dir / f"{algorithm}_seed{seed}"), device, 1, generator))
                 for algorithm in BASELINES for seed in range(scale["seeds"])]
         baseline_runs = list(run(jobs))
-        genrl_runs = [str(p) for p in sorted((task_dir / "policies" / best).glob("seed*"))]
+        genrl_runs = [str(task_dir / "policies" / best / f"seed{seed}") for seed in range(scale["seeds"])]
         comparison = compare_runs(genrl_runs + baseline_runs, runs_dir, task=task)
         log(f"{task}: GenRL ({best}) vs PPO vs SAC in {comparison}")
-    return write_task_report(task, rows, task_dir, scale=scale, comparison=comparison)
+    return write_task_report(task, rows, task_dir, scale=_recorded_scale(task_dir, dataset, rows, comparison),
+                             comparison=comparison)
+
+
+def _recorded_scale(task_dir: pathlib.Path, dataset: pathlib.Path, rows: list[dict[str, Any]],
+                    comparison: pathlib.Path | None) -> dict[str, Any]:
+    """The settings the report states, read from what the stages recorded (not from this run's request)."""
+    from sb3_genrl.data import dataset_info
+
+    generators, evaluation, policies = (read_settings(task_dir / name / STAGE_FILE)
+                                        for name in ("generators", "evaluation", "policies"))
+    baselines = read_settings(task_dir / "comparison" / STAGE_FILE) if comparison is not None else {"episodes": 0}
+    return {"demo_episodes": dataset_info(dataset)["episodes"], "generator_epochs": generators["epochs"],
+            "eval_every": generators["eval_every"], "pr_samples": evaluation["n"], "dwpr_samples": evaluation["dwpr_n"],
+            "policy_episodes": policies["episodes"], "batch_episodes": policies["batch_episodes"],
+            "seeds": min(len(row["rewards"]) for row in rows), "baseline_episodes": baselines["episodes"]}
 
 
 def _local_map(workers: int):
@@ -106,7 +192,9 @@ def _local_map(workers: int):
             return
         import multiprocessing
 
-        with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+        # The workers exit when this process dies (even on kill -9), so none finishes a stale job after it.
+        with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                                 initializer=exit_with_parent, initargs=(os.getpid(),)) as pool:
             futures = [pool.submit(fn, *args) for fn, args in jobs]
             for future in as_completed(futures):
                 yield future.result()
@@ -114,15 +202,16 @@ def _local_map(workers: int):
     return run
 
 
-def _ray_map(address: str | None):
+def _ray_map(address: str | None, connect_timeout: float = DEFAULT_CONNECT_TIMEOUT):
     try:
         import ray
     except ImportError as error:
         raise ValueError("the ray executor needs Ray: pip install 'sb3-genrl[ray]'") from error
+    from sb3_genrl.study.cluster import connect_ray
+
+    connect_ray(address, connect_timeout, include_dashboard=False, log_to_driver=False)
 
     def run(jobs):
-        if not ray.is_initialized():
-            ray.init(address=address, include_dashboard=False, log_to_driver=False)
         remote = {fn: ray.remote(num_cpus=1)(fn) for fn, _ in jobs}
         pending = [remote[fn].remote(*args) for fn, args in jobs]
         while pending:

@@ -1,0 +1,237 @@
+"""What makes a study or quickstart folder safe to resume: recorded settings, fingerprints, a lock, worker exit.
+
+- **Recorded settings.** Each resumable stage writes the settings that produce it (``stage.json`` next to its
+  output) before it starts, and a rerun compares them with its own before it does any work
+  (:func:`settings_conflicts`, :func:`refuse_conflicts`). A stage whose output exists without a record (an older
+  version wrote it) counts as a conflict too, so no result of unknown settings is reused or reported.
+- **Fingerprints** (:func:`dataset_fingerprint`, :func:`file_fingerprint`) tie a stage to the exact inputs it
+  used: a generator to its demonstrations, a policy to its generator.
+- **A lock** (:func:`folder_lock`) keeps a second process out of a folder while one works in it; the operating
+  system releases it when the holder exits, however it exits.
+- **Worker exit** (:func:`exit_with_parent`): worker processes end when the process that started them dies.
+
+The lock and the parent watch stand alone, so that they can move to :mod:`sb3_genrl.utils` beside the atomic
+writers.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import os
+import signal
+import sys
+import threading
+import time
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sb3_genrl.utils import atomic_write_json
+
+STAGE_FILE = "stage.json"
+LOCK_FILE = ".lock"
+
+
+class SettingsConflictError(ValueError):
+    """A rerun asks for other settings than those recorded in a folder it would resume."""
+
+
+class FolderInUseError(ValueError):
+    """Another process holds the lock of the folder (see :func:`folder_lock`)."""
+
+
+def read_settings(record: str | os.PathLike) -> dict[str, Any] | None:
+    """The settings recorded in ``record`` (a ``stage.json``), or None when there is none.
+
+    :param record: the record file
+    """
+    record = Path(record)
+    if not record.is_file():
+        return None
+    try:
+        value = json.loads(record.read_text())
+    except (OSError, json.JSONDecodeError) as error:
+        raise ValueError(f"cannot read the recorded settings {str(record)!r}: {error}; delete the stage folder to "
+                         "redo it") from None
+    if not isinstance(value, dict):
+        raise ValueError(f"{str(record)!r} holds no settings (a JSON object was expected); delete the stage folder "
+                         "to redo it")
+    return value
+
+
+def settings_conflicts(where: str | os.PathLike, recorded: Mapping[str, Any] | None, wanted: Mapping[str, Any], *,
+                       output_exists: bool = True) -> list[str]:
+    """The differences between a stage's recorded settings and a run's, one line each (empty when they agree).
+
+    Only the keys of ``wanted`` are compared, so a check can leave out what is not known yet (a fingerprint of an
+    input still to be made). A stage with output but no record conflicts: its settings are unknown.
+
+    :param where: the stage's folder or output, named in the lines
+    :param recorded: the recorded settings (None: no record)
+    :param wanted: the settings of this run
+    :param output_exists: whether the stage has written anything (only then does a missing record conflict)
+    :return: lines such as ``"FOLDER: epochs 2 (recorded) vs 150 (this run)"``
+    """
+    if recorded is None:
+        return [f"{where}: no recorded settings (written by an older version of sb3-genrl)"] if output_exists else []
+    differing = [f"{key} {_show(recorded[key]) if key in recorded else 'unset'} (recorded) vs {_show(value)} (this run)"
+                 for key, value in wanted.items() if key not in recorded or _normal(recorded[key]) != _normal(value)]
+    return [f"{where}: {', '.join(differing)}"] if differing else []
+
+
+def _normal(value: Any) -> Any:
+    return json.loads(json.dumps(value))  # tuples and lists, ints and floats as JSON has them
+
+
+def _show(value: Any) -> str:
+    return json.dumps(value) if isinstance(value, str | list | tuple | dict) else str(value)
+
+
+def refuse_conflicts(folder: str | os.PathLike, conflicts: list[str]) -> None:
+    """Raise :class:`SettingsConflictError` listing ``conflicts`` (nothing when the list is empty).
+
+    :param folder: the output folder of the run (named in the message)
+    :param conflicts: lines from :func:`settings_conflicts`
+    """
+    if conflicts:
+        lines = "\n  ".join(conflicts)
+        raise SettingsConflictError(
+            f"{folder} holds results made with other settings than this run's:\n  {lines}\nNothing was changed. "
+            "Rerun with the recorded settings, choose another output folder (--out), or delete the folders named "
+            "above (and the stages made from them) to redo them with the new settings.")
+
+
+def check_and_record(record: str | os.PathLike, wanted: Mapping[str, Any], *, output_exists: bool,
+                     folder: str | os.PathLike) -> None:
+    """Refuse when ``record`` holds other settings than ``wanted``; otherwise write ``wanted`` to it.
+
+    :param record: the stage's ``stage.json``
+    :param wanted: the settings of this run
+    :param output_exists: whether the stage has output already
+    :param folder: the run's output folder (named in the message)
+    """
+    record = Path(record)
+    recorded = read_settings(record)
+    refuse_conflicts(folder, settings_conflicts(record.parent if record.name == STAGE_FILE else record, recorded,
+                                                wanted, output_exists=output_exists))
+    if recorded is None:
+        atomic_write_json(record, dict(wanted))
+
+
+def dataset_fingerprint(dataset: str | os.PathLike) -> str:
+    """A short hash of a demonstration dataset's action trajectories (the generators' training data).
+
+    :param dataset: the dataset directory
+    """
+    from sb3_genrl.data import load_actions
+
+    actions = load_actions(dataset)
+    digest = hashlib.sha256(f"{actions.shape}{actions.dtype}".encode())
+    digest.update(np.ascontiguousarray(actions).tobytes())
+    return digest.hexdigest()[:16]
+
+
+def file_fingerprint(path: str | os.PathLike) -> str:
+    """A short hash of a file's bytes (a generator, a policy).
+
+    :param path: the file
+    """
+    digest = hashlib.sha256()
+    with open(path, "rb") as file:
+        for block in iter(lambda: file.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()[:16]
+
+
+@contextlib.contextmanager
+def folder_lock(folder: str | os.PathLike, lock_file: str | os.PathLike | None = None) -> Iterator[Path]:
+    """Hold an exclusive lock on ``folder`` for the ``with`` block, or raise :class:`FolderInUseError` at once.
+
+    The lock is an OS file lock (``flock``; ``msvcrt.locking`` on Windows) on ``folder/.lock``, which holds the
+    holder's PID while it runs and is removed at the end. The OS drops the lock when the holder exits, however it
+    exits (``kill -9`` included), so a lock file left by a killed process does not block the next run.
+
+    :param folder: the folder to lock (created)
+    :param lock_file: the lock file (default ``folder/.lock``), e.g. a sibling for a folder that must stay empty
+    :return: the lock file's path
+    """
+    folder = Path(folder)
+    path = Path(lock_file) if lock_file is not None else folder / LOCK_FILE
+    path.parent.mkdir(parents=True, exist_ok=True)
+    while True:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        if not _try_lock(fd):
+            holder = os.read(fd, 32).decode(errors="replace").strip() or "unknown"
+            os.close(fd)
+            raise FolderInUseError(f"{folder} is in use by another process (PID {holder}, lock file {path}): wait "
+                                   "for it to finish, or stop it, then rerun")
+        if _same_file(fd, path):
+            break
+        os.close(fd)  # the holder before removed this file as we opened it: lock the current one
+    try:
+        os.ftruncate(fd, 0)
+        os.write(fd, f"{os.getpid()}\n".encode())
+        yield path
+    finally:
+        if os.name != "nt":
+            path.unlink(missing_ok=True)  # still locked: a process that opened it will see it is gone
+        os.close(fd)  # releases the lock
+
+
+def _same_file(fd: int, path: Path) -> bool:
+    try:
+        on_disk = os.stat(path)
+    except FileNotFoundError:
+        return False
+    held = os.fstat(fd)
+    return (held.st_dev, held.st_ino) == (on_disk.st_dev, on_disk.st_ino)
+
+
+def _try_lock(fd: int) -> bool:
+    try:
+        import fcntl
+    except ImportError:  # Windows
+        import msvcrt
+
+        try:
+            msvcrt.locking(fd, msvcrt.LK_NBLCK, 1)
+        except OSError:
+            return False
+        return True
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return False
+    return True
+
+
+def exit_with_parent(parent_pid: int, poll_s: float = 1.0) -> None:
+    """Make this process exit as soon as ``parent_pid`` (the process that started it) dies.
+
+    A process pool's ``initializer``: on Linux the kernel sends SIGKILL when the parent dies
+    (``prctl(PR_SET_PDEATHSIG)``); everywhere a daemon thread also polls ``os.getppid()`` every ``poll_s``
+    seconds and exits when the parent has changed. So workers do not outlive a killed study, finish stale jobs
+    and race a rerun on the same files.
+
+    :param parent_pid: the parent's PID, as the parent saw it (``os.getpid()`` there)
+    :param poll_s: seconds between two checks of the parent
+    """
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(OSError, AttributeError):
+            import ctypes
+
+            pr_set_pdeathsig = 1
+            ctypes.CDLL(None, use_errno=True).prctl(pr_set_pdeathsig, int(signal.SIGKILL), 0, 0, 0)
+    if os.getppid() != parent_pid:  # the parent died before the above took effect
+        os._exit(1)
+
+    def watch() -> None:
+        while os.getppid() == parent_pid:
+            time.sleep(poll_s)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
