@@ -1,5 +1,5 @@
-"""Goal-conditioned variants of the arm tasks for hindsight experience replay: ``GenRL/HockeyGoal-v0`` and
-``GenRL/BasketballGoal-v0``.
+"""Goal-conditioned variants of the arm tasks for hindsight experience replay (``GenRL/HockeyGoal-v0``,
+``GenRL/BasketballGoal-v0``: each task module declares its variant, ``TaskSpec.goal_env_class``).
 
 Same physics, goals, actions and rewards as the plain tasks; the observation is a dict in the convention of
 goal-conditioned envs (``observation``, ``achieved_goal``, ``desired_goal``) and the reward is computed by a
@@ -15,10 +15,11 @@ crossings of the rim's height), so the achieved goal is only known at the termin
 Every reward but the terminal one is 0, as in the plain tasks. ``compute_reward`` tells the terminal transition by
 ``info["terminal"]`` (so ``HerReplayBuffer`` must be made with ``copy_info_dict=True``), and is exact for *any*
 relabelled goal: hockey's terminal reward is minus the distance from the rest point; basketball's is the smallest
-distance over all crossings, which the terminal info stores (``info["crossing_points"]``), since the crossing that
-is best depends on the goal. With the ``final`` strategy the relabelled goal is the terminal achieved goal and the
-terminal reward is 0; the ``future`` strategy would mostly relabel with mid-episode object positions, which no
-terminal transition of the episode is scored against.
+distance over all crossings, which the terminal info stores (``info["crossing_points"]``, see
+:class:`~sb3_genrl.envs.basketball.BasketballGoalEnv`), since the crossing that is best depends on the goal.
+With HER's ``final`` strategy the relabelled goal is the terminal achieved goal and the terminal reward is 0; the
+``future`` strategy would mostly relabel with mid-episode object positions, which no terminal transition of the
+episode is scored against.
 """
 
 from __future__ import annotations
@@ -27,12 +28,7 @@ from typing import Any
 
 import numpy as np
 from gymnasium import spaces
-from gymnasium.envs.registration import register, registry
 from sb3_genrl.envs.base import MAX_OBJECT_SPEED
-from sb3_genrl.envs.basketball import BASKET_HEIGHT, BasketballEnv
-from sb3_genrl.envs.hockey import HockeyEnv
-
-GOAL_TASK_IDS = {"hockey": "GenRL/HockeyGoal-v0", "basketball": "GenRL/BasketballGoal-v0"}
 
 
 class GoalConditionedMixin:
@@ -130,52 +126,3 @@ class GoalConditionedMixin:
             ends = np.minimum(np.arange(1, self.horizon + 1) * self.frame_skip, len(rows)) - 1
             info["object_path"] = np.concatenate([self.initial_state_object_xy()[None], rows[ends, 1:3]])
         return reward, info
-
-
-class HockeyGoalEnv(GoalConditionedMixin, HockeyEnv):
-    """``GenRL/HockeyGoal-v0``: :class:`~sb3_genrl.envs.hockey.HockeyEnv` with dict observations (see the module).
-
-    The terminal reward is minus the distance between the puck's rest point (the terminal ``achieved_goal``) and
-    the desired goal, bounded below by ``worst_reward``; an unstable simulation gives ``worst_reward``.
-    """
-
-
-class BasketballGoalEnv(GoalConditionedMixin, BasketballEnv):
-    """``GenRL/BasketballGoal-v0``: :class:`~sb3_genrl.envs.basketball.BasketballEnv` with dict observations.
-
-    The terminal info also holds ``crossing_points`` ``(K, 2)``, every point where the ball came down through the
-    rim's height, so the terminal reward for any goal is minus its distance to the nearest of them (``worst_reward``
-    when there is none or the simulation was unstable), exactly the plain task's reward for that goal.
-    """
-
-    def _outcome(self, rows: np.ndarray, goal: np.ndarray) -> tuple[float, dict[str, Any]]:
-        reward, info = super()._outcome(rows, goal)
-        info["crossing_points"] = crossing_points(rows)
-        return reward, info
-
-    def _terminal_reward(self, achieved: np.ndarray, desired: np.ndarray, info: dict[str, Any]) -> float:
-        points = np.asarray(info.get("crossing_points", np.zeros((0, 2))), dtype=np.float64).reshape(-1, 2)
-        if info.get("unstable", False) or len(points) == 0:
-            return float(self.worst_reward)
-        return max(-float(np.min(np.linalg.norm(points - desired, axis=1))), float(self.worst_reward))
-
-
-def crossing_points(rows: np.ndarray) -> np.ndarray:
-    """Where the ball came down through the rim's height, ``(K, 2)``: the points basketball's reward is scored at
-    (each crossing interpolated linearly between physics steps, as :class:`BasketballEnv` does)."""
-    position = rows[:, 1:4]
-    height = position[:, 2] - BASKET_HEIGHT
-    crossing = np.flatnonzero((height[:-1] >= 0) & (height[1:] < 0))
-    fraction = height[crossing] / (height[crossing] - height[crossing + 1])
-    return position[crossing, :2] + fraction[:, None] * (position[crossing + 1, :2] - position[crossing, :2])
-
-
-def register_goal_envs() -> None:
-    """Register the goal-conditioned variants with Gymnasium (idempotent)."""
-    for env_id, entry_point, steps in (("GenRL/HockeyGoal-v0", "HockeyGoalEnv", HockeyEnv.horizon),
-                                       ("GenRL/BasketballGoal-v0", "BasketballGoalEnv", BasketballEnv.horizon)):
-        if env_id not in registry:
-            register(id=env_id, entry_point=f"sb3_genrl.envs.goal:{entry_point}", max_episode_steps=steps)
-
-
-register_goal_envs()

@@ -6,23 +6,31 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
-from sb3_genrl.envs.basketball import BasketballEnv
-from sb3_genrl.envs.goal import GOAL_TASK_IDS, BasketballGoalEnv, HockeyGoalEnv
-from sb3_genrl.envs.hockey import HockeyEnv
-from sb3_genrl.envs.scripted import scripted_hit, scripted_throw
+from sb3_genrl.envs import TASKS, get_task
+from sb3_genrl.envs.basketball import BasketballEnv, BasketballGoalEnv, scripted_throw
+from sb3_genrl.envs.hockey import HockeyEnv, HockeyGoalEnv, scripted_hit
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 ALLOWED_SB3_WARNINGS = ("We recommend you to use a symmetric and normalized Box action space",)
-TASKS = {
+CASES = {
     "hockey": (HockeyGoalEnv, HockeyEnv, [scripted_hit(strength=s, direction=d) for s, d in ((0.8, -0.2), (1.2, 0.3))]),
     # strengths 1.0 and 1.2 bounce the ball back up through the rim's height: 2 and 3 crossings
     "basketball": (BasketballGoalEnv, BasketballEnv, [scripted_throw(strength=s, yaw=0.3) for s in (0.6, 1.0, 1.2)]),
 }
 
 
-@pytest.mark.parametrize("task", sorted(TASKS))
+def test_every_task_has_its_goal_variant_registered():
+    for name, spec in TASKS.items():
+        env = gym.make(spec.goal_env_id)
+        assert isinstance(env.unwrapped, spec.env_class) and env.spec.max_episode_steps == spec.horizon
+        assert sorted(env.observation_space.spaces) == ["achieved_goal", "desired_goal", "observation"]
+        assert hasattr(env.unwrapped, "compute_reward"), name
+    assert set(TASKS) == set(CASES)
+
+
+@pytest.mark.parametrize("task", sorted(CASES))
 def test_env_checkers_pass(task):
-    env = gym.make(GOAL_TASK_IDS[task]).unwrapped
+    env = gym.make(get_task(task).goal_env_id).unwrapped
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         check_env(env, skip_render_check=True)
@@ -46,9 +54,9 @@ def play(env, trajectory, goal):
     return observations, np.array(rewards), info
 
 
-@pytest.mark.parametrize("task", sorted(TASKS))
+@pytest.mark.parametrize("task", sorted(CASES))
 def test_compute_reward_equals_the_plain_tasks_reward(task):
-    goal_class, plain_class, trajectories = TASKS[task]
+    goal_class, plain_class, trajectories = CASES[task]
     env, plain = goal_class(), plain_class()
     rng = np.random.default_rng(0)
     crossings = []
@@ -80,9 +88,9 @@ def test_compute_reward_equals_the_plain_tasks_reward(task):
         assert max(crossings) >= 2  # some throw crosses the rim's height more than once
 
 
-@pytest.mark.parametrize("task", sorted(TASKS))
+@pytest.mark.parametrize("task", sorted(CASES))
 def test_object_paths_match_the_step_path(task):
-    goal_class, plain_class, trajectories = TASKS[task]
+    goal_class, plain_class, trajectories = CASES[task]
     env = goal_class()
     goals = np.array([[1.0, 0.1], [3.0, -1.0]] if task == "hockey" else [[3.0, -1.0], [5.0, 2.0]])
     paths, infos = env.object_paths(np.stack(trajectories[:2]), goals)
