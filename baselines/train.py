@@ -27,6 +27,7 @@ from __future__ import annotations
 import json
 import os
 import pathlib
+import time
 from typing import Any
 
 import gymnasium as gym
@@ -87,6 +88,7 @@ def train_baseline(
     out.mkdir(parents=True, exist_ok=True)
     summary: dict[str, Any] = {"algorithm": algorithm, "task": spec.name, "episodes": int(episodes), "seed": seed}
     common = {"seed": seed, "device": device, "verbose": verbose, "tensorboard_log": str(out / "tensorboard")}
+    began = time.perf_counter()
     if algorithm in LATENT_BASELINES:
         model, steps = _latent_model(algorithm, spec.env_id, generator, episodes, common)
     else:
@@ -98,7 +100,10 @@ def train_baseline(
                     "settings": settings_record()["sac" if algorithm == "sac-no-prefill" else algorithm]}
         model = _feedback_model(algorithm, spec.name, transitions, steps, summary, eval_goals, bc_kwargs, common)
     recorder = EpisodeRecorder(out / "episodes.csv")
+    summary["setup_seconds"] = time.perf_counter() - began  # demonstrations, behaviour cloning and its evaluation
+    began = time.perf_counter()
     model.learn(total_timesteps=steps, callback=recorder, progress_bar=progress_bar, tb_log_name=algorithm)
+    summary["learn_seconds"] = time.perf_counter() - began
     model.save(out / f"{algorithm}_policy.zip")
     curve = write_learning_curve(out / "episodes.csv", out, window=window, title=f"{algorithm} on {spec.name}")
     returns = np.asarray(recorder.returns)
