@@ -9,12 +9,13 @@ from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any
 
+from sb3_genrl.baselines import FEEDBACK_BASELINES, LATENT_BASELINES
 from sb3_genrl.study.jobs import baseline_job, generator_job
 from sb3_genrl.study.report import write_task_report
 from sb3_genrl.study.scales import SCALES, StudyScale
 
-# PPO and SAC on the feedback task with the demonstrations, and stock algorithms on the best generator's latent space.
-BASELINES = ("ppo", "sac", "latent-ppo", "latent-sac", "latent-trpo")
+# The feedback baselines with the demonstrations, and stock algorithms on the best generator's latent space.
+BASELINES = FEEDBACK_BASELINES + LATENT_BASELINES
 MODELS = tuple(f"VAE{i}" for i in range(1, 10)) + tuple(f"GAN{i}" for i in range(1, 10))
 
 
@@ -89,7 +90,8 @@ def _run_task(task: str, scale: dict[str, Any], task_dir: pathlib.Path, run, mod
         runs_dir = task_dir / "comparison"
         generator = str(task_dir / "generators" / f"{best}.pt")
         jobs = [(baseline_job, (algorithm, task, seed, scale["baseline_episodes"], str(dataset), scale["demo_episodes"],
-                                str(runs_dir / f"{algorithm}_seed{seed}"), device, 1, generator))
+                                str(runs_dir / f"{algorithm}_seed{seed}"), device, 1, generator,
+                                scale["bc_eval_goals"]))
                 for algorithm in BASELINES for seed in range(scale["seeds"])]
         baseline_runs = list(run(jobs))
         genrl_runs = [str(p) for p in sorted((task_dir / "policies" / best).glob("seed*"))]
