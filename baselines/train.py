@@ -19,7 +19,8 @@ defaults except 64 episodes per update (GenRL's batch), so they show what the EM
 
 Every run writes ``episodes.csv`` (one row per episode: return, table contacts, distance, written as training
 goes), ``learning_curve.csv`` / ``learning_curve.png`` (mean over windows of 64 episodes), TensorBoard logs in
-``tensorboard/``, the model (with its normalisation statistics), and ``summary.json``.
+``tensorboard/``, the model (with its normalisation statistics; ``ppo`` also the cloned policy before PPO,
+``bc_policy.zip``), and ``summary.json``.
 """
 
 from __future__ import annotations
@@ -98,7 +99,7 @@ def train_baseline(
         steps = int(episodes) * spec.horizon
         summary |= {"demo_transitions": len(transitions["observations"]),
                     "settings": settings_record()["sac" if algorithm == "sac-no-prefill" else algorithm]}
-        model = _feedback_model(algorithm, spec.name, transitions, steps, summary, eval_goals, bc_kwargs, common)
+        model = _feedback_model(algorithm, spec.name, transitions, steps, out, summary, eval_goals, bc_kwargs, common)
     recorder = EpisodeRecorder(out / "episodes.csv")
     summary["setup_seconds"] = time.perf_counter() - began  # demonstrations, behaviour cloning and its evaluation
     began = time.perf_counter()
@@ -117,8 +118,9 @@ def train_baseline(
     return summary
 
 
-def _feedback_model(algorithm: str, task: str, transitions: dict[str, np.ndarray], steps: int, summary: dict[str, Any],
-                    eval_goals: int, bc_kwargs: dict[str, Any] | None, common: dict[str, Any]) -> PPO | SAC:
+def _feedback_model(algorithm: str, task: str, transitions: dict[str, np.ndarray], steps: int, out: pathlib.Path,
+                    summary: dict[str, Any], eval_goals: int, bc_kwargs: dict[str, Any] | None,
+                    common: dict[str, Any]) -> PPO | SAC:
     """The feedback baseline's model, its demonstrations in place; behaviour cloning's record goes to ``summary``."""
     horizon = get_task(task).horizon
     if algorithm == "sac-her":
@@ -129,6 +131,7 @@ def _feedback_model(algorithm: str, task: str, transitions: dict[str, np.ndarray
     if algorithm != "ppo":
         return sac_with_demonstrations(env, transitions, steps=steps, prefill=algorithm == "sac", **common)
     model, record = ppo_with_behaviour_cloning(env, transitions, bc_kwargs=bc_kwargs, **common)
+    model.save(out / "bc_policy.zip")  # before PPO changes it
     distances = {}
     for mode in ("deterministic", "sampled"):
         rewards = evaluate_feedback_policy(model, task, goals=eval_goals, seed=EVAL_GOAL_SEED,

@@ -143,6 +143,8 @@ def test_baselines_run_end_to_end(algorithm, demos, tmp_path):
         bc, first = summary["bc"], summary["first_batch"]
         assert bc["epochs"] == 2 and bc["deterministic_distance"] > 0 and bc["sampled_distance"] > 0
         assert first["episodes"] == 512 // 69 and first["mean_distance"] > 0
+        cloned = PPO.load(tmp_path / "bc_policy.zip", device="cpu")
+        np.testing.assert_allclose(cloned.policy.log_std.exp().detach().numpy(), bc["action_std"], rtol=1e-5)
 
 
 def test_demonstrations_enter_the_her_buffer_as_episodes(demos):
