@@ -111,9 +111,7 @@ def train_baseline(
     summary |= {"episodes_played": len(returns), "final_mean_reward": float(curve["mean_reward"][-1]),
                 "best_mean_reward": float(np.max(curve["mean_reward"])), "max_reward": float(returns.max())}
     if algorithm == "ppo":
-        first = returns[: sum(record["timesteps"] <= PPO_SETTINGS["n_steps"] for record in recorder.records)]
-        summary["first_batch"] = {"episodes": len(first), "mean_distance": float(-first.mean()) if len(first) else None,
-                                  "first_64_mean_distance": float(-returns[:64].mean())}
+        summary["first_batch"] = _first_batch(recorder)
     _write_json(out / "summary.json", summary)
     return summary
 
@@ -144,6 +142,14 @@ def _feedback_model(algorithm: str, task: str, transitions: dict[str, np.ndarray
                      "residual_std": record["residual_std"], "action_std": record["action_std"],
                      "eval_goals": eval_goals, "eval_goal_seed": EVAL_GOAL_SEED, **distances}
     return model
+
+
+def _first_batch(recorder: EpisodeRecorder) -> dict[str, Any]:
+    """What PPO's first rollout (sampled from the cloned policy, before any PPO update) and first 64 episodes scored."""
+    returns = np.asarray(recorder.returns)
+    first = returns[: sum(record["timesteps"] <= PPO_SETTINGS["n_steps"] for record in recorder.records)]
+    return {"episodes": len(first), "mean_distance": float(-first.mean()) if len(first) else None,
+            "first_64_mean_distance": float(-returns[:64].mean())}
 
 
 def _write_json(path: pathlib.Path, value: dict[str, Any]) -> None:
