@@ -17,8 +17,9 @@ import numpy as np
 from sb3_genrl.callbacks import read_episodes
 from sb3_genrl.curves import mean_std_over_seeds, plot_curves, read_curve
 
-LABELS = {"genrl": "GenRL", "ppo": "PPO (BC)", "sac": "SAC (prefilled)", "latent-ppo": "PPO on latent",
-          "latent-sac": "SAC on latent", "latent-trpo": "TRPO on latent"}
+LABELS = {"genrl": "GenRL", "ppo": "PPO (BC)", "sac": "SAC (prefilled)", "sac-no-prefill": "SAC (no prefill)",
+          "sac-her": "SAC + HER", "latent-ppo": "PPO on latent", "latent-sac": "SAC on latent",
+          "latent-trpo": "TRPO on latent"}
 
 
 def compare_runs(run_dirs: list[str | os.PathLike], out_dir: str | os.PathLike, *, task: str | None = None) -> pathlib.Path:

@@ -1,14 +1,17 @@
 """Train a baseline on a task with the same outputs as ``genrl train-policy`` (paper sections 6.1.5, 6.2, 6.3).
 
-Feedback baselines (per-step actions, observation = goal + joint positions + joint velocities):
+Feedback baselines (per-step actions on the task's observation plus the time feature, see
+:mod:`sb3_genrl.baselines.feedback`; settings in :mod:`sb3_genrl.baselines.hyperparameters`):
 
-- ``ppo``: SB3 PPO whose actor is first fitted to the demonstrations' state-action pairs by behaviour cloning
-  (:func:`~sb3_genrl.baselines.bc.behaviour_cloning`, negative log-likelihood), then trained on the sparse
-  terminal reward. Hyperparameters are SB3's PPO defaults (which follow the PPO paper's MuJoCo settings) except
-  ``n_steps`` = 16 episodes per update, so that small episode budgets still give many updates.
-- ``sac``: SB3 SAC with SB3's defaults (SAC paper values: lr 3e-4, batch 256, tau 0.005, automatic entropy), its
-  replay buffer first filled with the same demonstration transitions and rewards
-  (:func:`~sb3_genrl.baselines.prefill.prefill_replay_buffer`) and no random warm-up.
+- ``ppo``: PPO whose actor is first cloned from the demonstrations (:mod:`sb3_genrl.baselines.bc`: held-out
+  episodes, early stopping, exploration std = held-out residual std), then trained on the sparse terminal reward.
+  The summary records the cloned policy's deterministic and sampled mean distance to :data:`EVAL_GOALS` held-out
+  goals and what PPO's first batch (its first rollout, sampled from the cloned policy) scored.
+- ``sac``: SAC with its replay buffer prefilled with the demonstration transitions and rewards.
+- ``sac-no-prefill``: the same SAC without the demonstrations in its buffer (their statistics still normalise the
+  observations), for reference.
+- ``sac-her``: SAC with hindsight experience replay on the task's goal-conditioned variant
+  (:mod:`sb3_genrl.envs.goal`), the demonstrations written into its ``HerReplayBuffer`` as episodes.
 
 Latent-space baselines (the same generator as GenRL, on :class:`~sb3_genrl.LatentActionWrapper`, one-step
 episodes): ``latent-ppo``, ``latent-sac``, ``latent-trpo`` - stock SB3 / sb3-contrib algorithms with their
@@ -16,30 +19,33 @@ defaults except 64 episodes per update (GenRL's batch), so they show what the EM
 
 Every run writes ``episodes.csv`` (one row per episode: return, table contacts, distance, written as training
 goes), ``learning_curve.csv`` / ``learning_curve.png`` (mean over windows of 64 episodes), TensorBoard logs in
-``tensorboard/``, the model, and ``summary.json``.
+``tensorboard/``, the model (with its normalisation statistics; ``ppo`` also the cloned policy before PPO,
+``bc_policy.zip``), and ``summary.json``.
 """
 
 from __future__ import annotations
 
-import json
 import os
 import pathlib
+import time
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from sb3_genrl.baselines.bc import behaviour_cloning
-from sb3_genrl.baselines.prefill import prefill_replay_buffer
+from sb3_genrl.baselines import BASELINES, LATENT_BASELINES
+from sb3_genrl.baselines.feedback import add_time_feature, evaluate_feedback_policy, make_feedback_env
+from sb3_genrl.baselines.her import goal_episodes
+from sb3_genrl.baselines.hyperparameters import PPO_SETTINGS, settings_record
+from sb3_genrl.baselines.models import ppo_with_behaviour_cloning, sac_her_with_demonstrations, sac_with_demonstrations
 from sb3_genrl.envs import get_task
 from stable_baselines3 import PPO, SAC
-from stable_baselines3.common.evaluation import evaluate_policy
-from stable_baselines3.common.monitor import Monitor
 
 from sb3_genrl.callbacks import EpisodeRecorder
 from sb3_genrl.curves import write_learning_curve
+from sb3_genrl.utils import atomic_write_json
 
-BASELINES = ("ppo", "sac", "latent-ppo", "latent-sac", "latent-trpo")
 LATENT_BATCH = 64  # episodes per update of the latent-space baselines (GenRL's default N)
+EVAL_GOALS, EVAL_GOAL_SEED = 100, 12345  # held-out goals of the cloned policy's evaluation (never used for tuning)
 
 
 def train_baseline(
@@ -52,8 +58,8 @@ def train_baseline(
     demos: str | os.PathLike | dict[str, np.ndarray] | None = None,
     demo_episodes: int | None = None,
     generator: Any = None,
-    bc_epochs: int = 5,
-    eval_episodes: int = 20,
+    bc_kwargs: dict[str, Any] | None = None,
+    eval_goals: int = EVAL_GOALS,
     device: str = "auto",
     progress_bar: bool = False,
     verbose: int = 0,
@@ -61,17 +67,17 @@ def train_baseline(
 ) -> dict[str, Any]:
     """Train one baseline for ``episodes`` episodes and write its outputs to ``out_dir``.
 
-    :param algorithm: one of ``ppo``, ``sac``, ``latent-ppo``, ``latent-sac``, ``latent-trpo``
+    :param algorithm: one of :data:`BASELINES`
     :param task: a task name from :data:`sb3_genrl.envs.TASKS` (or its Gymnasium id)
-    :param episodes: budget of episodes (the horizon's worth of steps each for ``ppo``/``sac``)
+    :param episodes: budget of episodes (the horizon's worth of environment steps each for the feedback baselines)
     :param out_dir: output folder (created)
     :param seed: random seed
-    :param demos: demonstrations for ``ppo``/``sac``: a dataset path or a transitions dict (see
+    :param demos: demonstrations for the feedback baselines: a dataset path or a transitions dict (see
         :func:`sb3_genrl.data.load_transitions`)
     :param demo_episodes: use only the first ``demo_episodes`` demonstration episodes (default: all)
     :param generator: a generator (or its file) for the latent-space baselines
-    :param bc_epochs: behaviour cloning epochs (``ppo``)
-    :param eval_episodes: episodes to evaluate the behaviour-cloned policy before RL (``ppo``)
+    :param bc_kwargs: behaviour cloning options (``ppo``; see :func:`~sb3_genrl.baselines.bc.behaviour_cloning`)
+    :param eval_goals: held-out goals on which the cloned policy is evaluated (``ppo``)
     :param window: episodes per point of the learning curve
     """
     if algorithm not in BASELINES:
@@ -79,42 +85,71 @@ def train_baseline(
     if int(episodes) != episodes or episodes < 1:
         raise ValueError(f"episodes must be a positive integer, got {episodes!r}")
     spec = get_task(task)
-    task, env_id = spec.name, spec.env_id
     out = pathlib.Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    summary: dict[str, Any] = {"algorithm": algorithm, "task": task, "episodes": int(episodes), "seed": seed}
+    summary: dict[str, Any] = {"algorithm": algorithm, "task": spec.name, "episodes": int(episodes), "seed": seed}
     common = {"seed": seed, "device": device, "verbose": verbose, "tensorboard_log": str(out / "tensorboard")}
-    if algorithm.startswith("latent-"):
-        model, steps = _latent_model(algorithm, env_id, generator, episodes, common)
+    began = time.perf_counter()
+    if algorithm in LATENT_BASELINES:
+        model, steps = _latent_model(algorithm, spec.env_id, generator, episodes, common)
     else:
         if demos is None:
             raise ValueError(f"{algorithm} needs demonstrations (demos=...)")
-        transitions = _demonstrations(demos, demo_episodes, task)
-        summary["demo_transitions"] = len(transitions["observations"])
-        env = gym.make(env_id)
-        horizon = env.unwrapped.horizon
-        steps = int(episodes) * horizon
-        if algorithm == "ppo":
-            model = PPO("MlpPolicy", env, n_steps=16 * horizon, batch_size=4 * horizon, **common)
-            summary["bc_loss"] = behaviour_cloning(model.policy, transitions["observations"], transitions["actions"],
-                                                   epochs=bc_epochs, seed=seed)
-            eval_env = Monitor(gym.make(env_id))
-            eval_env.reset(seed=seed + 10_000)
-            summary["bc_mean_reward"], summary["bc_std_reward"] = (float(v) for v in evaluate_policy(
-                model, eval_env, n_eval_episodes=eval_episodes, deterministic=True))
-        else:
-            model = SAC("MlpPolicy", env, buffer_size=max(len(transitions["observations"]) + steps, 1), learning_starts=0,
-                        **common)
-            prefill_replay_buffer(model, transitions)
+        transitions = _demonstrations(demos, demo_episodes, spec.name)
+        steps = int(episodes) * spec.horizon
+        summary |= {"demo_transitions": len(transitions["observations"]),
+                    "settings": settings_record()["sac" if algorithm == "sac-no-prefill" else algorithm]}
+        model = _feedback_model(algorithm, spec.name, transitions, steps, out, summary, eval_goals, bc_kwargs, common)
     recorder = EpisodeRecorder(out / "episodes.csv")
+    summary["setup_seconds"] = time.perf_counter() - began  # demonstrations, behaviour cloning and its evaluation
+    began = time.perf_counter()
     model.learn(total_timesteps=steps, callback=recorder, progress_bar=progress_bar, tb_log_name=algorithm)
+    summary["learn_seconds"] = time.perf_counter() - began
     model.save(out / f"{algorithm}_policy.zip")
-    curve = write_learning_curve(out / "episodes.csv", out, window=window, title=f"{algorithm} on {task}")
+    curve = write_learning_curve(out / "episodes.csv", out, window=window, title=f"{algorithm} on {spec.name}")
     returns = np.asarray(recorder.returns)
     summary |= {"episodes_played": len(returns), "final_mean_reward": float(curve["mean_reward"][-1]),
                 "best_mean_reward": float(np.max(curve["mean_reward"])), "max_reward": float(returns.max())}
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    if algorithm == "ppo":
+        summary["first_batch"] = _first_batch(recorder)
+    atomic_write_json(out / "summary.json", summary)
     return summary
+
+
+def _feedback_model(algorithm: str, task: str, transitions: dict[str, np.ndarray], steps: int, out: pathlib.Path,
+                    summary: dict[str, Any], eval_goals: int, bc_kwargs: dict[str, Any] | None,
+                    common: dict[str, Any]) -> PPO | SAC:
+    """The feedback baseline's model, its demonstrations in place; behaviour cloning's record goes to ``summary``."""
+    horizon = get_task(task).horizon
+    if algorithm == "sac-her":
+        return sac_her_with_demonstrations(gym.make(get_task(task).goal_env_id), goal_episodes(task, transitions),
+                                           steps=steps, **common)
+    transitions = add_time_feature(transitions, horizon)
+    env = make_feedback_env(task)
+    if algorithm != "ppo":
+        return sac_with_demonstrations(env, transitions, steps=steps, prefill=algorithm == "sac", **common)
+    model, record = ppo_with_behaviour_cloning(env, transitions, bc_kwargs=bc_kwargs, **common)
+    model.save(out / "bc_policy.zip")  # before PPO changes it
+    distances = {}
+    for mode in ("deterministic", "sampled"):
+        rewards = evaluate_feedback_policy(model, task, goals=eval_goals, seed=EVAL_GOAL_SEED,
+                                           deterministic=mode == "deterministic")["rewards"]
+        distances[f"{mode}_distance"] = float(-rewards.mean())
+    best = record["best_epoch"] - 1
+    summary["bc"] = {"epochs": record["epochs"], "best_epoch": record["best_epoch"],
+                     "train_loss": record["train_loss"][best], "heldout_loss": record["heldout_loss"][best],
+                     "train_episodes": record["train_episodes"], "heldout_episodes": record["heldout_episodes"],
+                     "residual_std": record["residual_std"], "action_std": record["action_std"],
+                     "eval_goals": eval_goals, "eval_goal_seed": EVAL_GOAL_SEED, **distances}
+    return model
+
+
+def _first_batch(recorder: EpisodeRecorder) -> dict[str, Any]:
+    """What PPO's first rollout (sampled from the cloned policy, before any PPO update) and first 64 episodes scored."""
+    returns = np.asarray(recorder.returns)
+    first = returns[: sum(record["timesteps"] <= PPO_SETTINGS["n_steps"] for record in recorder.records)]
+    return {"episodes": len(first), "mean_distance": float(-first.mean()) if len(first) else None,
+            "first_64_mean_distance": float(-returns[:64].mean())}
 
 
 def _demonstrations(demos: Any, demo_episodes: int | None, task: str) -> dict[str, np.ndarray]:

@@ -8,6 +8,7 @@ import sys
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from sb3_genrl.baselines import BASELINES
     from sb3_genrl.envs import DEFAULT_TASK, TASKS
 
     tasks = tuple(TASKS)  # the registered tasks' short names
@@ -74,15 +75,17 @@ def build_parser() -> argparse.ArgumentParser:
     video.add_argument("--out", required=True, help="output file, .mp4 or .gif")
     video.set_defaults(func=_video_command)
 
-    baseline = sub.add_parser("baseline", help="train PPO (BC), SAC (prefilled) or a stock algorithm on the latent space")
-    baseline.add_argument("algorithm", choices=("ppo", "sac", "latent-ppo", "latent-sac", "latent-trpo"))
+    baseline = sub.add_parser("baseline", help="train PPO (BC), SAC (with or without prefilled buffer), SAC+HER, or a "
+                              "stock algorithm on the latent space")
+    baseline.add_argument("algorithm", choices=BASELINES)
     baseline.add_argument("--task", required=True, choices=tasks, help="task")
-    baseline.add_argument("--demos", default=None, help="demonstration dataset (ppo, sac)")
+    baseline.add_argument("--demos", default=None, help="demonstration dataset (ppo, sac, sac-no-prefill, sac-her)")
     baseline.add_argument("--demo-episodes", type=int, default=None, help="use the first N demonstrations (default all)")
     baseline.add_argument("--generator", default=None, help="generator file (latent-ppo, latent-sac, latent-trpo)")
     baseline.add_argument("--episodes", type=int, required=True, help="budget of episodes")
     baseline.add_argument("--seed", type=int, default=0, help="random seed")
-    baseline.add_argument("--bc-epochs", type=int, default=5, help="behaviour cloning epochs (ppo)")
+    baseline.add_argument("--bc-max-epochs", type=int, default=200,
+                          help="most behaviour cloning epochs; it stops earlier on its held-out loss (ppo)")
     baseline.add_argument("--device", default="auto", help="torch device (default: auto)")
     baseline.add_argument("--no-progress-bar", action="store_true", help="hide the progress bar")
     baseline.add_argument("--out", required=True, help="output directory")
@@ -147,9 +150,13 @@ def _baseline_command(args: argparse.Namespace) -> int:
 
     summary = train_baseline(args.algorithm, args.task, episodes=args.episodes, out_dir=args.out, seed=args.seed,
                              demos=args.demos, demo_episodes=args.demo_episodes, generator=args.generator,
-                             bc_epochs=args.bc_epochs, device=args.device, progress_bar=not args.no_progress_bar)
-    if "bc_mean_reward" in summary:
-        print(f"behaviour cloning alone: mean reward {summary['bc_mean_reward']:.4g}")
+                             bc_kwargs={"max_epochs": args.bc_max_epochs}, device=args.device,
+                             progress_bar=not args.no_progress_bar)
+    if "bc" in summary:
+        bc, first = summary["bc"], summary["first_batch"]
+        print(f"behaviour cloning ({bc['epochs']} epochs, best {bc['best_epoch']}): mean distance to {bc['eval_goals']} "
+              f"held-out goals {bc['deterministic_distance']:.3f} m deterministic, {bc['sampled_distance']:.3f} m sampled;"
+              f" PPO's first batch ({first['episodes']} episodes) {first['mean_distance']:.3f} m")
     print(f"{args.algorithm} on {args.task}: {summary['episodes_played']} episodes, final mean reward "
           f"{summary['final_mean_reward']:.4g}, best {summary['best_mean_reward']:.4g} -> {args.out}")
     return 0

@@ -13,6 +13,7 @@ from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any
 
+from sb3_genrl.baselines import FEEDBACK_BASELINES, LATENT_BASELINES
 from sb3_genrl.study.cluster import DEFAULT_CONNECT_TIMEOUT
 from sb3_genrl.study.jobs import EVALUATION_SEED, GENERATOR_SEED, INTERVENTIONS, K, baseline_job, generator_job
 from sb3_genrl.study.report import write_task_report
@@ -30,8 +31,8 @@ from sb3_genrl.study.state import (
 )
 from sb3_genrl.utils import atomic_write_json, atomic_write_text
 
-# PPO and SAC on the feedback task with the demonstrations, and stock algorithms on the best generator's latent space.
-BASELINES = ("ppo", "sac", "latent-ppo", "latent-sac", "latent-trpo")
+# The feedback baselines with the demonstrations, and stock algorithms on the best generator's latent space.
+BASELINES = FEEDBACK_BASELINES + LATENT_BASELINES
 MODELS = tuple(f"VAE{i}" for i in range(1, 10)) + tuple(f"GAN{i}" for i in range(1, 10))
 DEMONSTRATION_SEED = 0
 
@@ -160,7 +161,8 @@ def _run_task(task: str, scale: dict[str, Any], task_dir: pathlib.Path, run, mod
         check_and_record(record, {**wanted, "generator": f"{best} {file_fingerprint(generator)}"},
                          output_exists=exists, folder=task_dir)
         jobs = [(baseline_job, (algorithm, task, seed, scale["baseline_episodes"], str(dataset), scale["demo_episodes"],
-                                str(runs_dir / f"{algorithm}_seed{seed}"), device, 1, generator))
+                                str(runs_dir / f"{algorithm}_seed{seed}"), device, 1, generator,
+                                scale["bc_eval_goals"]))
                 for algorithm in BASELINES for seed in range(scale["seeds"])]
         baseline_runs = list(run(jobs))
         genrl_runs = [str(task_dir / "policies" / best / f"seed{seed}") for seed in range(scale["seeds"])]
