@@ -33,7 +33,7 @@ def demo_transitions(n_episodes: int, seed: int = 0) -> dict[str, np.ndarray]:
     for _ in range(n_episodes):
         # float32, as the demonstration generator stores and simulates them
         trajectory = scripted_hit(strength=rng.uniform(0.8, 1.2), direction=rng.uniform(-0.4, 0.4)).astype(np.float32)
-        _, info = env.play_trajectory(trajectory, np.zeros(2))
+        _, info = env.play_trajectory(trajectory, np.zeros(2), allow_outside_region=True)
         obs, _ = env.reset(options={"goal": info["reached"], "allow_outside_region": True})
         for action in trajectory:
             next_obs, reward, terminated, _, _ = env.step(action)
