@@ -135,6 +135,7 @@ def test_baselines_run_end_to_end(algorithm, demos, tmp_path):
     episodes = read_episodes(tmp_path / "episodes.csv")
     assert len(episodes["return"]) == summary["episodes_played"]
     assert np.all(episodes["table_contacts"] >= 0) and np.all(episodes["return"] <= 0)
+    assert np.all(np.diff(episodes["cpu_seconds"]) >= 0) and episodes["cpu_seconds"][-1] > 0
     for name in ("learning_curve.csv", "learning_curve.png", f"{algorithm}_policy.zip", "summary.json"):
         assert (tmp_path / name).exists()
     assert any((tmp_path / "tensorboard").iterdir())
