@@ -89,7 +89,7 @@ def train_baseline(
     out.mkdir(parents=True, exist_ok=True)
     summary: dict[str, Any] = {"algorithm": algorithm, "task": spec.name, "episodes": int(episodes), "seed": seed}
     common = {"seed": seed, "device": device, "verbose": verbose, "tensorboard_log": str(out / "tensorboard")}
-    began = time.perf_counter()
+    began, began_cpu = time.perf_counter(), time.process_time()
     if algorithm in LATENT_BASELINES:
         model, steps = _latent_model(algorithm, spec.env_id, generator, episodes, common)
     else:
@@ -101,7 +101,8 @@ def train_baseline(
                     "settings": settings_record()["sac" if algorithm == "sac-no-prefill" else algorithm]}
         model = _feedback_model(algorithm, spec.name, transitions, steps, out, summary, eval_goals, bc_kwargs, common)
     recorder = EpisodeRecorder(out / "episodes.csv")
-    summary["setup_seconds"] = time.perf_counter() - began  # demonstrations, behaviour cloning and its evaluation
+    # Demonstrations, behaviour cloning and its evaluation: wall-clock and this process' CPU seconds.
+    summary |= {"setup_seconds": time.perf_counter() - began, "setup_cpu_seconds": time.process_time() - began_cpu}
     began = time.perf_counter()
     model.learn(total_timesteps=steps, callback=recorder, progress_bar=progress_bar, tb_log_name=algorithm)
     summary["learn_seconds"] = time.perf_counter() - began

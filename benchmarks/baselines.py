@@ -77,12 +77,7 @@ def run_one(method: str, settings: dict[str, Any], demos: str, generator: str, r
 
     torch.set_num_threads(1)
     run = pathlib.Path(run_dir)
-    record = run / "run.json"
-    if record.exists():
-        recorded = json.loads(record.read_text())["settings"]
-        if recorded != settings:
-            differ = sorted(k for k in set(recorded) | set(settings) if recorded.get(k) != settings.get(k))
-            raise ValueError(f"{run} holds a run with other settings ({', '.join(differ)}); use another --work folder")
+    if finished(run, settings):
         return run_dir
     run.mkdir(parents=True, exist_ok=True)
     began = time.perf_counter()
@@ -91,7 +86,7 @@ def run_one(method: str, settings: dict[str, Any], demos: str, generator: str, r
 
         summary = train_policy(settings["task"], generator, episodes=settings["episodes"], seed=settings["seed"],
                                out_dir=run, batch_episodes=WINDOW, device="cpu")
-        timing = {"setup_seconds": 0.0, "learn_seconds": time.perf_counter() - began}
+        timing = {"setup_seconds": 0.0, "setup_cpu_seconds": 0.0, "learn_seconds": time.perf_counter() - began}
     else:
         from sb3_genrl.baselines.train import train_baseline
 
@@ -99,10 +94,22 @@ def run_one(method: str, settings: dict[str, Any], demos: str, generator: str, r
         summary = train_baseline(method, settings["task"], episodes=settings["episodes"], out_dir=run,
                                  seed=settings["seed"], demos=None if latent else demos,
                                  generator=generator if latent else None, device="cpu")
-        timing = {key: summary[key] for key in ("setup_seconds", "learn_seconds")}
-    _write_json(record, {"settings": settings, **timing, "episodes_played": _episodes_played(run),
+        timing = {key: summary[key] for key in ("setup_seconds", "setup_cpu_seconds", "learn_seconds")}
+    _write_json(run / "run.json", {"settings": settings, **timing, "episodes_played": _episodes_played(run),
                          "bc": summary.get("bc"), "first_batch": summary.get("first_batch")})
     return run_dir
+
+
+def finished(run: pathlib.Path, settings: dict[str, Any]) -> bool:
+    """Whether ``run`` holds a finished run of ``settings``; raises if it holds one of other settings."""
+    record = run / "run.json"
+    if not record.exists():
+        return False
+    recorded = json.loads(record.read_text())["settings"]
+    if recorded != settings:
+        differ = sorted(k for k in set(recorded) | set(settings) if recorded.get(k) != settings.get(k))
+        raise ValueError(f"{run} holds a finished run with other settings ({', '.join(differ)}); use another --work")
+    return True
 
 
 def _episodes_played(run: pathlib.Path) -> int:
@@ -151,14 +158,20 @@ def method_result(runs: list[pathlib.Path], horizon: int) -> dict[str, Any]:
             values = distances[:, episodes - min(WINDOW, episodes):episodes].mean(axis=1)
             milestones[str(episodes)] = {"mean": float(values.mean()), "std": float(values.std()),
                                          "per_seed": values.tolist()}
-    learn = np.array([r["learn_seconds"] for r in records])
+    # Steady-state cost: CPU seconds per episode over the second half of each run (the process' own CPU time, so
+    # what else runs on the machine does not count).
+    half = n // 2
+    cpu_rates = [(n - half) / (columns["cpu_seconds"][n - 1] - (columns["cpu_seconds"][half - 1] if half else 0.0))
+                 for columns in per_seed]
     return {"seeds": len(runs), "episodes": int(n), "env_steps_per_episode": horizon, "milestones": milestones,
             "curve": {"episodes": grid.tolist(), "mean_distance": curves.mean(0).tolist(),
                       "std_distance": curves.std(0).tolist(), "table_contacts": np.nanmean(contact_curves, 0).tolist()
                       if np.isfinite(contact_curves).any() else None},
             "table_contacts_per_episode": float(np.nanmean(contacts)) if np.isfinite(contacts).any() else None,
             "setup_seconds": float(np.mean([r["setup_seconds"] for r in records])),
-            "episodes_per_second": float(np.mean([r["episodes_played"] for r in records] / learn)),
+            "setup_cpu_seconds": float(np.mean([r["setup_cpu_seconds"] for r in records])),
+            "episodes_per_second": float(np.mean([r["episodes_played"] / r["learn_seconds"] for r in records])),
+            "episodes_per_cpu_second": float(np.mean(cpu_rates)),
             "bc": [r["bc"] for r in records if r.get("bc")], "first_batch": [r["first_batch"] for r in records
                                                                               if r.get("first_batch")]}
 
@@ -189,14 +202,14 @@ def write_outputs(result: dict[str, Any], out: pathlib.Path) -> None:
     header = " | ".join(f"{m} episodes" for m in MILESTONES)
     lines = [f"# {task}: mean distance to the goal (m), mean +- std over seeds", "",
              f"Mean over the {WINDOW} episodes before each budget (training episodes, as played).", "",
-             f"| method | seeds | {header} | table contacts / episode | setup (s) | episodes / s |",
+             f"| method | seeds | {header} | table contacts / episode | setup (CPU s) | episodes / CPU s |",
              "|---|---|" + "---|" * len(MILESTONES) + "---|---|---|"]
     for method, row in result["methods"].items():
         cells = [f"{row['milestones'][str(m)]['mean']:.3f} +- {row['milestones'][str(m)]['std']:.3f}"
                  if str(m) in row["milestones"] else "n/a" for m in MILESTONES]
         contacts_cell = "n/a" if row["table_contacts_per_episode"] is None else f"{row['table_contacts_per_episode']:.2f}"
         lines.append(f"| {LABELS.get(method, method)} | {row['seeds']} | " + " | ".join(cells)
-                     + f" | {contacts_cell} | {row['setup_seconds']:.0f} | {row['episodes_per_second']:.2f} |")
+                     + f" | {contacts_cell} | {row['setup_cpu_seconds']:.0f} | {row['episodes_per_cpu_second']:.2f} |")
     lines += ["", f"![episodes]({stem.name}_episodes.png)", "", f"![environment steps]({stem.name}_env_steps.png)", ""]
     if contacts:
         lines += [f"![table contacts]({stem.name}_contacts.png)", ""]
@@ -204,9 +217,21 @@ def write_outputs(result: dict[str, Any], out: pathlib.Path) -> None:
 
 
 def core_hours(result: dict[str, Any], episodes: int, seeds: int) -> float:
-    """Single-core hours of the whole benchmark at ``episodes`` x ``seeds``, from the measured rates."""
-    seconds = sum(seeds * (row["setup_seconds"] + episodes / row["episodes_per_second"])
-                  for row in result["methods"].values())
+    """Single-core hours of the whole benchmark at ``episodes`` x ``seeds``, from the measured CPU costs (setup and
+    steady-state episodes). SAC without prefill plays random actions until ``learning_starts``; a run too short to
+    pass it is charged SAC (prefilled)'s rate, its cost once learning, beyond that point."""
+    from sb3_genrl.baselines.hyperparameters import SAC_SETTINGS
+
+    methods, seconds = result["methods"], 0.0
+    for method, row in methods.items():
+        rate = row["episodes_per_cpu_second"]
+        warm_up = SAC_SETTINGS["learning_starts"] / result["horizon"]
+        if method == "sac-no-prefill" and row["episodes"] <= warm_up and "sac" in methods:
+            learning = max(episodes - warm_up, 0)
+            cost = (episodes - learning) / rate + learning / methods["sac"]["episodes_per_cpu_second"]
+        else:
+            cost = episodes / rate
+        seconds += seeds * (row["setup_cpu_seconds"] + cost)
     return seconds / 3600
 
 
@@ -236,13 +261,18 @@ def main() -> None:
     demos, generator = prepare(args, work)
     jobs = [(method, run_settings(method, args, seed, demos, generator), demos, generator,
              str(work / method / f"seed{seed}")) for method in args.methods for seed in args.seeds]
+    try:  # refuse before running anything if a finished run of other settings is in the way
+        todo = [job for job in jobs if not finished(pathlib.Path(job[-1]), job[1])]
+    except ValueError as error:
+        raise SystemExit(f"baselines.py: {error}") from None
+    print(f"{len(jobs) - len(todo)} of {len(jobs)} runs already done", flush=True)
     began = time.perf_counter()
     if args.jobs <= 1:
-        for job in jobs:
+        for job in todo:
             print(f"done {run_one(*job)} ({time.perf_counter() - began:.0f} s)", flush=True)
     else:
         with ProcessPoolExecutor(args.jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
-            for future in as_completed([pool.submit(run_one, *job) for job in jobs]):
+            for future in as_completed([pool.submit(run_one, *job) for job in todo]):
                 print(f"done {future.result()} ({time.perf_counter() - began:.0f} s)", flush=True)
     import sb3_genrl
 

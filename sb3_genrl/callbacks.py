@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import os
 import pathlib
+import time
 from collections.abc import Sequence
 
 import numpy as np
@@ -12,7 +13,9 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 
 class EpisodeRecorder(BaseCallback):
-    """Append one CSV row per finished episode: its index, its return and chosen ``info`` entries.
+    """Append one CSV row per finished episode: its index, the timesteps so far, the process' CPU seconds since
+    training started (what the run has cost, whatever else shares the machine), its return and chosen ``info``
+    entries.
 
     Works for any SB3 algorithm and any number of environments: a one-step GenRL bandit pull is an episode, and
     so is a 69-step PPO episode. The return is the sum of the episode's rewards (the terminal reward for the
@@ -36,18 +39,19 @@ class EpisodeRecorder(BaseCallback):
         self._running = np.zeros(self.training_env.num_envs)
         self._file = self.csv_path.open("w", newline="")
         self._writer = csv.writer(self._file)
-        self._writer.writerow(("episode", "timesteps", "return", *self.info_keys))
+        self._writer.writerow(("episode", "timesteps", "cpu_seconds", "return", *self.info_keys))
+        self._cpu_start = time.process_time()
 
     def _on_step(self) -> bool:
         self._running += np.asarray(self.locals["rewards"], dtype=np.float64)
         for index in np.flatnonzero(self.locals["dones"]):
             info = self.locals["infos"][index]
             record = {"episode": len(self.records) + 1, "timesteps": self.num_timesteps,
-                      "return": float(self._running[index])}
+                      "cpu_seconds": time.process_time() - self._cpu_start, "return": float(self._running[index])}
             record |= {key: float(info[key]) for key in self.info_keys if key in info}
             self.records.append(record)
             self.returns.append(record["return"])
-            self._writer.writerow([record["episode"], record["timesteps"], record["return"],
+            self._writer.writerow([record["episode"], record["timesteps"], f"{record['cpu_seconds']:.3f}", record["return"],
                                    *(record.get(key, "") for key in self.info_keys)])
             self._running[index] = 0.0
         self._file.flush()

@@ -90,23 +90,26 @@ def test_early_stopping_stops_on_a_rising_heldout_loss():
                                rtol=1e-4)
 
 
-def test_behaviour_cloning_reproduces_a_heldout_demonstration_open_loop(demos):
-    transitions = add_time_feature(demos, HOCKEY_HORIZON)
+@pytest.mark.slow
+def test_behaviour_cloning_reproduces_heldout_demonstrations_open_loop():
+    transitions = add_time_feature(demo_transitions(40, seed=1), HOCKEY_HORIZON)
     model, record = ppo_with_behaviour_cloning(make_feedback_env("hockey"), transitions, seed=0, device="cpu",
-                                               bc_kwargs={"holdout": 0.25, "batch_size": 64, "patience": 20})
-    assert record["heldout_episodes"] == 3 and record["best_epoch"] > 1
-    _, heldout = split_episodes(transitions["dones"], 0.25, seed=0)
-    observations = transitions["observations"][heldout].reshape(3, HOCKEY_HORIZON, -1)
-    actions = transitions["actions"][heldout].reshape(3, HOCKEY_HORIZON, 7)
+                                               bc_kwargs={"holdout": 0.1, "batch_size": 64, "patience": 20})
+    assert record["heldout_episodes"] == 4 and record["best_epoch"] > 1
+    _, heldout = split_episodes(transitions["dones"], 0.1, seed=0)
+    observations = transitions["observations"][heldout].reshape(4, HOCKEY_HORIZON, -1)
+    actions = transitions["actions"][heldout].reshape(4, HOCKEY_HORIZON, 7)
     with th.no_grad():
         cloned = actor_mean(model.policy, th.as_tensor(observations.reshape(-1, observations.shape[-1]))).numpy()
     cloned = cloned.reshape(actions.shape)
+    # The cloned policy's actions along each held-out demonstration's own states, played open loop, against the
+    # arm holding still (each demonstration reached its goal exactly).
     goals = observations[:, 0, :2]
     env = HockeyEnv()
     cloned_rewards, _ = env.play_trajectories(cloned, goals)
     zero_rewards, _ = env.play_trajectories(np.zeros_like(cloned), goals)
-    assert np.mean((cloned - actions) ** 2) < 0.1 * np.mean(actions ** 2)
-    assert np.all(cloned_rewards > zero_rewards) and np.mean(-cloned_rewards) < 0.5 * np.mean(-zero_rewards)
+    assert np.mean((cloned - actions) ** 2) < 0.05 * np.mean(actions ** 2)  # the zero action's error is 1x
+    assert np.all(cloned_rewards > zero_rewards) and np.mean(-cloned_rewards) < 0.25 * np.mean(-zero_rewards)
 
 
 def test_prefilled_buffer_holds_exactly_the_demonstrations(demos):
@@ -135,6 +138,7 @@ def test_baselines_run_end_to_end(algorithm, demos, tmp_path):
     episodes = read_episodes(tmp_path / "episodes.csv")
     assert len(episodes["return"]) == summary["episodes_played"]
     assert np.all(episodes["table_contacts"] >= 0) and np.all(episodes["return"] <= 0)
+    assert np.all(np.diff(episodes["cpu_seconds"]) >= 0) and episodes["cpu_seconds"][-1] > 0
     for name in ("learning_curve.csv", "learning_curve.png", f"{algorithm}_policy.zip", "summary.json"):
         assert (tmp_path / name).exists()
     assert any((tmp_path / "tensorboard").iterdir())
