@@ -378,3 +378,12 @@ def test_interrupted_save_leaves_no_partial_file(vae, tmp_path, monkeypatch):
     with pytest.raises(KeyboardInterrupt):
         vae.save(path)
     assert list(tmp_path.iterdir()) == [path] and path.read_bytes() == before
+
+
+def test_fit_keeps_the_device_the_model_was_built_on(monkeypatch):
+    """A model built on the CPU trains on the CPU even where a GPU is present (fit's device defaults to the model's)."""
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)  # what "auto" would pick on a GPU machine
+    data, _ = sine_ramp_trajectories(64, 6, 2, rng=0)
+    model = BetaVAE(6, 2, 2, beta=0.01, device="cpu").fit(data, epochs=1, batch_size=32, seed=0, progress_bar=False)
+    assert model.device.type == "cpu" and model.action_mean.device.type == "cpu"
+    assert all(p.device.type == "cpu" for p in model.networks.parameters())

@@ -133,7 +133,7 @@ class TorchTrajectoryGenerator(TrajectoryGenerator, abc.ABC):
     def fit(self: SelfTorchTrajectoryGenerator, trajectories: np.ndarray, *, epochs: int = EPOCHS,
             batch_size: int = BATCH_SIZE, lr: float = LEARNING_RATE, seed: int | None = None,
             validation_fraction: float = 0.1, tensorboard_log: str | None = None, progress_bar: bool = True,
-            device: torch.device | str = "auto", selection_samples: int = SELECTION_SAMPLES,
+            device: torch.device | str | None = None, selection_samples: int = SELECTION_SAMPLES,
             eval_every: int = 10) -> SelfTorchTrajectoryGenerator:
         """Train from a fresh initialisation drawn from ``seed`` and keep the best checkpoint (paper appendix B).
 
@@ -149,7 +149,7 @@ class TorchTrajectoryGenerator(TrajectoryGenerator, abc.ABC):
         :param validation_fraction: fraction of the trajectories held out for model selection
         :param tensorboard_log: directory for TensorBoard scalars (``train/*`` per epoch, ``eval/selection_mse``)
         :param progress_bar: show a tqdm progress bar over epochs
-        :param device: torch device or ``"auto"``
+        :param device: torch device or ``"auto"``; ``None`` (default) keeps the device the model was built on
         :param selection_samples: generated trajectories per model-selection evaluation (paper: 100)
         :param eval_every: epochs between model-selection evaluations
         :return: this model, trained; per evaluation ``self.history`` holds the epoch, its mean losses and the
@@ -166,7 +166,7 @@ class TorchTrajectoryGenerator(TrajectoryGenerator, abc.ABC):
         train, held_out = split_train_validation(data, validation_fraction, rng)
         minibatch_indices(len(train), batch_size, np.arange(len(train)))  # validates batch_size early
 
-        self._reset(self.seed, device)
+        self._reset(self.seed, self.device if device is None else device)
         mean, std = normalisation_statistics(train, std_floor=self.std_floor)
         self.action_mean = torch.as_tensor(mean, device=self.device)
         self.action_std = torch.as_tensor(std, device=self.device)
