@@ -15,10 +15,11 @@ actions.
 
 **SAC + HER** (``sac-her``): rl-zoo3 ``sac.yml``, entry ``FetchReach-v1`` (the zoo's SAC + ``HerReplayBuffer``
 entry): ``learning_rate: 0.001``, ``batch_size: 256``, ``buffer_size: 1e6``, ``ent_coef: 'auto'``,
-``learning_starts: 1000``, ``normalize: True``, ``n_sampled_goal: 4``, ``net_arch: [64, 64]``. Two changes, for
-the tasks' terminal-only reward: ``goal_selection_strategy: 'final'`` instead of ``'future'`` (see
-:mod:`sb3_genrl.envs.goal`) and ``gamma: 0.99`` (SAC's MuJoCo default) instead of 0.95, which would discount the
-reward of a hit 40 steps ahead by 0.95 ** 40 = 0.13.
+``normalize: True``, ``n_sampled_goal: 4``, ``net_arch: [64, 64]``. Two changes, for the tasks' terminal-only
+reward: ``goal_selection_strategy: 'final'`` instead of ``'future'`` (see :mod:`sb3_genrl.envs.goal`) and
+``gamma: 0.99`` (SAC's MuJoCo default) instead of 0.95, which would discount the reward of a hit 40 steps ahead by
+0.95 ** 40 = 0.13. As with the prefilled SAC, the demonstrations in the buffer replace the zoo's random warm-up
+(``learning_starts: 1000``): learning starts at once.
 
 Everywhere: observations normalised with the demonstrations' statistics
 (:mod:`sb3_genrl.baselines.normalization`, the zoo's ``normalize`` on observations), rewards not normalised (the
