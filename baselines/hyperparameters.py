@@ -15,10 +15,11 @@ actions.
 
 **SAC + HER** (``sac-her``): rl-zoo3 ``sac.yml``, entry ``FetchReach-v1`` (the zoo's SAC + ``HerReplayBuffer``
 entry): ``learning_rate: 0.001``, ``batch_size: 256``, ``buffer_size: 1e6``, ``ent_coef: 'auto'``,
-``learning_starts: 1000``, ``normalize: True``, ``n_sampled_goal: 4``, ``net_arch: [64, 64]``. Two changes, for
-the tasks' terminal-only reward: ``goal_selection_strategy: 'final'`` instead of ``'future'`` (see
-:mod:`sb3_genrl.envs.goal`) and ``gamma: 0.99`` (SAC's MuJoCo default) instead of 0.95, which would discount the
-reward of a hit 40 steps ahead by 0.95 ** 40 = 0.13.
+``normalize: True``, ``n_sampled_goal: 4``, ``net_arch: [64, 64]``. Two changes, for the tasks' terminal-only
+reward: ``goal_selection_strategy: 'final'`` instead of ``'future'`` (see :mod:`sb3_genrl.envs.goal`) and
+``gamma: 0.99`` (SAC's MuJoCo default) instead of 0.95, which would discount the reward of a hit 40 steps ahead by
+0.95 ** 40 = 0.13. As with the prefilled SAC, the demonstrations in the buffer replace the zoo's random warm-up
+(``learning_starts: 1000``): learning starts at once.
 
 Everywhere: observations normalised with the demonstrations' statistics
 (:mod:`sb3_genrl.baselines.normalization`, the zoo's ``normalize`` on observations), rewards not normalised (the
@@ -43,6 +44,7 @@ SAC_SETTINGS: dict[str, Any] = {"learning_rate": 3e-4, "batch_size": 256, "tau":
 SAC_POLICY: dict[str, Any] = {"net_arch": [256, 256]}
 HER_SETTINGS: dict[str, Any] = {"learning_rate": 1e-3, "batch_size": 256, "gamma": 0.99, "ent_coef": "auto",
                                 "learning_starts": 1000}
+DEMONSTRATIONS_AS_WARM_UP: dict[str, Any] = {"learning_starts": 0}  # SAC prefilled and SAC + HER learn at once
 HER_BUFFER: dict[str, Any] = {"n_sampled_goal": 4, "goal_selection_strategy": "final", "copy_info_dict": True}
 HER_POLICY: dict[str, Any] = {"net_arch": [64, 64]}
 
@@ -52,6 +54,19 @@ def settings_record() -> dict[str, Any]:
     def plain(values: dict[str, Any]) -> dict[str, Any]:
         return {key: value.__name__ if isinstance(value, type) else value for key, value in values.items()}
 
-    return {"ppo": plain(PPO_SETTINGS) | {"policy": plain(PPO_POLICY)},
-            "sac": plain(SAC_SETTINGS) | {"policy": plain(SAC_POLICY)},
-            "sac-her": plain(HER_SETTINGS) | plain(HER_BUFFER) | {"policy": plain(HER_POLICY)}}
+    import inspect
+
+    from sb3_genrl.baselines.bc import behaviour_cloning, fit_actor
+    from sb3_genrl.baselines.normalization import CLIP, STD_FLOOR
+
+    cloning = {name: parameter.default for function in (behaviour_cloning, fit_actor)
+               for name, parameter in inspect.signature(function).parameters.items()
+               if parameter.default is not inspect.Parameter.empty and name != "seed"}
+    observations = {"std_floor": STD_FLOOR, "clip": CLIP, "time_feature": True}
+    return {"ppo": plain(PPO_SETTINGS) | {"policy": plain(PPO_POLICY), "behaviour_cloning": cloning,
+                                          "observations": observations},
+            "sac": plain(SAC_SETTINGS | DEMONSTRATIONS_AS_WARM_UP) | {"policy": plain(SAC_POLICY),
+                                                                       "observations": observations},
+            "sac-no-prefill": plain(SAC_SETTINGS) | {"policy": plain(SAC_POLICY), "observations": observations},
+            "sac-her": plain(HER_SETTINGS | DEMONSTRATIONS_AS_WARM_UP) | plain(HER_BUFFER)
+            | {"policy": plain(HER_POLICY), "observations": observations}}

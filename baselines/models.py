@@ -14,6 +14,7 @@ import numpy as np
 from sb3_genrl.baselines.bc import behaviour_cloning
 from sb3_genrl.baselines.her import add_goal_demonstrations, goal_statistics
 from sb3_genrl.baselines.hyperparameters import (
+    DEMONSTRATIONS_AS_WARM_UP,
     HER_BUFFER,
     HER_POLICY,
     HER_SETTINGS,
@@ -64,7 +65,7 @@ def sac_with_demonstrations(env: gym.Env, transitions: dict[str, np.ndarray], *,
     :param seed: seed of the model
     :param common: passed to ``SAC``
     """
-    settings = SAC_SETTINGS | ({"learning_starts": 0} if prefill else {})
+    settings = SAC_SETTINGS | (DEMONSTRATIONS_AS_WARM_UP if prefill else {})
     n_demos = len(transitions["observations"]) if prefill else 0
     model = SAC("MlpPolicy", env, policy_kwargs=normalized_policy(SAC_POLICY, transitions["observations"]),
                 buffer_size=n_demos + steps, seed=seed, **settings, **common)
@@ -85,7 +86,7 @@ def sac_her_with_demonstrations(env: gym.Env, episodes: dict[str, Any], *, steps
     n_demos = int(np.prod(episodes["rewards"].shape))
     policy_kwargs = HER_POLICY | {"features_extractor_class": NormalizedCombined,
                                   "features_extractor_kwargs": {"statistics": goal_statistics(episodes)}}
-    settings = HER_SETTINGS | {"learning_starts": 0}  # the demonstrations are the warm-up
+    settings = HER_SETTINGS | DEMONSTRATIONS_AS_WARM_UP
     model = SAC("MultiInputPolicy", env, replay_buffer_class=HerReplayBuffer, replay_buffer_kwargs=dict(HER_BUFFER),
                 policy_kwargs=policy_kwargs, buffer_size=n_demos + steps, seed=seed, **settings, **common)
     add_goal_demonstrations(model, episodes)

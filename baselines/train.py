@@ -97,8 +97,9 @@ def train_baseline(
             raise ValueError(f"{algorithm} needs demonstrations (demos=...)")
         transitions = _demonstrations(demos, demo_episodes, spec.name)
         steps = int(episodes) * spec.horizon
-        summary |= {"demo_transitions": len(transitions["observations"]),
-                    "settings": settings_record()["sac" if algorithm == "sac-no-prefill" else algorithm]}
+        summary |= {"demo_transitions": len(transitions["observations"]), "settings": settings_record()[algorithm]}
+        if algorithm == "ppo":
+            summary["settings"]["behaviour_cloning"] |= bc_kwargs or {}
         model = _feedback_model(algorithm, spec.name, transitions, steps, out, summary, eval_goals, bc_kwargs, common)
     recorder = EpisodeRecorder(out / "episodes.csv")
     # Demonstrations, behaviour cloning and its evaluation: wall-clock and this process' CPU seconds.

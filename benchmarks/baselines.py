@@ -67,7 +67,7 @@ def run_settings(method: str, args: argparse.Namespace, seed: int, demos: str, g
                      "batch_episodes": WINDOW}
     else:
         settings |= {"demos": os.path.abspath(demos), "demo_episodes": info["episodes"], "demo_seed": info.get("seed"),
-                     "hyperparameters": settings_record()["sac" if method == "sac-no-prefill" else method]}
+                     "hyperparameters": settings_record()[method]}
     return json.loads(json.dumps(settings))  # as it reads back from JSON
 
 
