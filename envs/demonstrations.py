@@ -129,14 +129,16 @@ def make_demonstrations(task: str | TaskSpec, episodes: int, out_dir: str | os.P
     from sb3_genrl.envs.coverage import coverage_report
 
     import sb3_genrl
+    from sb3_genrl.checks import check_output_dir, check_positive_int, check_seed
     from sb3_genrl.data import write_dataset
 
-    if episodes < 1:
-        raise ValueError(f"episodes must be at least 1, got {episodes}")
-    out_dir = Path(out_dir)
-    if out_dir.exists() and (not out_dir.is_dir() or any(out_dir.iterdir())):
-        raise ValueError(f"{str(out_dir)!r} already exists and is not an empty directory; choose another output path")
     spec = get_task(task)
+    check_positive_int(episodes, "episodes")
+    check_seed(seed)
+    check_positive_int(chunk, "chunk")
+    if n_threads is not None:
+        check_positive_int(n_threads, "n_threads")
+    out_dir = check_output_dir(out_dir, "out_dir", empty=True)
     task = spec.name
     env = spec.make_env()
     began = time.perf_counter()

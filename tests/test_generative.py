@@ -16,7 +16,6 @@ from sb3_genrl.generative import (
     InfoGAN,
     TrajectoryGenerator,
     load,
-    load_trajectories,
     make_generator,
     train_generator,
 )
@@ -276,9 +275,37 @@ def test_train_generator_and_cli_write_loadable_models(tmp_path, capsys):
     floored = load(tmp_path / "vae_floor.pt")
     assert floored.std_floor == 0.2
     assert float(floored.action_std.min()) >= 0.2 * float(floored.action_std.max()) * (1 - 1e-6)
-    assert cli_main(["train-generator", "--data", str(tmp_path / "missing.npy"), "--out", str(out)]) == 2
     assert cli_main(["train-generator", "--data", str(npy), "--model", "vae", "--out", str(out)]) == 2
     assert "needs" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (("--data", "missing.npy"), "argument --data: 'missing.npy' does not exist"),
+    (("--lr", "-1"), "argument --lr: must be a finite number > 0, got -1.0"),
+    (("--lr", "inf"), "argument --lr: must be a finite number > 0, got inf"),
+    (("--epochs", "0"), "argument --epochs: must be an integer >= 1, got 0"),
+    (("--seed", "-1"), "argument --seed: must be an integer between 0 and 4294967295, got -1"),
+    (("--device", "bogus"), "argument --device: must be 'auto' or a torch device"),
+    (("--out", "."), "argument --out: '.' is a folder; expected a file name"),
+])
+def test_train_generator_cli_checks_arguments_first(tmp_path, cli, monkeypatch, args, message):
+    monkeypatch.chdir(tmp_path)
+    np.save("demos.npy", np.zeros((10, 4, 2), dtype=np.float32))
+    argv = dict(zip(args[::2], args[1::2], strict=True))
+    argv = {"--data": "demos.npy", "--epochs": "1", "--out": "vae.pt", **argv}
+    code, _, err = cli("train-generator", *(item for pair in argv.items() for item in pair))
+    assert code == 2 and message in err and not (tmp_path / "vae.pt").exists()
+
+
+def test_train_generator_checks_arguments_before_training(tmp_path):
+    data = np.zeros((10, 4, 2), dtype=np.float32)
+    (tmp_path / "folder").mkdir()
+    for kwargs, message in (({"epochs": -1}, "epochs must be an integer >= 1, got -1"),
+                            ({"batch_size": 2.5}, r"batch_size must be an integer >= 1, got 2.5 \(float\)"),
+                            ({"lr": float("nan")}, "lr must be a finite number > 0"),
+                            ({"out": tmp_path / "folder"}, "is a folder; expected a file name")):
+        with pytest.raises(ValueError, match=message):
+            train_generator(data, **kwargs)
 
 
 def test_infogan_noise_is_fixed_at_decode(tmp_path):
@@ -295,15 +322,3 @@ def test_infogan_noise_is_fixed_at_decode(tmp_path):
     restored = load(tmp_path / "gan.pt")
     assert restored.noise_dim == 3
     np.testing.assert_array_equal(restored.decode(alpha), model.decode(alpha))
-
-
-def test_dataset_directory_is_read_with_load_actions(tmp_path, monkeypatch):
-    import sb3_genrl.data
-
-    data, _ = sine_ramp_trajectories(4, 6, 2, rng=0)
-    calls = []
-    monkeypatch.setattr(sb3_genrl.data, "load_actions", lambda path: calls.append(path) or data)
-    np.testing.assert_array_equal(load_trajectories(tmp_path), data)
-    assert calls == [str(tmp_path)]
-    with pytest.raises(ValueError, match="neither"):
-        load_trajectories(__file__)

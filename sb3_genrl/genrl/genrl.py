@@ -21,7 +21,7 @@ from torch.nn import functional as F
 from torch.nn.utils import parameters_to_vector, vector_to_parameters
 
 from sb3_genrl.generative.base import TrajectoryGenerator
-from sb3_genrl.genrl.policies import BoxScaler, MlpPolicy, MultiInputPolicy, default_log_std_init
+from sb3_genrl.genrl.policies import BoxScaler, MlpPolicy, MultiInputPolicy, actor_parameters, default_log_std_init
 from sb3_genrl.wrappers import latent_action_env
 
 SelfGenRL = TypeVar("SelfGenRL", bound="GenRL")
@@ -251,7 +251,7 @@ class GenRL(OnPolicyAlgorithm):
         """E-step, TRPO variant: maximise eq. 5's surrogate subject to KL(q || pi) < target_kl (Schulman et al. 2015)."""
         objective, kl = self._surrogate(q, *batch)
         # Actor parameters of q: those the KL depends on (the value head is not part of q(alpha|s)).
-        named = [p for name, p in q.named_parameters() if "value" not in name]
+        named = actor_parameters(q)
         grads_kl = th.autograd.grad(kl, named, create_graph=True, allow_unused=True)
         params = [p for p, g in zip(named, grads_kl, strict=True) if g is not None]
         grad_kl = th.cat([g.reshape(-1) for g in grads_kl if g is not None])
@@ -288,7 +288,7 @@ class GenRL(OnPolicyAlgorithm):
 
     def _kl_penalty_e_step(self, q: ActorCriticPolicy, *batch: th.Tensor) -> dict[str, float]:
         """E-step, KL-penalty variant: eq. 5 taken literally, E[q/pi A] - kl_coef KL(q || pi), by Adam."""
-        params = [p for name, p in q.named_parameters() if "value" not in name]
+        params = actor_parameters(q)
         optimizer = th.optim.Adam(params, lr=self.e_step_learning_rate)
         n = len(batch[0])
         for _ in range(self.n_e_step_epochs):
@@ -304,7 +304,7 @@ class GenRL(OnPolicyAlgorithm):
         return {"policy_objective": float(objective - self.kl_coef * kl)}
 
     def _fit_value_function(self) -> list[float]:
-        actor_params = [p for name, p in self.policy.named_parameters() if "value" not in name]
+        actor_params = actor_parameters(self.policy)
         losses = []
         for _ in range(self.n_critic_updates):
             for rollout_data in self.rollout_buffer.get(self.batch_size):

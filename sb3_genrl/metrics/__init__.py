@@ -1,12 +1,13 @@
 """Evaluation of generative models (paper section 5.2): precision and recall, DwPR, correlation with policy scores."""
 
-from sb3_genrl.metrics.correlation import CorrelationRow, CorrelationTable, correlation_table, pearson
+from sb3_genrl.metrics.correlation import MEASURES, CorrelationRow, CorrelationTable, correlation_table, pearson
 from sb3_genrl.metrics.dwpr import DwPR, default_intervention_values, dwpr
-from sb3_genrl.metrics.evaluate import GeneratorEvaluation, evaluate_generators, load_real_trajectories
+from sb3_genrl.metrics.evaluate import GeneratorEvaluation, evaluate_generators
 from sb3_genrl.metrics.plots import labelled_scatter
 from sb3_genrl.metrics.precision_recall import PrecisionRecall, precision_recall
 
 __all__ = [
+    "MEASURES",
     "CorrelationRow",
     "CorrelationTable",
     "DwPR",
@@ -17,7 +18,6 @@ __all__ = [
     "dwpr",
     "evaluate_generators",
     "labelled_scatter",
-    "load_real_trajectories",
     "pearson",
     "precision_recall",
 ]

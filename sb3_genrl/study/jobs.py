@@ -40,7 +40,7 @@ def generator_job(task: str, name: str, scale: dict[str, Any], dataset: str, tas
     from sb3_genrl.data import load_actions
     from sb3_genrl.generative import PRESETS, load, train_generator
     from sb3_genrl.genrl import train_policy
-    from sb3_genrl.metrics import dwpr, precision_recall
+    from sb3_genrl.metrics import MEASURES, dwpr, precision_recall
 
     torch.set_num_threads(torch_threads)
     root = pathlib.Path(task_dir)
@@ -84,7 +84,7 @@ def generator_job(task: str, name: str, scale: dict[str, Any], dataset: str, tas
     spec = PRESETS[name]
     return {"model": name, "type": "VAE" if name.startswith("VAE") else "GAN", "latent_dim": spec["latent_dim"],
             "beta": spec.get("beta"), "info_weight": spec.get("info_weight"), **{
-                key: evaluation[key] for key in ("precision", "recall", "delta_1", "delta_2", "mean_delta")},
+                key: evaluation[key] for key in MEASURES},
             "rewards": rewards, "score": float(np.max(rewards))}
 
 

@@ -17,7 +17,8 @@ QUICKSTART_PRESET = "VAE1"
 
 def quickstart(out_dir: str | os.PathLike, *, task: str, demo_episodes: int = 4000, epochs: int = 300,
                policy_episodes: int = 3000, pr_samples: int = 1000, dwpr_samples: int = 500, seed: int = 0,
-               video: bool = True, device: str = "auto", log: Callable[[str], None] | None = None) -> pathlib.Path:
+               video: bool = True, device: str = "auto", progress_bar: bool = True,
+               log: Callable[[str], None] | None = None) -> pathlib.Path:
     """Run the whole GenRL workflow at a small size and write ``report.md`` in ``out_dir``.
 
     Each stage is skipped when its output exists, so a rerun resumes. Defaults take about four minutes on a 2-core CPU.
@@ -30,15 +31,25 @@ def quickstart(out_dir: str | os.PathLike, *, task: str, demo_episodes: int = 40
     :param pr_samples: samples per set for precision and recall
     :param dwpr_samples: samples per intervention for DwPR
     :param video: also render the trained policy (a GIF and a strip of frames)
+    :param progress_bar: show the stages' progress bars
     :return: the report's path
     """
     import torch
 
+    from sb3_genrl.checks import check_device, check_output_dir, check_positive_int, check_seed
+    from sb3_genrl.envs import get_task
     from sb3_genrl.envs.demonstrations import make_demonstrations
     from sb3_genrl.generative import load, train_generator
     from sb3_genrl.genrl import GenRL, evaluate_on_goals, train_policy
     from sb3_genrl.metrics import evaluate_generators
 
+    get_task(task)
+    for name, value in (("demo_episodes", demo_episodes), ("epochs", epochs), ("policy_episodes", policy_episodes),
+                        ("pr_samples", pr_samples), ("dwpr_samples", dwpr_samples)):
+        check_positive_int(value, name)
+    check_seed(seed)
+    check_device(device)
+    check_output_dir(out_dir)
     # The models are small: one torch thread is as fast as several and leaves the other cores to MuJoCo.
     torch.set_num_threads(1)
     log = log or (lambda _line: None)
@@ -55,19 +66,19 @@ def quickstart(out_dir: str | os.PathLike, *, task: str, demo_episodes: int = 40
 
     dataset = out / "demonstrations"
     stage("demonstrations", dataset.exists(),
-          lambda: make_demonstrations(task, demo_episodes, dataset, seed=seed, progress_bar=True))
+          lambda: make_demonstrations(task, demo_episodes, dataset, seed=seed, progress_bar=progress_bar))
     model_path = out / "vae.pt"
     stage("generator", model_path.exists(),
           lambda: train_generator(dataset, preset=QUICKSTART_PRESET, epochs=epochs, eval_every=10, seed=seed, out=model_path,
-                                  progress_bar=True, device=device, tensorboard_log=str(out / "tensorboard")))
+                                  progress_bar=progress_bar, device=device, tensorboard_log=str(out / "tensorboard")))
     evaluation = out / "evaluation"
     stage("evaluation", (evaluation / "results.json").exists(),
-          lambda: evaluate_generators({QUICKSTART_PRESET: model_path}, dataset, n=pr_samples, dwpr_n=dwpr_samples, seed=seed,
-                                      out_dir=evaluation, device=device))
+          lambda: evaluate_generators({QUICKSTART_PRESET: model_path}, dataset, n=min(pr_samples, demo_episodes),
+                                      dwpr_n=dwpr_samples, seed=seed, out_dir=evaluation, device=device))
     policy = out / "policy"
     stage("policy", (policy / "summary.json").exists(),
           lambda: train_policy(task, str(model_path), episodes=policy_episodes, seed=seed, out_dir=policy,
-                               device=device, progress_bar=True))
+                               device=device, progress_bar=progress_bar))
     if video:
         from sb3_genrl.video import record_video
 
@@ -103,6 +114,7 @@ def quickstart(out_dir: str | os.PathLike, *, task: str, demo_episodes: int = 40
 
 
 def _measure_line(measures: list[dict[str, Any]]) -> str:
+    from sb3_genrl.metrics import MEASURES
+
     row = measures[0]
-    return ", ".join(f"{key} {row[key]:.3f}" for key in ("precision", "recall", "delta_1", "delta_2", "mean_delta")
-                     if key in row)
+    return ", ".join(f"{key} {row[key]:.3f}" for key in MEASURES if key in row)

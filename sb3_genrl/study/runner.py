@@ -9,12 +9,12 @@ from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any
 
+from sb3_genrl.baselines import BASELINES
+from sb3_genrl.checks import check_device, check_output_dir, check_positive_int
 from sb3_genrl.study.jobs import baseline_job, generator_job
 from sb3_genrl.study.report import write_task_report
 from sb3_genrl.study.scales import SCALES, StudyScale
 
-# PPO and SAC on the feedback task with the demonstrations, and stock algorithms on the best generator's latent space.
-BASELINES = ("ppo", "sac", "latent-ppo", "latent-sac", "latent-trpo")
 MODELS = tuple(f"VAE{i}" for i in range(1, 10)) + tuple(f"GAN{i}" for i in range(1, 10))
 
 
@@ -48,8 +48,11 @@ def run_study(task: str, scale: str | StudyScale, out_dir: str | os.PathLike, *,
     unknown = [m for m in models if m not in MODELS]
     if unknown:
         raise ValueError(f"unknown models {unknown}; expected names among {MODELS}")
+    if workers is not None:
+        check_positive_int(workers, "workers")
+    check_device(device)
     preset = scale if isinstance(scale, StudyScale) else SCALES[scale]
-    out = pathlib.Path(out_dir)
+    out = check_output_dir(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     scale_name = "custom" if isinstance(scale, StudyScale) else scale
     (out / "study.json").write_text(json.dumps({"task": task, "scale": scale_name, **preset.as_dict()}, indent=2))
