@@ -8,8 +8,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
-from stable_baselines3.common.vec_env import DummyVecEnv
-from test_wrapper import (
+from conftest import (
     ContextReachEnv,
     FastReachEnv,
     LinearGenerator,
@@ -17,6 +16,7 @@ from test_wrapper import (
     load_linear_generator,
     optimal_latent,
 )
+from stable_baselines3.common.vec_env import DummyVecEnv
 
 from sb3_genrl import GenRL, LatentActionWrapper
 from sb3_genrl.cli import main as cli_main
