@@ -144,6 +144,44 @@ def test_library_functions_check_before_any_work(tmp_path):
     assert list(tmp_path.iterdir()) == []  # no demonstrations were made, no folder created
 
 
+def test_every_library_entry_point_checks_its_output_path_and_seed_first(tmp_path, hockey_generator):
+    from sb3_genrl.baselines.compare import compare_runs
+    from sb3_genrl.baselines.train import train_baseline
+    from sb3_genrl.envs.demonstrations import make_demonstrations
+
+    from sb3_genrl.generative import train_generator
+    from sb3_genrl.genrl import train_policy
+    from sb3_genrl.metrics import evaluate_generators
+    from sb3_genrl.showcase import play_scripted
+    from sb3_genrl.study import run_study
+    from sb3_genrl.study.quickstart import quickstart
+    from sb3_genrl.video import record_video
+
+    trajectories = np.zeros((5, 69, 7), dtype=np.float32)
+    entry_points = {
+        "make_demonstrations": lambda out, seed: make_demonstrations("hockey", 2, out, seed=seed, progress_bar=False),
+        "train_generator": lambda out, seed: train_generator(trajectories, out=out / "g.pt", seed=seed),
+        "evaluate_generators": lambda out, seed: evaluate_generators([hockey_generator], trajectories, n=5, out_dir=out,
+                                                                     seed=seed),
+        "train_policy": lambda out, seed: train_policy("hockey", hockey_generator, episodes=8, out_dir=out, seed=seed),
+        "train_baseline": lambda out, seed: train_baseline("latent-ppo", "hockey", episodes=8, out_dir=out, seed=seed,
+                                                           generator=hockey_generator),
+        "compare_runs": lambda out, seed: compare_runs([tmp_path], out),
+        "play_scripted": lambda out, seed: play_scripted(out, seed=seed),
+        "record_video": lambda out, seed: record_video("hockey", out / "v.gif", generator=hockey_generator, seed=seed),
+        "quickstart": lambda out, seed: quickstart(out, task="hockey", seed=seed),
+        "run_study": lambda out, seed: run_study("hockey", "smoke", out),
+    }
+    (tmp_path / "file").write_text("")
+    for name, call in entry_points.items():
+        with pytest.raises(ValueError, match="is a file"):
+            call(tmp_path / "file", 0)
+        if name not in ("compare_runs", "run_study"):  # these two draw nothing at random
+            with pytest.raises(ValueError, match="seed must be an integer between 0 and 4294967295, got -1"):
+                call(tmp_path / "out", -1)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file"]  # nothing was written
+
+
 def test_play_renders_the_scripted_motion_it_reports(tmp_path, cli):
     code, printed, err = cli("play", "--task", "hockey", "--seed", 3, "--out", tmp_path)
     assert code == 0, err
