@@ -14,20 +14,20 @@ Latent-space baselines (the same generator as GenRL, on :class:`~sb3_genrl.Laten
 episodes): ``latent-ppo``, ``latent-sac``, ``latent-trpo`` - stock SB3 / sb3-contrib algorithms with their
 defaults except 64 episodes per update (GenRL's batch), so they show what the EM update adds.
 
-Every run writes ``episodes.csv`` (one row per episode: return, table contacts, distance, written as training
-goes), ``learning_curve.csv`` / ``learning_curve.png`` (mean over windows of 64 episodes), TensorBoard logs in
-``tensorboard/``, the model, and ``summary.json``.
+Every run writes ``episodes.monitor.csv`` (SB3's Monitor: one row per episode with its return, table contacts and
+distance, written as training goes), ``learning_curve.csv`` / ``learning_curve.png`` (mean over windows of 64
+episodes), SB3's logs in ``logs/`` (``progress.csv`` and TensorBoard), the model, and ``summary.json``.
 """
 
 from __future__ import annotations
 
-import json
 import os
 import pathlib
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from sb3_genrl.baselines import BASELINES
 from sb3_genrl.baselines.bc import behaviour_cloning
 from sb3_genrl.baselines.prefill import prefill_replay_buffer
 from sb3_genrl.envs import get_task
@@ -35,10 +35,10 @@ from stable_baselines3 import PPO, SAC
 from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.monitor import Monitor
 
-from sb3_genrl.callbacks import EpisodeRecorder
-from sb3_genrl.curves import write_learning_curve
+from sb3_genrl.checks import check_device, check_input_path, check_output_dir, check_positive_int, check_seed
+from sb3_genrl.curves import MONITOR_FILE, monitor_episodes, read_monitor, training_logger, write_learning_curve
+from sb3_genrl.utils import atomic_write_json
 
-BASELINES = ("ppo", "sac", "latent-ppo", "latent-sac", "latent-trpo")
 LATENT_BATCH = 64  # episodes per update of the latent-space baselines (GenRL's default N)
 
 
@@ -74,24 +74,19 @@ def train_baseline(
     :param eval_episodes: episodes to evaluate the behaviour-cloned policy before RL (``ppo``)
     :param window: episodes per point of the learning curve
     """
-    if algorithm not in BASELINES:
-        raise ValueError(f"unknown baseline {algorithm!r}; expected one of {BASELINES}")
-    if int(episodes) != episodes or episodes < 1:
-        raise ValueError(f"episodes must be a positive integer, got {episodes!r}")
+    _check_arguments(algorithm, episodes, seed, demos, demo_episodes, generator, bc_epochs, device)
     spec = get_task(task)
     task, env_id = spec.name, spec.env_id
-    out = pathlib.Path(out_dir)
+    out = check_output_dir(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     summary: dict[str, Any] = {"algorithm": algorithm, "task": task, "episodes": int(episodes), "seed": seed}
-    common = {"seed": seed, "device": device, "verbose": verbose, "tensorboard_log": str(out / "tensorboard")}
+    common = {"seed": seed, "device": device, "verbose": verbose}
     if algorithm.startswith("latent-"):
-        model, steps = _latent_model(algorithm, env_id, generator, episodes, common)
+        model, steps = _latent_model(algorithm, env_id, generator, episodes, common, out)
     else:
-        if demos is None:
-            raise ValueError(f"{algorithm} needs demonstrations (demos=...)")
         transitions = _demonstrations(demos, demo_episodes, task)
         summary["demo_transitions"] = len(transitions["observations"])
-        env = gym.make(env_id)
+        env = monitor_episodes(gym.make(env_id), out)
         horizon = env.unwrapped.horizon
         steps = int(episodes) * horizon
         if algorithm == "ppo":
@@ -106,15 +101,36 @@ def train_baseline(
             model = SAC("MlpPolicy", env, buffer_size=max(len(transitions["observations"]) + steps, 1), learning_starts=0,
                         **common)
             prefill_replay_buffer(model, transitions)
-    recorder = EpisodeRecorder(out / "episodes.csv")
-    model.learn(total_timesteps=steps, callback=recorder, progress_bar=progress_bar, tb_log_name=algorithm)
+    model.set_logger(training_logger(out, verbose))
+    model.learn(total_timesteps=steps, progress_bar=progress_bar, tb_log_name=algorithm)
+    model.logger.close()
     model.save(out / f"{algorithm}_policy.zip")
-    curve = write_learning_curve(out / "episodes.csv", out, window=window, title=f"{algorithm} on {task}")
-    returns = np.asarray(recorder.returns)
+    curve = write_learning_curve(out / MONITOR_FILE, out, window=window, title=f"{algorithm} on {task}")
+    returns = read_monitor(out / MONITOR_FILE)["return"]
     summary |= {"episodes_played": len(returns), "final_mean_reward": float(curve["mean_reward"][-1]),
                 "best_mean_reward": float(np.max(curve["mean_reward"])), "max_reward": float(returns.max())}
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    atomic_write_json(out / "summary.json", summary)
     return summary
+
+
+def _check_arguments(algorithm: str, episodes: int, seed: int, demos: Any, demo_episodes: int | None, generator: Any,
+                     bc_epochs: int, device: str) -> None:
+    """Refuse bad arguments before anything is built or simulated."""
+    if algorithm not in BASELINES:
+        raise ValueError(f"unknown baseline {algorithm!r}; expected one of {BASELINES}")
+    if algorithm.startswith("latent-") and generator is None:
+        raise ValueError(f"{algorithm} needs a generator (generator=...)")
+    if not algorithm.startswith("latent-") and demos is None:
+        raise ValueError(f"{algorithm} needs demonstrations (demos=...)")
+    check_positive_int(episodes, "episodes")
+    check_seed(seed)
+    check_positive_int(bc_epochs, "bc_epochs")
+    check_device(device)
+    if demo_episodes is not None:
+        check_positive_int(demo_episodes, "demo_episodes")
+    for name, path in (("demos", demos), ("generator", generator)):
+        if isinstance(path, str | os.PathLike):
+            check_input_path(path, name)
 
 
 def _demonstrations(demos: Any, demo_episodes: int | None, task: str) -> dict[str, np.ndarray]:
@@ -133,16 +149,15 @@ def _demonstrations(demos: Any, demo_episodes: int | None, task: str) -> dict[st
     return {key: np.asarray(value)[:n] for key, value in transitions.items()}
 
 
-def _latent_model(algorithm: str, env_id: str, generator: Any, episodes: int, common: dict) -> tuple[Any, int]:
+def _latent_model(algorithm: str, env_id: str, generator: Any, episodes: int, common: dict,
+                  out: pathlib.Path) -> tuple[Any, int]:
     from sb3_genrl import LatentActionWrapper
 
-    if generator is None:
-        raise ValueError(f"{algorithm} needs a generator (generator=...)")
     if isinstance(generator, str | os.PathLike):
         from sb3_genrl.generative import load
 
         generator = load(generator)
-    env = LatentActionWrapper(gym.make(env_id), generator)
+    env = monitor_episodes(LatentActionWrapper(gym.make(env_id), generator), out)
     if algorithm == "latent-ppo":
         model = PPO("MlpPolicy", env, n_steps=LATENT_BATCH, batch_size=LATENT_BATCH, **common)
     elif algorithm == "latent-sac":
