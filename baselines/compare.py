@@ -8,6 +8,7 @@ table contacts.
 from __future__ import annotations
 
 import csv
+import io
 import json
 import os
 import pathlib
@@ -18,6 +19,7 @@ import numpy as np
 from sb3_genrl.checks import check_output_dir
 from sb3_genrl.curves import MONITOR_FILE, mean_std_over_seeds, plot_curves, read_curve, read_monitor
 from sb3_genrl.markdown import markdown_table
+from sb3_genrl.utils import atomic_path, atomic_write_text
 
 # How the comparison names each method (``genrl`` and :data:`~sb3_genrl.baselines.BASELINES`).
 LABELS = {"genrl": "GenRL", "ppo": "PPO (BC)", "sac": "SAC (prefilled)", "latent-ppo": "PPO on latent",
@@ -46,10 +48,11 @@ def compare_runs(run_dirs: list[str | os.PathLike], out_dir: str | os.PathLike, 
     plot_curves(series, out / "reward_vs_episodes.png", ylabel="mean reward (-distance, m)",
                 title=f"{task_name}: mean +- std over seeds")
     _plot_contacts(rows, out / "table_contacts.png", title=f"{task_name}: table contacts per episode")
-    with (out / "comparison.csv").open("w", newline="") as file:
-        writer = csv.DictWriter(file, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
+    text = io.StringIO()
+    writer = csv.DictWriter(text, fieldnames=list(rows[0]))
+    writer.writeheader()
+    writer.writerows(rows)
+    atomic_write_text(out / "comparison.csv", text.getvalue(), newline="")
     header = ["method", "seeds", f"reward at {budget} episodes", "episodes run", "final mean reward", "best mean reward",
               "table contacts / episode"]
     table = [[row["method"], row["seeds"], f"{row['reward_at_budget']:.3f} +- {row['reward_at_budget_std']:.3f}",
@@ -61,7 +64,7 @@ def compare_runs(run_dirs: list[str | os.PathLike], out_dir: str | os.PathLike, 
              "episodes) and at the end of each method's own runs.", "", markdown_table(header, table), "",
              "![reward vs episodes](reward_vs_episodes.png)", "", "![table contacts](table_contacts.png)", ""]
     path = out / "comparison.md"
-    path.write_text("\n".join(lines))
+    atomic_write_text(path, "\n".join(lines))
     return path
 
 
@@ -120,4 +123,5 @@ def _plot_contacts(rows: list[dict], path: pathlib.Path, *, title: str) -> None:
     ax.set_title(title)
     ax.tick_params(axis="x", labelrotation=20)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format=path.suffix[1:] or "png")
