@@ -22,8 +22,9 @@ from sb3_genrl.markdown import markdown_table
 from sb3_genrl.utils import atomic_path, atomic_write_text
 
 # How the comparison names each method (``genrl`` and :data:`~sb3_genrl.baselines.BASELINES`).
-LABELS = {"genrl": "GenRL", "ppo": "PPO (BC)", "sac": "SAC (prefilled)", "latent-ppo": "PPO on latent",
-          "latent-sac": "SAC on latent", "latent-trpo": "TRPO on latent"}
+LABELS = {"genrl": "GenRL", "ppo": "PPO (BC)", "sac": "SAC (prefilled)", "sac-no-prefill": "SAC (no prefill)",
+          "sac-her": "SAC + HER", "latent-ppo": "PPO on latent", "latent-sac": "SAC on latent",
+          "latent-trpo": "TRPO on latent"}
 
 
 def compare_runs(run_dirs: list[str | os.PathLike], out_dir: str | os.PathLike, *, task: str | None = None) -> pathlib.Path:

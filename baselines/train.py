@@ -1,45 +1,52 @@
 """Train a baseline on a task with the same outputs as ``genrl train-policy`` (paper sections 6.1.5, 6.2, 6.3).
 
-Feedback baselines (per-step actions, observation = goal + joint positions + joint velocities):
+Feedback baselines (per-step actions on the task's observation plus the time feature, see
+:mod:`sb3_genrl.baselines.feedback`; settings in :mod:`sb3_genrl.baselines.hyperparameters`):
 
-- ``ppo``: SB3 PPO whose actor is first fitted to the demonstrations' state-action pairs by behaviour cloning
-  (:func:`~sb3_genrl.baselines.bc.behaviour_cloning`, negative log-likelihood), then trained on the sparse
-  terminal reward. Hyperparameters are SB3's PPO defaults (which follow the PPO paper's MuJoCo settings) except
-  ``n_steps`` = 16 episodes per update, so that small episode budgets still give many updates.
-- ``sac``: SB3 SAC with SB3's defaults (SAC paper values: lr 3e-4, batch 256, tau 0.005, automatic entropy), its
-  replay buffer first filled with the same demonstration transitions and rewards
-  (:func:`~sb3_genrl.baselines.prefill.prefill_replay_buffer`) and no random warm-up.
+- ``ppo``: PPO whose actor is first cloned from the demonstrations (:mod:`sb3_genrl.baselines.bc`: held-out
+  episodes, early stopping, exploration std = held-out residual std), then trained on the sparse terminal reward.
+  The summary records the cloned policy's deterministic and sampled mean distance to :data:`EVAL_GOALS` held-out
+  goals and what PPO's first batch (its first rollout, sampled from the cloned policy) scored.
+- ``sac``: SAC with its replay buffer prefilled with the demonstration transitions and rewards.
+- ``sac-no-prefill``: the same SAC without the demonstrations in its buffer (their statistics still normalise the
+  observations), for reference.
+- ``sac-her``: SAC with hindsight experience replay on the task's goal-conditioned variant
+  (:mod:`sb3_genrl.envs.goal`), the demonstrations written into its ``HerReplayBuffer`` as episodes.
 
 Latent-space baselines (the same generator as GenRL, on :class:`~sb3_genrl.LatentActionWrapper`, one-step
 episodes): ``latent-ppo``, ``latent-sac``, ``latent-trpo`` - stock SB3 / sb3-contrib algorithms with their
 defaults except 64 episodes per update (GenRL's batch), so they show what the EM update adds.
 
-Every run writes ``episodes.monitor.csv`` (SB3's Monitor: one row per episode with its return, table contacts and
-distance, written as training goes), ``learning_curve.csv`` / ``learning_curve.png`` (mean over windows of 64
-episodes), SB3's logs in ``logs/`` (``progress.csv`` and TensorBoard), the model, and ``summary.json``.
+Every run writes ``episodes.monitor.csv`` (SB3's Monitor: one row per episode with its return, length, table
+contacts, distance and the process' CPU seconds so far, written as training goes), ``learning_curve.csv`` /
+``learning_curve.png`` (mean over windows of 64 episodes), SB3's logs in ``logs/`` (``progress.csv`` and
+TensorBoard), the model (with its normalisation statistics; ``ppo`` also the cloned policy before PPO,
+``bc_policy.zip``), and ``summary.json``.
 """
 
 from __future__ import annotations
 
 import os
 import pathlib
+import time
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from sb3_genrl.baselines import BASELINES
-from sb3_genrl.baselines.bc import behaviour_cloning
-from sb3_genrl.baselines.prefill import prefill_replay_buffer
+from sb3_genrl.baselines import BASELINES, LATENT_BASELINES
+from sb3_genrl.baselines.feedback import add_time_feature, evaluate_feedback_policy, make_feedback_env
+from sb3_genrl.baselines.her import goal_episodes
+from sb3_genrl.baselines.hyperparameters import PPO_SETTINGS, settings_record
+from sb3_genrl.baselines.models import ppo_with_behaviour_cloning, sac_her_with_demonstrations, sac_with_demonstrations
 from sb3_genrl.envs import get_task
 from stable_baselines3 import PPO, SAC
-from stable_baselines3.common.evaluation import evaluate_policy
-from stable_baselines3.common.monitor import Monitor
 
 from sb3_genrl.checks import check_device, check_input_path, check_output_dir, check_positive_int, check_seed
 from sb3_genrl.curves import MONITOR_FILE, monitor_episodes, read_monitor, training_logger, write_learning_curve
 from sb3_genrl.utils import atomic_write_json
 
 LATENT_BATCH = 64  # episodes per update of the latent-space baselines (GenRL's default N)
+EVAL_GOALS, EVAL_GOAL_SEED = 100, 12345  # held-out goals of the cloned policy's evaluation (never used for tuning)
 
 
 def train_baseline(
@@ -52,8 +59,8 @@ def train_baseline(
     demos: str | os.PathLike | dict[str, np.ndarray] | None = None,
     demo_episodes: int | None = None,
     generator: Any = None,
-    bc_epochs: int = 5,
-    eval_episodes: int = 20,
+    bc_kwargs: dict[str, Any] | None = None,
+    eval_goals: int = EVAL_GOALS,
     device: str = "auto",
     progress_bar: bool = False,
     verbose: int = 0,
@@ -61,76 +68,111 @@ def train_baseline(
 ) -> dict[str, Any]:
     """Train one baseline for ``episodes`` episodes and write its outputs to ``out_dir``.
 
-    :param algorithm: one of ``ppo``, ``sac``, ``latent-ppo``, ``latent-sac``, ``latent-trpo``
+    :param algorithm: one of :data:`BASELINES`
     :param task: a task name from :data:`sb3_genrl.envs.TASKS` (or its Gymnasium id)
-    :param episodes: budget of episodes (the horizon's worth of steps each for ``ppo``/``sac``)
+    :param episodes: budget of episodes (the horizon's worth of environment steps each for the feedback baselines)
     :param out_dir: output folder (created)
     :param seed: random seed
-    :param demos: demonstrations for ``ppo``/``sac``: a dataset path or a transitions dict (see
+    :param demos: demonstrations for the feedback baselines: a dataset path or a transitions dict (see
         :func:`sb3_genrl.data.load_transitions`)
     :param demo_episodes: use only the first ``demo_episodes`` demonstration episodes (default: all)
     :param generator: a generator (or its file) for the latent-space baselines
-    :param bc_epochs: behaviour cloning epochs (``ppo``)
-    :param eval_episodes: episodes to evaluate the behaviour-cloned policy before RL (``ppo``)
+    :param bc_kwargs: behaviour cloning options (``ppo``; see :func:`~sb3_genrl.baselines.bc.behaviour_cloning`)
+    :param eval_goals: held-out goals on which the cloned policy is evaluated (``ppo``)
     :param window: episodes per point of the learning curve
     """
-    _check_arguments(algorithm, episodes, seed, demos, demo_episodes, generator, bc_epochs, device)
+    _check_arguments(algorithm, episodes, seed, demos, demo_episodes, generator, eval_goals, device)
     spec = get_task(task)
-    task, env_id = spec.name, spec.env_id
     out = check_output_dir(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    summary: dict[str, Any] = {"algorithm": algorithm, "task": task, "episodes": int(episodes), "seed": seed}
+    summary: dict[str, Any] = {"algorithm": algorithm, "task": spec.name, "episodes": int(episodes), "seed": seed}
     common = {"seed": seed, "device": device, "verbose": verbose}
-    if algorithm.startswith("latent-"):
-        model, steps = _latent_model(algorithm, env_id, generator, episodes, common, out)
+    began, began_cpu = time.perf_counter(), time.process_time()
+    if algorithm in LATENT_BASELINES:
+        model, steps = _latent_model(algorithm, spec.env_id, generator, episodes, common, out)
     else:
-        transitions = _demonstrations(demos, demo_episodes, task)
-        summary["demo_transitions"] = len(transitions["observations"])
-        env = monitor_episodes(gym.make(env_id), out)
-        horizon = env.unwrapped.horizon
-        steps = int(episodes) * horizon
-        if algorithm == "ppo":
-            model = PPO("MlpPolicy", env, n_steps=16 * horizon, batch_size=4 * horizon, **common)
-            summary["bc_loss"] = behaviour_cloning(model.policy, transitions["observations"], transitions["actions"],
-                                                   epochs=bc_epochs, seed=seed)
-            eval_env = Monitor(gym.make(env_id))
-            eval_env.reset(seed=seed + 10_000)
-            summary["bc_mean_reward"], summary["bc_std_reward"] = (float(v) for v in evaluate_policy(
-                model, eval_env, n_eval_episodes=eval_episodes, deterministic=True))
-        else:
-            model = SAC("MlpPolicy", env, buffer_size=max(len(transitions["observations"]) + steps, 1), learning_starts=0,
-                        **common)
-            prefill_replay_buffer(model, transitions)
+        transitions = _demonstrations(demos, demo_episodes, spec.name)
+        steps = int(episodes) * spec.horizon
+        summary |= {"demo_transitions": len(transitions["observations"]),
+                    "settings": settings_record()["sac" if algorithm == "sac-no-prefill" else algorithm]}
+        model = _feedback_model(algorithm, spec.name, transitions, steps, out, summary, eval_goals, bc_kwargs, common)
+    # Demonstrations, behaviour cloning and its evaluation: wall-clock and this process' CPU seconds.
+    summary |= {"setup_seconds": time.perf_counter() - began, "setup_cpu_seconds": time.process_time() - began_cpu}
     model.set_logger(training_logger(out, verbose))
+    began = time.perf_counter()
     model.learn(total_timesteps=steps, progress_bar=progress_bar, tb_log_name=algorithm)
+    summary["learn_seconds"] = time.perf_counter() - began
     model.logger.close()
     model.save(out / f"{algorithm}_policy.zip")
-    curve = write_learning_curve(out / MONITOR_FILE, out, window=window, title=f"{algorithm} on {task}")
-    returns = read_monitor(out / MONITOR_FILE)["return"]
+    curve = write_learning_curve(out / MONITOR_FILE, out, window=window, title=f"{algorithm} on {spec.name}")
+    episodes_record = read_monitor(out / MONITOR_FILE)
+    returns = episodes_record["return"]
     summary |= {"episodes_played": len(returns), "final_mean_reward": float(curve["mean_reward"][-1]),
                 "best_mean_reward": float(np.max(curve["mean_reward"])), "max_reward": float(returns.max())}
+    if algorithm == "ppo":
+        summary["first_batch"] = _first_batch(episodes_record)
     atomic_write_json(out / "summary.json", summary)
     return summary
 
 
 def _check_arguments(algorithm: str, episodes: int, seed: int, demos: Any, demo_episodes: int | None, generator: Any,
-                     bc_epochs: int, device: str) -> None:
+                     eval_goals: int, device: str) -> None:
     """Refuse bad arguments before anything is built or simulated."""
     if algorithm not in BASELINES:
         raise ValueError(f"unknown baseline {algorithm!r}; expected one of {BASELINES}")
-    if algorithm.startswith("latent-") and generator is None:
+    if algorithm in LATENT_BASELINES and generator is None:
         raise ValueError(f"{algorithm} needs a generator (generator=...)")
-    if not algorithm.startswith("latent-") and demos is None:
+    if algorithm not in LATENT_BASELINES and demos is None:
         raise ValueError(f"{algorithm} needs demonstrations (demos=...)")
     check_positive_int(episodes, "episodes")
     check_seed(seed)
-    check_positive_int(bc_epochs, "bc_epochs")
+    check_positive_int(eval_goals, "eval_goals")
     check_device(device)
     if demo_episodes is not None:
         check_positive_int(demo_episodes, "demo_episodes")
     for name, path in (("demos", demos), ("generator", generator)):
         if isinstance(path, str | os.PathLike):
             check_input_path(path, name)
+
+
+def _feedback_model(algorithm: str, task: str, transitions: dict[str, np.ndarray], steps: int, out: pathlib.Path,
+                    summary: dict[str, Any], eval_goals: int, bc_kwargs: dict[str, Any] | None,
+                    common: dict[str, Any]) -> PPO | SAC:
+    """The feedback baseline's model on a monitored env, its demonstrations in place; behaviour cloning's record
+    goes to ``summary``."""
+    horizon = get_task(task).horizon
+    if algorithm == "sac-her":
+        env = monitor_episodes(gym.make(get_task(task).goal_env_id), out)
+        return sac_her_with_demonstrations(env, goal_episodes(task, transitions), steps=steps, **common)
+    transitions = add_time_feature(transitions, horizon)
+    env = monitor_episodes(make_feedback_env(task), out)
+    if algorithm != "ppo":
+        return sac_with_demonstrations(env, transitions, steps=steps, prefill=algorithm == "sac", **common)
+    model, record = ppo_with_behaviour_cloning(env, transitions, bc_kwargs=bc_kwargs, **common)
+    model.save(out / "bc_policy.zip")  # before PPO changes it
+    distances = {}
+    for mode in ("deterministic", "sampled"):
+        rewards = evaluate_feedback_policy(model, task, goals=eval_goals, seed=EVAL_GOAL_SEED,
+                                           deterministic=mode == "deterministic")["rewards"]
+        distances[f"{mode}_distance"] = float(-rewards.mean())
+    best = record["best_epoch"] - 1
+    summary["bc"] = {"epochs": record["epochs"], "best_epoch": record["best_epoch"],
+                     "train_loss": record["train_loss"][best], "heldout_loss": record["heldout_loss"][best],
+                     "train_episodes": record["train_episodes"], "heldout_episodes": record["heldout_episodes"],
+                     "residual_std": record["residual_std"], "action_std": record["action_std"],
+                     "eval_goals": eval_goals, "eval_goal_seed": EVAL_GOAL_SEED, **distances}
+    return model
+
+
+def _first_batch(episodes: dict[str, np.ndarray]) -> dict[str, Any]:
+    """What PPO's first rollout (sampled from the cloned policy, before any PPO update) and first 64 episodes scored.
+
+    :param episodes: the run's Monitor columns (one env: the timesteps at each episode's end are the lengths' sum)
+    """
+    returns = episodes["return"]
+    first = returns[: int(np.sum(np.cumsum(episodes["length"]) <= PPO_SETTINGS["n_steps"]))]
+    return {"episodes": len(first), "mean_distance": float(-first.mean()) if len(first) else None,
+            "first_64_mean_distance": float(-returns[:64].mean())}
 
 
 def _demonstrations(demos: Any, demo_episodes: int | None, task: str) -> dict[str, np.ndarray]:

@@ -3,7 +3,8 @@
 The paper's MuJoCo tasks (section 6.1.1) are ``hockey`` (``GenRL/Hockey-v0``) and ``basketball``
 (``GenRL/Basketball-v0``). Each lives in one module (:mod:`sb3_genrl.envs.hockey`, :mod:`sb3_genrl.envs.basketball`)
 that declares its :class:`TaskSpec`; a new task is one more such module and one :func:`register_task` call (for the
-package's own tasks, one more entry in :data:`_BUILT_IN`).
+package's own tasks, one more entry in :data:`_BUILT_IN`). A task may also declare a goal-conditioned variant for
+hindsight experience replay (``GenRL/HockeyGoal-v0``, ``GenRL/BasketballGoal-v0``: ``get_task(name).goal_env_id``).
 """
 
 from __future__ import annotations
@@ -33,11 +34,11 @@ def register_task(spec: TaskSpec) -> TaskSpec:
     clash = [name for name, other in TASKS.items() if other.env_id == spec.env_id and name != spec.name]
     if clash:
         raise ValueError(f"Gymnasium id {spec.env_id!r} already belongs to task {clash[0]!r}")
-    if spec.env_id not in registry:
-        cls = spec.env_class
-        # A module-level class is registered by its import path, as Gymnasium's own envs are.
-        entry_point = cls if "<locals>" in cls.__qualname__ else f"{cls.__module__}:{cls.__qualname__}"
-        register(id=spec.env_id, entry_point=entry_point, max_episode_steps=spec.horizon)
+    for env_id, cls in ((spec.env_id, spec.env_class), (spec.goal_env_id, spec.goal_env_class)):
+        if env_id is not None and env_id not in registry:
+            # A module-level class is registered by its import path, as Gymnasium's own envs are.
+            entry_point = cls if "<locals>" in cls.__qualname__ else f"{cls.__module__}:{cls.__qualname__}"
+            register(id=env_id, entry_point=entry_point, max_episode_steps=spec.horizon)
     TASKS[spec.name] = spec
     return spec
 

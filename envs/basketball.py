@@ -12,6 +12,7 @@ import mujoco
 import numpy as np
 from sb3_genrl.envs.arm import task_mjcf
 from sb3_genrl.envs.base import ArmTaskEnv
+from sb3_genrl.envs.goal import GoalConditionedMixin
 from sb3_genrl.envs.motions import bump
 from sb3_genrl.envs.spec import TaskSpec
 
@@ -123,19 +124,47 @@ class BasketballEnv(ArmTaskEnv):
         return bool(row[3] < BALL_RADIUS + 0.01 and np.linalg.norm(row[4:7]) < 0.05)
 
     def _outcome(self, rows: np.ndarray, goal: np.ndarray) -> tuple[float, dict[str, Any]]:
-        position = rows[:, 1:4]
-        height = position[:, 2] - BASKET_HEIGHT
-        # Crossing the rim's height going down between physics steps i and i + 1.
-        crossing = np.flatnonzero((height[:-1] >= 0) & (height[1:] < 0))
-        if len(crossing) == 0:
-            return self.worst_reward, {"reached": position[-1, :2].copy(), "crossings": 0,
-                                       "distance": float(np.linalg.norm(position[-1, :2] - goal))}
-        fraction = height[crossing] / (height[crossing] - height[crossing + 1])
-        points = position[crossing, :2] + fraction[:, None] * (position[crossing + 1, :2] - position[crossing, :2])
+        points = crossing_points(rows)
+        if len(points) == 0:
+            last = rows[-1, 1:3].copy()
+            return self.worst_reward, {"reached": last, "crossings": 0, "distance": float(np.linalg.norm(last - goal))}
         distances = np.linalg.norm(points - goal, axis=1)
         best = int(np.argmin(distances))
         distance = float(distances[best])
-        return -distance, {"reached": points[best], "crossings": len(crossing), "distance": distance}
+        return -distance, {"reached": points[best], "crossings": len(points), "distance": distance}
+
+
+def crossing_points(rows: np.ndarray) -> np.ndarray:
+    """Where the ball came down through the rim's height, ``(K, 2)`` (x, y) in metres: each crossing between
+    physics steps ``i`` and ``i + 1`` located by linear interpolation.
+
+    :param rows: sensor rows, one per physics step
+    """
+    position = rows[:, 1:4]
+    height = position[:, 2] - BASKET_HEIGHT
+    crossing = np.flatnonzero((height[:-1] >= 0) & (height[1:] < 0))
+    fraction = height[crossing] / (height[crossing] - height[crossing + 1])
+    return position[crossing, :2] + fraction[:, None] * (position[crossing + 1, :2] - position[crossing, :2])
+
+
+class BasketballGoalEnv(GoalConditionedMixin, BasketballEnv):
+    """``GenRL/BasketballGoal-v0``: :class:`BasketballEnv` with dict observations (see :mod:`sb3_genrl.envs.goal`).
+
+    The terminal info also holds ``crossing_points`` ``(K, 2)``, every point where the ball came down through the
+    rim's height, so the terminal reward for any goal is minus its distance to the nearest of them (``worst_reward``
+    when there is none or the simulation was unstable): the plain task's reward for that goal.
+    """
+
+    def _outcome(self, rows: np.ndarray, goal: np.ndarray) -> tuple[float, dict[str, Any]]:
+        reward, info = super()._outcome(rows, goal)
+        info["crossing_points"] = crossing_points(rows)
+        return reward, info
+
+    def _terminal_reward(self, achieved: np.ndarray, desired: np.ndarray, info: dict[str, Any]) -> float:
+        points = np.asarray(info.get("crossing_points", np.zeros((0, 2))), dtype=np.float64).reshape(-1, 2)
+        if info.get("unstable", False) or len(points) == 0:
+            return float(self.worst_reward)
+        return max(-float(np.min(np.linalg.norm(points - desired, axis=1))), float(self.worst_reward))
 
 
 def in_goal_region(points: np.ndarray) -> np.ndarray:
@@ -232,4 +261,5 @@ def is_valid(info: dict[str, Any]) -> bool:
 TASK = TaskSpec(name="basketball", env_id="GenRL/Basketball-v0", env_class=BasketballEnv, horizon=BASKETBALL_HORIZON,
                 goal_low=BasketballEnv.goal_low, goal_high=BasketballEnv.goal_high, in_goal_region=in_goal_region,
                 cell_size=0.25, sample_expert=sample_throw, perturbation_scales=BASKETBALL_PERTURBATION,
-                is_valid=is_valid, region_patch=region_patch, figure_size=(6.0, 8.0))
+                is_valid=is_valid, region_patch=region_patch, figure_size=(6.0, 8.0),
+                goal_env_id="GenRL/BasketballGoal-v0", goal_env_class=BasketballGoalEnv)

@@ -12,6 +12,7 @@ import mujoco
 import numpy as np
 from sb3_genrl.envs.arm import task_mjcf
 from sb3_genrl.envs.base import ArmTaskEnv
+from sb3_genrl.envs.goal import GoalConditionedMixin
 from sb3_genrl.envs.motions import bump
 from sb3_genrl.envs.spec import TaskSpec
 
@@ -131,6 +132,14 @@ class HockeyEnv(ArmTaskEnv):
         return -distance, {"reached": reached, "distance": distance, "table_contacts": table_contacts}
 
 
+class HockeyGoalEnv(GoalConditionedMixin, HockeyEnv):
+    """``GenRL/HockeyGoal-v0``: :class:`HockeyEnv` with dict observations (see :mod:`sb3_genrl.envs.goal`).
+
+    The terminal reward is minus the distance between the puck's rest point (the terminal ``achieved_goal``) and
+    the desired goal, bounded below by ``worst_reward``; an unstable simulation gives ``worst_reward``.
+    """
+
+
 def _hockey_home(model: mujoco.MjModel) -> np.ndarray:
     """The home pose: forearm vertical above the puck, blade lower edge ``BLADE_CLEARANCE`` above the table."""
     data = mujoco.MjData(model)
@@ -219,4 +228,5 @@ def is_valid(info: dict[str, Any]) -> bool:
 
 TASK = TaskSpec(name="hockey", env_id="GenRL/Hockey-v0", env_class=HockeyEnv, horizon=HOCKEY_HORIZON,
                 goal_low=HOCKEY_GOAL_LOW, goal_high=HOCKEY_GOAL_HIGH, in_goal_region=in_goal_region, cell_size=0.05,
-                sample_expert=sample_hit, perturbation_scales=HOCKEY_PERTURBATION, is_valid=is_valid)
+                sample_expert=sample_hit, perturbation_scales=HOCKEY_PERTURBATION, is_valid=is_valid,
+                goal_env_id="GenRL/HockeyGoal-v0", goal_env_class=HockeyGoalEnv)

@@ -34,6 +34,9 @@ class TaskSpec:
     :param region_patch: draws the goal region's outline on the coverage plot (a Matplotlib patch); by default
         the bounding box
     :param figure_size: size (inches) of the coverage plot
+    :param goal_env_id: the Gymnasium id of the task's goal-conditioned variant (dict observations and
+        ``compute_reward``, for hindsight experience replay; see :mod:`sb3_genrl.envs.goal`), if it has one
+    :param goal_env_class: that variant's class
     """
 
     name: str
@@ -49,6 +52,8 @@ class TaskSpec:
     is_valid: Callable[[dict[str, Any]], bool]
     region_patch: Callable[[], Any] | None = None
     figure_size: tuple[float, float] = (6.0, 6.0)
+    goal_env_id: str | None = None
+    goal_env_class: type[ArmTaskEnv] | None = None
 
     def __post_init__(self) -> None:
         if not self.name or "/" in self.name:
@@ -66,6 +71,8 @@ class TaskSpec:
         if getattr(self.env_class, "horizon", self.horizon) != self.horizon:
             raise ValueError(f"task {self.name!r}: horizon {self.horizon} differs from {self.env_class.__name__}.horizon "
                              f"{self.env_class.horizon}")
+        if (self.goal_env_id is None) != (self.goal_env_class is None):
+            raise ValueError(f"task {self.name!r}: give both goal_env_id and goal_env_class, or neither")
         if not self.cell_size > 0:
             raise ValueError(f"task {self.name!r}: cell_size must be positive, got {self.cell_size!r}")
 

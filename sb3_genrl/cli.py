@@ -168,15 +168,18 @@ def _add_train_policy(sub: argparse._SubParsersAction) -> None:
 def _add_baseline(sub: argparse._SubParsersAction) -> None:
     from sb3_genrl.baselines import BASELINES
 
-    baseline = sub.add_parser("baseline", help="train PPO (BC), SAC (prefilled) or a stock algorithm on the latent space")
+    baseline = sub.add_parser("baseline", help="train PPO (BC), SAC (with or without prefilled buffer), SAC+HER, or a "
+                              "stock algorithm on the latent space")
     baseline.add_argument("algorithm", choices=BASELINES)
     _task_option(baseline)
-    baseline.add_argument("--demos", type=EXISTING, default=None, help="demonstration dataset (ppo, sac)")
+    baseline.add_argument("--demos", type=EXISTING, default=None,
+                          help="demonstration dataset (ppo, sac, sac-no-prefill, sac-her)")
     baseline.add_argument("--demo-episodes", type=COUNT, default=None, help="use the first N demonstrations (default all)")
     baseline.add_argument("--generator", type=EXISTING, default=None, help="generator file (latent-ppo/-sac/-trpo)")
     baseline.add_argument("--episodes", type=COUNT, required=True, help="budget of episodes")
     _seed_option(baseline)
-    baseline.add_argument("--bc-epochs", type=COUNT, default=5, help="behaviour cloning epochs (ppo)")
+    baseline.add_argument("--bc-max-epochs", type=COUNT, default=200,
+                          help="most behaviour cloning epochs; it stops earlier on its held-out loss (ppo)")
     _device_option(baseline)
     _progress_option(baseline)
     baseline.add_argument("--out", required=True, type=OUT_DIR, help="output folder")
@@ -311,9 +314,14 @@ def _baseline_command(args: argparse.Namespace) -> int:
 
     summary = train_baseline(args.algorithm, args.task, episodes=args.episodes, out_dir=args.out, seed=args.seed,
                              demos=args.demos, demo_episodes=args.demo_episodes, generator=args.generator,
-                             bc_epochs=args.bc_epochs, device=args.device, progress_bar=not args.no_progress_bar)
-    if "bc_mean_reward" in summary:
-        print(f"behaviour cloning alone: mean reward {summary['bc_mean_reward']:.4g}")
+                             bc_kwargs={"max_epochs": args.bc_max_epochs}, device=args.device,
+                             progress_bar=not args.no_progress_bar)
+    if "bc" in summary:
+        bc, first = summary["bc"], summary["first_batch"]
+        print(f"behaviour cloning ({bc['epochs']} epochs, best {bc['best_epoch']}): mean distance to {bc['eval_goals']} "
+              f"held-out goals {bc['deterministic_distance']:.3f} m deterministic, {bc['sampled_distance']:.3f} m sampled;"
+              + (f" PPO's first batch ({first['episodes']} episodes) {first['mean_distance']:.3f} m"
+                 if first["episodes"] else ""))
     print(f"{args.algorithm} on {args.task}: {summary['episodes_played']} episodes, final mean reward "
           f"{summary['final_mean_reward']:.4g}, best {summary['best_mean_reward']:.4g} -> {args.out}")
     return 0

@@ -2,8 +2,8 @@
 that ``genrl compare`` draws.
 
 Every run records its episodes with SB3's :class:`~stable_baselines3.common.monitor.Monitor` (``episodes.monitor.csv``:
-return, length, time and the :data:`EPISODE_INFO` entries, written as training goes) and its training logs with
-SB3's logger (:func:`training_logger`: ``logs/progress.csv`` and TensorBoard). The learning curve
+return, length, time, the :data:`EPISODE_INFO` entries and the CPU seconds so far, written as training goes) and its
+training logs with SB3's logger (:func:`training_logger`: ``logs/progress.csv`` and TensorBoard). The learning curve
 (:func:`write_learning_curve`) is the mean over consecutive windows of episodes of the Monitor file.
 """
 
@@ -15,6 +15,7 @@ import json
 import math
 import os
 import pathlib
+import time
 from collections.abc import Sequence
 from typing import Any
 
@@ -31,8 +32,10 @@ LOG_DIR = "logs"
 _MONITOR_COLUMNS = {"r": "return", "l": "length", "t": "time"}
 
 
-class _CompleteInfo(gym.Wrapper):
-    """Give a finished episode's ``info`` every key Monitor records: NaN where the task does not report it.
+class _EpisodeInfo(gym.Wrapper):
+    """Give a finished episode's ``info`` every key Monitor records (NaN where the task does not report it) and
+    ``cpu_seconds``: this process' CPU seconds since the env's first reset (what the run has cost, whatever else
+    shares the machine).
 
     SB3's Monitor raises ``KeyError`` for a missing ``info_keywords`` entry, and a task need not report them all
     (basketball has no table, an unstable simulation reports no distance).
@@ -41,25 +44,35 @@ class _CompleteInfo(gym.Wrapper):
     def __init__(self, env: gym.Env, keys: Sequence[str]) -> None:
         super().__init__(env)
         self.keys = tuple(keys)
+        self._cpu_start: float | None = None
+
+    def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
+        if self._cpu_start is None:
+            self._cpu_start = time.process_time()
+        return self.env.reset(**kwargs)
 
     def step(self, action: Any) -> tuple[Any, Any, bool, bool, dict[str, Any]]:
         observation, reward, terminated, truncated, info = self.env.step(action)
         if terminated or truncated:
             for key in self.keys:
                 info.setdefault(key, math.nan)
+            info["cpu_seconds"] = time.process_time() - self._cpu_start
         return observation, reward, terminated, truncated, info
 
 
 def monitor_episodes(env: gym.Env, out_dir: str | os.PathLike, info_keywords: Sequence[str] = EPISODE_INFO) -> Monitor:
     """Wrap ``env`` in SB3's Monitor writing ``out_dir/episodes.monitor.csv`` (one row per episode, as it ends).
 
+    Each row also holds ``cpu_seconds`` (see :class:`_EpisodeInfo`); the timesteps at an episode's end are the
+    cumulative sum of the ``length`` column.
+
     :param env: the training env (a one-step latent-action env or a step-by-step task env)
     :param out_dir: the run folder
     :param info_keywords: entries of a finished episode's ``info`` to record (NaN where missing)
     :return: the monitored env
     """
-    return Monitor(_CompleteInfo(env, info_keywords), str(pathlib.Path(out_dir) / MONITOR_FILE),
-                   info_keywords=tuple(info_keywords))
+    return Monitor(_EpisodeInfo(env, info_keywords), str(pathlib.Path(out_dir) / MONITOR_FILE),
+                   info_keywords=(*info_keywords, "cpu_seconds"))
 
 
 def training_logger(out_dir: str | os.PathLike, verbose: int = 0) -> Logger:

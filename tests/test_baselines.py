@@ -1,16 +1,27 @@
 """PPO with behaviour cloning, SAC with a prefilled replay buffer, and the comparison of runs."""
 
 import json
+import os
 
+import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
-from sb3_genrl.baselines.bc import behaviour_cloning, imitation_loss
+from sb3_genrl.baselines import FEEDBACK_BASELINES
+from sb3_genrl.baselines.bc import STD_RANGE, actor_mean, fit_actor, split_episodes
+from sb3_genrl.baselines.feedback import add_time_feature, make_feedback_env
+from sb3_genrl.baselines.her import goal_episodes
+from sb3_genrl.baselines.hyperparameters import PPO_POLICY
+from sb3_genrl.baselines.models import normalized_policy, ppo_with_behaviour_cloning, sac_her_with_demonstrations
+from sb3_genrl.baselines.normalization import STD_FLOOR, NormalizedFlatten
 from sb3_genrl.baselines.prefill import prefill_replay_buffer
 from sb3_genrl.baselines.train import train_baseline
-from sb3_genrl.envs.hockey import HockeyEnv, scripted_hit
+from sb3_genrl.envs.demonstrations import make_demonstrations
+from sb3_genrl.envs.hockey import HOCKEY_HORIZON, HockeyEnv, scripted_hit
 from stable_baselines3 import PPO, SAC
+from stable_baselines3.common.policies import ActorCriticPolicy
 
+from sb3_genrl.cli import main
 from sb3_genrl.curves import MONITOR_FILE, read_monitor
 
 
@@ -21,8 +32,9 @@ def demo_transitions(n_episodes: int, seed: int = 0) -> dict[str, np.ndarray]:
     keys = ("observations", "actions", "rewards", "next_observations", "dones")
     out = {key: [] for key in keys}
     for _ in range(n_episodes):
-        trajectory = scripted_hit(strength=rng.uniform(0.8, 1.2), direction=rng.uniform(-0.4, 0.4))
-        _, info = env.play_trajectory(trajectory, np.array([1.0, 0.0]))
+        # float32, as the demonstration generator stores and simulates them
+        trajectory = scripted_hit(strength=rng.uniform(0.8, 1.2), direction=rng.uniform(-0.4, 0.4)).astype(np.float32)
+        _, info = env.play_trajectory(trajectory, np.zeros(2), allow_outside_region=True)
         obs, _ = env.reset(options={"goal": info["reached"], "allow_outside_region": True})
         for action in trajectory:
             next_obs, reward, terminated, _, _ = env.step(action)
@@ -37,28 +49,68 @@ def demos():
     return demo_transitions(12)
 
 
-def test_behaviour_cloning_lowers_loss_and_imitates(demos):
-    model = PPO("MlpPolicy", HockeyEnv(), seed=0, device="cpu")
-    obs = th.as_tensor(demos["observations"])
-    act = th.as_tensor(demos["actions"])
+def test_normalisation_statistics_are_saved_and_reloaded_with_the_model(demos, tmp_path):
+    transitions = add_time_feature(demos, HOCKEY_HORIZON)
+    model = PPO("MlpPolicy", make_feedback_env("hockey"), seed=0, device="cpu",
+                policy_kwargs=normalized_policy(PPO_POLICY, transitions["observations"]))
+    model.save(tmp_path / "model.zip")
+    loaded = PPO.load(tmp_path / "model.zip", device="cpu")
+    # Statistics computed here, independently: float64 mean and std, std floored.
+    observations = transitions["observations"].astype(np.float64)
+    mean, std = observations.mean(axis=0), np.maximum(observations.std(axis=0), STD_FLOOR)
+    extractor = loaded.policy.features_extractor
+    assert isinstance(extractor, NormalizedFlatten)
+    np.testing.assert_allclose(extractor.mean.numpy(), mean, rtol=1e-6)
+    np.testing.assert_allclose(extractor.std.numpy(), std, rtol=1e-6)
+    batch = transitions["observations"][::50]
     with th.no_grad():
-        before = imitation_loss(model.policy, obs, act).item()
-        untrained_mse = ((model.policy.get_distribution(obs).distribution.mean - act) ** 2).mean().item()
-    history = behaviour_cloning(model.policy, demos["observations"], demos["actions"], epochs=60, batch_size=256)
-    with th.no_grad():
-        after = imitation_loss(model.policy, obs, act).item()
-        cloned_mse = ((model.policy.get_distribution(obs).distribution.mean - act) ** 2).mean().item()
-    assert history[-1] < history[0] and after < before - 1.0
-    assert cloned_mse < 0.25 * untrained_mse
+        features = extractor(th.as_tensor(batch)).numpy()
+    np.testing.assert_allclose(features, np.clip((batch - mean) / std, -10, 10), rtol=1e-5, atol=1e-5)
+    np.testing.assert_array_equal(loaded.predict(batch, deterministic=True)[0], model.predict(batch, deterministic=True)[0])
 
-    # The first demonstration, action by action along its own states: the cloned policy's mean reproduces it far
-    # better than an untrained policy's.
-    first = slice(0, 69)
-    untrained = PPO("MlpPolicy", HockeyEnv(), seed=1, device="cpu")
+
+def test_early_stopping_stops_on_a_rising_heldout_loss():
+    # The held-out actions are the negated training actions: fitting the training set raises the held-out loss.
+    rng = np.random.default_rng(0)
+    observations = rng.normal(size=(512, 4)).astype(np.float32)
+    actions = np.tanh(observations[:, :2] @ np.array([[0.3, -0.2], [0.1, 0.4]], dtype=np.float32))
+    th.manual_seed(0)
+    policy = ActorCriticPolicy(gym.spaces.Box(-10, 10, (4,), np.float32), gym.spaces.Box(-1, 1, (2,), np.float32),
+                               lr_schedule=lambda _: 1e-3, net_arch=[32, 32])
+    record = fit_actor(policy, (observations, actions), (observations, -actions), max_epochs=100, patience=4,
+                       batch_size=64, learning_rate=3e-3)
+    losses = record["heldout_loss"]
+    assert record["epochs"] == record["best_epoch"] + 4 < 100
+    assert losses[record["best_epoch"] - 1] == min(losses) and losses[-1] > min(losses)
+    # The best epoch's weights are restored: the held-out loss recomputed now is the best one.
     with th.no_grad():
-        errors = [((m.policy.get_distribution(obs[first]).distribution.mean - act[first]) ** 2).sum().item()
-                  for m in (model, untrained)]
-    assert errors[0] < 0.25 * errors[1]
+        mean = actor_mean(policy, th.as_tensor(observations)).numpy()
+    residuals = -actions - mean
+    assert np.mean(residuals ** 2) == pytest.approx(min(losses), rel=1e-5)
+    np.testing.assert_allclose(policy.log_std.exp().detach().numpy(), np.clip(residuals.std(axis=0), *STD_RANGE),
+                               rtol=1e-4)
+
+
+@pytest.mark.slow
+def test_behaviour_cloning_reproduces_heldout_demonstrations_open_loop():
+    transitions = add_time_feature(demo_transitions(40, seed=1), HOCKEY_HORIZON)
+    model, record = ppo_with_behaviour_cloning(make_feedback_env("hockey"), transitions, seed=0, device="cpu",
+                                               bc_kwargs={"holdout": 0.1, "batch_size": 64, "patience": 20})
+    assert record["heldout_episodes"] == 4 and record["best_epoch"] > 1
+    _, heldout = split_episodes(transitions["dones"], 0.1, seed=0)
+    observations = transitions["observations"][heldout].reshape(4, HOCKEY_HORIZON, -1)
+    actions = transitions["actions"][heldout].reshape(4, HOCKEY_HORIZON, 7)
+    with th.no_grad():
+        cloned = actor_mean(model.policy, th.as_tensor(observations.reshape(-1, observations.shape[-1]))).numpy()
+    cloned = cloned.reshape(actions.shape)
+    # The cloned policy's actions along each held-out demonstration's own states, played open loop, against the
+    # arm holding still (each demonstration reached its goal exactly).
+    goals = observations[:, 0, :2]
+    env = HockeyEnv()
+    cloned_rewards, _ = env.play_trajectories(cloned, goals)
+    zero_rewards, _ = env.play_trajectories(np.zeros_like(cloned), goals)
+    assert np.mean((cloned - actions) ** 2) < 0.05 * np.mean(actions ** 2)  # the zero action's error is 1x
+    assert np.all(cloned_rewards > zero_rewards) and np.mean(-cloned_rewards) < 0.25 * np.mean(-zero_rewards)
 
 
 def test_prefilled_buffer_holds_exactly_the_demonstrations(demos):
@@ -79,22 +131,60 @@ def test_prefilled_buffer_holds_exactly_the_demonstrations(demos):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("algorithm", ["ppo", "sac"])
+@pytest.mark.parametrize("algorithm", FEEDBACK_BASELINES)
 def test_baselines_run_end_to_end(algorithm, demos, tmp_path):
-    summary = train_baseline(algorithm, "hockey", episodes=20, out_dir=tmp_path, demos=demos, demo_episodes=10,
-                             bc_epochs=2, eval_episodes=2, window=5, device="cpu")
-    assert summary["episodes_played"] >= 20 and summary["demo_transitions"] == 10 * 69
+    summary = train_baseline(algorithm, "hockey", episodes=12, out_dir=tmp_path, demos=demos, demo_episodes=10,
+                             bc_kwargs={"max_epochs": 2}, eval_goals=2, window=5, device="cpu")
+    assert summary["episodes_played"] >= 12 and summary["demo_transitions"] == 10 * 69
     episodes = read_monitor(tmp_path / MONITOR_FILE)
     assert len(episodes["return"]) == summary["episodes_played"] and np.all(episodes["length"] == 69)
     assert np.all(episodes["table_contacts"] >= 0) and np.all(episodes["return"] <= 0)
     # The return of a hockey episode is its terminal reward: minus the distance it reports (Monitor keeps 6
     # decimals), or the worst reward of an unstable simulation.
     assert np.all(np.isclose(episodes["return"], -episodes["distance"], atol=1e-6) | (episodes["return"] == -5.0))
+    # The process' CPU seconds at each episode's end: never decreasing, and measured from the run's start.
+    assert np.all(np.diff(episodes["cpu_seconds"]) >= 0) and episodes["cpu_seconds"][-1] > 0
+    assert episodes["cpu_seconds"][-1] <= summary["learn_seconds"] * os.cpu_count() + 1
     for name in ("learning_curve.csv", "learning_curve.png", f"{algorithm}_policy.zip", "summary.json"):
         assert (tmp_path / name).exists()
     assert any((tmp_path / "logs").glob("events.out.tfevents.*")) and (tmp_path / "logs" / "progress.csv").exists()
+    assert json.loads((tmp_path / "summary.json").read_text()) == summary and "settings" in summary
     if algorithm == "ppo":
-        assert "bc_mean_reward" in json.loads((tmp_path / "summary.json").read_text())
+        bc, first = summary["bc"], summary["first_batch"]
+        assert bc["epochs"] == 2 and bc["deterministic_distance"] > 0 and bc["sampled_distance"] > 0
+        assert first["episodes"] == 512 // 69 and first["mean_distance"] > 0
+        cloned = PPO.load(tmp_path / "bc_policy.zip", device="cpu")
+        np.testing.assert_allclose(cloned.policy.log_std.exp().detach().numpy(), bc["action_std"], rtol=1e-5)
+
+
+def test_demonstrations_enter_the_her_buffer_as_episodes(demos):
+    episodes = goal_episodes("hockey", demos)
+    assert episodes["observation"].shape == (12, 70, 15) and episodes["achieved_goal"].shape == (12, 70, 2)
+    # Each demonstration reached its own goal: the terminal achieved goal is the goal, the reward 0.
+    np.testing.assert_allclose(episodes["achieved_goal"][:, -1], episodes["desired_goal"][:, -1], atol=1e-6)
+    model = sac_her_with_demonstrations(gym.make("GenRL/HockeyGoal-v0"), episodes, steps=100, seed=0, device="cpu")
+    buffer = model.replay_buffer
+    assert buffer.size() == 12 * 69 and np.all(buffer.ep_length[: 12 * 69, 0] == 69)
+    np.testing.assert_array_equal(buffer.observations["observation"][:69, 0], episodes["observation"][0, :-1])
+    np.testing.assert_array_equal(buffer.next_observations["achieved_goal"][:69, 0], episodes["achieved_goal"][0, 1:])
+    np.testing.assert_allclose(model.policy.unscale_action(buffer.actions[:69, 0]), episodes["actions"][0], atol=1e-6)
+    assert buffer.infos[68, 0]["terminal"] and not buffer.infos[67, 0]["terminal"]
+    # Relabelled samples: a terminal transition scores 0 against its own final goal, any other transition 0 too.
+    samples = buffer.sample(2048)
+    rewards, terminal = samples.rewards[:, 0].numpy(), samples.dones[:, 0].numpy() > 0
+    final = np.all(np.isclose(samples.observations["desired_goal"].numpy(),
+                              samples.next_observations["achieved_goal"].numpy(), atol=1e-6), axis=1)
+    assert np.all(rewards[~terminal] == 0) and np.sum(terminal & final) > 5
+    assert np.all(np.abs(rewards[terminal & final]) < 1e-6)
+
+
+def test_sac_her_through_the_cli(tmp_path):
+    dataset = make_demonstrations("hockey", 4, tmp_path / "demos", progress_bar=False)
+    code = main(["baseline", "sac-her", "--task", "hockey", "--demos", str(dataset), "--episodes", "3",
+                 "--out", str(tmp_path / "run"), "--device", "cpu", "--no-progress-bar"])
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert code == 0 and summary["algorithm"] == "sac-her" and summary["episodes_played"] >= 3
+    assert summary["demo_transitions"] == 4 * 69 and summary["settings"]["goal_selection_strategy"] == "final"
 
 
 def test_baseline_bad_input(tmp_path, demos):

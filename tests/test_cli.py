@@ -57,8 +57,8 @@ def test_help_lists_the_commands_in_workflow_order_and_version(cli):
      "argument --batch-episodes: must be an integer >= 2, got 1"),
     (("train-policy", "--task", "hockey", "--generator", "missing.pt", "--episodes", "8", "--out", "D"),
      "argument --generator: 'missing.pt' does not exist"),
-    (("baseline", "ppo", "--task", "hockey", "--demos", "D0", "--episodes", "8", "--bc-epochs", "-1", "--out", "D"),
-     "argument --bc-epochs: must be an integer >= 1, got -1"),
+    (("baseline", "ppo", "--task", "hockey", "--demos", "D0", "--episodes", "8", "--bc-max-epochs", "-1", "--out", "D"),
+     "argument --bc-max-epochs: must be an integer >= 1, got -1"),
     (("baseline", "ppo", "--task", "hockey", "--demos", "D0", "--episodes", "8", "--device", "cuda:7", "--out", "D"),
      "argument --device: "),
     (("baseline", "ppo", "--task", "hockey", "--demos", "D0", "--episodes", "8", "--out", "FILE"),
@@ -243,6 +243,16 @@ def test_baseline_and_compare(runs, tmp_path, cli):
     assert code == 2 and "is not a run folder (no summary.json)" in err
     code, _, err = cli("baseline", "ppo", "--task", "hockey", "--episodes", 8, "--out", tmp_path / "ppo")
     assert code == 2 and "genrl baseline: error: ppo needs demonstrations" in err and not (tmp_path / "ppo").exists()
+
+
+def test_baseline_offers_every_baseline_and_checks_its_inputs_first(cli, tmp_path):
+    from sb3_genrl.baselines import BASELINES, LATENT_BASELINES
+
+    for algorithm in BASELINES:  # each one is a choice, and refused without its inputs before any work
+        code, printed, err = cli("baseline", algorithm, "--task", "hockey", "--episodes", 8, "--out", tmp_path / algorithm)
+        needs = "a generator" if algorithm in LATENT_BASELINES else "demonstrations"
+        assert code == 2 and f"genrl baseline: error: {algorithm} needs {needs}" in err and printed == "", err
+        assert not (tmp_path / algorithm).exists()
 
 
 class _Payload:

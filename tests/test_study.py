@@ -58,8 +58,8 @@ def test_smoke_study_writes_every_table_and_plot_and_resumes(tmp_path, cli):
         assert (root / "plots" / f"{name}.png").stat().st_size > 1000
     # The comparison: GenRL with the best generator and each baseline, one seed each, their curves and table contacts.
     comparison = _csv_rows(root / "comparison" / "comparison.csv")
-    assert [row["method"] for row in comparison] == ["GenRL", "PPO (BC)", "SAC (prefilled)", "PPO on latent",
-                                                     "SAC on latent", "TRPO on latent"]
+    assert [row["method"] for row in comparison] == ["GenRL", "PPO (BC)", "SAC (prefilled)", "SAC (no prefill)",
+                                                     "SAC + HER", "PPO on latent", "SAC on latent", "TRPO on latent"]
     assert all(row["seeds"] == "1" for row in comparison)
     for name in ("reward_vs_episodes.png", "table_contacts.png"):
         assert (root / "comparison" / name).stat().st_size > 1000

@@ -112,9 +112,10 @@ def _policy_reward(task: str, model_path: pathlib.Path, seed: int, scale: dict[s
 
 
 def baseline_job(algorithm: str, task: str, seed: int, episodes: int, dataset: str, demo_episodes: int, run_dir: str,
-                 device: str = "auto", torch_threads: int = 1, generator: str | None = None) -> str:
-    """One run of the comparison: PPO (behaviour cloning), SAC (prefilled), or a stock algorithm on the latent
-    space of ``generator`` (``latent-ppo``, ``latent-sac``, ``latent-trpo``); skipped when already done."""
+                 device: str = "auto", torch_threads: int = 1, generator: str | None = None, bc_eval_goals: int = 100) -> str:
+    """One run of the comparison: a feedback baseline on the demonstrations (PPO with behaviour cloning, SAC with and
+    without them in its buffer, SAC + HER) or a stock algorithm on the latent space of ``generator``
+    (``latent-ppo``, ``latent-sac``, ``latent-trpo``); skipped when already done."""
     import torch
 
     from sb3_genrl.baselines.train import train_baseline
@@ -124,5 +125,5 @@ def baseline_job(algorithm: str, task: str, seed: int, episodes: int, dataset: s
         latent = algorithm.startswith("latent-")
         train_baseline(algorithm, task, episodes=episodes, out_dir=run_dir, seed=seed,
                        demos=None if latent else dataset, demo_episodes=None if latent else demo_episodes,
-                       generator=generator if latent else None, device=device)
+                       generator=generator if latent else None, eval_goals=bc_eval_goals, device=device)
     return run_dir

@@ -163,7 +163,8 @@ def _run_task(task: str, scale: dict[str, Any], task_dir: pathlib.Path, run, mod
         check_and_record(record, {**wanted, "generator": f"{best} {file_fingerprint(generator)}"},
                          output_exists=exists, folder=task_dir)
         jobs = [(baseline_job, (algorithm, task, seed, scale["baseline_episodes"], str(dataset), scale["demo_episodes"],
-                                str(runs_dir / f"{algorithm}_seed{seed}"), device, 1, generator))
+                                str(runs_dir / f"{algorithm}_seed{seed}"), device, 1, generator,
+                                scale["bc_eval_goals"]))
                 for algorithm in BASELINES for seed in range(scale["seeds"])]
         baseline_runs = list(run(jobs))
         genrl_runs = [str(task_dir / "policies" / best / f"seed{seed}") for seed in range(scale["seeds"])]

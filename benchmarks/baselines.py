@@ -1,0 +1,290 @@
+"""GenRL against the baselines on one task, for several seeds, on one episode budget (paper figures 6 and 8).
+
+Methods: GenRL, PPO (BC), SAC (prefilled), SAC (no prefill), SAC + HER, and PPO / SAC / TRPO on the generator's
+latent space (see :mod:`sb3_genrl.baselines.train` and :mod:`sb3_genrl.baselines.hyperparameters`). Every method
+plays the same number of episodes; a feedback episode is the task's horizon in environment steps, a GenRL or
+latent-space episode is one trajectory of that many steps, so both axes (episodes, environment steps) hold.
+
+Each run has its own folder under ``--work`` (``METHOD/seedS``) where it writes its per-episode records (SB3's
+Monitor file) as it goes; a run whose ``run.json`` exists is skipped when the settings recorded there match, and the
+benchmark refuses to mix runs of other settings. The results: ``--out`` (JSON), beside it the Markdown table of the
+mean distance at 100, 300, 1000 and 3000 episodes and the curves (reward against episodes and against environment
+steps, table contacts per episode).
+
+    python benchmarks/baselines.py                          # hockey, 3 seeds x 3000 episodes, every method
+    python benchmarks/baselines.py --jobs 2                 # two runs at a time
+    python benchmarks/baselines.py --episodes 40 --seeds 0 --out /tmp/tiny.json --work /tmp/tiny   # end-to-end check
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import multiprocessing
+import os
+import pathlib
+import platform
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from typing import Any
+
+import numpy as np
+
+from sb3_genrl.utils import atomic_write_json
+
+HERE = pathlib.Path(__file__).resolve().parent
+METHODS = ("genrl", "ppo", "sac", "sac-no-prefill", "sac-her", "latent-ppo", "latent-sac", "latent-trpo")
+MILESTONES = (100, 300, 1000, 3000)  # episodes at which the table reports the mean distance
+WINDOW = 64  # episodes averaged per point (GenRL's batch)
+GENERATOR_PRESET, GENERATOR_EPOCHS = "VAE1", 300  # the quickstart's generator
+
+
+def _file_digest(path: str) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as file:
+        for block in iter(lambda: file.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()[:16]
+
+
+def run_settings(method: str, args: argparse.Namespace, seed: int, demos: str, generator: str) -> dict[str, Any]:
+    """What a run's result depends on: compared with a finished run's record before it is reused."""
+    from sb3_genrl.baselines.hyperparameters import settings_record
+
+    from sb3_genrl import __version__
+    from sb3_genrl.data import dataset_info
+
+    info = dataset_info(demos)
+    settings: dict[str, Any] = {"method": method, "task": args.task, "seed": seed, "episodes": args.episodes,
+                                "sb3_genrl": __version__}
+    if method == "genrl" or method.startswith("latent-"):
+        settings |= {"generator": os.path.abspath(generator), "generator_sha256": _file_digest(generator),
+                     "batch_episodes": WINDOW}
+    else:
+        settings |= {"demos": os.path.abspath(demos), "demo_episodes": info["episodes"], "demo_seed": info.get("seed"),
+                     "hyperparameters": settings_record()["sac" if method == "sac-no-prefill" else method]}
+    return json.loads(json.dumps(settings))  # as it reads back from JSON
+
+
+def run_one(method: str, settings: dict[str, Any], demos: str, generator: str, run_dir: str) -> str:
+    """One run (a worker process' job); skipped when done with the same settings, refused when done with others."""
+    import torch
+
+    torch.set_num_threads(1)
+    run = pathlib.Path(run_dir)
+    if finished(run, settings):
+        return run_dir
+    run.mkdir(parents=True, exist_ok=True)
+    began = time.perf_counter()
+    if method == "genrl":
+        from sb3_genrl.genrl import train_policy
+
+        summary = train_policy(settings["task"], generator, episodes=settings["episodes"], seed=settings["seed"],
+                               out_dir=run, batch_episodes=WINDOW, device="cpu")
+        timing = {"setup_seconds": 0.0, "setup_cpu_seconds": 0.0, "learn_seconds": time.perf_counter() - began}
+    else:
+        from sb3_genrl.baselines.train import train_baseline
+
+        latent = method.startswith("latent-")
+        summary = train_baseline(method, settings["task"], episodes=settings["episodes"], out_dir=run,
+                                 seed=settings["seed"], demos=None if latent else demos,
+                                 generator=generator if latent else None, device="cpu")
+        timing = {key: summary[key] for key in ("setup_seconds", "setup_cpu_seconds", "learn_seconds")}
+    atomic_write_json(run / "run.json", {"settings": settings, **timing, "episodes_played": _episodes_played(run),
+                                         "bc": summary.get("bc"), "first_batch": summary.get("first_batch")})
+    return run_dir
+
+
+def finished(run: pathlib.Path, settings: dict[str, Any]) -> bool:
+    """Whether ``run`` holds a finished run of ``settings``; raises if it holds one of other settings."""
+    record = run / "run.json"
+    if not record.exists():
+        return False
+    recorded = json.loads(record.read_text())["settings"]
+    if recorded != settings:
+        differ = sorted(k for k in set(recorded) | set(settings) if recorded.get(k) != settings.get(k))
+        raise ValueError(f"{run} holds a finished run with other settings ({', '.join(differ)}); use another --work")
+    return True
+
+
+def _episodes_played(run: pathlib.Path) -> int:
+    from sb3_genrl.curves import MONITOR_FILE, read_monitor
+
+    return len(read_monitor(run / MONITOR_FILE).get("return", []))
+
+
+def prepare(args: argparse.Namespace, work: pathlib.Path) -> tuple[str, str]:
+    """The demonstrations and the generator: given, or made once in ``work`` (and reused on a rerun)."""
+    demos = args.demos
+    if demos is None:
+        demos = str(work / "demonstrations")
+        if not pathlib.Path(demos).exists():
+            from sb3_genrl.envs.demonstrations import make_demonstrations
+
+            make_demonstrations(args.task, args.demo_count, demos, seed=0, progress_bar=False)
+    generator = args.generator
+    needs_generator = any(m == "genrl" or m.startswith("latent-") for m in args.methods)
+    if generator is None and needs_generator:
+        generator = str(work / f"{GENERATOR_PRESET}.pt")
+        if not pathlib.Path(generator).exists():
+            from sb3_genrl.generative import train_generator
+
+            tmp = work / f".{GENERATOR_PRESET}.pt.tmp"
+            train_generator(demos, preset=GENERATOR_PRESET, epochs=GENERATOR_EPOCHS, seed=0, out=tmp, device="cpu")
+            os.replace(tmp, generator)
+    return demos, generator
+
+
+def method_result(runs: list[pathlib.Path], horizon: int) -> dict[str, Any]:
+    """Distances, table contacts and timings of one method's runs (one per seed)."""
+    from sb3_genrl.curves import MONITOR_FILE, read_monitor, windowed_curve
+
+    per_seed = [read_monitor(run / MONITOR_FILE) for run in runs]
+    records = [json.loads((run / "run.json").read_text()) for run in runs]
+    n = min(len(columns["return"]) for columns in per_seed)
+    distances = np.stack([-columns["return"][:n] for columns in per_seed])
+    contacts = np.stack([columns.get("table_contacts", np.full(n, np.nan))[:n] for columns in per_seed])
+    grid, _ = windowed_curve(distances[0], WINDOW)
+    curves = np.stack([windowed_curve(d, WINDOW)[1] for d in distances])
+    contact_curves = np.stack([windowed_curve(c, WINDOW)[1] for c in contacts])
+    milestones = {}
+    for episodes in MILESTONES:
+        if n >= episodes:
+            values = distances[:, episodes - min(WINDOW, episodes):episodes].mean(axis=1)
+            milestones[str(episodes)] = {"mean": float(values.mean()), "std": float(values.std()),
+                                         "per_seed": values.tolist()}
+    # Steady-state cost: CPU seconds per episode over the second half of each run (the process' own CPU time, so
+    # what else runs on the machine does not count).
+    half = n // 2
+    cpu_rates = [(n - half) / (columns["cpu_seconds"][n - 1] - (columns["cpu_seconds"][half - 1] if half else 0.0))
+                 for columns in per_seed]
+    return {"seeds": len(runs), "episodes": int(n), "env_steps_per_episode": horizon, "milestones": milestones,
+            "curve": {"episodes": grid.tolist(), "mean_distance": curves.mean(0).tolist(),
+                      "std_distance": curves.std(0).tolist(), "table_contacts": np.nanmean(contact_curves, 0).tolist()
+                      if np.isfinite(contact_curves).any() else None},
+            "table_contacts_per_episode": float(np.nanmean(contacts)) if np.isfinite(contacts).any() else None,
+            "setup_seconds": float(np.mean([r["setup_seconds"] for r in records])),
+            "setup_cpu_seconds": float(np.mean([r["setup_cpu_seconds"] for r in records])),
+            "episodes_per_second": float(np.mean([r["episodes_played"] / r["learn_seconds"] for r in records])),
+            "episodes_per_cpu_second": float(np.mean(cpu_rates)),
+            "bc": [r["bc"] for r in records if r.get("bc")], "first_batch": [r["first_batch"] for r in records
+                                                                              if r.get("first_batch")]}
+
+
+def write_outputs(result: dict[str, Any], out: pathlib.Path) -> None:
+    """The JSON, the Markdown table and the three plots."""
+    from sb3_genrl.baselines.compare import LABELS
+
+    from sb3_genrl.curves import plot_curves
+    from sb3_genrl.markdown import markdown_table
+    from sb3_genrl.utils import atomic_write_text
+
+    out.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_json(out, result)
+    stem, task = out.with_suffix(""), result["task"]
+    series = {}
+    for method, row in result["methods"].items():
+        curve = row["curve"]
+        series[LABELS.get(method, method)] = (np.array(curve["episodes"]), -np.array(curve["mean_distance"]),
+                                              np.array(curve["std_distance"]))
+    plot_curves(series, f"{stem}_episodes.png", ylabel="mean reward (-distance, m)", title=f"{task}: mean +- std over seeds")
+    steps = {label: (x * result["horizon"], y, s) for label, (x, y, s) in series.items()}
+    plot_curves(steps, f"{stem}_env_steps.png", ylabel="mean reward (-distance, m)", xlabel="environment steps",
+                title=f"{task}: mean +- std over seeds")
+    contacts = {LABELS.get(m, m): (np.array(r["curve"]["episodes"]), np.array(r["curve"]["table_contacts"]), None)
+                for m, r in result["methods"].items() if r["curve"]["table_contacts"] is not None}
+    if contacts:
+        plot_curves(contacts, f"{stem}_contacts.png", ylabel="table contacts per episode (control steps)",
+                    title=f"{task}: table contacts")
+    header = ["method", "seeds", *(f"{m} episodes" for m in MILESTONES), "table contacts / episode", "setup (CPU s)",
+              "episodes / CPU s"]
+    rows = []
+    for method, row in result["methods"].items():
+        cells = [f"{row['milestones'][str(m)]['mean']:.3f} +- {row['milestones'][str(m)]['std']:.3f}"
+                 if str(m) in row["milestones"] else "n/a" for m in MILESTONES]
+        contacts_cell = "n/a" if row["table_contacts_per_episode"] is None else f"{row['table_contacts_per_episode']:.2f}"
+        rows.append([LABELS.get(method, method), row["seeds"], *cells, contacts_cell,
+                     f"{row['setup_cpu_seconds']:.0f}", f"{row['episodes_per_cpu_second']:.2f}"])
+    lines = [f"# {task}: mean distance to the goal (m), mean +- std over seeds", "",
+             f"Mean over the {WINDOW} episodes before each budget (training episodes, as played).", "",
+             markdown_table(header, rows)]
+    lines += ["", f"![episodes]({stem.name}_episodes.png)", "", f"![environment steps]({stem.name}_env_steps.png)", ""]
+    if contacts:
+        lines += [f"![table contacts]({stem.name}_contacts.png)", ""]
+    atomic_write_text(out.with_suffix(".md"), "\n".join(lines))
+
+
+def core_hours(result: dict[str, Any], episodes: int, seeds: int) -> float:
+    """Single-core hours of the whole benchmark at ``episodes`` x ``seeds``, from the measured CPU costs (setup and
+    steady-state episodes). SAC without prefill plays random actions until ``learning_starts``; a run too short to
+    pass it is charged SAC (prefilled)'s rate, its cost once learning, beyond that point."""
+    from sb3_genrl.baselines.hyperparameters import SAC_SETTINGS
+
+    methods, seconds = result["methods"], 0.0
+    for method, row in methods.items():
+        rate = row["episodes_per_cpu_second"]
+        warm_up = SAC_SETTINGS["learning_starts"] / result["horizon"]
+        if method == "sac-no-prefill" and row["episodes"] <= warm_up and "sac" in methods:
+            learning = max(episodes - warm_up, 0)
+            cost = (episodes - learning) / rate + learning / methods["sac"]["episodes_per_cpu_second"]
+        else:
+            cost = episodes / rate
+        seconds += seeds * (row["setup_cpu_seconds"] + cost)
+    return seconds / 3600
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--task", default="hockey", help="a registered task (default: hockey)")
+    parser.add_argument("--episodes", type=int, default=3000, help="episode budget of every run")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)
+    parser.add_argument("--demos", default=None, help="demonstration dataset (default: make --demo-count of them)")
+    parser.add_argument("--demo-count", type=int, default=4000, help="demonstrations to make when --demos is not given")
+    parser.add_argument("--generator", default=None,
+                        help=f"generator for GenRL and the latent baselines (default: {GENERATOR_PRESET}, "
+                             f"{GENERATOR_EPOCHS} epochs, on the demonstrations)")
+    parser.add_argument("--jobs", type=int, default=1, help="runs at a time, one process (one core) each")
+    parser.add_argument("--work", default=None, help="folder of the runs (default: benchmarks/runs/baselines_TASK)")
+    parser.add_argument("--out", default=None, help="JSON result (default: benchmarks/results/baselines[_TASK].json)")
+    args = parser.parse_args()
+    from sb3_genrl.envs import get_task
+
+    spec = get_task(args.task)
+    args.task = spec.name
+    work = pathlib.Path(args.work or HERE / "runs" / f"baselines_{spec.name}")
+    out = pathlib.Path(args.out or HERE / "results" / ("baselines.json" if spec.name == "hockey"
+                                                       else f"baselines_{spec.name}.json"))
+    work.mkdir(parents=True, exist_ok=True)
+    demos, generator = prepare(args, work)
+    jobs = [(method, run_settings(method, args, seed, demos, generator), demos, generator,
+             str(work / method / f"seed{seed}")) for method in args.methods for seed in args.seeds]
+    try:  # refuse before running anything if a finished run of other settings is in the way
+        todo = [job for job in jobs if not finished(pathlib.Path(job[-1]), job[1])]
+    except ValueError as error:
+        raise SystemExit(f"baselines.py: {error}") from None
+    print(f"{len(jobs) - len(todo)} of {len(jobs)} runs already done", flush=True)
+    began = time.perf_counter()
+    if args.jobs <= 1:
+        for job in todo:
+            print(f"done {run_one(*job)} ({time.perf_counter() - began:.0f} s)", flush=True)
+    else:
+        with ProcessPoolExecutor(args.jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+            for future in as_completed([pool.submit(run_one, *job) for job in todo]):
+                print(f"done {future.result()} ({time.perf_counter() - began:.0f} s)", flush=True)
+    import sb3_genrl
+
+    result = {"benchmark": "baselines", "task": spec.name, "horizon": spec.horizon, "episodes": args.episodes,
+              "seeds": args.seeds, "window": WINDOW, "demos": os.path.abspath(demos), "sb3_genrl": sb3_genrl.__version__,
+              "machine": platform.machine(), "cpus": os.cpu_count(), "jobs": args.jobs,
+              "methods": {m: method_result([work / m / f"seed{s}" for s in args.seeds], spec.horizon)
+                          for m in args.methods}}
+    result["core_hours_3000_episodes_3_seeds"] = core_hours(result, 3000, 3)
+    write_outputs(result, out)
+    print(out.with_suffix(".md").read_text())
+    print(f"estimated single-core hours for 3 seeds x 3000 episodes: {result['core_hours_3000_episodes_3_seeds']:.1f}")
+
+
+if __name__ == "__main__":
+    main()
