@@ -1,12 +1,14 @@
 """Compare GenRL, PPO, SAC and the latent-space baselines over seeds (paper figures 6 and 8).
 
 Each run folder is one written by ``genrl train-policy`` or ``genrl baseline``: ``summary.json`` names the method,
-``learning_curve.csv`` holds mean reward against episodes, ``episodes.csv`` the per-episode table contacts.
+``learning_curve.csv`` holds mean reward against episodes, ``episodes.monitor.csv`` (SB3's Monitor) the per-episode
+table contacts.
 """
 
 from __future__ import annotations
 
 import csv
+import io
 import json
 import os
 import pathlib
@@ -14,9 +16,12 @@ from collections import defaultdict
 
 import numpy as np
 
-from sb3_genrl.callbacks import read_episodes
-from sb3_genrl.curves import mean_std_over_seeds, plot_curves, read_curve
+from sb3_genrl.checks import check_output_dir
+from sb3_genrl.curves import MONITOR_FILE, mean_std_over_seeds, plot_curves, read_curve, read_monitor
+from sb3_genrl.markdown import markdown_table
+from sb3_genrl.utils import atomic_path, atomic_write_text
 
+# How the comparison names each method (``genrl`` and :data:`~sb3_genrl.baselines.BASELINES`).
 LABELS = {"genrl": "GenRL", "ppo": "PPO (BC)", "sac": "SAC (prefilled)", "sac-no-prefill": "SAC (no prefill)",
           "sac-her": "SAC + HER", "latent-ppo": "PPO on latent", "latent-sac": "SAC on latent",
           "latent-trpo": "TRPO on latent"}
@@ -31,6 +36,41 @@ def compare_runs(run_dirs: list[str | os.PathLike], out_dir: str | os.PathLike, 
     :param task: only runs of this task (default: all given, which must then share one task)
     :return: the Markdown table's path
     """
+    out = check_output_dir(out_dir)
+    runs, task_name = _read_runs(run_dirs, task)
+    out.mkdir(parents=True, exist_ok=True)
+    # The budget every run reached: methods are compared there (and each also at the end of its own runs).
+    budget = int(min(run["curve"]["episodes"][-1] for group in runs.values() for run in group))
+    series, rows = {}, []
+    for algorithm, group in runs.items():
+        curves = [run["curve"] for run in group]
+        series[LABELS.get(algorithm, algorithm)] = mean_std_over_seeds(curves)
+        rows.append(_method_row(LABELS.get(algorithm, algorithm), curves, [run["contacts"] for run in group], budget))
+    plot_curves(series, out / "reward_vs_episodes.png", ylabel="mean reward (-distance, m)",
+                title=f"{task_name}: mean +- std over seeds")
+    _plot_contacts(rows, out / "table_contacts.png", title=f"{task_name}: table contacts per episode")
+    text = io.StringIO()
+    writer = csv.DictWriter(text, fieldnames=list(rows[0]))
+    writer.writeheader()
+    writer.writerows(rows)
+    atomic_write_text(out / "comparison.csv", text.getvalue(), newline="")
+    header = ["method", "seeds", f"reward at {budget} episodes", "episodes run", "final mean reward", "best mean reward",
+              "table contacts / episode"]
+    table = [[row["method"], row["seeds"], f"{row['reward_at_budget']:.3f} +- {row['reward_at_budget_std']:.3f}",
+              row["episodes"], f"{row['final_mean_reward']:.3f} +- {row['final_std']:.3f}", row["best_mean_reward"],
+              "n/a" if np.isnan(row["table_contacts_per_episode"])
+              else f"{row['table_contacts_per_episode']:.2f} +- {row['table_contacts_std']:.2f}"] for row in rows]
+    lines = [f"# {task_name}: GenRL vs baselines", "",
+             f"Mean reward (minus the distance in m; mean +- std over seeds) at the budget every run reached ({budget} "
+             "episodes) and at the end of each method's own runs.", "", markdown_table(header, table), "",
+             "![reward vs episodes](reward_vs_episodes.png)", "", "![table contacts](table_contacts.png)", ""]
+    path = out / "comparison.md"
+    atomic_write_text(path, "\n".join(lines))
+    return path
+
+
+def _read_runs(run_dirs: list[str | os.PathLike], task: str | None) -> tuple[dict[str, list[dict]], str]:
+    """The runs of ``task`` grouped by method (each with its curve and mean table contacts per episode) and the task."""
     runs: dict[str, list[dict]] = defaultdict(list)
     tasks = set()
     for run_dir in map(pathlib.Path, run_dirs):
@@ -41,59 +81,32 @@ def compare_runs(run_dirs: list[str | os.PathLike], out_dir: str | os.PathLike, 
         if task is not None and summary.get("task") != task:
             continue
         tasks.add(summary.get("task"))
-        episodes = read_episodes(run_dir / "episodes.csv") if (run_dir / "episodes.csv").exists() else {}
+        episodes = read_monitor(run_dir / MONITOR_FILE) if (run_dir / MONITOR_FILE).exists() else {}
         contacts = episodes.get("table_contacts", np.array([np.nan]))
         runs[summary["algorithm"]].append({"curve": read_curve(run_dir / "learning_curve.csv"), "summary": summary,
-                                           "contacts": float(np.nanmean(contacts)) if np.any(np.isfinite(contacts))
-                                           else np.nan})
+                                           "contacts": _nanmean(contacts)})
     if not runs:
         raise ValueError(f"no runs of task {task!r} among {len(run_dirs)} folders")
     if len(tasks) > 1:
         raise ValueError(f"runs of several tasks {sorted(tasks)}; pass task=...")
-    task_name = task or tasks.pop()
-    out = pathlib.Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    return runs, task or tasks.pop()
 
-    # The budget every run reached: methods are compared there (and each also at the end of its own runs).
-    budget = int(min(run["curve"]["episodes"][-1] for group in runs.values() for run in group))
-    series, rows = {}, []
-    for algorithm, group in runs.items():
-        label = LABELS.get(algorithm, algorithm)
-        curves = [run["curve"] for run in group]
-        series[label] = mean_std_over_seeds(curves)
-        finals = np.array([curve["mean_reward"][-1] for curve in curves])
-        at_budget = np.array([np.interp(budget, curve["episodes"], curve["mean_reward"]) for curve in curves])
-        best = np.array([np.max(curve["mean_reward"]) for curve in curves])
-        contacts = np.array([run["contacts"] for run in group])
-        rows.append({"method": label, "seeds": len(group), "budget": int(budget), "reward_at_budget": at_budget.mean(),
-                     "reward_at_budget_std": at_budget.std(), "episodes": int(min(c["episodes"][-1] for c in curves)),
-                     "final_mean_reward": finals.mean(), "final_std": finals.std(), "best_mean_reward": best.max(),
-                     "table_contacts_per_episode": np.nanmean(contacts) if np.any(np.isfinite(contacts)) else np.nan,
-                     "table_contacts_std": np.nanstd(contacts) if np.any(np.isfinite(contacts)) else np.nan})
-    plot_curves(series, out / "reward_vs_episodes.png", ylabel="mean reward (-distance, m)",
-                title=f"{task_name}: mean +- std over seeds")
-    _plot_contacts(rows, out / "table_contacts.png", title=f"{task_name}: table contacts per episode")
-    with (out / "comparison.csv").open("w", newline="") as file:
-        writer = csv.DictWriter(file, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
-    lines = [f"# {task_name}: GenRL vs baselines", "",
-             f"Mean reward (minus the distance in m; mean +- std over seeds) at the budget every run reached ({budget} "
-             "episodes) and at the end of each method's own runs.", "",
-             f"| method | seeds | reward at {budget} episodes | episodes run | final mean reward | best mean reward "
-             "| table contacts / episode |",
-             "|---|---|---|---|---|---|---|"]
-    for row in rows:
-        cells = [row["method"], row["seeds"], f"{row['reward_at_budget']:.3f} +- {row['reward_at_budget_std']:.3f}",
-                 row["episodes"], f"{row['final_mean_reward']:.3f} +- {row['final_std']:.3f}",
-                 f"{row['best_mean_reward']:.3f}",
-                 "n/a" if np.isnan(row["table_contacts_per_episode"])
-                 else f"{row['table_contacts_per_episode']:.2f} +- {row['table_contacts_std']:.2f}"]
-        lines.append("| " + " | ".join(map(str, cells)) + " |")
-    lines += ["", "![reward vs episodes](reward_vs_episodes.png)", "", "![table contacts](table_contacts.png)", ""]
-    path = out / "comparison.md"
-    path.write_text("\n".join(lines))
-    return path
+
+def _method_row(label: str, curves: list[dict[str, np.ndarray]], contacts: list[float], budget: int) -> dict:
+    """One method's line of the comparison: rewards at the common budget, at the end and at best, table contacts."""
+    finals = np.array([curve["mean_reward"][-1] for curve in curves])
+    at_budget = np.array([np.interp(budget, curve["episodes"], curve["mean_reward"]) for curve in curves])
+    contacts = np.array(contacts)
+    return {"method": label, "seeds": len(curves), "budget": int(budget), "reward_at_budget": at_budget.mean(),
+            "reward_at_budget_std": at_budget.std(), "episodes": int(min(c["episodes"][-1] for c in curves)),
+            "final_mean_reward": finals.mean(), "final_std": finals.std(),
+            "best_mean_reward": max(np.max(curve["mean_reward"]) for curve in curves),
+            "table_contacts_per_episode": _nanmean(contacts),
+            "table_contacts_std": np.nanstd(contacts) if np.isfinite(contacts).any() else np.nan}
+
+
+def _nanmean(values: np.ndarray) -> float:
+    return float(np.nanmean(values)) if np.isfinite(values).any() else np.nan
 
 
 def _plot_contacts(rows: list[dict], path: pathlib.Path, *, title: str) -> None:
@@ -111,4 +124,5 @@ def _plot_contacts(rows: list[dict], path: pathlib.Path, *, title: str) -> None:
     ax.set_title(title)
     ax.tick_params(axis="x", labelrotation=20)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format=path.suffix[1:] or "png")

@@ -17,9 +17,10 @@ Latent-space baselines (the same generator as GenRL, on :class:`~sb3_genrl.Laten
 episodes): ``latent-ppo``, ``latent-sac``, ``latent-trpo`` - stock SB3 / sb3-contrib algorithms with their
 defaults except 64 episodes per update (GenRL's batch), so they show what the EM update adds.
 
-Every run writes ``episodes.csv`` (one row per episode: return, table contacts, distance, written as training
-goes), ``learning_curve.csv`` / ``learning_curve.png`` (mean over windows of 64 episodes), TensorBoard logs in
-``tensorboard/``, the model (with its normalisation statistics; ``ppo`` also the cloned policy before PPO,
+Every run writes ``episodes.monitor.csv`` (SB3's Monitor: one row per episode with its return, length, table
+contacts, distance and the process' CPU seconds so far, written as training goes), ``learning_curve.csv`` /
+``learning_curve.png`` (mean over windows of 64 episodes), SB3's logs in ``logs/`` (``progress.csv`` and
+TensorBoard), the model (with its normalisation statistics; ``ppo`` also the cloned policy before PPO,
 ``bc_policy.zip``), and ``summary.json``.
 """
 
@@ -40,8 +41,8 @@ from sb3_genrl.baselines.models import ppo_with_behaviour_cloning, sac_her_with_
 from sb3_genrl.envs import get_task
 from stable_baselines3 import PPO, SAC
 
-from sb3_genrl.callbacks import EpisodeRecorder
-from sb3_genrl.curves import write_learning_curve
+from sb3_genrl.checks import check_device, check_input_path, check_output_dir, check_positive_int, check_seed
+from sb3_genrl.curves import MONITOR_FILE, monitor_episodes, read_monitor, training_logger, write_learning_curve
 from sb3_genrl.utils import atomic_write_json
 
 LATENT_BATCH = 64  # episodes per update of the latent-space baselines (GenRL's default N)
@@ -80,54 +81,72 @@ def train_baseline(
     :param eval_goals: held-out goals on which the cloned policy is evaluated (``ppo``)
     :param window: episodes per point of the learning curve
     """
-    if algorithm not in BASELINES:
-        raise ValueError(f"unknown baseline {algorithm!r}; expected one of {BASELINES}")
-    if int(episodes) != episodes or episodes < 1:
-        raise ValueError(f"episodes must be a positive integer, got {episodes!r}")
+    _check_arguments(algorithm, episodes, seed, demos, demo_episodes, generator, eval_goals, device)
     spec = get_task(task)
-    out = pathlib.Path(out_dir)
+    out = check_output_dir(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     summary: dict[str, Any] = {"algorithm": algorithm, "task": spec.name, "episodes": int(episodes), "seed": seed}
-    common = {"seed": seed, "device": device, "verbose": verbose, "tensorboard_log": str(out / "tensorboard")}
+    common = {"seed": seed, "device": device, "verbose": verbose}
     began, began_cpu = time.perf_counter(), time.process_time()
     if algorithm in LATENT_BASELINES:
-        model, steps = _latent_model(algorithm, spec.env_id, generator, episodes, common)
+        model, steps = _latent_model(algorithm, spec.env_id, generator, episodes, common, out)
     else:
-        if demos is None:
-            raise ValueError(f"{algorithm} needs demonstrations (demos=...)")
         transitions = _demonstrations(demos, demo_episodes, spec.name)
         steps = int(episodes) * spec.horizon
         summary |= {"demo_transitions": len(transitions["observations"]), "settings": settings_record()[algorithm]}
         if algorithm == "ppo":
             summary["settings"]["behaviour_cloning"] |= bc_kwargs or {}
         model = _feedback_model(algorithm, spec.name, transitions, steps, out, summary, eval_goals, bc_kwargs, common)
-    recorder = EpisodeRecorder(out / "episodes.csv")
     # Demonstrations, behaviour cloning and its evaluation: wall-clock and this process' CPU seconds.
     summary |= {"setup_seconds": time.perf_counter() - began, "setup_cpu_seconds": time.process_time() - began_cpu}
+    model.set_logger(training_logger(out, verbose))
     began = time.perf_counter()
-    model.learn(total_timesteps=steps, callback=recorder, progress_bar=progress_bar, tb_log_name=algorithm)
+    model.learn(total_timesteps=steps, progress_bar=progress_bar, tb_log_name=algorithm)
     summary["learn_seconds"] = time.perf_counter() - began
+    model.logger.close()
     model.save(out / f"{algorithm}_policy.zip")
-    curve = write_learning_curve(out / "episodes.csv", out, window=window, title=f"{algorithm} on {spec.name}")
-    returns = np.asarray(recorder.returns)
+    curve = write_learning_curve(out / MONITOR_FILE, out, window=window, title=f"{algorithm} on {spec.name}")
+    episodes_record = read_monitor(out / MONITOR_FILE)
+    returns = episodes_record["return"]
     summary |= {"episodes_played": len(returns), "final_mean_reward": float(curve["mean_reward"][-1]),
                 "best_mean_reward": float(np.max(curve["mean_reward"])), "max_reward": float(returns.max())}
     if algorithm == "ppo":
-        summary["first_batch"] = _first_batch(recorder)
+        summary["first_batch"] = _first_batch(episodes_record)
     atomic_write_json(out / "summary.json", summary)
     return summary
+
+
+def _check_arguments(algorithm: str, episodes: int, seed: int, demos: Any, demo_episodes: int | None, generator: Any,
+                     eval_goals: int, device: str) -> None:
+    """Refuse bad arguments before anything is built or simulated."""
+    if algorithm not in BASELINES:
+        raise ValueError(f"unknown baseline {algorithm!r}; expected one of {BASELINES}")
+    if algorithm in LATENT_BASELINES and generator is None:
+        raise ValueError(f"{algorithm} needs a generator (generator=...)")
+    if algorithm not in LATENT_BASELINES and demos is None:
+        raise ValueError(f"{algorithm} needs demonstrations (demos=...)")
+    check_positive_int(episodes, "episodes")
+    check_seed(seed)
+    check_positive_int(eval_goals, "eval_goals")
+    check_device(device)
+    if demo_episodes is not None:
+        check_positive_int(demo_episodes, "demo_episodes")
+    for name, path in (("demos", demos), ("generator", generator)):
+        if isinstance(path, str | os.PathLike):
+            check_input_path(path, name)
 
 
 def _feedback_model(algorithm: str, task: str, transitions: dict[str, np.ndarray], steps: int, out: pathlib.Path,
                     summary: dict[str, Any], eval_goals: int, bc_kwargs: dict[str, Any] | None,
                     common: dict[str, Any]) -> PPO | SAC:
-    """The feedback baseline's model, its demonstrations in place; behaviour cloning's record goes to ``summary``."""
+    """The feedback baseline's model on a monitored env, its demonstrations in place; behaviour cloning's record
+    goes to ``summary``."""
     horizon = get_task(task).horizon
     if algorithm == "sac-her":
-        return sac_her_with_demonstrations(gym.make(get_task(task).goal_env_id), goal_episodes(task, transitions),
-                                           steps=steps, **common)
+        env = monitor_episodes(gym.make(get_task(task).goal_env_id), out)
+        return sac_her_with_demonstrations(env, goal_episodes(task, transitions), steps=steps, **common)
     transitions = add_time_feature(transitions, horizon)
-    env = make_feedback_env(task)
+    env = monitor_episodes(make_feedback_env(task), out)
     if algorithm != "ppo":
         return sac_with_demonstrations(env, transitions, steps=steps, prefill=algorithm == "sac", **common)
     model, record = ppo_with_behaviour_cloning(env, transitions, bc_kwargs=bc_kwargs, **common)
@@ -146,10 +165,13 @@ def _feedback_model(algorithm: str, task: str, transitions: dict[str, np.ndarray
     return model
 
 
-def _first_batch(recorder: EpisodeRecorder) -> dict[str, Any]:
-    """What PPO's first rollout (sampled from the cloned policy, before any PPO update) and first 64 episodes scored."""
-    returns = np.asarray(recorder.returns)
-    first = returns[: sum(record["timesteps"] <= PPO_SETTINGS["n_steps"] for record in recorder.records)]
+def _first_batch(episodes: dict[str, np.ndarray]) -> dict[str, Any]:
+    """What PPO's first rollout (sampled from the cloned policy, before any PPO update) and first 64 episodes scored.
+
+    :param episodes: the run's Monitor columns (one env: the timesteps at each episode's end are the lengths' sum)
+    """
+    returns = episodes["return"]
+    first = returns[: int(np.sum(np.cumsum(episodes["length"]) <= PPO_SETTINGS["n_steps"]))]
     return {"episodes": len(first), "mean_distance": float(-first.mean()) if len(first) else None,
             "first_64_mean_distance": float(-returns[:64].mean())}
 
@@ -170,16 +192,15 @@ def _demonstrations(demos: Any, demo_episodes: int | None, task: str) -> dict[st
     return {key: np.asarray(value)[:n] for key, value in transitions.items()}
 
 
-def _latent_model(algorithm: str, env_id: str, generator: Any, episodes: int, common: dict) -> tuple[Any, int]:
+def _latent_model(algorithm: str, env_id: str, generator: Any, episodes: int, common: dict,
+                  out: pathlib.Path) -> tuple[Any, int]:
     from sb3_genrl import LatentActionWrapper
 
-    if generator is None:
-        raise ValueError(f"{algorithm} needs a generator (generator=...)")
     if isinstance(generator, str | os.PathLike):
         from sb3_genrl.generative import load
 
         generator = load(generator)
-    env = LatentActionWrapper(gym.make(env_id), generator)
+    env = monitor_episodes(LatentActionWrapper(gym.make(env_id), generator), out)
     if algorithm == "latent-ppo":
         model = PPO("MlpPolicy", env, n_steps=LATENT_BATCH, batch_size=LATENT_BATCH, **common)
     elif algorithm == "latent-sac":

@@ -5,11 +5,11 @@ latent space (see :mod:`sb3_genrl.baselines.train` and :mod:`sb3_genrl.baselines
 plays the same number of episodes; a feedback episode is the task's horizon in environment steps, a GenRL or
 latent-space episode is one trajectory of that many steps, so both axes (episodes, environment steps) hold.
 
-Each run has its own folder under ``--work`` (``METHOD/seedS``) where it writes its per-episode CSV as it goes; a
-run whose ``run.json`` exists is skipped when the settings recorded there match, and the benchmark refuses to mix
-runs of other settings. The results: ``--out`` (JSON), beside it the Markdown table of the mean distance at 100,
-300, 1000 and 3000 episodes and the curves (reward against episodes and against environment steps, table contacts
-per episode).
+Each run has its own folder under ``--work`` (``METHOD/seedS``) where it writes its per-episode records (SB3's
+Monitor file) as it goes; a run whose ``run.json`` exists is skipped when the settings recorded there match, and the
+benchmark refuses to mix runs of other settings. The results: ``--out`` (JSON), beside it the Markdown table of the
+mean distance at 100, 300, 1000 and 3000 episodes and the curves (reward against episodes and against environment
+steps, table contacts per episode).
 
     python benchmarks/baselines.py                          # hockey, 3 seeds x 3000 episodes, every method
     python benchmarks/baselines.py --jobs 2                 # two runs at a time
@@ -31,17 +31,13 @@ from typing import Any
 
 import numpy as np
 
+from sb3_genrl.utils import atomic_write_json
+
 HERE = pathlib.Path(__file__).resolve().parent
 METHODS = ("genrl", "ppo", "sac", "sac-no-prefill", "sac-her", "latent-ppo", "latent-sac", "latent-trpo")
 MILESTONES = (100, 300, 1000, 3000)  # episodes at which the table reports the mean distance
 WINDOW = 64  # episodes averaged per point (GenRL's batch)
 GENERATOR_PRESET, GENERATOR_EPOCHS = "VAE1", 300  # the quickstart's generator
-
-
-def _write_json(path: pathlib.Path, value: Any) -> None:
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(json.dumps(value, indent=2))
-    os.replace(tmp, path)
 
 
 def _file_digest(path: str) -> str:
@@ -95,8 +91,8 @@ def run_one(method: str, settings: dict[str, Any], demos: str, generator: str, r
                                  seed=settings["seed"], demos=None if latent else demos,
                                  generator=generator if latent else None, device="cpu")
         timing = {key: summary[key] for key in ("setup_seconds", "setup_cpu_seconds", "learn_seconds")}
-    _write_json(run / "run.json", {"settings": settings, **timing, "episodes_played": _episodes_played(run),
-                         "bc": summary.get("bc"), "first_batch": summary.get("first_batch")})
+    atomic_write_json(run / "run.json", {"settings": settings, **timing, "episodes_played": _episodes_played(run),
+                                         "bc": summary.get("bc"), "first_batch": summary.get("first_batch")})
     return run_dir
 
 
@@ -113,9 +109,9 @@ def finished(run: pathlib.Path, settings: dict[str, Any]) -> bool:
 
 
 def _episodes_played(run: pathlib.Path) -> int:
-    from sb3_genrl.callbacks import read_episodes
+    from sb3_genrl.curves import MONITOR_FILE, read_monitor
 
-    return len(read_episodes(run / "episodes.csv").get("return", []))
+    return len(read_monitor(run / MONITOR_FILE).get("return", []))
 
 
 def prepare(args: argparse.Namespace, work: pathlib.Path) -> tuple[str, str]:
@@ -142,9 +138,9 @@ def prepare(args: argparse.Namespace, work: pathlib.Path) -> tuple[str, str]:
 
 def method_result(runs: list[pathlib.Path], horizon: int) -> dict[str, Any]:
     """Distances, table contacts and timings of one method's runs (one per seed)."""
-    from sb3_genrl.callbacks import read_episodes, windowed_curve
+    from sb3_genrl.curves import MONITOR_FILE, read_monitor, windowed_curve
 
-    per_seed = [read_episodes(run / "episodes.csv") for run in runs]
+    per_seed = [read_monitor(run / MONITOR_FILE) for run in runs]
     records = [json.loads((run / "run.json").read_text()) for run in runs]
     n = min(len(columns["return"]) for columns in per_seed)
     distances = np.stack([-columns["return"][:n] for columns in per_seed])
@@ -181,9 +177,11 @@ def write_outputs(result: dict[str, Any], out: pathlib.Path) -> None:
     from sb3_genrl.baselines.compare import LABELS
 
     from sb3_genrl.curves import plot_curves
+    from sb3_genrl.markdown import markdown_table
+    from sb3_genrl.utils import atomic_write_text
 
     out.parent.mkdir(parents=True, exist_ok=True)
-    _write_json(out, result)
+    atomic_write_json(out, result)
     stem, task = out.with_suffix(""), result["task"]
     series = {}
     for method, row in result["methods"].items():
@@ -199,21 +197,22 @@ def write_outputs(result: dict[str, Any], out: pathlib.Path) -> None:
     if contacts:
         plot_curves(contacts, f"{stem}_contacts.png", ylabel="table contacts per episode (control steps)",
                     title=f"{task}: table contacts")
-    header = " | ".join(f"{m} episodes" for m in MILESTONES)
-    lines = [f"# {task}: mean distance to the goal (m), mean +- std over seeds", "",
-             f"Mean over the {WINDOW} episodes before each budget (training episodes, as played).", "",
-             f"| method | seeds | {header} | table contacts / episode | setup (CPU s) | episodes / CPU s |",
-             "|---|---|" + "---|" * len(MILESTONES) + "---|---|---|"]
+    header = ["method", "seeds", *(f"{m} episodes" for m in MILESTONES), "table contacts / episode", "setup (CPU s)",
+              "episodes / CPU s"]
+    rows = []
     for method, row in result["methods"].items():
         cells = [f"{row['milestones'][str(m)]['mean']:.3f} +- {row['milestones'][str(m)]['std']:.3f}"
                  if str(m) in row["milestones"] else "n/a" for m in MILESTONES]
         contacts_cell = "n/a" if row["table_contacts_per_episode"] is None else f"{row['table_contacts_per_episode']:.2f}"
-        lines.append(f"| {LABELS.get(method, method)} | {row['seeds']} | " + " | ".join(cells)
-                     + f" | {contacts_cell} | {row['setup_cpu_seconds']:.0f} | {row['episodes_per_cpu_second']:.2f} |")
+        rows.append([LABELS.get(method, method), row["seeds"], *cells, contacts_cell,
+                     f"{row['setup_cpu_seconds']:.0f}", f"{row['episodes_per_cpu_second']:.2f}"])
+    lines = [f"# {task}: mean distance to the goal (m), mean +- std over seeds", "",
+             f"Mean over the {WINDOW} episodes before each budget (training episodes, as played).", "",
+             markdown_table(header, rows)]
     lines += ["", f"![episodes]({stem.name}_episodes.png)", "", f"![environment steps]({stem.name}_env_steps.png)", ""]
     if contacts:
         lines += [f"![table contacts]({stem.name}_contacts.png)", ""]
-    out.with_suffix(".md").write_text("\n".join(lines))
+    atomic_write_text(out.with_suffix(".md"), "\n".join(lines))
 
 
 def core_hours(result: dict[str, Any], episodes: int, seeds: int) -> float:

@@ -88,6 +88,25 @@ def _run(method: str, size: int, args: argparse.Namespace) -> dict:
     return json.loads(completed.stdout.strip().splitlines()[-1])
 
 
+def _table(runs: list[dict], find) -> str:
+    """The runs as a Markdown table: time, peak memory, values and time over the matrix-product bound."""
+    from sb3_genrl.markdown import markdown_table  # here: the worker processes measure their memory without it
+
+    table = []
+    for run in runs:
+        if "seconds" not in run:
+            table.append([run["size"], run["method"], f"failed: {run['error']}", "", "", "", ""])
+            continue
+        bound = find("matmul", run["size"])
+        ratio = run["seconds"] / bound["seconds"] if bound else float("nan")
+        precision = f"{run['precision']:.4f}" if "precision" in run else ""
+        recall = f"{run['recall']:.4f}" if "recall" in run else ""
+        table.append([run["size"], run["method"], f"{run['seconds']:.2f}", f"{run['peak_mb']:.0f}", precision, recall,
+                      ratio])
+    header = ["N vs N", "method", "time (s)", "peak memory (MiB)", "precision", "recall", "time / matmul bound"]
+    return markdown_table(header, table, digits=2, align="rlrrrrr")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[5000, 15000], help="set sizes (real = generated)")
@@ -118,18 +137,7 @@ def main(argv: list[str] | None = None) -> int:
         return next((r for r in runs if r["method"] == method and r["size"] == size and "seconds" in r), None)
 
     summary = []
-    print("\n| N vs N | method | time (s) | peak memory (MiB) | precision | recall | time / matmul bound |")
-    print("|---:|---|---:|---:|---:|---:|---:|")
-    for run in runs:
-        if "seconds" not in run:
-            print(f"| {run['size']} | {run['method']} | failed: {run['error']} | | | | |")
-            continue
-        bound = find("matmul", run["size"])
-        ratio = run["seconds"] / bound["seconds"] if bound else float("nan")
-        precision = f"{run['precision']:.4f}" if "precision" in run else ""
-        recall = f"{run['recall']:.4f}" if "recall" in run else ""
-        print(f"| {run['size']} | {run['method']} | {run['seconds']:.2f} | {run['peak_mb']:.0f} | {precision} | {recall} "
-              f"| {ratio:.2f} |")
+    print("\n" + _table(runs, find))
     for size in sorted({run["size"] for run in runs}):
         ours, prdc_run, bound = find("ours", size), find("prdc", size), find("matmul", size)
         entry = {"size": size}

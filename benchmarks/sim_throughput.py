@@ -16,6 +16,8 @@ import numpy as np
 from sb3_genrl.envs.basketball import BasketballEnv, scripted_throw
 from sb3_genrl.envs.hockey import HockeyEnv, scripted_hit
 
+from sb3_genrl.markdown import markdown_table
+
 
 def _trajectories(task: str, n: int, rng: np.random.Generator) -> np.ndarray:
     if task == "hockey":
@@ -77,11 +79,9 @@ def main() -> None:
     rows = [measure(task, args.episodes, args.step_episodes, args.repeats) for task in ("hockey", "basketball")]
     print(f"episodes per second (best of {args.repeats} runs, {args.episodes} episodes)")
     header = ("task", "raw mj_step bound", "open loop 1 thread", "open loop 2 threads", "step by step", "1 thread / bound")
-    print("| " + " | ".join(header) + " |")
-    print("|" + "---|" * len(header))
-    for r in rows:
-        print(f"| {r['task']} | {r['raw_mj_step']:.1f} | {r['open_loop_1_thread']:.1f} | {r['open_loop_2_thread']:.1f} "
-              f"| {r['step_by_step']:.1f} | {r['open_loop_1_thread_vs_bound']:.2f} |")
+    print(markdown_table(header, [[r["task"], *(f"{r[key]:.1f}" for key in ("raw_mj_step", "open_loop_1_thread",
+                                    "open_loop_2_thread", "step_by_step")), f"{r['open_loop_1_thread_vs_bound']:.2f}"]
+                                  for r in rows]))
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(rows, indent=2))
     print(f"wrote {args.out}")

@@ -129,18 +129,27 @@ def make_demonstrations(task: str | TaskSpec, episodes: int, out_dir: str | os.P
     :param chunk: trajectories drawn and simulated per round
     :return: the dataset directory
     """
+    from sb3_genrl.checks import check_output_dir, check_positive_int, check_seed
     from sb3_genrl.study.state import folder_lock
 
-    if episodes < 1:
-        raise ValueError(f"episodes must be at least 1, got {episodes}")
-    out_dir = Path(out_dir).absolute()
+    spec = get_task(task)
+    check_positive_int(episodes, "episodes")
+    check_seed(seed)
+    check_positive_int(chunk, "chunk")
+    if n_threads is not None:
+        check_positive_int(n_threads, "n_threads")
+    out_dir = check_output_dir(out_dir, "out_dir").absolute()
     with folder_lock(out_dir, lock_file=out_dir.parent / f".{out_dir.name}.lock"):
-        _refuse_existing(out_dir)
-        return _make_demonstrations(get_task(task), episodes, out_dir, seed, n_threads, progress_bar, chunk)
+        refuse_existing_output(out_dir)
+        return _make_demonstrations(spec, episodes, out_dir, seed, n_threads, progress_bar, chunk)
 
 
-def _refuse_existing(out_dir: Path) -> None:
-    """Raise unless ``out_dir`` is missing or an empty directory, saying what is in the way."""
+def refuse_existing_output(out_dir: Path) -> None:
+    """Raise unless ``out_dir`` is missing or an empty directory, saying what is in the way (``genrl demos`` checks
+    its ``--out`` with it before any work).
+
+    :param out_dir: the dataset directory to create
+    """
     from sb3_genrl.data import dataset_info
 
     if not out_dir.exists() or (out_dir.is_dir() and not any(out_dir.iterdir())):

@@ -4,7 +4,7 @@ The same workflow as ``genrl quickstart``, written out with the library's functi
 About four minutes on a 2-core CPU with the defaults below.
 
     python examples/quickstart.py --out hockey_example
-    python examples/quickstart.py --out hockey_small --demos 1000 --epochs 60 --episodes 640   # about a minute
+    python examples/quickstart.py --out hockey_small --demo-episodes 1000 --epochs 60 --episodes 640   # about a minute
 
 Writes ``demonstrations/`` (a Minari dataset), ``vae.pt``, ``policy/`` (the model, ``learning_curve.csv`` and
 ``learning_curve.png``, TensorBoard logs) and prints the trained policy's mean final distance to new goals.
@@ -27,7 +27,7 @@ from sb3_genrl.genrl import train_policy
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default="hockey_example", help="output folder")
-    parser.add_argument("--demos", type=int, default=4000, help="demonstrations to generate")
+    parser.add_argument("--demo-episodes", type=int, default=4000, help="demonstrations to generate")
     parser.add_argument("--epochs", type=int, default=300, help="beta-VAE training epochs")
     parser.add_argument("--episodes", type=int, default=3000, help="GenRL episodes (one episode = one trajectory)")
     parser.add_argument("--seed", type=int, default=0)
@@ -37,7 +37,7 @@ def main() -> None:
     # 1. Demonstrations: the scripted expert's hits with small perturbations, stored as a Minari dataset.
     dataset = out / "demonstrations"
     if not dataset.exists():
-        make_demonstrations("hockey", args.demos, dataset, seed=args.seed, progress_bar=True)
+        make_demonstrations("hockey", args.demo_episodes, dataset, seed=args.seed, progress_bar=True)
 
     # 2. Generator: a beta-VAE with a 2-D latent space (paper table 1, VAE1: N_alpha = 2, beta = 0.01) trained on the
     #    demonstrations' action trajectories (69 steps x 7 joint position changes).

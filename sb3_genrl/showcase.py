@@ -9,6 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
+from sb3_genrl.checks import check_output_dir, check_positive_int, check_seed
+
 
 def frame_strip(frames: list[np.ndarray], n: int = 6) -> np.ndarray:
     """``n`` frames evenly spaced over the episode, side by side."""
@@ -47,13 +49,16 @@ def play_scripted(out_dir: str | Path, *, tasks: tuple[str, ...] | None = None, 
 
     from sb3_genrl.envs import TASKS, get_task
 
-    out = Path(out_dir)
+    specs = [get_task(name) for name in tasks or tuple(TASKS)]
+    check_seed(seed)
+    check_positive_int(width, "width")
+    check_positive_int(height, "height")
+    out = check_output_dir(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     lines = ["# Scripted motions of the GenRL tasks", "",
              "One base motion of each task's scripted expert played on its MuJoCo task (offscreen rendering); the red "
              "goal marks the point it reaches.", ""]
-    for name in tasks or tuple(TASKS):
-        spec = get_task(name)
+    for spec in specs:
         env = spec.make_env(render_mode="rgb_array", width=width, height=height)
         trajectory = spec.sample_expert(np.random.default_rng(seed))
         _, info = env.play_trajectory(trajectory, 0.5 * (spec.goal_low + spec.goal_high))

@@ -10,12 +10,15 @@ import pathlib
 
 import numpy as np
 
+from sb3_genrl.checks import check_input_path, check_output_file, check_positive_int, check_seed
 from sb3_genrl.showcase import frame_strip, save_animation
+
+VIDEO_SUFFIXES = (".mp4", ".gif")
 
 
 def record_video(task: str, out: str | os.PathLike, *, policy: str | os.PathLike | None = None,
                  generator: str | os.PathLike | None = None, goals: int = 6, seed: int = 0, width: int = 480,
-                 height: int = 352, fps: int = 25, strip: bool = True) -> dict:
+                 height: int = 352, fps: int = 25, strip: bool = True, trust_policy: bool = False) -> dict:
     """Play ``goals`` episodes and write them one after the other as an MP4 or GIF (by ``out``'s suffix).
 
     With ``policy`` (a GenRL run folder or model zip) the policy picks each goal's latent action
@@ -24,22 +27,28 @@ def record_video(task: str, out: str | os.PathLike, *, policy: str | os.PathLike
 
     :param task: a task name from :data:`sb3_genrl.envs.TASKS`
     :param goals: episodes (goals) to show, drawn with ``seed`` (which also draws the random latent actions)
+    :param trust_policy: load the policy zip with SB3's unpickling (see :func:`sb3_genrl.genrl.loading.load_policy`);
+        by default nothing in it is unpickled
     :return: ``video``, ``strip`` paths and per-episode ``rewards``
     """
     from sb3_genrl.envs import get_task
 
+    spec = get_task(task)
     if (policy is None) == (generator is None):
         raise ValueError("give exactly one of policy= (a GenRL run) or generator= (a generator file)")
-    if goals < 1:
-        raise ValueError(f"goals must be at least 1, got {goals}")
-    env = get_task(task).make_env(render_mode="rgb_array", width=width, height=height)
+    for name, value in (("goals", goals), ("width", width), ("height", height), ("fps", fps)):
+        check_positive_int(value, name)
+    check_seed(seed)
+    check_output_file(out, "out", suffixes=VIDEO_SUFFIXES)
+    check_input_path(policy if policy is not None else generator, "policy" if policy is not None else "generator")
+    env = spec.make_env(render_mode="rgb_array", width=width, height=height)
     rng = np.random.default_rng(seed)
     goal_list = np.array([env.sample_goal(rng) for _ in range(goals)])
     if policy is not None:
-        from sb3_genrl import GenRL
+        from sb3_genrl.genrl.loading import load_policy
 
         path = pathlib.Path(policy)
-        model = GenRL.load(path / "genrl_policy.zip" if path.is_dir() else path, device="cpu")
+        model = load_policy(path / "genrl_policy.zip" if path.is_dir() else path, env, trust=trust_policy)
         alphas, _ = model.predict(goal_list.astype(np.float32), deterministic=True)
         trajectories = model.generator.decode(alphas)
     else:

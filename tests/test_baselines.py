@@ -1,6 +1,7 @@
 """PPO with behaviour cloning, SAC with a prefilled replay buffer, and the comparison of runs."""
 
 import json
+import os
 
 import gymnasium as gym
 import numpy as np
@@ -20,8 +21,8 @@ from sb3_genrl.envs.hockey import HOCKEY_HORIZON, HockeyEnv, scripted_hit
 from stable_baselines3 import PPO, SAC
 from stable_baselines3.common.policies import ActorCriticPolicy
 
-from sb3_genrl.callbacks import read_episodes
 from sb3_genrl.cli import main
+from sb3_genrl.curves import MONITOR_FILE, read_monitor
 
 
 def demo_transitions(n_episodes: int, seed: int = 0) -> dict[str, np.ndarray]:
@@ -135,13 +136,18 @@ def test_baselines_run_end_to_end(algorithm, demos, tmp_path):
     summary = train_baseline(algorithm, "hockey", episodes=12, out_dir=tmp_path, demos=demos, demo_episodes=10,
                              bc_kwargs={"max_epochs": 2}, eval_goals=2, window=5, device="cpu")
     assert summary["episodes_played"] >= 12 and summary["demo_transitions"] == 10 * 69
-    episodes = read_episodes(tmp_path / "episodes.csv")
-    assert len(episodes["return"]) == summary["episodes_played"]
+    episodes = read_monitor(tmp_path / MONITOR_FILE)
+    assert len(episodes["return"]) == summary["episodes_played"] and np.all(episodes["length"] == 69)
     assert np.all(episodes["table_contacts"] >= 0) and np.all(episodes["return"] <= 0)
+    # The return of a hockey episode is its terminal reward: minus the distance it reports (Monitor keeps 6
+    # decimals), or the worst reward of an unstable simulation.
+    assert np.all(np.isclose(episodes["return"], -episodes["distance"], atol=1e-6) | (episodes["return"] == -5.0))
+    # The process' CPU seconds at each episode's end: never decreasing, and measured from the run's start.
     assert np.all(np.diff(episodes["cpu_seconds"]) >= 0) and episodes["cpu_seconds"][-1] > 0
+    assert episodes["cpu_seconds"][-1] <= summary["learn_seconds"] * os.cpu_count() + 1
     for name in ("learning_curve.csv", "learning_curve.png", f"{algorithm}_policy.zip", "summary.json"):
         assert (tmp_path / name).exists()
-    assert any((tmp_path / "tensorboard").iterdir())
+    assert any((tmp_path / "logs").glob("events.out.tfevents.*")) and (tmp_path / "logs" / "progress.csv").exists()
     assert json.loads((tmp_path / "summary.json").read_text()) == summary and "settings" in summary
     if algorithm == "ppo":
         bc, first = summary["bc"], summary["first_batch"]

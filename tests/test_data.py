@@ -199,3 +199,33 @@ def test_non_finite_demonstrations_are_refused_by_every_loader(tmp_path: Path) -
             with pytest.raises(ValueError, match=f"{key} hold .* non-finite") as error:
                 loader(path)
             assert str(path) in str(error.value)
+
+
+def test_one_trajectory_loader_for_arrays_files_and_datasets(dataset, tmp_path) -> None:
+    from sb3_genrl.data import load_trajectories
+
+    path, arrays = dataset
+    actions = arrays["actions"]
+    np.testing.assert_array_equal(load_trajectories(path), actions)  # a dataset: its actions
+    np.testing.assert_array_equal(load_trajectories(actions), actions)
+    np.save(tmp_path / "a.npy", actions)
+    np.testing.assert_array_equal(load_trajectories(tmp_path / "a.npy"), actions)
+    np.savez(tmp_path / "one.npz", anything=actions)
+    np.savez(tmp_path / "named.npz", trajectories=actions, goals=arrays["reached"])
+    for name in ("one.npz", "named.npz"):
+        np.testing.assert_array_equal(load_trajectories(str(tmp_path / name)), actions)
+    np.savez(tmp_path / "two.npz", a=actions, b=actions)
+    with pytest.raises(ValueError, match=r"holds arrays \['a', 'b'\]"):
+        load_trajectories(tmp_path / "two.npz")
+    with pytest.raises(FileNotFoundError, match="does not exist"):
+        load_trajectories(tmp_path / "missing.npy")
+    with pytest.raises(ValueError, match="neither a demonstration dataset directory nor a .npy/.npz file"):
+        load_trajectories(Path(__file__))
+    with pytest.raises(ValueError, match=r"shape \(N, T, M\)"):
+        load_trajectories(actions[0])
+    # The generators' training and their evaluation read data through this one loader.
+    import sb3_genrl.generative.training
+    import sb3_genrl.metrics.evaluate
+
+    assert sb3_genrl.generative.training.load_trajectories is load_trajectories
+    assert sb3_genrl.metrics.evaluate.load_trajectories is load_trajectories

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -11,7 +12,6 @@ from sb3_genrl.envs import TASKS
 from sb3_genrl.envs.coverage import coverage_fraction, coverage_report, covered_cells, region_cells
 from sb3_genrl.envs.demonstrations import make_demonstrations, sample_trajectories, within_limits
 
-from sb3_genrl.cli import main
 from sb3_genrl.data import dataset_info, load_arrays
 
 EPISODES = 8
@@ -95,6 +95,14 @@ def test_determinism_threads_and_seeds(hockey_dataset: Path, tmp_path: Path) -> 
     assert sorted(p.name for p in tmp_path.iterdir()) == ["other", "same"]  # no temporary directories left
 
 
+def _cells_by_hand(task: str) -> int:
+    """The goal region's cells counted from the paper's geometry (section 6.1.1), cell by cell."""
+    if task == "hockey":  # x in [0.65, 1.3] m, y in [-0.4, 0.4] m, all inside: 13 x 16 cells of 5 cm
+        return 13 * 16
+    # Basketball: cells of 0.25 m over x in [0, 8] m, y in [-8, 8] m; the half-annulus keeps radii 1 to 8 m.
+    return sum(1 for i in range(32) for j in range(64) if 1 <= math.hypot(0.125 + 0.25 * i, -7.875 + 0.25 * j) <= 8)
+
+
 def _brute_force_coverage(points: np.ndarray, task: str) -> float:
     centres = region_cells(task)
     covered = [any(np.hypot(*(p - c)) <= TASKS[task].cell_size for p in points) for c in centres]
@@ -104,7 +112,7 @@ def _brute_force_coverage(points: np.ndarray, task: str) -> float:
 @pytest.mark.parametrize("task", ["hockey", "basketball"])
 def test_coverage_against_brute_force(task: str) -> None:
     centres = region_cells(task)
-    assert len(centres) == (13 * 16 if task == "hockey" else len(centres))
+    assert len(centres) == _cells_by_hand(task)
     assert coverage_fraction(centres, task) == 1.0
     corner = centres[np.argmin(centres.sum(axis=1))][None]
     assert 0 < coverage_fraction(corner, task) < 0.05
@@ -134,11 +142,11 @@ def test_coverage_report_files(hockey_dataset: Path, tmp_path: Path) -> None:
         coverage_report(hockey_dataset, "basketball", tmp_path / "other")
 
 
-def test_cli_demos(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_demos(tmp_path: Path, cli) -> None:
     out = tmp_path / "cli"
-    assert main(["demos", "--task", "basketball", "--episodes", "3", "--out", str(out), "--seed", "1", "--threads", "2",
-                 "--no-progress-bar"]) == 0
-    printed = capsys.readouterr().out
+    code, printed, err = cli("demos", "--task", "basketball", "--episodes", 3, "--out", out, "--seed", 1, "--threads", 2,
+                             "--no-progress-bar")
+    assert code == 0, err
     assert "3 basketball demonstrations" in printed and str(out) in printed and "coverage:" in printed
     assert dataset_info(out)["task"] == "basketball"
     arrays = load_arrays(out, task="basketball")
@@ -146,8 +154,9 @@ def test_cli_demos(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
                                                                      allow_outside_region=True)
     np.testing.assert_array_equal(rewards, 0.0)  # hindsight goals: every demonstration succeeds
     assert all(info["crossings"] > 0 and not info["joint_limit_clipped"] for info in infos)
-    assert main(["demos", "--task", "basketball", "--episodes", "3", "--out", str(out), "--no-progress-bar"]) == 2
-    assert "already exists" in capsys.readouterr().err
+    code, _, err = cli("demos", "--task", "basketball", "--episodes", 3, "--out", out, "--no-progress-bar")
+    assert code == 2 and "argument --out" in err  # checked before any work, saying what is in the way
+    assert "already exists and holds a complete dataset (3 basketball demonstrations, seed 1)" in err
 
 
 def test_hockey_hits_all_swing_at_the_same_step():

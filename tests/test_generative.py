@@ -16,7 +16,6 @@ from sb3_genrl.generative import (
     InfoGAN,
     TrajectoryGenerator,
     load,
-    load_trajectories,
     make_generator,
     train_generator,
 )
@@ -276,9 +275,37 @@ def test_train_generator_and_cli_write_loadable_models(tmp_path, capsys):
     floored = load(tmp_path / "vae_floor.pt")
     assert floored.std_floor == 0.2
     assert float(floored.action_std.min()) >= 0.2 * float(floored.action_std.max()) * (1 - 1e-6)
-    assert cli_main(["train-generator", "--data", str(tmp_path / "missing.npy"), "--out", str(out)]) == 2
     assert cli_main(["train-generator", "--data", str(npy), "--model", "vae", "--out", str(out)]) == 2
     assert "needs" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (("--data", "missing.npy"), "argument --data: 'missing.npy' does not exist"),
+    (("--lr", "-1"), "argument --lr: must be a finite number > 0, got -1.0"),
+    (("--lr", "inf"), "argument --lr: must be a finite number > 0, got inf"),
+    (("--epochs", "0"), "argument --epochs: must be an integer >= 1, got 0"),
+    (("--seed", "-1"), "argument --seed: must be an integer between 0 and 4294967295, got -1"),
+    (("--device", "bogus"), "argument --device: must be 'auto' or a torch device"),
+    (("--out", "."), "argument --out: '.' is a folder; expected a file name"),
+])
+def test_train_generator_cli_checks_arguments_first(tmp_path, cli, monkeypatch, args, message):
+    monkeypatch.chdir(tmp_path)
+    np.save("demos.npy", np.zeros((10, 4, 2), dtype=np.float32))
+    argv = dict(zip(args[::2], args[1::2], strict=True))
+    argv = {"--data": "demos.npy", "--epochs": "1", "--out": "vae.pt", **argv}
+    code, _, err = cli("train-generator", *(item for pair in argv.items() for item in pair))
+    assert code == 2 and message in err and not (tmp_path / "vae.pt").exists()
+
+
+def test_train_generator_checks_arguments_before_training(tmp_path):
+    data = np.zeros((10, 4, 2), dtype=np.float32)
+    (tmp_path / "folder").mkdir()
+    for kwargs, message in (({"epochs": -1}, "epochs must be an integer >= 1, got -1"),
+                            ({"batch_size": 2.5}, r"batch_size must be an integer >= 1, got 2.5 \(float\)"),
+                            ({"lr": float("nan")}, "lr must be a finite number > 0"),
+                            ({"out": tmp_path / "folder"}, "is a folder; expected a file name")):
+        with pytest.raises(ValueError, match=message):
+            train_generator(data, **kwargs)
 
 
 def test_infogan_noise_is_fixed_at_decode(tmp_path):
@@ -295,18 +322,6 @@ def test_infogan_noise_is_fixed_at_decode(tmp_path):
     restored = load(tmp_path / "gan.pt")
     assert restored.noise_dim == 3
     np.testing.assert_array_equal(restored.decode(alpha), model.decode(alpha))
-
-
-def test_dataset_directory_is_read_with_load_actions(tmp_path, monkeypatch):
-    import sb3_genrl.data
-
-    data, _ = sine_ramp_trajectories(4, 6, 2, rng=0)
-    calls = []
-    monkeypatch.setattr(sb3_genrl.data, "load_actions", lambda path: calls.append(path) or data)
-    np.testing.assert_array_equal(load_trajectories(tmp_path), data)
-    assert calls == [str(tmp_path)]
-    with pytest.raises(ValueError, match="neither"):
-        load_trajectories(__file__)
 
 
 def test_corrupted_weights_are_refused_on_load(vae, tmp_path):
@@ -335,7 +350,7 @@ def test_file_without_checksum_is_refused_naming_the_file(vae, tmp_path):
     assert str(path) in str(error.value)
 
 
-def test_diverged_training_is_not_saved(family, tmp_path, capsys):
+def test_diverged_training_is_not_saved(family, tmp_path, cli):
     diverged = BetaVAE(HORIZON, ACTION_DIM, 2, beta=0.01, device="cpu").fit(family[0][:300], epochs=4, seed=0, lr=1e6,
                                                                             progress_bar=False, eval_every=2)
     assert diverged.best_epoch is None  # every selection MSE was nan
@@ -349,10 +364,10 @@ def test_diverged_training_is_not_saved(family, tmp_path, capsys):
     np.save(npy, family[0][:300])
     for option, value in (("--lr", "1e6"), ("--lr", "inf"), ("--beta", "inf")):
         out = tmp_path / f"cli{option}{value}.pt"
-        code = cli_main(["train-generator", "--data", str(npy), "--model", "vae", "--latent-dim", "2", option, value,
-                         "--epochs", "2", "--batch-size", "64", "--no-progress-bar", "--out", str(out)])
-        assert code != 0 and not out.exists(), (option, value)
-        assert capsys.readouterr().err.strip(), (option, value)
+        code, _, err = cli("train-generator", "--data", npy, "--model", "vae", "--latent-dim", 2, option, value,
+                           "--epochs", 2, "--batch-size", 64, "--no-progress-bar", "--out", out)
+        assert code == 2 and not out.exists(), (option, value)
+        assert err.strip(), (option, value)
 
 
 def test_interrupted_save_leaves_no_partial_file(vae, tmp_path, monkeypatch):

@@ -10,10 +10,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
-from stable_baselines3.common.preprocessing import get_flattened_obs_dim
-from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
-from stable_baselines3.common.vec_env import DummyVecEnv
-from test_wrapper import (
+from conftest import (
     ContextReachEnv,
     FastReachEnv,
     LinearGenerator,
@@ -21,6 +18,9 @@ from test_wrapper import (
     load_linear_generator,
     optimal_latent,
 )
+from stable_baselines3.common.preprocessing import get_flattened_obs_dim
+from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
+from stable_baselines3.common.vec_env import DummyVecEnv
 
 from sb3_genrl import GenRL, LatentActionWrapper
 from sb3_genrl.cli import main as cli_main
@@ -29,6 +29,7 @@ from sb3_genrl.genrl import train_policy
 
 GOALS = np.array([[0.5, -0.3], [-0.6, 0.4], [0.0, 0.6], [0.3, 0.3]], dtype=np.float32)
 TOY_ID = "GenRLTest/FastReach-v0"
+TOY_TASK_ID = "GenRLTest/FastReachTask-v0"
 
 
 @pytest.mark.parametrize("e_step", ["trpo", "kl_penalty"])
@@ -153,25 +154,62 @@ def test_generator_path_is_kept(tmp_path, monkeypatch):
     assert GenRL.load(tmp_path / "policy.zip").generator_path == str(generator_file)
 
 
-def test_train_policy_writes_curve_model_and_logs(tmp_path, capsys):
-    if TOY_ID not in gym.registry:
-        gym.register(TOY_ID, entry_point=FastReachEnv)
-    result = train_policy(TOY_ID, LinearGenerator(), episodes=96, seed=0, out_dir=tmp_path, batch_episodes=32)
+@pytest.fixture
+def fast_reach_task():
+    """FastReachEnv as a registered task (the registry is how train_policy resolves tasks)."""
+    from sb3_genrl.envs import TASKS, TaskSpec, register_task
+
+    spec = TaskSpec(name="fast-reach", env_id=TOY_TASK_ID, env_class=FastReachEnv, horizon=5, goal_low=np.full(2, -0.8),
+                    goal_high=np.full(2, 0.8), in_goal_region=lambda points: np.ones(len(points), dtype=bool),
+                    cell_size=0.1, sample_expert=lambda rng: np.zeros((5, 7)), perturbation_scales=np.zeros(7),
+                    is_valid=lambda info: True)
+    register_task(spec)
+    yield spec
+    TASKS.pop(spec.name)
+    gym.registry.pop(spec.env_id)
+
+
+def test_train_policy_writes_curve_model_and_logs(fast_reach_task, tmp_path, capsys):
+    from sb3_genrl.curves import read_monitor
+
+    result = train_policy("fast-reach", LinearGenerator(), episodes=96, seed=0, out_dir=tmp_path, batch_episodes=32)
     assert result["episodes"] == 96 and result["iterations"] == 3
+    # The Monitor file: one row per episode, its return the episode's reward.
+    episodes = read_monitor(tmp_path / "episodes.monitor.csv")
+    assert len(episodes["return"]) == 96 and np.all(episodes["length"] == 1) and np.all(episodes["return"] <= 0)
+    # The learning curve: the mean and max reward of each iteration's 32 episodes, from the Monitor file.
     with open(result["csv_path"]) as file:
         rows = list(csv.DictReader(file))
     assert [float(row["episodes"]) for row in rows] == [32, 64, 96]
-    assert all(np.isfinite(float(row["mean_reward"])) and float(row["kl"]) >= 0 for row in rows)
+    np.testing.assert_allclose([float(row["mean_reward"]) for row in rows], episodes["return"].reshape(3, 32).mean(axis=1))
+    np.testing.assert_allclose([float(row["max_reward"]) for row in rows], episodes["return"].reshape(3, 32).max(axis=1))
+    assert result["best_mean_reward"] == max(float(row["mean_reward"]) for row in rows)
+    # SB3's logger: one row per iteration's update, in progress.csv and in TensorBoard.
+    with open(tmp_path / "logs" / "progress.csv") as file:
+        progress = [row for row in csv.DictReader(file) if row.get("train/kl")]
+    assert len(progress) == 3 and all(float(row["train/kl"]) >= 0 for row in progress)
+    # GenRL's own mean reward of each iteration (from its rollout buffer) is the Monitor's, up to its 6 decimals.
+    np.testing.assert_allclose([float(row["train/mean_reward"]) for row in progress],
+                               [float(row["mean_reward"]) for row in rows], atol=1e-6)
+    assert any((tmp_path / "logs").glob("events.out.tfevents.*"))
     assert (tmp_path / "learning_curve.png").stat().st_size > 0
-    assert len((tmp_path / "episodes.csv").read_text().splitlines()) == 1 + 96
-    assert any((tmp_path / "tensorboard").rglob("events.out.tfevents.*"))
     assert GenRL.load(result["model_path"], generator=LinearGenerator()).predict(GOALS[0])[0].shape == (2,)
     with pytest.raises(ValueError, match="unknown task"):
         train_policy("curling", LinearGenerator(), episodes=10, out_dir=tmp_path)
+    # Besides the registry's tasks, any registered Gymnasium id (a user's own env) is accepted.
+    if TOY_ID not in gym.registry:
+        gym.register(TOY_ID, entry_point=FastReachEnv)
+    own = train_policy(TOY_ID, LinearGenerator(), episodes=32, seed=0, out_dir=tmp_path / "own", batch_episodes=32)
+    assert own["task"] == TOY_ID and own["iterations"] == 1 and len(read_monitor(own["episodes_csv_path"])["return"]) == 32
     argv = ["train-policy", "--task", "curling", "--generator", "x.pt", "--episodes", "8", "--out", str(tmp_path)]
     with pytest.raises(SystemExit) as exit_info:  # --task takes its choices from the registry
         cli_main(argv)
     assert exit_info.value.code == 2 and "invalid choice: 'curling'" in capsys.readouterr().err
+    argv = ["train-policy", "--task", "fast-reach", "--generator", str(tmp_path / "missing.pt"), "--episodes", "8",
+            "--out", str(tmp_path)]
+    with pytest.raises(SystemExit):
+        cli_main(argv)
+    assert "missing.pt' does not exist" in capsys.readouterr().err
 
 
 def test_on_paper_task_with_saved_generator(tmp_path):

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import csv
-import importlib
 import math
 
 import numpy as np
@@ -246,20 +245,47 @@ def test_evaluate_generators_writes_table_and_plots(tmp_path) -> None:
         evaluate_generators([LinearGenerator(np.ones((1, 3)), 3, 1)], real, n=50, dwpr_n=10, out_dir=out)
 
 
-def test_cli_evaluate(tmp_path, capsys) -> None:
-    generative = importlib.import_module("sb3_genrl.generative")
-    if not hasattr(generative, "load") or not hasattr(generative, "make_generator"):
-        pytest.skip("sb3_genrl.generative.load / make_generator are not available: cannot write a generator file")
-    from sb3_genrl.cli import main
+def test_cli_evaluate(tmp_path, cli) -> None:
+    from sb3_genrl.generative import make_generator
 
-    generator = generative.make_generator("vae", horizon=4, action_dim=2, latent_dim=2, beta=1.0, device="cpu")
+    generator = make_generator("vae", horizon=4, action_dim=2, latent_dim=2, beta=1.0, device="cpu")
     generator.save(str(tmp_path / "vae.pt"))
     np.save(tmp_path / "real.npy", np.random.default_rng(0).normal(size=(120, 4, 2)).astype(np.float32))
-    code = main(["evaluate", str(tmp_path / "vae.pt"), "--data", str(tmp_path / "real.npy"), "--out",
-                 str(tmp_path / "out"), "--n", "100", "--dwpr-n", "20", "--k", "3", "--seed", "0", "--device", "cpu"])
-    assert code == 0
-    assert "vae: precision" in capsys.readouterr().out
-    assert (tmp_path / "out" / "results.md").exists() and (tmp_path / "out" / "disentanglement.png").exists()
+    args = ["evaluate", tmp_path / "vae.pt", "--data", tmp_path / "real.npy", "--out", tmp_path / "out", "--dwpr-n", 20,
+            "--k", 3, "--seed", 0, "--device", "cpu"]
+    code, printed, err = cli(*args, "--n", 100)
+    assert code == 0, err
+    with open(tmp_path / "out" / "results.csv") as file:
+        row = next(csv.DictReader(file))
+    assert f"vae: precision {float(row['precision']):.3f}, recall {float(row['recall']):.3f}" in printed
+    assert (tmp_path / "out" / "results.md").read_text().splitlines()[2].startswith("| vae | ")
+    assert (tmp_path / "out" / "disentanglement.png").exists()
+    # More samples than the data holds, or none: refused before any model is loaded or evaluated.
+    code, _, err = cli(*args[:5], tmp_path / "out2", *args[6:], "--n", 121)
+    assert code == 2 and "n = 121 is more than the 120 real trajectories" in err and not (tmp_path / "out2").exists()
+    code, _, err = cli(*args, "--n", 0)
+    assert code == 2 and "argument --n: must be an integer >= 1, got 0" in err
+
+
+def test_evaluate_generators_checks_its_arguments_first(tmp_path) -> None:
+    generator = two_factor_generator()
+    real = generator.decode(generator.sample_prior(50, 0))
+    calls = []
+    generator.decode = lambda alpha: calls.append(alpha) or real  # any evaluation would decode
+    for kwargs, message in (({"n": 51}, "n = 51 is more than the 50 real trajectories"),
+                            ({"n": 0}, "n must be an integer >= 1, got 0"),
+                            ({"dwpr_n": 10**12}, "dwpr_n = 1000000000000 needs about"),
+                            ({"k": 2.5}, r"k must be an integer >= 1, got 2.5 \(float\)"),
+                            ({"seed": -1}, "seed must be an integer between 0 and"),
+                            ({"device": "bogus"}, "device must be 'auto' or a torch device")):
+        with pytest.raises(ValueError, match=message):
+            evaluate_generators([generator], real, **{"n": 40, "dwpr_n": 10, "out_dir": tmp_path / "out", **kwargs})
+    (tmp_path / "file").write_text("")
+    with pytest.raises(ValueError, match="is a file; expected a folder"):
+        evaluate_generators([generator], real, n=40, dwpr_n=10, out_dir=tmp_path / "file")
+    with pytest.raises(ValueError, match="model 'missing' .* does not exist"):
+        evaluate_generators([tmp_path / "missing.pt"], real, n=40, dwpr_n=10, out_dir=tmp_path / "out")
+    assert calls == [] and not (tmp_path / "out").exists()
 
 
 def test_evaluate_generator_is_the_one_evaluation_and_independent_of_list_order(tmp_path) -> None:

@@ -168,18 +168,21 @@ def test_a_dataset_is_never_visible_without_its_coverage_report(tmp_path: Path, 
     assert report["png"] == str(path / "coverage.png") and Path(report["png"]).is_file()
 
 
-def test_demos_explains_what_is_in_the_way(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_demos_explains_what_is_in_the_way(tmp_path: Path, cli) -> None:
     from sb3_genrl.envs.demonstrations import make_demonstrations
 
     path = make_demonstrations("hockey", 2, tmp_path / "demos", seed=1, n_threads=1, progress_bar=False)
     args = ["demos", "--task", "hockey", "--episodes", "2", "--out", str(path), "--no-progress-bar"]
-    assert main(args) == 2
-    assert "holds a complete dataset (2 hockey demonstrations, seed 1)" in capsys.readouterr().err
+    code, _, err = cli(*args)
+    assert code == 2 and "argument --out" in err  # refused while the arguments are read, before any work
+    assert "holds a complete dataset (2 hockey demonstrations, seed 1)" in err
     for name in ("coverage.json", "coverage.png"):  # as an older version left it when killed after the rename
         (path / name).unlink()
-    assert main(args) == 2
-    error = capsys.readouterr().err
+    code, _, error = cli(*args)
+    assert code == 2
     assert "without its coverage report" in error and "older sb3-genrl version" in error and str(path) in error
+    with pytest.raises(ValueError, match="without its coverage report"):  # the library says the same
+        make_demonstrations("hockey", 2, path, seed=1, n_threads=1, progress_bar=False)
 
 
 def test_unreachable_ray_address_fails_within_the_timeout_and_names_it(tmp_path: Path) -> None:

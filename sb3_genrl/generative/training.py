@@ -8,6 +8,8 @@ from typing import Any
 import numpy as np
 import torch
 
+from sb3_genrl.checks import check_device, check_output_file, check_positive_float, check_positive_int, check_seed
+from sb3_genrl.data import load_trajectories
 from sb3_genrl.generative.presets import (
     BATCH_SIZE,
     EPOCHS,
@@ -17,43 +19,6 @@ from sb3_genrl.generative.presets import (
     make_generator,
 )
 from sb3_genrl.generative.torch_generator import TorchTrajectoryGenerator
-
-_ARRAY_KEYS = ("actions", "trajectories")
-
-
-def load_trajectories(data: np.ndarray | str | os.PathLike[str]) -> np.ndarray:
-    """Motor trajectories ``(N, T, M)`` from an array, a ``.npy`` / ``.npz`` file or a Minari dataset directory.
-
-    A ``.npz`` file must hold a single array or one named ``actions`` or ``trajectories``; a directory is read with
-    :func:`sb3_genrl.data.load_actions`.
-    """
-    if not isinstance(data, str | os.PathLike):
-        array = np.asarray(data)
-    else:
-        path = os.fspath(data)
-        if os.path.isdir(path):
-            try:
-                from sb3_genrl.data import load_actions
-            except ImportError as error:
-                raise ValueError(f"{path!r} is a directory, but reading Minari datasets needs "
-                                 f"sb3_genrl.data.load_actions ({error})") from None
-            array = np.asarray(load_actions(path))
-        elif not os.path.exists(path):
-            raise FileNotFoundError(f"no dataset at {path!r}")
-        elif path.endswith(".npy"):
-            array = np.load(path, allow_pickle=False)
-        elif path.endswith(".npz"):
-            with np.load(path, allow_pickle=False) as archive:
-                names = list(archive.keys())
-                name = names[0] if len(names) == 1 else next((key for key in _ARRAY_KEYS if key in names), None)
-                if name is None:
-                    raise ValueError(f"{path!r} holds arrays {names}; expected one array or one named {_ARRAY_KEYS}")
-                array = archive[name]
-        else:
-            raise ValueError(f"{path!r} is neither a Minari dataset directory nor a .npy/.npz file")
-    if array.ndim != 3:
-        raise ValueError(f"trajectories must have shape (N, T, M) (N, horizon, action_dim), got {array.shape}")
-    return array
 
 
 def train_generator(data: np.ndarray | str | os.PathLike[str], *, model: str | None = None, preset: str | None = None,
@@ -88,6 +53,15 @@ def train_generator(data: np.ndarray | str | os.PathLike[str], *, model: str | N
     :param device: torch device or ``"auto"``
     :return: the trained generator
     """
+    for name, value in (("epochs", epochs), ("batch_size", batch_size), ("eval_every", eval_every),
+                        ("selection_samples", selection_samples)):
+        check_positive_int(value, name)
+    check_positive_float(lr, "lr")
+    check_device(device)
+    if seed is not None:
+        check_seed(seed)
+    if out is not None:
+        check_output_file(out, "out")
     if preset is not None:
         spec: dict[str, Any] = {"preset_or_kind": preset}
         preset_model = PRESETS.get(preset.upper(), {}).get("model")

@@ -2,6 +2,6 @@
 
 from sb3_genrl.genrl.genrl import GenRL
 from sb3_genrl.genrl.policies import MlpPolicy, MultiInputPolicy
-from sb3_genrl.genrl.train import LearningCurveCallback, evaluate_on_goals, train_policy
+from sb3_genrl.genrl.train import evaluate_on_goals, train_policy
 
-__all__ = ["GenRL", "LearningCurveCallback", "MlpPolicy", "MultiInputPolicy", "evaluate_on_goals", "train_policy"]
+__all__ = ["GenRL", "MlpPolicy", "MultiInputPolicy", "evaluate_on_goals", "train_policy"]

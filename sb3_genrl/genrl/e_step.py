@@ -15,6 +15,8 @@ from stable_baselines3.common.distributions import kl_divergence
 from stable_baselines3.common.policies import ActorCriticPolicy
 from torch.nn.utils import parameters_to_vector, vector_to_parameters
 
+from sb3_genrl.genrl.policies import actor_parameters
+
 Batch = tuple[th.Tensor, th.Tensor, th.Tensor, th.Tensor]  # observations, actions, log pi(actions), advantages
 
 
@@ -55,7 +57,7 @@ def trpo_e_step(q: ActorCriticPolicy, pi: ActorCriticPolicy, batch: Batch, *, ta
     """
     objective, kl = surrogate(q, pi, batch)
     # Actor parameters of q: those the KL depends on (the value head is not part of q(alpha|s)).
-    named = [p for name, p in q.named_parameters() if "value" not in name]
+    named = actor_parameters(q)
     grads_kl = th.autograd.grad(kl, named, create_graph=True, allow_unused=True)
     params = [p for p, g in zip(named, grads_kl, strict=True) if g is not None]
     grad_kl = th.cat([g.reshape(-1) for g in grads_kl if g is not None])
@@ -98,7 +100,7 @@ def kl_penalty_e_step(q: ActorCriticPolicy, pi: ActorCriticPolicy, batch: Batch,
 
     :return: ``policy_objective``, the penalised objective on the whole batch after the last epoch
     """
-    params = [p for name, p in q.named_parameters() if "value" not in name]
+    params = actor_parameters(q)
     optimizer = th.optim.Adam(params, lr=learning_rate)
     n = len(batch[0])
     for _ in range(n_epochs):

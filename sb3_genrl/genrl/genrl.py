@@ -20,7 +20,7 @@ from torch.nn import functional as F
 
 from sb3_genrl.generative.base import TrajectoryGenerator
 from sb3_genrl.genrl.e_step import kl_penalty_e_step, trpo_e_step
-from sb3_genrl.genrl.policies import BoxScaler, MlpPolicy, MultiInputPolicy, default_log_std_init
+from sb3_genrl.genrl.policies import BoxScaler, MlpPolicy, MultiInputPolicy, actor_parameters, default_log_std_init
 from sb3_genrl.utils import atomic_path
 from sb3_genrl.wrappers import latent_action_env
 
@@ -256,7 +256,7 @@ class GenRL(OnPolicyAlgorithm):
                                  batch_size=self.batch_size, learning_rate=self.e_step_learning_rate)
 
     def _fit_value_function(self) -> list[float]:
-        actor_params = [p for name, p in self.policy.named_parameters() if "value" not in name]
+        actor_params = actor_parameters(self.policy)
         losses = []
         for _ in range(self.n_critic_updates):
             for rollout_data in self.rollout_buffer.get(self.batch_size):

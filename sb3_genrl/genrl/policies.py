@@ -22,6 +22,20 @@ MlpPolicy = ActorCriticPolicy
 MultiInputPolicy = MultiInputActorCriticPolicy
 
 
+# Names of the value function's parameters in SB3's actor-critic policies: its head, its branch of the MLP and,
+# when the features extractor is not shared, its own extractor.
+CRITIC_PREFIXES = ("value_net.", "mlp_extractor.value_net.", "vf_features_extractor.")
+
+
+def actor_parameters(policy: ActorCriticPolicy) -> list[th.nn.Parameter]:
+    """The parameters of the policy's action distribution ``pi(alpha | s)``: all but the value function's.
+
+    :param policy: an SB3 actor-critic policy
+    :return: the parameters, in ``named_parameters`` order
+    """
+    return [parameter for name, parameter in policy.named_parameters() if not name.startswith(CRITIC_PREFIXES)]
+
+
 def default_log_std_init(prior: Prior) -> float:
     """Log of the prior's standard deviation: 0 for N(0, 1), log(1/sqrt(3)) for U(-1, 1)."""
     return 0.0 if prior == "normal" else float(np.log(1.0 / np.sqrt(3.0)))

@@ -6,71 +6,19 @@ the functions so that the core library (:class:`~sb3_genrl.GenRL`) never imports
 
 from __future__ import annotations
 
-import csv
-import math
 import os
 import pathlib
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from stable_baselines3.common.callbacks import BaseCallback
 
-from sb3_genrl.callbacks import EpisodeRecorder
-from sb3_genrl.curves import plot_curves
+from sb3_genrl.checks import check_device, check_input_path, check_int, check_output_dir, check_positive_int, check_seed
+from sb3_genrl.curves import LOG_DIR, MONITOR_FILE, monitor_episodes, training_logger, write_learning_curve
 from sb3_genrl.generative.base import TrajectoryGenerator
 from sb3_genrl.genrl.genrl import EStep, GenRL
 from sb3_genrl.utils import atomic_write_json
-
-
-class LearningCurveCallback(BaseCallback):
-    """Record one row per EM iteration (after its update) and append it to a CSV file as training goes.
-
-    Columns: ``episodes`` (episodes played so far), the iteration's ``mean_table_contacts`` (where the task reports
-    ``table_contacts``) and its ``train/`` logs (:attr:`FIELDS`): the columns of the baselines' learning curves
-    (:func:`sb3_genrl.curves.write_learning_curve`, one iteration = one window of N episodes) plus GenRL's own.
-
-    :param csv_path: the CSV file to write (created, or overwritten, when training starts)
-    :param verbose: verbosity of the callback
-    """
-
-    FIELDS = ("mean_reward", "max_reward", "kl", "entropy", "value_loss", "policy_objective", "line_search_success")
-    COLUMNS = ("episodes", "mean_reward", "max_reward", "mean_table_contacts", *FIELDS[2:])
-
-    def __init__(self, csv_path: str | os.PathLike, verbose: int = 0) -> None:
-        super().__init__(verbose)
-        self.csv_path = pathlib.Path(csv_path)
-        self.rows: list[dict[str, float]] = []
-        self._table_contacts: list[float] = []
-
-    def _on_training_start(self) -> None:
-        self.rows, self._table_contacts = [], []
-        self.csv_path.parent.mkdir(parents=True, exist_ok=True)
-        with self.csv_path.open("w", newline="") as file:
-            csv.writer(file).writerow(self.COLUMNS)
-
-    def _on_rollout_start(self) -> None:
-        self._record()  # the logs of the update that followed the previous rollout
-
-    def _on_step(self) -> bool:
-        for done, info in zip(self.locals["dones"], self.locals["infos"], strict=True):
-            if done and "table_contacts" in info:
-                self._table_contacts.append(float(info["table_contacts"]))
-        return True
-
-    def _on_training_end(self) -> None:
-        self._record()
-
-    def _record(self) -> None:
-        logs = self.model.logger.name_to_value
-        if "train/mean_reward" not in logs or (self.rows and self.rows[-1]["episodes"] == self.num_timesteps):
-            return
-        row = {"episodes": float(self.num_timesteps)} | {key: float(logs.get(f"train/{key}", math.nan)) for key in self.FIELDS}
-        row["mean_table_contacts"] = float(np.mean(self._table_contacts)) if self._table_contacts else math.nan
-        self._table_contacts = []
-        self.rows.append(row)
-        with self.csv_path.open("a", newline="") as file:
-            csv.writer(file).writerow([row[key] for key in self.COLUMNS])
+from sb3_genrl.wrappers import LatentActionWrapper
 
 
 def evaluate_on_goals(model: GenRL, task: str, goals: int = 100, seed: int = 0,
@@ -122,9 +70,10 @@ def train_policy(
 ) -> dict[str, Any]:
     """Train a GenRL policy for ``episodes`` episodes on ``task`` and write everything to ``out_dir``.
 
-    Writes ``genrl_policy.zip`` (the model), ``summary.json``, ``learning_curve.csv`` (one row per iteration,
-    written as training goes), ``learning_curve.png``, ``episodes.csv`` (one row per episode, as the baselines write it) and
-    TensorBoard logs under ``tensorboard/``.
+    Writes ``genrl_policy.zip`` (the model), ``summary.json``, ``episodes.monitor.csv`` (SB3's Monitor: one row per
+    episode, written as training goes), ``logs/`` (SB3's logger: ``progress.csv`` and TensorBoard, one row per EM
+    iteration), ``learning_curve.csv`` and ``learning_curve.png`` (the mean reward of each iteration's N episodes,
+    the columns of the baselines' curves, :func:`sb3_genrl.curves.write_learning_curve`).
 
     :param task: a task name from :data:`sb3_genrl.envs.TASKS`, or any registered Gymnasium id
     :param generator: the trajectory generator or the path of a saved one
@@ -140,46 +89,43 @@ def train_policy(
     :return: paths of the outputs and a summary (``episodes``, ``iterations``, ``final_mean_reward``,
         ``best_mean_reward``)
     """
-    if int(episodes) != episodes or episodes < 1:
-        raise ValueError(f"episodes must be a positive integer, got {episodes!r}")
-    if int(batch_episodes) != batch_episodes or batch_episodes < 2:
-        raise ValueError(f"batch_episodes must be an integer >= 2, got {batch_episodes!r}")
     env_id, task_name = _resolve_env_id(task)
-    out = pathlib.Path(out_dir)
-    model = GenRL(  # built first: a generator that does not fit the task is refused before anything is written
-        gym.make(env_id),
-        generator,
-        e_step=e_step,
-        n_steps=batch_episodes,
-        batch_size=min(batch_episodes, genrl_kwargs.pop("batch_size", 64)),
-        seed=seed,
-        device=device,
-        tensorboard_log=str(out / "tensorboard"),
-        verbose=verbose,
-        **genrl_kwargs,
-    )
+    check_positive_int(episodes, "episodes")
+    check_int(batch_episodes, "batch_episodes", minimum=2)
+    check_seed(seed)
+    check_device(device)
+    out = check_output_dir(out_dir)
+    # Built first: a generator that does not fit the task is refused before anything is written.
+    env = LatentActionWrapper(gym.make(env_id), _as_generator(generator))
     out.mkdir(parents=True, exist_ok=True)
-    curve = LearningCurveCallback(out / "learning_curve.csv")
-    callbacks = [EpisodeRecorder(out / "episodes.csv"), curve]
-    model.learn(total_timesteps=int(episodes), callback=callbacks, progress_bar=progress_bar, tb_log_name="GenRL")
+    # The generator is given as it came (a path is kept as the model's generator_path, saved in the zip).
+    model = GenRL(monitor_episodes(env, out), generator, e_step=e_step, n_steps=batch_episodes,
+                  batch_size=min(batch_episodes, genrl_kwargs.pop("batch_size", 64)), seed=seed, device=device,
+                  verbose=verbose, **genrl_kwargs)
+    model.set_logger(training_logger(out, verbose))
+    model.learn(total_timesteps=int(episodes), progress_bar=progress_bar, tb_log_name="GenRL")
+    model.logger.dump(model.num_timesteps)  # SB3 dumps before each update: this writes the last one's logs
+    model.logger.close()
     model.save(out / "genrl_policy.zip")
-    episodes_played = np.array([row["episodes"] for row in curve.rows])
-    mean_rewards = [row["mean_reward"] for row in curve.rows]
-    plot_curves({"GenRL": (episodes_played, np.array(mean_rewards), None)}, out / "learning_curve.png",
-                ylabel="mean reward per iteration", title=f"GenRL on {env_id} (seed {seed})")
-    result = {
-        "algorithm": "genrl",
-        "task": task_name,
-        "seed": seed,
-        "model_path": str(out / "genrl_policy.zip"),
-        "csv_path": str(curve.csv_path),
-        "png_path": str(out / "learning_curve.png"),
-        "episodes_csv_path": str(out / "episodes.csv"),
-        "tensorboard_dir": str(out / "tensorboard"),
-        "episodes": int(model.num_timesteps),
-        "iterations": len(curve.rows),
-        "final_mean_reward": mean_rewards[-1] if mean_rewards else math.nan,
-        "best_mean_reward": max(mean_rewards) if mean_rewards else math.nan,
-    }
+    curve = write_learning_curve(out / MONITOR_FILE, out, window=batch_episodes,
+                                 title=f"GenRL on {env_id} (seed {seed})")
+    result = {"algorithm": "genrl", "task": task_name, "seed": seed, **_output_paths(out),
+              "episodes": int(model.num_timesteps), "iterations": len(curve["episodes"]),
+              "final_mean_reward": float(curve["mean_reward"][-1]), "best_mean_reward": float(np.max(curve["mean_reward"]))}
     atomic_write_json(out / "summary.json", result)
     return result
+
+
+def _output_paths(out: pathlib.Path) -> dict[str, str]:
+    files = {"model_path": "genrl_policy.zip", "csv_path": "learning_curve.csv", "png_path": "learning_curve.png",
+             "episodes_csv_path": MONITOR_FILE, "log_dir": LOG_DIR}
+    return {key: str(out / name) for key, name in files.items()}
+
+
+def _as_generator(generator: TrajectoryGenerator | str | os.PathLike) -> TrajectoryGenerator:
+    if isinstance(generator, TrajectoryGenerator):
+        return generator
+    check_input_path(generator, "generator")
+    from sb3_genrl.generative import load
+
+    return load(generator)

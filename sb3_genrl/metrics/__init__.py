@@ -1,18 +1,13 @@
 """Evaluation of generative models (paper section 5.2): precision and recall, DwPR, correlation with policy scores."""
 
-from sb3_genrl.metrics.correlation import CorrelationRow, CorrelationTable, correlation_table, pearson
+from sb3_genrl.metrics.correlation import MEASURES, CorrelationRow, CorrelationTable, correlation_table, pearson
 from sb3_genrl.metrics.dwpr import DwPR, default_intervention_values, dwpr
-from sb3_genrl.metrics.evaluate import (
-    GeneratorEvaluation,
-    evaluate_generator,
-    evaluate_generators,
-    load_real_trajectories,
-    real_subset,
-)
+from sb3_genrl.metrics.evaluate import GeneratorEvaluation, evaluate_generator, evaluate_generators, real_subset
 from sb3_genrl.metrics.plots import labelled_scatter
 from sb3_genrl.metrics.precision_recall import PrecisionRecall, precision_recall
 
 __all__ = [
+    "MEASURES",
     "CorrelationRow",
     "CorrelationTable",
     "DwPR",
@@ -24,7 +19,6 @@ __all__ = [
     "evaluate_generator",
     "evaluate_generators",
     "labelled_scatter",
-    "load_real_trajectories",
     "pearson",
     "precision_recall",
     "real_subset",

@@ -17,9 +17,11 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 from scipy.stats import pearsonr
 
+from sb3_genrl.markdown import markdown_table
 from sb3_genrl.utils import atomic_write_text
 
-DEFAULT_MEASURES = ("precision", "recall", "delta_1", "delta_2", "mean_delta")
+# The five measures of a generator (paper section 5.2): the one list every table, report and correlation uses.
+MEASURES = ("precision", "recall", "delta_1", "delta_2", "mean_delta")
 ALL_MODELS = "ALL"
 _COLUMNS = ("group", "measure", "num_models", "pearson_r", "p_value", "note")
 
@@ -44,10 +46,6 @@ class CorrelationRow:
     note: str = ""
 
 
-def _format(value: float, digits: int) -> str:
-    return "nan" if math.isnan(value) else f"{value:.{digits}f}"
-
-
 @dataclasses.dataclass(frozen=True)
 class CorrelationTable:
     """Rows of :func:`correlation_table`, one per (group, measure), groups in order then measures in order."""
@@ -63,11 +61,9 @@ class CorrelationTable:
 
     def to_markdown(self, digits: int = 3) -> str:
         """A Markdown table, one line per (group, measure), values rounded to ``digits`` decimals."""
-        lines = ["| group | measure | models | Pearson's R | p-value | note |", "|---|---|---:|---:|---:|---|"]
-        for row in self.rows:
-            lines.append(f"| {row.group} | {row.measure} | {row.num_models} | {_format(row.pearson_r, digits)} | "
-                         f"{_format(row.p_value, digits)} | {row.note} |")
-        return "\n".join(lines) + "\n"
+        rows = [(row.group, row.measure, row.num_models, row.pearson_r, row.p_value, row.note) for row in self.rows]
+        header = ("group", "measure", "models", "Pearson's R", "p-value", "note")
+        return markdown_table(header, rows, digits=digits, align="llrrrl") + "\n"
 
     def to_csv(self, path: str | os.PathLike) -> None:
         """Write the rows to ``path`` as CSV with full float precision (``nan`` for undefined values)."""
@@ -145,9 +141,9 @@ def correlation_table(measures: Sequence[Mapping] | Mapping[str, Mapping[str, fl
     if not records:
         raise ValueError("no models given")
     if measure_names is None:
-        measure_names = [name for name in DEFAULT_MEASURES if all(name in record for record in records)]
+        measure_names = [name for name in MEASURES if all(name in record for record in records)]
         if not measure_names:
-            raise ValueError(f"the records hold none of the measures {DEFAULT_MEASURES}; pass measure_names")
+            raise ValueError(f"the records hold none of the measures {MEASURES}; pass measure_names")
     for name in measure_names:
         missing = [record.get(model_key, index) for index, record in enumerate(records) if name not in record]
         if missing:

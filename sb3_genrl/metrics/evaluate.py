@@ -16,7 +16,11 @@ from typing import Any
 import numpy as np
 import torch
 
+from sb3_genrl.checks import check_device, check_input_path, check_output_dir, check_positive_int, check_seed
+from sb3_genrl.data import load_trajectories
 from sb3_genrl.generative.base import TrajectoryGenerator
+from sb3_genrl.markdown import markdown_table
+from sb3_genrl.metrics.correlation import MEASURES
 from sb3_genrl.metrics.dwpr import DEFAULT_DWPR_SAMPLES, DEFAULT_INTERVENTIONS, DwPR, decode_batched, dwpr
 from sb3_genrl.metrics.plots import labelled_scatter
 from sb3_genrl.metrics.precision_recall import PrecisionRecall, precision_recall
@@ -24,7 +28,7 @@ from sb3_genrl.utils import atomic_write_json, atomic_write_text
 
 # Paper section 6.1.2: 15000 generated against 15000 fixed, randomly chosen training trajectories, k = 3.
 DEFAULT_SAMPLES = 15000
-TABLE_COLUMNS = ("model", "precision", "recall", "delta_1", "delta_2", "mean_delta")
+TABLE_COLUMNS = ("model", *MEASURES)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -41,9 +45,10 @@ class GeneratorEvaluation:
     dwpr: DwPR
 
     def row(self) -> dict[str, float | str]:
-        """The table row: model, precision, recall, delta_1, delta_2, mean_delta."""
-        return {"model": self.name, "precision": self.precision_recall.precision, "recall": self.precision_recall.recall,
-                "delta_1": self.dwpr.delta_1, "delta_2": self.dwpr.delta_2, "mean_delta": self.dwpr.mean_delta}
+        """The table row: the model's name and its :data:`~sb3_genrl.metrics.MEASURES`."""
+        values = (self.precision_recall.precision, self.precision_recall.recall, self.dwpr.delta_1, self.dwpr.delta_2,
+                  self.dwpr.mean_delta)
+        return {"model": self.name, **dict(zip(MEASURES, values, strict=True))}
 
     def details(self) -> dict[str, Any]:
         """The row plus the per-dimension DwPR values and the sample sizes (JSON-ready)."""
@@ -53,34 +58,19 @@ class GeneratorEvaluation:
                 "num_generated": self.precision_recall.num_generated, "dwpr_n": self.dwpr.n}
 
 
-def load_real_trajectories(data: str | os.PathLike | np.ndarray) -> np.ndarray:
-    """Real action trajectories ``(N, T, M)`` from an array, a ``.npy`` file or a dataset (``sb3_genrl.data.load_actions``)."""
-    if isinstance(data, np.ndarray):
-        return data
-    path = Path(data)
-    if path.suffix == ".npy":
-        if not path.is_file():
-            raise FileNotFoundError(f"no such file: {path}")
-        return np.load(path)
-    try:
-        from sb3_genrl.data import load_actions
-    except ImportError as error:
-        raise ValueError(f"cannot read dataset {str(path)!r}: sb3_genrl.data.load_actions is not available; "
-                         "pass a .npy array of shape (N, T, M) instead") from error
-    return np.asarray(load_actions(str(path)))
-
-
 def _named_generators(models: Sequence[str | os.PathLike | TrajectoryGenerator] | Mapping[str, str | os.PathLike
                       | TrajectoryGenerator]) -> list[tuple[str, str | os.PathLike | TrajectoryGenerator]]:
     if isinstance(models, Mapping):
-        return list(models.items())
-    named = []
-    for index, model in enumerate(models):
-        name = Path(model).stem if isinstance(model, str | os.PathLike) else f"{type(model).__name__}{index + 1}"
-        named.append((name, model))
+        named = list(models.items())
+    else:
+        named = [(Path(model).stem if isinstance(model, str | os.PathLike) else f"{type(model).__name__}{index + 1}", model)
+                 for index, model in enumerate(models)]
     names = [name for name, _ in named]
     if len(set(names)) != len(names):
         raise ValueError(f"model names must be unique, got {names}; pass a mapping name -> model")
+    for name, model in named:
+        if isinstance(model, str | os.PathLike):
+            check_input_path(model, f"model {name!r}")
     return named
 
 
@@ -103,9 +93,9 @@ def write_results(evaluations: Sequence[GeneratorEvaluation], out_dir: str | os.
     writer.writerows({key: repr(value) if isinstance(value, float) else value for key, value in row.items()}
                      for row in rows)
     atomic_write_text(out / "results.csv", table.getvalue(), newline="")
-    lines = ["| " + " | ".join(TABLE_COLUMNS) + " |", "|---" + "|---:" * (len(TABLE_COLUMNS) - 1) + "|"]
-    lines += ["| " + " | ".join([str(row["model"])] + [f"{row[c]:.3f}" for c in TABLE_COLUMNS[1:]]) + " |" for row in rows]
-    atomic_write_text(out / "results.md", "\n".join(lines) + "\n")
+    markdown = markdown_table(TABLE_COLUMNS, [[row[column] for column in TABLE_COLUMNS] for row in rows],
+                              align="l" + "r" * len(MEASURES))
+    atomic_write_text(out / "results.md", markdown + "\n")
     labels = [str(row["model"]) for row in rows]
     labelled_scatter([row["precision"] for row in rows], [row["recall"] for row in rows], labels,
                      out / "precision_recall.png", xlabel="precision", ylabel="recall", title="Precision and recall")
@@ -172,15 +162,16 @@ def evaluate_generators(models: Sequence[str | os.PathLike | TrajectoryGenerator
                         batch_size: int | None = None) -> list[GeneratorEvaluation]:
     """Precision/recall against real trajectories and DwPR of each generator, written as each model completes.
 
-    The real set is ``n`` trajectories drawn once with ``seed`` (:func:`real_subset`) and shared by every model;
-    each model is evaluated by :func:`evaluate_generator` with the same ``seed``. Files in ``out_dir``:
-    ``results.csv`` and ``results.md`` (precision, recall, delta_1, delta_2, mean_delta per model),
-    ``results.json`` (also the per-dimension deltas), ``precision_recall.png`` and ``disentanglement.png`` (the
-    paper's scatter plots).
+    The real set is ``n`` trajectories drawn once with ``seed`` (:func:`real_subset`; there must be at least
+    ``n``) and shared by every model; each model is evaluated by :func:`evaluate_generator` with the same ``seed``.
+    Files in ``out_dir``: ``results.csv`` and ``results.md`` (precision, recall, delta_1, delta_2, mean_delta per
+    model), ``results.json`` (also the per-dimension deltas), ``precision_recall.png`` and ``disentanglement.png``
+    (the paper's scatter plots).
 
     :param models: generator files (loaded with ``sb3_genrl.generative.load``) or generator objects, or a mapping
         name -> either; names default to file stems
-    :param data: real trajectories ``(N, T, M)``: an array, a ``.npy`` file or a dataset path
+    :param data: real trajectories ``(N, T, M)``, read by :func:`sb3_genrl.data.load_trajectories` (an array, a
+        ``.npy``/``.npz`` file or a dataset path); they must number at least ``n
     :param n: real and generated samples for precision and recall (paper: 15000)
     :param k: neighbourhood size (paper: 3)
     :param dwpr_n: prior samples per intervention for DwPR (paper: 10000)
@@ -194,11 +185,14 @@ def evaluate_generators(models: Sequence[str | os.PathLike | TrajectoryGenerator
     named = _named_generators(models)
     if not named:
         raise ValueError("no models given")
-    real = load_real_trajectories(data)
-    if real.ndim != 3:
-        raise ValueError(f"real trajectories must have shape (N, T, M), got {real.shape}")
+    for name, value in (("n", n), ("k", k), ("dwpr_n", dwpr_n), ("interventions", interventions)):
+        check_positive_int(value, name)
+    check_seed(seed)
+    check_device(device)
+    out = check_output_dir(out_dir)
+    real = load_trajectories(data)
+    _check_sample_sizes(real, n, dwpr_n, interventions)
     real = real_subset(real, n, seed)
-    out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     evaluations: list[GeneratorEvaluation] = []
     for name, model in named:
@@ -207,3 +201,15 @@ def evaluate_generators(models: Sequence[str | os.PathLike | TrajectoryGenerator
                                               batch_size=batch_size))
         write_results(evaluations, out)
     return evaluations
+
+
+def _check_sample_sizes(real: np.ndarray, n: int, dwpr_n: int, interventions: int) -> None:
+    """Refuse more samples than the real data holds, or DwPR sets that cannot fit in this machine's memory."""
+    if n > len(real):
+        raise ValueError(f"n = {n} is more than the {len(real)} real trajectories; pass n <= {len(real)}")
+    # DwPR holds a reference set and one latent dimension's set of n * D decoded float32 trajectories at a time.
+    needed = 2 * dwpr_n * interventions * int(np.prod(real.shape[1:])) * 4
+    available = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    if needed > available:
+        raise ValueError(f"dwpr_n = {dwpr_n} needs about {needed / 2**30:.0f} GiB for its decoded trajectories, more "
+                         f"than this machine's {available / 2**30:.0f} GiB of memory")

@@ -50,6 +50,7 @@ def generator_job(task: str, name: str, scale: dict[str, Any], dataset: str, tas
     import torch
 
     from sb3_genrl.generative import PRESETS, load, train_generator
+    from sb3_genrl.metrics import MEASURES
 
     torch.set_num_threads(torch_threads)
     root = pathlib.Path(task_dir)
@@ -77,7 +78,7 @@ def generator_job(task: str, name: str, scale: dict[str, Any], dataset: str, tas
     spec = PRESETS[name]
     return {"model": name, "type": "VAE" if name.startswith("VAE") else "GAN", "latent_dim": spec["latent_dim"],
             "beta": spec.get("beta"), "info_weight": spec.get("info_weight"), **{
-                key: evaluation[key] for key in ("precision", "recall", "delta_1", "delta_2", "mean_delta")},
+                key: evaluation[key] for key in MEASURES},
             "rewards": rewards, "score": float(np.max(rewards))}
 
 

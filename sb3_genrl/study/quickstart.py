@@ -32,7 +32,8 @@ VIDEO = {"goals": 4, "width": 320, "height": 240, "fps": 20}
 
 def quickstart(out_dir: str | os.PathLike, *, task: str, demo_episodes: int = 4000, epochs: int = 300,
                policy_episodes: int = 3000, pr_samples: int = 1000, dwpr_samples: int = 500, seed: int = 0,
-               video: bool = True, device: str = "auto", log: Callable[[str], None] | None = None) -> pathlib.Path:
+               video: bool = True, device: str = "auto", progress_bar: bool = True,
+               log: Callable[[str], None] | None = None) -> pathlib.Path:
     """Run the whole GenRL workflow at a small size and write ``report.md`` in ``out_dir``.
 
     Each stage is skipped when its output exists, so a rerun resumes. Each stage also records the settings that
@@ -51,20 +52,31 @@ def quickstart(out_dir: str | os.PathLike, *, task: str, demo_episodes: int = 40
     :param seed: seed of the demonstrations, the generator, the evaluation and the policy (the video uses seed + 1)
     :param video: also render the trained policy (a GIF and a strip of frames)
     :param device: torch device
+    :param progress_bar: show the stages' progress bars
     :param log: called with a line after each stage
     :return: the report's path
     """
     import torch
 
     import sb3_genrl
+    from sb3_genrl.checks import check_device, check_output_dir, check_positive_int, check_seed
+    from sb3_genrl.envs import get_task
 
+    get_task(task)
+    for name, value in (("demo_episodes", demo_episodes), ("epochs", epochs), ("policy_episodes", policy_episodes),
+                        ("pr_samples", pr_samples), ("dwpr_samples", dwpr_samples)):
+        check_positive_int(value, name)
+    check_seed(seed)
+    check_device(device)
+    check_output_dir(out_dir)
     # The models are small: one torch thread is as fast as several and leaves the other cores to MuJoCo.
     torch.set_num_threads(1)
     out = pathlib.Path(out_dir)
     settings = {
         "demonstrations": {"task": task, "episodes": demo_episodes, "seed": seed, "version": sb3_genrl.__version__},
         "generator": {"preset": QUICKSTART_PRESET, "epochs": epochs, "eval_every": 10, "seed": seed},
-        "evaluation": {"n": pr_samples, "dwpr_n": dwpr_samples, "k": 3, "interventions": 5, "seed": seed},
+        # precision/recall compares at most as many samples as there are demonstrations
+        "evaluation": {"n": min(pr_samples, demo_episodes), "dwpr_n": dwpr_samples, "k": 3, "interventions": 5, "seed": seed},
         "policy": {"task": task, "episodes": policy_episodes, "batch_episodes": QUICKSTART_BATCH, "seed": seed},
         "video": {**VIDEO, "seed": seed + 1}}
     if not video:
@@ -73,7 +85,7 @@ def quickstart(out_dir: str | os.PathLike, *, task: str, demo_episodes: int = 40
         refuse_conflicts(out, [line for name, wanted in settings.items()
                                for line in settings_conflicts(*_recorded(out, name), wanted,
                                                               output_exists=_done(out, name))])
-        timings = _run_stages(out, settings, device, log or (lambda _line: None))
+        timings = _run_stages(out, settings, device, progress_bar, log or (lambda _line: None))
         return _write_report(out, task, seed, video, timings)
 
 
@@ -99,7 +111,7 @@ def _recorded(out: pathlib.Path, stage: str) -> tuple[pathlib.Path, dict[str, An
     return out / _RECORDS[stage], read_settings(out / _RECORDS[stage])
 
 
-def _run_stages(out: pathlib.Path, settings: dict[str, dict[str, Any]], device: str,
+def _run_stages(out: pathlib.Path, settings: dict[str, dict[str, Any]], device: str, progress_bar: bool,
                 log: Callable[[str], None]) -> dict[str, float]:
     from sb3_genrl.envs.demonstrations import make_demonstrations
     from sb3_genrl.generative import train_generator
@@ -123,11 +135,11 @@ def _run_stages(out: pathlib.Path, settings: dict[str, dict[str, Any]], device: 
 
     def train() -> None:  # the file is written atomically: it exists only once training is complete
         train_generator(dataset, preset=generator["preset"], epochs=generator["epochs"],
-                        eval_every=generator["eval_every"], seed=generator["seed"], out=model_path, progress_bar=True,
+                        eval_every=generator["eval_every"], seed=generator["seed"], out=model_path, progress_bar=progress_bar,
                         device=device, tensorboard_log=str(out / "tensorboard"))
 
     stage("demonstrations", {}, lambda: make_demonstrations(demos["task"], demos["episodes"], dataset,
-                                                            seed=demos["seed"], progress_bar=True))
+                                                            seed=demos["seed"], progress_bar=progress_bar))
     stage("generator", {"dataset": dataset_fingerprint(dataset)}, train)
     made_from = {"dataset": dataset_fingerprint(dataset), "generator": file_fingerprint(model_path)}
     stage("evaluation", made_from, lambda: evaluate_generators(
@@ -136,7 +148,7 @@ def _run_stages(out: pathlib.Path, settings: dict[str, dict[str, Any]], device: 
     stage("policy", {"generator": made_from["generator"]}, lambda: train_policy(
         policy_settings["task"], str(model_path), episodes=policy_settings["episodes"],
         batch_episodes=policy_settings["batch_episodes"], seed=policy_settings["seed"], out_dir=policy, device=device,
-        progress_bar=True))
+        progress_bar=progress_bar))
     if "video" in settings:
         from sb3_genrl.video import record_video
 
@@ -185,6 +197,7 @@ def _write_report(out: pathlib.Path, task: str, seed: int, video: bool, timings:
 
 
 def _measure_line(measures: list[dict[str, Any]]) -> str:
+    from sb3_genrl.metrics import MEASURES
+
     row = measures[0]
-    return ", ".join(f"{key} {row[key]:.3f}" for key in ("precision", "recall", "delta_1", "delta_2", "mean_delta")
-                     if key in row)
+    return ", ".join(f"{key} {row[key]:.3f}" for key in MEASURES if key in row)

@@ -8,24 +8,10 @@ import json
 import pathlib
 from typing import Any
 
-import numpy as np
-
 from sb3_genrl.curves import mean_std_over_seeds, plot_curves, read_curve
-from sb3_genrl.metrics import correlation_table, labelled_scatter
+from sb3_genrl.markdown import markdown_table
+from sb3_genrl.metrics import MEASURES, correlation_table, labelled_scatter
 from sb3_genrl.utils import atomic_write_text
-
-MEASURES = ("precision", "recall", "delta_1", "delta_2", "mean_delta")
-
-
-def _markdown_table(header: list[str], rows: list[list[Any]]) -> str:
-    def cell(value: Any) -> str:
-        if isinstance(value, float):
-            return "nan" if np.isnan(value) else f"{value:.3f}"
-        return str(value)
-
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(cell(v) for v in row) + " |" for row in rows]
-    return "\n".join(lines)
 
 
 def _write_csv(path: pathlib.Path, header: list[str], rows: list[list[Any]]) -> None:
@@ -87,8 +73,8 @@ def write_task_report(task: str, rows: list[dict[str, Any]], task_dir: str | pat
              f"Best generator: **{best['model']}** (best reward {best['score']:.3f}, i.e. {-best['score'] * 100:.1f} cm).",
              "", "## Table 1: generators and GenRL reward", "",
              "Best reward = the highest mean reward of a GenRL iteration, over all seeds (paper section 6.1.3).", "",
-             _markdown_table(header1, table1), "",
-             "## Tables 4-5: precision, recall and disentanglement", "", _markdown_table(header_m, table_m), "",
+             markdown_table(header1, table1), "",
+             "## Tables 4-5: precision, recall and disentanglement", "", markdown_table(header_m, table_m), "",
              "## Tables 2-3: correlation of each measure with the best reward", "", correlations.to_markdown(), "",
              "## Plots", "",
              "![VAE learning curves](plots/learning_curves_vae.png)", "",
@@ -98,7 +84,7 @@ def write_task_report(task: str, rows: list[dict[str, Any]], task_dir: str | pat
     if comparison is not None:
         lines += ["## GenRL vs PPO vs SAC", "", comparison.read_text().split("\n", 2)[2].replace(
             "](", f"]({comparison.parent.relative_to(root)}/"), ""]
-    markdown = {"table1_models.md": _markdown_table(header1, table1), "measures.md": _markdown_table(header_m, table_m),
+    markdown = {"table1_models.md": markdown_table(header1, table1), "measures.md": markdown_table(header_m, table_m),
                 "correlation.md": correlations.to_markdown()}
     for name, text in markdown.items():
         atomic_write_text(tables / name, text + "\n")

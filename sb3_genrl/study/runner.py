@@ -13,7 +13,8 @@ from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any
 
-from sb3_genrl.baselines import FEEDBACK_BASELINES, LATENT_BASELINES
+from sb3_genrl.baselines import BASELINES
+from sb3_genrl.checks import check_device, check_output_dir, check_positive_int
 from sb3_genrl.study.cluster import DEFAULT_CONNECT_TIMEOUT
 from sb3_genrl.study.jobs import EVALUATION_SEED, GENERATOR_SEED, INTERVENTIONS, K, baseline_job, generator_job
 from sb3_genrl.study.report import write_task_report
@@ -31,8 +32,6 @@ from sb3_genrl.study.state import (
 )
 from sb3_genrl.utils import atomic_write_json, atomic_write_text
 
-# The feedback baselines with the demonstrations, and stock algorithms on the best generator's latent space.
-BASELINES = FEEDBACK_BASELINES + LATENT_BASELINES
 MODELS = tuple(f"VAE{i}" for i in range(1, 10)) + tuple(f"GAN{i}" for i in range(1, 10))
 DEMONSTRATION_SEED = 0
 
@@ -71,9 +70,12 @@ def run_study(task: str, scale: str | StudyScale, out_dir: str | os.PathLike, *,
     unknown = [m for m in models if m not in MODELS]
     if unknown:
         raise ValueError(f"unknown models {unknown}; expected names among {MODELS}")
+    if workers is not None:
+        check_positive_int(workers, "workers")
+    check_device(device)
     settings = (scale if isinstance(scale, StudyScale) else SCALES[scale]).as_dict()
     tasks = tuple(TASKS) if task == "all" else (task,)
-    out = pathlib.Path(out_dir)
+    out = check_output_dir(out_dir)
     log = log or (lambda _line: None)
     with folder_lock(out):
         refuse_conflicts(out, [line for name in tasks for line in _conflicts(name, settings, out / name)])

@@ -37,9 +37,9 @@ class StudyScale:
 
 
 SCALES: dict[str, StudyScale] = {
-    # Seconds per generator: checks that every stage runs and every table and plot is written.
+    # Seconds per generator: checks that every stage runs and every table and plot is written (one seed).
     "smoke": StudyScale(demo_episodes=160, generator_epochs=2, eval_every=1, pr_samples=100, dwpr_samples=40,
-                        policy_episodes=32, batch_episodes=16, seeds=3, baseline_episodes=2, bc_eval_goals=2),
+                        policy_episodes=32, batch_episodes=16, seeds=1, baseline_episodes=2, bc_eval_goals=2),
     # A 2-core CPU in well under an hour per task.
     "small": StudyScale(demo_episodes=4000, generator_epochs=150, eval_every=10, pr_samples=2000, dwpr_samples=1000,
                         policy_episodes=960, batch_episodes=64, seeds=3, baseline_episodes=192),
