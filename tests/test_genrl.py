@@ -67,9 +67,9 @@ def test_constructor_forms_and_defaults():
     ):
         assert model.generator is generator
         assert model.n_steps == 64 and model.e_step == "trpo"
-        assert th.exp(model.policy.log_std).detach().numpy() == pytest.approx([1.0, 1.0])  # the prior's std
+        assert th.exp(model.policy.log_std).detach().cpu().numpy() == pytest.approx([1.0, 1.0])  # the prior's std
     uniform = GenRL(ContextReachEnv(), LinearGenerator(prior="uniform"))
-    assert th.exp(uniform.policy.log_std).detach().numpy() == pytest.approx([3**-0.5] * 2, rel=1e-5)
+    assert th.exp(uniform.policy.log_std).detach().cpu().numpy() == pytest.approx([3**-0.5] * 2, rel=1e-5)
     assert uniform.action_space.high.tolist() == [1.0, 1.0]
     gym.register(TOY_ID, entry_point=FastReachEnv) if TOY_ID not in gym.registry else None
     vec_env = GenRL(TOY_ID, generator).env
