@@ -96,19 +96,18 @@ def compare_runs(run_dirs: list[str | os.PathLike], out_dir: str | os.PathLike, 
 
 
 def _plot_contacts(rows: list[dict], path: pathlib.Path, *, title: str) -> None:
-    import matplotlib
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6.4, 3.6))
+    fig = Figure(figsize=(6.4, 3.6))
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot()
     labels = [row["method"] for row in rows]
     means = [0.0 if np.isnan(row["table_contacts_per_episode"]) else row["table_contacts_per_episode"] for row in rows]
     stds = [0.0 if np.isnan(row["table_contacts_std"]) else row["table_contacts_std"] for row in rows]
-    ax.bar(labels, means, yerr=stds, capsize=4, color="tab:red", alpha=0.7)
+    ax.bar(labels, means, yerr=stds, capsize=4, color="C3", alpha=0.7)
     ax.set_ylabel("table contacts per episode (control steps)")
     ax.set_title(title)
     ax.tick_params(axis="x", labelrotation=20)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)

@@ -30,7 +30,7 @@ import gymnasium as gym
 import numpy as np
 from sb3_genrl.baselines.bc import behaviour_cloning
 from sb3_genrl.baselines.prefill import prefill_replay_buffer
-from sb3_genrl.envs import TASK_IDS
+from sb3_genrl.envs import get_task
 from stable_baselines3 import PPO, SAC
 from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.monitor import Monitor
@@ -62,7 +62,7 @@ def train_baseline(
     """Train one baseline for ``episodes`` episodes and write its outputs to ``out_dir``.
 
     :param algorithm: one of ``ppo``, ``sac``, ``latent-ppo``, ``latent-sac``, ``latent-trpo``
-    :param task: ``hockey`` or ``basketball`` (or their Gymnasium ids)
+    :param task: a task name from :data:`sb3_genrl.envs.TASKS` (or its Gymnasium id)
     :param episodes: budget of episodes (the horizon's worth of steps each for ``ppo``/``sac``)
     :param out_dir: output folder (created)
     :param seed: random seed
@@ -78,9 +78,8 @@ def train_baseline(
         raise ValueError(f"unknown baseline {algorithm!r}; expected one of {BASELINES}")
     if int(episodes) != episodes or episodes < 1:
         raise ValueError(f"episodes must be a positive integer, got {episodes!r}")
-    env_id = TASK_IDS.get(task, task)
-    if env_id not in TASK_IDS.values():
-        raise ValueError(f"unknown task {task!r}; expected one of {sorted(TASK_IDS)}")
+    spec = get_task(task)
+    task, env_id = spec.name, spec.env_id
     out = pathlib.Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     summary: dict[str, Any] = {"algorithm": algorithm, "task": task, "episodes": int(episodes), "seed": seed}

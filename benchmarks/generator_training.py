@@ -16,10 +16,11 @@ import platform
 import time
 
 import torch
+from sb3_genrl.envs import TASKS
 
 from sb3_genrl import __version__
 from sb3_genrl.generative import make_generator
-from sb3_genrl.generative.presets import BATCH_SIZE, N_DEMONSTRATIONS, N_JOINTS, TRAJECTORY_HORIZONS
+from sb3_genrl.generative.presets import BATCH_SIZE, N_DEMONSTRATIONS, N_JOINTS
 from sb3_genrl.generative.synthetic import sine_ramp_trajectories
 
 DEFAULT_OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "generator_training.json")
@@ -45,7 +46,7 @@ def benchmark(n: int, horizon: int, epochs: int, batch_size: int, device: str, s
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--n", type=int, default=N_DEMONSTRATIONS, help="number of trajectories (paper: ~40000)")
-    parser.add_argument("--horizon", type=int, default=TRAJECTORY_HORIZONS["hockey"], help="time steps (hockey: 69)")
+    parser.add_argument("--horizon", type=int, default=TASKS["hockey"].horizon, help="time steps (hockey: 69)")
     parser.add_argument("--epochs", type=int, default=3, help="epochs timed per model")
     parser.add_argument("--batch-size", type=int, default=BATCH_SIZE)
     parser.add_argument("--device", default="auto")

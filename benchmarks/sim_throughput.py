@@ -13,9 +13,8 @@ from pathlib import Path
 
 import mujoco
 import numpy as np
-from sb3_genrl.envs.basketball import BasketballEnv
-from sb3_genrl.envs.hockey import HockeyEnv
-from sb3_genrl.envs.scripted import scripted_hit, scripted_throw
+from sb3_genrl.envs.basketball import BasketballEnv, scripted_throw
+from sb3_genrl.envs.hockey import HockeyEnv, scripted_hit
 
 
 def _trajectories(task: str, n: int, rng: np.random.Generator) -> np.ndarray:

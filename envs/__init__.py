@@ -1,32 +1,75 @@
-"""The paper's MuJoCo tasks (section 6.1.1): ``GenRL/Hockey-v0`` and ``GenRL/Basketball-v0``."""
+"""The task registry: :data:`TASKS` maps each task's short name to its :class:`TaskSpec`.
 
-import os
+The paper's MuJoCo tasks (section 6.1.1) are ``hockey`` (``GenRL/Hockey-v0``) and ``basketball``
+(``GenRL/Basketball-v0``). Each lives in one module (:mod:`sb3_genrl.envs.hockey`, :mod:`sb3_genrl.envs.basketball`)
+that declares its :class:`TaskSpec`; a new task is one more such module and one :func:`register_task` call (for the
+package's own tasks, one more entry in :data:`_BUILT_IN`).
+"""
+
+from __future__ import annotations
+
+from typing import Any
 
 from gymnasium.envs.registration import register, registry
+from sb3_genrl.envs import basketball, hockey
+from sb3_genrl.envs.spec import TaskSpec
 
-# Offscreen rendering on machines without a display.
-if "DISPLAY" not in os.environ:
-    os.environ.setdefault("MUJOCO_GL", "egl")
+__all__ = ["DEFAULT_TASK", "TASKS", "TaskSpec", "get_task", "make_task", "register_envs", "register_task"]
 
-TASK_IDS = {"hockey": "GenRL/Hockey-v0", "basketball": "GenRL/Basketball-v0"}
+TASKS: dict[str, TaskSpec] = {}
+_BUILT_IN = (hockey.TASK, basketball.TASK)
+DEFAULT_TASK = hockey.TASK.name  # the quickstart's task
+
+
+def register_task(spec: TaskSpec) -> TaskSpec:
+    """Add a task to :data:`TASKS` and register its Gymnasium id (idempotent for the same spec).
+
+    :param spec: the task's description
+    :return: ``spec``
+    """
+    known = TASKS.get(spec.name)
+    if known is not None and known is not spec:
+        raise ValueError(f"a different task is already registered as {spec.name!r}")
+    clash = [name for name, other in TASKS.items() if other.env_id == spec.env_id and name != spec.name]
+    if clash:
+        raise ValueError(f"Gymnasium id {spec.env_id!r} already belongs to task {clash[0]!r}")
+    if spec.env_id not in registry:
+        cls = spec.env_class
+        # A module-level class is registered by its import path, as Gymnasium's own envs are.
+        entry_point = cls if "<locals>" in cls.__qualname__ else f"{cls.__module__}:{cls.__qualname__}"
+        register(id=spec.env_id, entry_point=entry_point, max_episode_steps=spec.horizon)
+    TASKS[spec.name] = spec
+    return spec
+
+
+def get_task(task: str | TaskSpec) -> TaskSpec:
+    """The registered task of a short name or a Gymnasium id (a :class:`TaskSpec` is returned as it is).
+
+    :param task: a name in :data:`TASKS` or the Gymnasium id of one
+    :return: the task's description
+    """
+    if isinstance(task, TaskSpec):
+        return task
+    if task in TASKS:
+        return TASKS[task]
+    for spec in TASKS.values():
+        if spec.env_id == task:
+            return spec
+    raise ValueError(f"unknown task {task!r}; expected one of {sorted(TASKS)} or their Gymnasium ids "
+                     f"{sorted(spec.env_id for spec in TASKS.values())}")
+
+
+def make_task(name: str, **kwargs: Any):
+    """``gymnasium.make`` of a registered task by its short name or Gymnasium id, with ``kwargs``."""
+    import gymnasium
+
+    return gymnasium.make(get_task(name).env_id, **kwargs)
 
 
 def register_envs() -> None:
-    """Register the tasks with Gymnasium (idempotent). Called through the ``gymnasium.envs`` entry point."""
-    if "GenRL/Hockey-v0" not in registry:
-        register(id="GenRL/Hockey-v0", entry_point="sb3_genrl.envs.hockey:HockeyEnv", max_episode_steps=69)
-    if "GenRL/Basketball-v0" not in registry:
-        register(id="GenRL/Basketball-v0", entry_point="sb3_genrl.envs.basketball:BasketballEnv", max_episode_steps=78)
+    """Register the package's tasks (idempotent). Called through the ``gymnasium.envs`` entry point."""
+    for spec in _BUILT_IN:
+        register_task(spec)
 
 
 register_envs()
-
-
-def make_task(name: str, **kwargs):
-    """Make a task by its short name (``"hockey"`` or ``"basketball"``) or its Gymnasium id."""
-    import gymnasium
-
-    env_id = TASK_IDS.get(name, name)
-    if env_id not in TASK_IDS.values():
-        raise ValueError(f"unknown task {name!r}; expected one of {sorted(TASK_IDS)} or {sorted(TASK_IDS.values())}")
-    return gymnasium.make(env_id, **kwargs)

@@ -1,4 +1,8 @@
-"""``GenRL/Basketball-v0``: throw a ball from a cup held by the arm into a basket (paper section 6.1.1)."""
+"""``GenRL/Basketball-v0``: throw a ball from a cup held by the arm into a basket (paper section 6.1.1).
+
+The module holds the whole task: the env, its goal region, its scripted expert and the registry entry
+:data:`TASK`.
+"""
 
 from __future__ import annotations
 
@@ -8,6 +12,8 @@ import mujoco
 import numpy as np
 from sb3_genrl.envs.arm import task_mjcf
 from sb3_genrl.envs.base import ArmTaskEnv
+from sb3_genrl.envs.motions import bump
+from sb3_genrl.envs.spec import TaskSpec
 
 # Paper section 6.1.1: basket at radius 1-8 m and angle [-pi/2, pi/2] from the robot; 78 control steps.
 BASKET_RADIUS_RANGE = (1.0, 8.0)
@@ -130,3 +136,100 @@ class BasketballEnv(ArmTaskEnv):
         best = int(np.argmin(distances))
         distance = float(distances[best])
         return -distance, {"reached": points[best], "crossings": len(crossing), "distance": distance}
+
+
+def in_goal_region(points: np.ndarray) -> np.ndarray:
+    """Per point ``(x, y)``: whether it lies in the goal region, the half-annulus of :data:`BASKET_RADIUS_RANGE`
+    and :data:`BASKET_ANGLE_RANGE`."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    radius = np.linalg.norm(points, axis=1)
+    angle = np.arctan2(points[:, 1], points[:, 0])
+    return ((radius >= BASKET_RADIUS_RANGE[0]) & (radius <= BASKET_RADIUS_RANGE[1])
+            & (angle >= BASKET_ANGLE_RANGE[0]) & (angle <= BASKET_ANGLE_RANGE[1]))
+
+
+def region_patch() -> Any:
+    """The goal region's outline for the coverage plot."""
+    from matplotlib.patches import Wedge
+
+    return Wedge((0, 0), BASKET_RADIUS_RANGE[1], np.degrees(BASKET_ANGLE_RANGE[0]), np.degrees(BASKET_ANGLE_RANGE[1]),
+                 width=BASKET_RADIUS_RANGE[1] - BASKET_RADIUS_RANGE[0], fill=False, color="k", label="goal region")
+
+
+# ----------------------------------------------------------------------------------------- the scripted expert
+# Perturbation sizes per joint (rad moved by one bump at level 1), small next to the base motions' amplitudes so
+# the demonstrations vary mainly along the task's factors.
+BASKETBALL_PERTURBATION = np.array([0.06, 0.04, 0.06, 0.04, 0.06, 0.04, 0.06])
+BASKETBALL_THROW_START = (28, 35)  # the swing starts at a control step drawn in this (narrow) window
+BASKETBALL_YAW = np.pi / 2 + 0.15  # rad, either side
+BASKETBALL_FAMILIES = (0.35, 0.45, 0.2)  # shares of shoulder-led long, elbow-led long and other throws
+
+
+def scripted_throw(*, strength: float = 1.0, yaw: float = 0.0, throw_start: int = 20) -> np.ndarray:
+    """A throw: turn the base by ``yaw`` (rad), then swing shoulder, elbow and wrist forward fast.
+
+    :param strength: scales the swing's amplitude (and so its speed)
+    :param yaw: base rotation, positive turns the throw to the robot's left (positive y)
+    :param throw_start: control step at which the swing starts
+    :return: ``(78, 7)`` joint position deltas
+    """
+    trajectory = np.zeros((BASKETBALL_HORIZON, 7))
+    trajectory[:, 0] = bump(BASKETBALL_HORIZON, 2, 12, yaw)
+    for joint, total in zip((1, 3, 5), (1.0, 0.8, 0.4), strict=True):
+        trajectory[:, joint] = bump(BASKETBALL_HORIZON, throw_start, 6, total * strength)
+    return trajectory
+
+
+def throw_motion(*, yaw: float = 0.0, shoulder: float = 0.7, elbow: float = 0.3, wrist: float = 0.15,
+                 duration: int = 4, throw_start: int = 30) -> np.ndarray:
+    """A throw with separate joint amplitudes: turn the base slowly by ``yaw``, then swing fast.
+
+    Short swings (``duration`` 4) led by the shoulder throw far (up to about 9 m); slower swings and strong elbow
+    or wrist motion lob the ball short.
+
+    :param yaw: base rotation (rad), positive throws to the robot's left (positive y); spread over 18 steps so the
+        ball stays in the cup
+    :param shoulder: shoulder pitch travel of the swing (rad)
+    :param elbow: elbow travel (rad)
+    :param wrist: wrist pitch travel (rad)
+    :param duration: control steps of the swing
+    :param throw_start: control step at which the swing starts
+    :return: ``(78, 7)`` joint position deltas
+    """
+    trajectory = np.zeros((BASKETBALL_HORIZON, 7))
+    trajectory[:, 0] = bump(BASKETBALL_HORIZON, 1, 18, yaw)
+    for joint, total in zip((1, 3, 5), (shoulder, elbow, wrist), strict=True):
+        trajectory[:, joint] = bump(BASKETBALL_HORIZON, throw_start, duration, total)
+    return trajectory
+
+
+def sample_throw(rng: np.random.Generator) -> np.ndarray:
+    """The expert's base motion: a throw of one of three families (:data:`BASKETBALL_FAMILIES`), random yaw,
+    timing and amplitudes.
+
+    :param rng: the random generator
+    :return: ``(78, 7)`` joint position deltas
+    """
+    yaw = rng.uniform(-BASKETBALL_YAW, BASKETBALL_YAW)
+    throw_start = int(rng.integers(*BASKETBALL_THROW_START))
+    family = rng.choice(3, p=BASKETBALL_FAMILIES)
+    if family == 0:  # long throws led by the shoulder (they fall short beyond about 1.1 rad of yaw)
+        return throw_motion(yaw=yaw, shoulder=rng.uniform(0.55, 1.05), elbow=rng.uniform(0.1, 0.5),
+                            wrist=rng.uniform(0.02, 0.3), duration=4, throw_start=throw_start)
+    if family == 1:  # long throws led by the elbow (they reach 7-8 m at every yaw)
+        return throw_motion(yaw=yaw, shoulder=rng.uniform(0.35, 0.8), elbow=rng.uniform(0.85, 1.1),
+                            wrist=rng.uniform(0.02, 0.3), duration=4, throw_start=throw_start)
+    strength = rng.uniform(0.2, 1.4)  # everything else: slower swings of every strength
+    return throw_motion(yaw=yaw, shoulder=strength * rng.uniform(0.8, 1.3), elbow=strength * rng.uniform(0.3, 1.2),
+                        wrist=strength * rng.uniform(0.2, 0.6), duration=int(rng.integers(4, 10)), throw_start=throw_start)
+
+
+def is_valid(info: dict[str, Any]) -> bool:
+    """A throw may be a demonstration when the ball comes down through the rim's height."""
+    return info.get("crossings", 0) > 0
+
+
+TASK = TaskSpec(name="basketball", env_id="GenRL/Basketball-v0", env_class=BasketballEnv, horizon=BASKETBALL_HORIZON,
+                goal_low=BasketballEnv.goal_low, goal_high=BasketballEnv.goal_high, in_goal_region=in_goal_region,
+                cell_size=0.25, sample_expert=sample_throw, perturbation_scales=BASKETBALL_PERTURBATION,
+                is_valid=is_valid, region_patch=region_patch, figure_size=(6.0, 8.0))

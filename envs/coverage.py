@@ -1,7 +1,8 @@
 """How well a set of demonstrations covers a task's goal region: a share of covered cells, a JSON file and a plot.
 
-The goal region is cut into square cells (hockey 5 cm, basketball 25 cm); the cells whose centres lie inside the
-region count. A cell is covered when some demonstration's reached point lies within one cell size of its centre.
+The goal region's bounding box is cut into square cells of the task's ``cell_size``; the cells whose centres lie
+inside the region count. A cell is covered when some demonstration's reached point lies within one cell size of
+its centre.
 """
 
 from __future__ import annotations
@@ -12,64 +13,53 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from sb3_genrl.envs.basketball import BASKET_ANGLE_RANGE, BASKET_RADIUS_RANGE
-from sb3_genrl.envs.hockey import HOCKEY_GOAL_HIGH, HOCKEY_GOAL_LOW
+from sb3_genrl.envs import TaskSpec, get_task
 from scipy.spatial import cKDTree
 
-CELL_SIZE = {"hockey": 0.05, "basketball": 0.25}  # m
+
+def in_goal_region(points: np.ndarray, task: str | TaskSpec) -> np.ndarray:
+    """Per point ``(x, y)``: whether it lies in the task's goal region.
+
+    :param points: ``(N, 2)`` points (m)
+    :param task: a task name from :data:`sb3_genrl.envs.TASKS` (or its spec)
+    """
+    return np.asarray(get_task(task).in_goal_region(np.asarray(points, dtype=np.float64).reshape(-1, 2)), dtype=bool)
 
 
-def in_goal_region(points: np.ndarray, task: str) -> np.ndarray:
-    """Per point ``(x, y)``: whether it lies in the task's goal region (hockey rectangle, basketball half-annulus)."""
-    points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    if task == "hockey":
-        return np.all((points >= HOCKEY_GOAL_LOW) & (points <= HOCKEY_GOAL_HIGH), axis=1)
-    if task == "basketball":
-        radius = np.linalg.norm(points, axis=1)
-        angle = np.arctan2(points[:, 1], points[:, 0])
-        return ((radius >= BASKET_RADIUS_RANGE[0]) & (radius <= BASKET_RADIUS_RANGE[1])
-                & (angle >= BASKET_ANGLE_RANGE[0]) & (angle <= BASKET_ANGLE_RANGE[1]))
-    raise ValueError(f"unknown task {task!r}; expected 'hockey' or 'basketball'")
-
-
-def region_cells(task: str) -> np.ndarray:
-    """Centres ``(K, 2)`` of the grid cells (size :data:`CELL_SIZE`) that lie inside the task's goal region."""
-    if task not in CELL_SIZE:
-        raise ValueError(f"unknown task {task!r}; expected one of {sorted(CELL_SIZE)}")
-    cell = CELL_SIZE[task]
-    if task == "hockey":
-        low, high = HOCKEY_GOAL_LOW, HOCKEY_GOAL_HIGH
-    else:
-        low, high = np.array([0.0, -BASKET_RADIUS_RANGE[1]]), np.array([BASKET_RADIUS_RANGE[1]] * 2)
+def region_cells(task: str | TaskSpec) -> np.ndarray:
+    """Centres ``(K, 2)`` of the grid cells (of the task's ``cell_size``) that lie inside the task's goal region."""
+    spec = get_task(task)
+    cell, low, high = spec.cell_size, np.asarray(spec.goal_low), np.asarray(spec.goal_high)
     counts = np.round((high - low) / cell).astype(int)
     xs = low[0] + (np.arange(counts[0]) + 0.5) * cell
     ys = low[1] + (np.arange(counts[1]) + 0.5) * cell
     centres = np.stack(np.meshgrid(xs, ys, indexing="ij"), axis=-1).reshape(-1, 2)
-    return centres[in_goal_region(centres, task)]
+    return centres[in_goal_region(centres, spec)]
 
 
-def covered_cells(reached: np.ndarray, task: str) -> np.ndarray:
+def covered_cells(reached: np.ndarray, task: str | TaskSpec) -> np.ndarray:
     """Per cell of :func:`region_cells`: whether some reached point lies within one cell size of its centre."""
-    centres = region_cells(task)
+    spec = get_task(task)
+    centres = region_cells(spec)
     reached = np.asarray(reached, dtype=np.float64).reshape(-1, 2)
     reached = reached[np.all(np.isfinite(reached), axis=1)]
     if len(reached) == 0:
         return np.zeros(len(centres), dtype=bool)
     distance, _ = cKDTree(reached).query(centres, k=1)
-    return distance <= CELL_SIZE[task]
+    return distance <= spec.cell_size
 
 
-def coverage_fraction(reached: np.ndarray, task: str) -> float:
+def coverage_fraction(reached: np.ndarray, task: str | TaskSpec) -> float:
     """Share of the goal region's cells covered by the reached points (see the module docstring)."""
     return float(covered_cells(reached, task).mean())
 
 
-def coverage_report(source: np.ndarray | str | os.PathLike[str], task: str | None, out_dir: str | os.PathLike[str],
-                    ) -> dict[str, Any]:
+def coverage_report(source: np.ndarray | str | os.PathLike[str], task: str | TaskSpec | None,
+                    out_dir: str | os.PathLike[str]) -> dict[str, Any]:
     """Write ``coverage.json`` and ``coverage.png`` (reached points over the goal region) into ``out_dir``.
 
     :param source: a dataset directory or the reached points ``(N, 2)``
-    :param task: ``"hockey"`` or ``"basketball"``; read from the dataset when None
+    :param task: a task name from :data:`sb3_genrl.envs.TASKS` (or its spec); read from the dataset when None
     :param out_dir: where to write the two files (created if needed)
     :return: the report: ``task``, ``episodes``, ``cell_size``, ``cells``, ``covered_cells``, ``coverage``,
         ``in_region`` (share of reached points inside the region) and the two file paths
@@ -78,49 +68,48 @@ def coverage_report(source: np.ndarray | str | os.PathLike[str], task: str | Non
         from sb3_genrl.data import dataset_info, load_reached
 
         info = dataset_info(source)
-        if task is not None and task != info["task"]:
-            raise ValueError(f"dataset {str(source)!r} holds task {info['task']!r}, not {task!r}")
+        if task is not None and get_task(task).name != info["task"]:
+            raise ValueError(f"dataset {str(source)!r} holds task {info['task']!r}, not {get_task(task).name!r}")
         task, reached = info["task"], load_reached(source)
     else:
         reached = np.asarray(source, dtype=np.float64).reshape(-1, 2)
-    if task not in CELL_SIZE:
-        raise ValueError(f"unknown task {task!r}; expected one of {sorted(CELL_SIZE)}")
+    if task is None:
+        raise ValueError("task is needed when the reached points are given as an array")
+    spec = get_task(task)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    covered = covered_cells(reached, task)
-    report = {"task": task, "episodes": int(len(reached)), "cell_size": CELL_SIZE[task], "cells": int(len(covered)),
+    covered = covered_cells(reached, spec)
+    report = {"task": spec.name, "episodes": int(len(reached)), "cell_size": spec.cell_size, "cells": int(len(covered)),
               "covered_cells": int(covered.sum()), "coverage": float(covered.mean()),
-              "in_region": float(in_goal_region(reached, task).mean()) if len(reached) else 0.0,
+              "in_region": float(in_goal_region(reached, spec).mean()) if len(reached) else 0.0,
               "json": str(out_dir / "coverage.json"), "png": str(out_dir / "coverage.png")}
-    _plot(reached, task, covered, out_dir / "coverage.png", report["coverage"])
+    _plot(reached, spec, covered, out_dir / "coverage.png", report["coverage"])
     (out_dir / "coverage.json").write_text(json.dumps(report, indent=1))
     return report
 
 
-def _plot(reached: np.ndarray, task: str, covered: np.ndarray, path: Path, coverage: float) -> None:
-    import matplotlib
+def _plot(reached: np.ndarray, spec: TaskSpec, covered: np.ndarray, path: Path, coverage: float) -> None:
+    """Reached points, uncovered cells and the goal region's outline, drawn without pyplot's global state."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Rectangle
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.patches import Rectangle, Wedge
-
-    centres = region_cells(task)
-    figure, axes = plt.subplots(figsize=(6, 6) if task == "hockey" else (6, 8))
+    centres = region_cells(spec)
+    figure = Figure(figsize=spec.figure_size)
+    FigureCanvasAgg(figure)
+    axes = figure.add_subplot()
     shown = reached[np.random.default_rng(0).permutation(len(reached))[:20000]] if len(reached) > 20000 else reached
-    axes.scatter(shown[:, 0], shown[:, 1], s=1, alpha=0.3, color="tab:blue", label="reached")
-    axes.scatter(*centres[~covered].T, s=8, marker="x", color="tab:red", label="uncovered cell")
-    if task == "hockey":
-        size = HOCKEY_GOAL_HIGH - HOCKEY_GOAL_LOW
-        axes.add_patch(Rectangle(tuple(HOCKEY_GOAL_LOW), size[0], size[1], fill=False, color="k", label="goal region"))
+    axes.scatter(shown[:, 0], shown[:, 1], s=1, alpha=0.3, color="C0", label="reached")
+    axes.scatter(*centres[~covered].T, s=8, marker="x", color="C3", label="uncovered cell")
+    if spec.region_patch is None:
+        low, size = np.asarray(spec.goal_low), np.asarray(spec.goal_high) - np.asarray(spec.goal_low)
+        axes.add_patch(Rectangle(tuple(low), size[0], size[1], fill=False, color="k", label="goal region"))
     else:
-        axes.add_patch(Wedge((0, 0), BASKET_RADIUS_RANGE[1], np.degrees(BASKET_ANGLE_RANGE[0]),
-                             np.degrees(BASKET_ANGLE_RANGE[1]), width=BASKET_RADIUS_RANGE[1] - BASKET_RADIUS_RANGE[0],
-                             fill=False, color="k", label="goal region"))
+        axes.add_patch(spec.region_patch())
     axes.set_aspect("equal")
     axes.set_xlabel("x (m)")
     axes.set_ylabel("y (m)")
-    axes.set_title(f"{task}: {len(reached)} demonstrations, {100 * coverage:.1f}% of cells covered", fontsize=10)
+    axes.set_title(f"{spec.name}: {len(reached)} demonstrations, {100 * coverage:.1f}% of cells covered", fontsize=10)
     axes.legend(loc="upper right", fontsize=7)
     figure.tight_layout()
     figure.savefig(path, dpi=100)
-    plt.close(figure)

@@ -1,14 +1,14 @@
 """The demonstration generator (paper section 6.1.4): a scripted expert perturbed by random joint-velocity changes.
 
 The paper recorded a few kinesthetic demonstrations and made 40K episodes from them with random changes of the
-joint velocities of different strengths and orientations. Here the expert is a family of smooth base motions
-(:func:`sb3_genrl.envs.scripted.scripted_hit` for hockey, :func:`throw_motion` for basketball) with random
-parameters (strength, direction or yaw; for basketball also timing), and the perturbation (:func:`perturbation`)
-adds to its per-step joint position deltas (joint velocities times the control step) a few raised-cosine velocity
-bumps, each on a random joint, at a random time, of random width, sign and size, the sizes scaled by one random
+joint velocities of different strengths and orientations. Here the expert is each task's family of smooth base
+motions with random parameters (:attr:`TaskSpec.sample_expert <sb3_genrl.envs.spec.TaskSpec>`, e.g. a hockey hit of
+random strength and direction), and the perturbation (:func:`perturbation`) adds to its per-step joint position
+deltas (joint velocities times the control step) a few raised-cosine velocity bumps, each on a random joint, at a
+random time, of random width, sign and size, the sizes scaled by the task's ``perturbation_scales`` and one random
 level per episode. Trajectories outside the action box or the joint ranges are redrawn before simulation (nothing
-relies on the env's clipping); after simulation only valid episodes are kept: stable, no clipping, for hockey no
-stick-table contact, for basketball a ball that comes down through the rim's height.
+relies on the env's clipping); after simulation only valid episodes are kept (:func:`is_valid`): stable, no
+clipping, and valid for the task (e.g. no stick-table contact in hockey).
 
 Every stored demonstration is a successful one: its goal is the point it reached (hindsight relabelling; the
 randomly drawn goal it was simulated with is kept as ``sampled_goals``), so its terminal reward is ``-0.0``.
@@ -22,71 +22,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from sb3_genrl.envs import TASK_IDS
+from sb3_genrl.envs import TaskSpec, get_task
 from sb3_genrl.envs.arm import JOINT_RANGE
 from sb3_genrl.envs.base import ArmTaskEnv, default_threads
-from sb3_genrl.envs.basketball import BASKETBALL_HORIZON, BasketballEnv
-from sb3_genrl.envs.hockey import HOCKEY_GOAL_HIGH, HOCKEY_GOAL_LOW, HockeyEnv
-from sb3_genrl.envs.scripted import bump, scripted_hit
+from sb3_genrl.envs.motions import bump
 from tqdm.auto import tqdm
 
-# Perturbation sizes per joint (rad moved by one bump at level 1). They are small next to the base motions'
-# strength and direction, so the demonstrations vary mainly along the task's factors (as a few demonstrations
-# with changed joint velocities do) and a low-dimensional generator can capture them; the shoulder and elbow
-# (which lower the hockey blade onto the table) get the smallest.
-HOCKEY_PERTURBATION = np.array([0.04, 0.02, 0.04, 0.02, 0.05, 0.04, 0.05])
-BASKETBALL_PERTURBATION = np.array([0.06, 0.04, 0.06, 0.04, 0.06, 0.04, 0.06])
-# Control step at which the hit or throw starts. Hockey hits all start at one step: timing changes nothing in the
-# outcome, and whole-step shifts split the demonstrations into one cluster per start step, which a 2-D generator then
-# lays out as separate patches of its latent space (each patch covering part of the goal region), so the latent
-# action that reaches a goal jumps between patches. Basketball throws keep a narrow window.
-HOCKEY_SWING_START = 25
-BASKETBALL_THROW_START = (28, 35)
-# Hockey aims: a target drawn uniformly in the goal region widened by HOCKEY_AIM_MARGIN (m) on each side, hit from
-# the puck's start at HOCKEY_PUCK_X with direction = the target's bearing and a strength for its distance, read
-# off the measured distance (m) -> strength curve of scripted_hit.
-HOCKEY_AIM_MARGIN = 0.08
-HOCKEY_PUCK_X = 0.36
-HOCKEY_DISTANCE_TO_STRENGTH = (np.array([0.19, 0.256, 0.301, 0.362, 0.43, 0.49, 0.549, 0.612, 0.676, 0.765, 0.84, 0.92,
-                                         0.998, 1.079, 1.165, 1.252]),
-                               np.array([0.6, 0.7, 0.75, 0.8, 0.9, 0.95, 1.0, 1.05, 1.1, 1.15, 1.25, 1.3, 1.35, 1.4, 1.45,
-                                         1.5]))
-BASKETBALL_YAW = np.pi / 2 + 0.15  # rad, either side
-BASKETBALL_FAMILIES = (0.35, 0.45, 0.2)  # shares of shoulder-led long, elbow-led long and other throws
 ACTION_MARGIN = 0.95  # trajectories use at most this share of the action box
 JOINT_MARGIN = 0.05  # rad kept from each joint limit
-
-
-def make_env(task: str, **kwargs: Any) -> ArmTaskEnv:
-    """The task's env (unwrapped) by short name, ``"hockey"`` or ``"basketball"``, with constructor ``kwargs``."""
-    if task == "hockey":
-        return HockeyEnv(**kwargs)
-    if task == "basketball":
-        return BasketballEnv(**kwargs)
-    raise ValueError(f"unknown task {task!r}; expected one of {sorted(TASK_IDS)}")
-
-
-def throw_motion(*, yaw: float = 0.0, shoulder: float = 0.7, elbow: float = 0.3, wrist: float = 0.15,
-                 duration: int = 4, throw_start: int = 30) -> np.ndarray:
-    """A basketball throw with separate joint amplitudes: turn the base slowly by ``yaw``, then swing fast.
-
-    Short swings (``duration`` 4) led by the shoulder throw far (up to about 9 m); slower swings and strong elbow
-    or wrist motion lob the ball short.
-
-    :param yaw: base rotation (rad), positive throws to the robot's left (positive y); spread over 18 steps so the
-        ball stays in the cup
-    :param shoulder: shoulder pitch travel of the swing (rad)
-    :param elbow: elbow travel (rad)
-    :param wrist: wrist pitch travel (rad)
-    :param duration: control steps of the swing
-    :param throw_start: control step at which the swing starts
-    :return: ``(78, 7)`` joint position deltas
-    """
-    trajectory = np.zeros((BASKETBALL_HORIZON, 7))
-    trajectory[:, 0] = bump(BASKETBALL_HORIZON, 1, 18, yaw)
-    for joint, total in zip((1, 3, 5), (shoulder, elbow, wrist), strict=True):
-        trajectory[:, joint] = bump(BASKETBALL_HORIZON, throw_start, duration, total)
-    return trajectory
 
 
 def perturbation(horizon: int, rng: np.random.Generator, scales: np.ndarray, *, max_bumps: int = 4,
@@ -111,32 +54,6 @@ def perturbation(horizon: int, rng: np.random.Generator, scales: np.ndarray, *, 
     return out
 
 
-def _hockey_base(rng: np.random.Generator) -> np.ndarray:
-    target = rng.uniform(HOCKEY_GOAL_LOW - HOCKEY_AIM_MARGIN, HOCKEY_GOAL_HIGH + HOCKEY_AIM_MARGIN)
-    offset = target - np.array([HOCKEY_PUCK_X, 0.0])
-    strength = np.interp(np.linalg.norm(offset), *HOCKEY_DISTANCE_TO_STRENGTH) * rng.uniform(0.95, 1.05)
-    return scripted_hit(strength=strength, direction=float(np.arctan2(-offset[1], offset[0])),
-                        swing_start=HOCKEY_SWING_START)
-
-
-def _basketball_base(rng: np.random.Generator) -> np.ndarray:
-    yaw = rng.uniform(-BASKETBALL_YAW, BASKETBALL_YAW)
-    throw_start = int(rng.integers(*BASKETBALL_THROW_START))
-    family = rng.choice(3, p=BASKETBALL_FAMILIES)
-    if family == 0:  # long throws led by the shoulder (they fall short beyond about 1.1 rad of yaw)
-        return throw_motion(yaw=yaw, shoulder=rng.uniform(0.55, 1.05), elbow=rng.uniform(0.1, 0.5),
-                            wrist=rng.uniform(0.02, 0.3), duration=4, throw_start=throw_start)
-    if family == 1:  # long throws led by the elbow (they reach 7-8 m at every yaw)
-        return throw_motion(yaw=yaw, shoulder=rng.uniform(0.35, 0.8), elbow=rng.uniform(0.85, 1.1),
-                            wrist=rng.uniform(0.02, 0.3), duration=4, throw_start=throw_start)
-    strength = rng.uniform(0.2, 1.4)  # everything else: slower swings of every strength
-    return throw_motion(yaw=yaw, shoulder=strength * rng.uniform(0.8, 1.3), elbow=strength * rng.uniform(0.3, 1.2),
-                        wrist=strength * rng.uniform(0.2, 0.6), duration=int(rng.integers(4, 10)), throw_start=throw_start)
-
-
-_TASKS = {"hockey": (_hockey_base, HOCKEY_PERTURBATION), "basketball": (_basketball_base, BASKETBALL_PERTURBATION)}
-
-
 def within_limits(trajectories: np.ndarray, home: np.ndarray, max_joint_delta: float = 0.5) -> np.ndarray:
     """Per trajectory: whether every delta is inside the action box and every command inside the joint ranges,
     each with a margin (:data:`ACTION_MARGIN`, :data:`JOINT_MARGIN`)."""
@@ -147,24 +64,23 @@ def within_limits(trajectories: np.ndarray, home: np.ndarray, max_joint_delta: f
     return in_box & in_range
 
 
-def sample_trajectories(task: str, n: int, rng: np.random.Generator, *, home: np.ndarray | None = None,
+def sample_trajectories(task: str | TaskSpec, n: int, rng: np.random.Generator, *, home: np.ndarray | None = None,
                         max_joint_delta: float = 0.5) -> np.ndarray:
     """Draw ``n`` perturbed expert trajectories (before simulation; see the module docstring).
 
-    :param task: ``"hockey"`` or ``"basketball"``
+    :param task: a task name from :data:`sb3_genrl.envs.TASKS` (or its spec)
     :param n: number of trajectories
     :param rng: the random generator (all draws come from it)
     :param home: the task's home pose (7,) for the joint-range check; made from the task's env when None
     :param max_joint_delta: the action bound (rad per step)
     :return: ``(n, T, 7)`` float32 joint position deltas, all inside the action box and joint ranges
     """
-    if task not in _TASKS:
-        raise ValueError(f"unknown task {task!r}; expected one of {sorted(_TASKS)}")
+    spec = get_task(task)
     if n < 0:
         raise ValueError(f"n must be non-negative, got {n}")
-    base, scales = _TASKS[task]
+    base, scales = spec.sample_expert, spec.perturbation_scales
     if home is None:
-        home = make_env(task).home_qpos()
+        home = spec.make_env().home_qpos()
     out: list[np.ndarray] = []
     count = 0
     while count < n:
@@ -179,17 +95,19 @@ def sample_trajectories(task: str, n: int, rng: np.random.Generator, *, home: np
     return np.concatenate(out)[:n] if out else np.zeros((0, 0, 7), dtype=np.float32)
 
 
-def is_valid(task: str, info: dict[str, Any]) -> bool:
-    """Whether a simulated episode may be a demonstration: stable, unclipped, and for hockey without stick-table
-    contact, for basketball with the ball coming down through the rim's height."""
+def is_valid(task: str | TaskSpec, info: dict[str, Any]) -> bool:
+    """Whether a simulated episode may be a demonstration: stable, unclipped, and valid for the task
+    (:attr:`TaskSpec.is_valid <sb3_genrl.envs.spec.TaskSpec>`).
+
+    :param task: a task name from :data:`sb3_genrl.envs.TASKS` (or its spec)
+    :param info: the episode's final info
+    """
     if info.get("unstable") or info.get("joint_limit_clipped"):
         return False
-    if task == "hockey":
-        return info.get("table_contacts", 1) == 0
-    return info.get("crossings", 0) > 0
+    return bool(get_task(task).is_valid(info))
 
 
-def make_demonstrations(task: str, episodes: int, out_dir: str | os.PathLike[str], *, seed: int = 0,
+def make_demonstrations(task: str | TaskSpec, episodes: int, out_dir: str | os.PathLike[str], *, seed: int = 0,
                         n_threads: int | None = None, progress_bar: bool = True, chunk: int = 256) -> Path:
     """Generate ``episodes`` valid demonstrations of ``task`` and write them as a Minari dataset in ``out_dir``.
 
@@ -199,7 +117,7 @@ def make_demonstrations(task: str, episodes: int, out_dir: str | os.PathLike[str
     is a prefix of a larger one. The dataset directory is written
     atomically (see :func:`sb3_genrl.data.write_dataset`), with a coverage report beside its ``data`` folder.
 
-    :param task: ``"hockey"`` or ``"basketball"``
+    :param task: a task name from :data:`sb3_genrl.envs.TASKS` (or its spec)
     :param episodes: number of demonstrations (paper: 40000)
     :param out_dir: the dataset directory to create (must not exist or be empty)
     :param seed: seed of every random draw
@@ -218,42 +136,53 @@ def make_demonstrations(task: str, episodes: int, out_dir: str | os.PathLike[str
     out_dir = Path(out_dir)
     if out_dir.exists() and (not out_dir.is_dir() or any(out_dir.iterdir())):
         raise ValueError(f"{str(out_dir)!r} already exists and is not an empty directory; choose another output path")
-    env = make_env(task)
-    n_threads = default_threads() if n_threads is None else int(n_threads)
-    home = env.home_qpos()
-    kept: dict[str, list[np.ndarray]] = {"actions": [], "joints": [], "reached": [], "sampled_goals": []}
-    count = drawn = 0
+    spec = get_task(task)
+    task = spec.name
+    env = spec.make_env()
     began = time.perf_counter()
-    with tqdm(total=episodes, disable=not progress_bar, unit="episode", desc=f"{task} demonstrations") as bar:
-        while count < episodes:
-            if drawn >= 5000 and count == 0:
-                raise RuntimeError(f"none of the first {drawn} {task} trajectories was valid")
-            size = min(chunk, int(1.1 * (episodes - count)) + 4)
-            rngs = [np.random.default_rng([seed, k]) for k in range(drawn, drawn + size)]
-            actions = np.concatenate([sample_trajectories(task, 1, r, home=home, max_joint_delta=env.max_joint_delta)
-                                      for r in rngs])
-            goals = np.stack([env.sample_goal(r) for r in rngs])
-            _, infos, joints = env.play_trajectories(actions, goals, n_threads=n_threads, return_joint_states=True)
-            drawn += size
-            valid = np.flatnonzero([is_valid(task, info) for info in infos])[: episodes - count]
-            reached = np.array([infos[i]["reached"] for i in valid]).reshape(-1, 2)
-            kept["actions"].append(actions[valid])
-            kept["joints"].append(joints[valid])
-            kept["reached"].append(reached)
-            kept["sampled_goals"].append(goals[valid])
-            count += len(valid)
-            bar.update(len(valid))
-    arrays = _episode_arrays(env, {key: np.concatenate(value) for key, value in kept.items()})
-    genrl = {"task": task, "env_id": TASK_IDS[task], "horizon": env.horizon, "seed": int(seed),
+    kept, drawn = _valid_episodes(spec, env, episodes, seed, default_threads() if n_threads is None else int(n_threads),
+                                  chunk, progress_bar)
+    arrays = _episode_arrays(env, kept)
+    genrl = {"task": task, "env_id": spec.env_id, "horizon": env.horizon, "seed": int(seed),
              "version": sb3_genrl.__version__, "episodes": int(episodes), "drawn": int(drawn),
              "goal": "reached (hindsight: each demonstration's goal is the point it reached)",
              "observation": "goal xy, 7 joint positions, 7 joint velocities", "max_joint_delta": env.max_joint_delta,
              "seconds": round(time.perf_counter() - began, 1)}
     path = write_dataset(out_dir, arrays, dataset_id=f"genrl/{task}-v0", observation_space=env.observation_space,
                          action_space=env.action_space, genrl=genrl,
-                         description=f"{episodes} perturbed scripted demonstrations of {TASK_IDS[task]} (sb3-genrl)")
-    coverage_report(arrays["reached"], task, path)
+                         description=f"{episodes} perturbed scripted demonstrations of {spec.env_id} (sb3-genrl)")
+    coverage_report(arrays["reached"], spec, path)
     return path
+
+
+def _valid_episodes(spec: TaskSpec, env: ArmTaskEnv, episodes: int, seed: int, n_threads: int, chunk: int,
+                    progress_bar: bool) -> tuple[dict[str, np.ndarray], int]:
+    """Draw and simulate trajectories in chunks until ``episodes`` are valid (see :func:`make_demonstrations`).
+
+    :return: the valid episodes' ``actions``, ``joints``, ``reached`` and ``sampled_goals``, and the number drawn
+    """
+    home = env.home_qpos()
+    kept: dict[str, list[np.ndarray]] = {"actions": [], "joints": [], "reached": [], "sampled_goals": []}
+    count = drawn = 0
+    with tqdm(total=episodes, disable=not progress_bar, unit="episode", desc=f"{spec.name} demonstrations") as bar:
+        while count < episodes:
+            if drawn >= 5000 and count == 0:
+                raise RuntimeError(f"none of the first {drawn} {spec.name} trajectories was valid")
+            size = min(chunk, int(1.1 * (episodes - count)) + 4)
+            rngs = [np.random.default_rng([seed, k]) for k in range(drawn, drawn + size)]
+            actions = np.concatenate([sample_trajectories(spec, 1, r, home=home, max_joint_delta=env.max_joint_delta)
+                                      for r in rngs])
+            goals = np.stack([env.sample_goal(r) for r in rngs])
+            _, infos, joints = env.play_trajectories(actions, goals, n_threads=n_threads, return_joint_states=True)
+            drawn += size
+            valid = np.flatnonzero([is_valid(spec, info) for info in infos])[: episodes - count]
+            kept["actions"].append(actions[valid])
+            kept["joints"].append(joints[valid])
+            kept["reached"].append(np.array([infos[i]["reached"] for i in valid]).reshape(-1, 2))
+            kept["sampled_goals"].append(goals[valid])
+            count += len(valid)
+            bar.update(len(valid))
+    return {key: np.concatenate(value) for key, value in kept.items()}, drawn
 
 
 def _episode_arrays(env: ArmTaskEnv, kept: dict[str, np.ndarray]) -> dict[str, np.ndarray]:

@@ -1,4 +1,8 @@
-"""``GenRL/Hockey-v0``: shoot a puck with a stick held by the arm to a target on the table (paper section 6.1.1)."""
+"""``GenRL/Hockey-v0``: shoot a puck with a stick held by the arm to a target on the table (paper section 6.1.1).
+
+The module holds the whole task: the env, its goal region, its scripted expert and the registry entry
+:data:`TASK`.
+"""
 
 from __future__ import annotations
 
@@ -8,6 +12,8 @@ import mujoco
 import numpy as np
 from sb3_genrl.envs.arm import task_mjcf
 from sb3_genrl.envs.base import ArmTaskEnv
+from sb3_genrl.envs.motions import bump
+from sb3_genrl.envs.spec import TaskSpec
 
 # Paper section 6.1.1: target uniform in x in [0.65, 1.3] m, y in [-0.4, 0.4] m from the robot; 69 control steps.
 HOCKEY_GOAL_LOW = np.array([0.65, -0.4])
@@ -106,9 +112,9 @@ class HockeyEnv(ArmTaskEnv):
         data = self.data
         mujoco.mj_kinematics(self.model, data)
         blade = data.geom("blade")
-        front = blade.xpos + blade.xmat.reshape(3, 3)[:, 0] * 0.0  # blade centre
+        centre = blade.xpos
         puck_adr = self.model.joint("puck").qposadr[0]
-        data.qpos[puck_adr:puck_adr + 3] = [front[0] + 0.012 + PUCK_RADIUS + 0.01, front[1], PUCK_HALF_HEIGHT]
+        data.qpos[puck_adr:puck_adr + 3] = [centre[0] + 0.012 + PUCK_RADIUS + 0.01, centre[1], PUCK_HALF_HEIGHT]
         data.qpos[puck_adr + 3:puck_adr + 7] = [1, 0, 0, 0]
 
     def _settled(self, row: np.ndarray) -> bool:
@@ -145,3 +151,72 @@ def _hockey_home(model: mujoco.MjModel) -> np.ndarray:
             high = mid
     shoulder = 0.5 * (low + high)
     return np.array([0.0, shoulder, 0.0, np.pi - shoulder, 0.0, 0.0, 0.0])
+
+
+def in_goal_region(points: np.ndarray) -> np.ndarray:
+    """Per point ``(x, y)``: whether it lies in the goal rectangle."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    return np.all((points >= HOCKEY_GOAL_LOW) & (points <= HOCKEY_GOAL_HIGH), axis=1)
+
+
+# ----------------------------------------------------------------------------------------- the scripted expert
+# Perturbation sizes per joint (rad moved by one bump at level 1). They are small next to the base motions'
+# strength and direction, so the demonstrations vary mainly along the task's factors (as a few demonstrations
+# with changed joint velocities do) and a low-dimensional generator can capture them; the shoulder and elbow
+# (which lower the blade onto the table) get the smallest.
+HOCKEY_PERTURBATION = np.array([0.04, 0.02, 0.04, 0.02, 0.05, 0.04, 0.05])
+# Control step at which every hit starts: timing changes nothing in the outcome, and whole-step shifts split the
+# demonstrations into one cluster per start step, which a 2-D generator then lays out as separate patches of its
+# latent space (each patch covering part of the goal region), so the latent action that reaches a goal jumps
+# between patches.
+HOCKEY_SWING_START = 25
+# Aims: a target drawn uniformly in the goal region widened by HOCKEY_AIM_MARGIN (m) on each side, hit from the
+# puck's start at HOCKEY_PUCK_X with direction = the target's bearing and a strength for its distance, read off the
+# measured distance (m) -> strength curve of scripted_hit.
+HOCKEY_AIM_MARGIN = 0.08
+HOCKEY_PUCK_X = 0.36
+HOCKEY_DISTANCE_TO_STRENGTH = (np.array([0.19, 0.256, 0.301, 0.362, 0.43, 0.49, 0.549, 0.612, 0.676, 0.765, 0.84, 0.92,
+                                         0.998, 1.079, 1.165, 1.252]),
+                               np.array([0.6, 0.7, 0.75, 0.8, 0.9, 0.95, 1.0, 1.05, 1.1, 1.15, 1.25, 1.3, 1.35, 1.4, 1.45,
+                                         1.5]))
+
+
+def scripted_hit(*, strength: float = 1.0, direction: float = 0.0, swing_start: int = 25) -> np.ndarray:
+    """A hit: turn the swing plane by ``direction`` (rad, forearm roll), wind up the wrist, swing through.
+
+    :param strength: scales the swing's amplitude and speed; 0.75-1.3 sends the puck to x = 0.65-1.3 m, weaker hits
+        fall short of the goal region
+    :param direction: the shot's angle (rad) from the x axis, positive to the robot's right (negative y)
+    :param swing_start: control step at which the forward swing starts
+    :return: ``(69, 7)`` joint position deltas
+    """
+    trajectory = np.zeros((HOCKEY_HORIZON, 7))
+    trajectory[:, 4] = bump(HOCKEY_HORIZON, 4, 8, direction)
+    backswing = 0.35 * strength
+    trajectory[:, 5] = bump(HOCKEY_HORIZON, 10, 10, backswing)
+    trajectory[:, 5] += bump(HOCKEY_HORIZON, swing_start, 6, -2 * backswing)  # through the puck
+    trajectory[:, 5] += bump(HOCKEY_HORIZON, swing_start + 10, 12, backswing)  # back to vertical, slowly
+    return trajectory
+
+
+def sample_hit(rng: np.random.Generator) -> np.ndarray:
+    """The expert's base motion: a hit aimed at a random target around the goal region (see the constants above).
+
+    :param rng: the random generator
+    :return: ``(69, 7)`` joint position deltas
+    """
+    target = rng.uniform(HOCKEY_GOAL_LOW - HOCKEY_AIM_MARGIN, HOCKEY_GOAL_HIGH + HOCKEY_AIM_MARGIN)
+    offset = target - np.array([HOCKEY_PUCK_X, 0.0])
+    strength = np.interp(np.linalg.norm(offset), *HOCKEY_DISTANCE_TO_STRENGTH) * rng.uniform(0.95, 1.05)
+    return scripted_hit(strength=strength, direction=float(np.arctan2(-offset[1], offset[0])),
+                        swing_start=HOCKEY_SWING_START)
+
+
+def is_valid(info: dict[str, Any]) -> bool:
+    """A hit may be a demonstration when the stick never touched the table."""
+    return info.get("table_contacts", 1) == 0
+
+
+TASK = TaskSpec(name="hockey", env_id="GenRL/Hockey-v0", env_class=HockeyEnv, horizon=HOCKEY_HORIZON,
+                goal_low=HOCKEY_GOAL_LOW, goal_high=HOCKEY_GOAL_HIGH, in_goal_region=in_goal_region, cell_size=0.05,
+                sample_expert=sample_hit, perturbation_scales=HOCKEY_PERTURBATION, is_valid=is_valid)

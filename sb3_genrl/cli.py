@@ -8,13 +8,16 @@ import sys
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from sb3_genrl.envs import DEFAULT_TASK, TASKS
+
+    tasks = tuple(TASKS)  # the registered tasks' short names
     parser = argparse.ArgumentParser(prog="genrl", description="GenRL for Stable-Baselines3: tasks, demonstrations, "
                                      "generators, evaluation, policies, baselines and the paper's study.")
     sub = parser.add_subparsers(dest="command", required=True)
     # Each command adds its own parser here (one function per command, defined below).
 
     demos = sub.add_parser("demos", help="generate a task's demonstrations as a Minari dataset, with a coverage report")
-    demos.add_argument("--task", required=True, choices=("hockey", "basketball"), help="task")
+    demos.add_argument("--task", required=True, choices=tasks, help="task")
     demos.add_argument("--episodes", type=int, default=40000, help="valid demonstrations to keep (paper: 40000)")
     demos.add_argument("--out", required=True, help="dataset directory to create (must not exist or be empty)")
     demos.add_argument("--seed", type=int, default=0, help="seed of every random draw")
@@ -40,7 +43,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     quick = sub.add_parser("quickstart", help="demonstrations -> VAE -> evaluation -> GenRL policy -> report, in minutes")
     quick.add_argument("--out", required=True, help="output folder (a rerun resumes it)")
-    quick.add_argument("--task", choices=("hockey", "basketball"), default="hockey")
+    quick.add_argument("--task", choices=tasks, default=DEFAULT_TASK, help=f"task (default: {DEFAULT_TASK})")
     quick.add_argument("--demos", type=int, default=4000, help="demonstrations to generate")
     quick.add_argument("--epochs", type=int, default=300, help="beta-VAE training epochs")
     quick.add_argument("--episodes", type=int, default=3000, help="GenRL episodes")
@@ -50,7 +53,7 @@ def build_parser() -> argparse.ArgumentParser:
     quick.set_defaults(func=_quickstart_command)
 
     study = sub.add_parser("study", help="the paper's experiments at a scale, with tables, plots and report.md")
-    study.add_argument("--task", choices=("hockey", "basketball", "all"), default="all")
+    study.add_argument("--task", choices=(*tasks, "all"), default="all")
     study.add_argument("--scale", choices=("smoke", "small", "paper"), default="small")
     study.add_argument("--out", required=True, help="study folder (a rerun resumes it)")
     study.add_argument("--executor", choices=("local", "ray"), default="local", help="worker processes or Ray tasks")
@@ -61,7 +64,7 @@ def build_parser() -> argparse.ArgumentParser:
     study.set_defaults(func=_study_command)
 
     video = sub.add_parser("video", help="render a GenRL policy (or a generator's random trajectories) to MP4 or GIF")
-    video.add_argument("--task", required=True, choices=("hockey", "basketball"))
+    video.add_argument("--task", required=True, choices=tasks)
     source = video.add_mutually_exclusive_group(required=True)
     source.add_argument("--policy", help="a GenRL run folder or model zip")
     source.add_argument("--generator", help="a generator file (random latent actions)")
@@ -72,7 +75,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     baseline = sub.add_parser("baseline", help="train PPO (BC), SAC (prefilled) or a stock algorithm on the latent space")
     baseline.add_argument("algorithm", choices=("ppo", "sac", "latent-ppo", "latent-sac", "latent-trpo"))
-    baseline.add_argument("--task", required=True, help="hockey or basketball")
+    baseline.add_argument("--task", required=True, choices=tasks, help="task")
     baseline.add_argument("--demos", default=None, help="demonstration dataset (ppo, sac)")
     baseline.add_argument("--demo-episodes", type=int, default=None, help="use the first N demonstrations (default all)")
     baseline.add_argument("--generator", default=None, help="generator file (latent-ppo, latent-sac, latent-trpo)")
@@ -85,13 +88,13 @@ def build_parser() -> argparse.ArgumentParser:
     baseline.set_defaults(func=_baseline_command)
 
     compare = sub.add_parser("compare", help="GenRL vs baselines over seeds: reward curves and table contacts")
-    compare.add_argument("--task", default=None, help="only runs of this task")
+    compare.add_argument("--task", default=None, choices=tasks, help="only runs of this task")
     compare.add_argument("--runs", nargs="+", required=True, help="run directories (several seeds per method)")
     compare.add_argument("--out", required=True, help="output directory")
     compare.set_defaults(func=_compare_command)
 
     train_policy = sub.add_parser("train-policy", help="train a GenRL policy over a generator's latent space (Algorithm 1)")
-    train_policy.add_argument("--task", required=True, help="hockey, basketball or a registered Gymnasium id")
+    train_policy.add_argument("--task", required=True, choices=tasks, help="task")
     train_policy.add_argument("--generator", required=True, help="file of a trained generator")
     train_policy.add_argument("--episodes", type=int, required=True, help="episodes (trajectories played) in total")
     train_policy.add_argument("--seed", type=int, default=0, help="random seed")
@@ -169,7 +172,7 @@ def _study_command(args: argparse.Namespace) -> int:
 
 
 def _video_command(args: argparse.Namespace) -> int:
-    from sb3_genrl.envs.video import record_video
+    from sb3_genrl.video import record_video
 
     result = record_video(args.task, args.out, policy=args.policy, generator=args.generator, goals=args.goals,
                           seed=args.seed)
@@ -188,7 +191,7 @@ def _quickstart_command(args: argparse.Namespace) -> int:
 
 
 def _play_command(args: argparse.Namespace) -> int:
-    from sb3_genrl.envs.showcase import play_scripted
+    from sb3_genrl.showcase import play_scripted
 
     print(f"wrote {play_scripted(args.out)}")
     return 0

@@ -64,12 +64,12 @@ def mean_std_over_seeds(curves: Sequence[dict[str, np.ndarray]], key: str = "mea
 def plot_curves(series: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray | None]], path: str | os.PathLike, *,
                 ylabel: str, title: str = "", xlabel: str = "episodes") -> pathlib.Path:
     """One line per series (x, mean, std or None), a shaded band of +- std where given."""
-    import matplotlib
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    fig = Figure(figsize=(6.4, 4.0))
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot()
     for label, (x, mean, std) in series.items():
         (line,) = ax.plot(x, mean, label=label)
         if std is not None:
@@ -84,5 +84,4 @@ def plot_curves(series: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray | Non
     fig.tight_layout()
     path = pathlib.Path(path)
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     return path

@@ -8,8 +8,7 @@ import torch as th
 from sb3_genrl.baselines.bc import behaviour_cloning, imitation_loss
 from sb3_genrl.baselines.prefill import prefill_replay_buffer
 from sb3_genrl.baselines.train import train_baseline
-from sb3_genrl.envs.hockey import HockeyEnv
-from sb3_genrl.envs.scripted import scripted_hit
+from sb3_genrl.envs.hockey import HockeyEnv, scripted_hit
 from stable_baselines3 import PPO, SAC
 
 from sb3_genrl.callbacks import read_episodes

@@ -7,8 +7,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from sb3_genrl.envs.coverage import CELL_SIZE, coverage_fraction, coverage_report, covered_cells, region_cells
-from sb3_genrl.envs.demonstrations import make_demonstrations, make_env, sample_trajectories, within_limits
+from sb3_genrl.envs import TASKS
+from sb3_genrl.envs.coverage import coverage_fraction, coverage_report, covered_cells, region_cells
+from sb3_genrl.envs.demonstrations import make_demonstrations, sample_trajectories, within_limits
 
 from sb3_genrl.cli import main
 from sb3_genrl.data import dataset_info, load_arrays
@@ -24,7 +25,7 @@ def hockey_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.mark.parametrize("task", ["hockey", "basketball"])
 def test_sampling_is_seeded_and_within_limits(task: str) -> None:
-    env = make_env(task)
+    env = TASKS[task].make_env()
     first = sample_trajectories(task, 16, np.random.default_rng(1), home=env.home_qpos())
     again = sample_trajectories(task, 16, np.random.default_rng(1), home=env.home_qpos())
     other = sample_trajectories(task, 16, np.random.default_rng(2), home=env.home_qpos())
@@ -39,7 +40,7 @@ def test_sampling_is_seeded_and_within_limits(task: str) -> None:
 
 @pytest.mark.parametrize("task", ["hockey", "basketball"])
 def test_joint_states_match_play_trajectories_and_step(task: str) -> None:
-    env = make_env(task)
+    env = TASKS[task].make_env()
     rng = np.random.default_rng(3)
     actions = sample_trajectories(task, 2, rng, home=env.home_qpos())
     goals = np.stack([env.sample_goal(rng) for _ in range(2)])
@@ -61,7 +62,7 @@ def test_joint_states_match_play_trajectories_and_step(task: str) -> None:
 def test_stored_episodes_are_valid_replays(hockey_dataset: Path) -> None:
     arrays = load_arrays(hockey_dataset, task="hockey")
     assert arrays["actions"].shape == (EPISODES, 69, 7) and arrays["observations"].shape == (EPISODES, 70, 16)
-    env = make_env("hockey")
+    env = TASKS["hockey"].make_env()
     rewards, infos = env.play_trajectories(arrays["actions"], arrays["reached"])
     np.testing.assert_array_equal(rewards, 0.0)  # each demonstration's goal is the point it reached
     for i, info in enumerate(infos):
@@ -96,7 +97,7 @@ def test_determinism_threads_and_seeds(hockey_dataset: Path, tmp_path: Path) -> 
 
 def _brute_force_coverage(points: np.ndarray, task: str) -> float:
     centres = region_cells(task)
-    covered = [any(np.hypot(*(p - c)) <= CELL_SIZE[task] for p in points) for c in centres]
+    covered = [any(np.hypot(*(p - c)) <= TASKS[task].cell_size for p in points) for c in centres]
     return float(np.mean(covered))
 
 
@@ -141,7 +142,7 @@ def test_cli_demos(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert "3 basketball demonstrations" in printed and str(out) in printed and "coverage:" in printed
     assert dataset_info(out)["task"] == "basketball"
     arrays = load_arrays(out, task="basketball")
-    rewards, infos = make_env("basketball").play_trajectories(arrays["actions"], arrays["reached"])
+    rewards, infos = TASKS["basketball"].make_env().play_trajectories(arrays["actions"], arrays["reached"])
     np.testing.assert_array_equal(rewards, 0.0)  # hindsight goals: every demonstration succeeds
     assert all(info["crossings"] > 0 and not info["joint_limit_clipped"] for info in infos)
     assert main(["demos", "--task", "basketball", "--episodes", "3", "--out", str(out), "--no-progress-bar"]) == 2
@@ -151,9 +152,9 @@ def test_cli_demos(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
 def test_hockey_hits_all_swing_at_the_same_step():
     # Whole-step differences in swing timing split the demonstrations into clusters that a 2-D generator lays out
     # as separate latent patches; every scripted hit therefore swings through the puck at the same control step.
-    from sb3_genrl.envs.demonstrations import HOCKEY_SWING_START, _hockey_base
+    from sb3_genrl.envs.hockey import HOCKEY_SWING_START, sample_hit
 
     rng = np.random.default_rng(3)
-    fastest_steps = {int(np.argmin(_hockey_base(rng)[:, 5])) for _ in range(200)}
+    fastest_steps = {int(np.argmin(sample_hit(rng)[:, 5])) for _ in range(200)}
     assert len(fastest_steps) == 1
     assert HOCKEY_SWING_START <= fastest_steps.pop() < HOCKEY_SWING_START + 6  # inside the 6-step forward swing

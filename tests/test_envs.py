@@ -6,10 +6,9 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
-from sb3_genrl.envs import TASK_IDS
-from sb3_genrl.envs.basketball import BasketballEnv
-from sb3_genrl.envs.hockey import HockeyEnv
-from sb3_genrl.envs.scripted import scripted_hit, scripted_throw
+from sb3_genrl.envs import TASKS
+from sb3_genrl.envs.basketball import BasketballEnv, scripted_throw
+from sb3_genrl.envs.hockey import HockeyEnv, scripted_hit
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import sb3_genrl  # noqa: F401  (registers the tasks)
@@ -43,7 +42,7 @@ def play_steps(env, trajectory, goal, seed=0):
 
 @pytest.mark.parametrize("task", ["hockey", "basketball"])
 def test_check_env_without_warnings(task):
-    env = gym.make(TASK_IDS[task]).unwrapped
+    env = gym.make(TASKS[task].env_id).unwrapped
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         check_env(env, skip_render_check=True)

@@ -1,4 +1,4 @@
-"""The interface every trajectory generator implements (paper section 3, SPEC section 3).
+"""The interface every trajectory generator implements (paper section 3).
 
 A generator ``g`` maps a latent action ``alpha`` (``latent_dim`` numbers) to a whole open-loop motor
 trajectory ``tau = g(alpha)`` of ``horizon`` time steps and ``action_dim`` joints, in raw action units.

@@ -1,4 +1,4 @@
-"""Network architectures of paper appendix B (tables ``tab:gen_arc`` and ``tab:dis_arc``)."""
+"""Network architectures of paper appendix B (tables 7 and 8: the generator, the discriminator and Q-network)."""
 
 from __future__ import annotations
 

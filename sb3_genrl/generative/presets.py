@@ -10,13 +10,12 @@ import torch
 if TYPE_CHECKING:  # the models import their defaults from here
     from sb3_genrl.generative.torch_generator import TorchTrajectoryGenerator
 
-# Section 6.1.2: latent dimensions N_alpha and the regularisation weights of the grid (table 1, "tab:models").
+# Section 6.1.2: latent dimensions N_alpha and the regularisation weights of the grid (paper table 1).
 LATENT_DIMS = (2, 3, 6)
 BETAS = (0.01, 0.005, 0.001)
 INFO_WEIGHTS = (0.1, 1.5, 3.5)
-# Section 6.1.2: trajectories of 7 joints over 69 (hockey) or 78 (basketball) time steps.
+# Section 6.1.2: trajectories of 7 joints (their horizon is the task's, read from the data or the task's spec).
 N_JOINTS = 7
-TRAJECTORY_HORIZONS = {"hockey": 69, "basketball": 78}
 # Appendix B: "trained for 5000 epochs with learning rate fixed to 2e-4 using batch size 256"; model selection by the
 # squared error between "100 randomly generated trajectories" and held-out test trajectories.
 EPOCHS = 5000
@@ -78,7 +77,7 @@ def make_generator(preset_or_kind: str, *, horizon: int, action_dim: int, latent
     """Build an untrained generator from a preset of paper table 1 or a model kind.
 
     :param preset_or_kind: ``"VAE1"``..``"VAE9"``, ``"GAN1"``..``"GAN9"``, ``"vae"`` or ``"gan"``
-    :param horizon: number of time steps ``T`` (paper: 69 for hockey, 78 for basketball)
+    :param horizon: number of time steps ``T`` (the task's horizon; paper: 69 for hockey, 78 for basketball)
     :param action_dim: number of joints ``M`` (paper: 7)
     :param latent_dim: ``N_alpha``; required for a kind, must match a preset
     :param beta: KL weight of a VAE; required for ``"vae"``, must match a preset

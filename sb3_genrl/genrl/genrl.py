@@ -31,8 +31,9 @@ EStep = Literal["trpo", "kl_penalty"]
 class GenRL(OnPolicyAlgorithm):
     """GenRL: train ``pi_theta(alpha | s0)`` over a generator's latent space with the paper's EM algorithm.
 
-    Paper: "GenRL" (section 4, Algorithm 1). Equation numbers are those of ``paper/genrl-paper.tex``: eq. 4 the
-    E-step objective (``eq:E_loss``), eq. 5 its TRPO form (``eq:trpo``), eq. 6 the M-step (``eq:M_loss``).
+    Paper: Ghadirzadeh et al., "Training and Evaluation of Deep Policies using Reinforcement Learning and Generative
+    Models" (JMLR 23(174), 2022), section 4 and Algorithm 1: eq. 4 is the E-step objective, eq. 5 its TRPO form,
+    eq. 6 the M-step.
 
     Each iteration collects ``N = n_steps * n_envs`` one-step episodes
     (one bandit pull each: context ``s0``, latent action ``alpha ~ pi``, reward ``r`` of the decoded trajectory),
@@ -53,9 +54,8 @@ class GenRL(OnPolicyAlgorithm):
     sb3-contrib TRPO's; ``N = 64`` episodes per iteration; the initial policy std equals the prior's
     (``log_std_init`` 0 for a normal prior). The value function is fitted harder than sb3-contrib does (50 epochs
     at 3e-3 instead of 10 at 1e-3) and the E/M pair is repeated 3 times per batch: once the policy is narrow, a
-    pull's advantage is small next to the value function's error. With these defaults, on hockey with the
-    quickstart's beta-VAE, the deterministic policy lands 1.9 cm from new goals on average after 3000 episodes
-    (3 seeds, ``benchmarks/genrl_hockey.py``).
+    pull's advantage is small next to the value function's error. What these defaults reach on hockey is measured
+    by ``benchmarks/genrl_hockey.py`` (results in the README and ``benchmarks/results/genrl_hockey.json``).
 
     :param policy: the policy (``"MlpPolicy"``, the default, or an ``ActorCriticPolicy`` class), or the env (see above)
     :param env: the env (raw, wrapped, VecEnv of wrapped envs or Gymnasium id), or the generator (see above)

@@ -1,4 +1,8 @@
-"""Train a GenRL policy on one of the paper's tasks, with logs, a learning curve (CSV + PNG) and the saved model."""
+"""Train a GenRL policy on a registered task, with logs, a learning curve (CSV + PNG) and the saved model.
+
+Task-level workflow code: tasks are resolved through the registry (:func:`sb3_genrl.envs.get_task`), imported inside
+the functions so that the core library (:class:`~sb3_genrl.GenRL`) never imports the tasks.
+"""
 
 from __future__ import annotations
 
@@ -17,10 +21,6 @@ from sb3_genrl.callbacks import EpisodeRecorder
 from sb3_genrl.curves import plot_curves
 from sb3_genrl.generative.base import TrajectoryGenerator
 from sb3_genrl.genrl.genrl import EStep, GenRL
-
-# The paper's tasks (section 6.1.1), by name. Kept here as ids: the core library does not import ``envs``
-# (``import sb3_genrl`` registers them with Gymnasium).
-TASK_IDS = {"hockey": "GenRL/Hockey-v0", "basketball": "GenRL/Basketball-v0"}
 
 
 class LearningCurveCallback(BaseCallback):
@@ -73,31 +73,21 @@ class LearningCurveCallback(BaseCallback):
             csv.writer(file).writerow([row[key] for key in self.COLUMNS])
 
 
-def resolve_task(task: str) -> str:
-    """A task name (``hockey``, ``basketball``) or a registered Gymnasium id -> the Gymnasium id."""
-    if task in TASK_IDS:
-        return TASK_IDS[task]
-    if task in gym.registry:
-        return task
-    raise ValueError(f"unknown task {task!r}: expected one of {sorted(TASK_IDS)} or a registered Gymnasium id")
-
-
 def evaluate_on_goals(model: GenRL, task: str, goals: int = 100, seed: int = 0,
                       ) -> tuple[np.ndarray, np.ndarray, list[dict[str, Any]]]:
     """Play the policy's deterministic latent actions for ``goals`` random goals through the task's fast path.
 
     :param model: a trained GenRL model with its generator
-    :param task: ``"hockey"``, ``"basketball"`` or a registered id of a task with ``sample_goal`` and
-        ``play_trajectories``
+    :param task: a task name from :data:`sb3_genrl.envs.TASKS` or its Gymnasium id
     :param goals: number of goals, drawn with ``np.random.default_rng(seed)``
     :param seed: seed of the goals
     :return: the goals ``(goals, 2)``, the rewards (minus the final distance, m) and the episodes' infos
     """
+    from sb3_genrl.envs import get_task
+
     if model.generator is None:
         raise ValueError("this GenRL model has no generator: pass generator= to GenRL.load()")
-    env = gym.make(resolve_task(task)).unwrapped
-    if not hasattr(env, "play_trajectories") or not hasattr(env, "sample_goal"):
-        raise ValueError(f"task {task!r} has no sample_goal()/play_trajectories() fast path")
+    env = get_task(task).make_env()
     rng = np.random.default_rng(seed)
     goal_array = np.array([env.sample_goal(rng) for _ in range(goals)], dtype=np.float32)
     latents, _ = model.predict(goal_array, deterministic=True)
@@ -126,7 +116,7 @@ def train_policy(
     written as training goes), ``learning_curve.png``, ``episodes.csv`` (one row per episode, as the baselines write it) and
     TensorBoard logs under ``tensorboard/``.
 
-    :param task: ``"hockey"``, ``"basketball"`` or a registered Gymnasium id
+    :param task: a task name from :data:`sb3_genrl.envs.TASKS` or its Gymnasium id
     :param generator: the trajectory generator or the path of a saved one
     :param episodes: total episodes (trajectories played); rounded up to whole iterations
     :param seed: random seed
@@ -144,11 +134,13 @@ def train_policy(
         raise ValueError(f"episodes must be a positive integer, got {episodes!r}")
     if int(batch_episodes) != batch_episodes or batch_episodes < 2:
         raise ValueError(f"batch_episodes must be an integer >= 2, got {batch_episodes!r}")
-    env_id = resolve_task(task)
+    from sb3_genrl.envs import get_task
+
+    spec = get_task(task)
     out = pathlib.Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     model = GenRL(
-        gym.make(env_id),
+        gym.make(spec.env_id),
         generator,
         e_step=e_step,
         n_steps=batch_episodes,
@@ -166,10 +158,10 @@ def train_policy(
     episodes_played = np.array([row["episodes"] for row in curve.rows])
     mean_rewards = [row["mean_reward"] for row in curve.rows]
     plot_curves({"GenRL": (episodes_played, np.array(mean_rewards), None)}, out / "learning_curve.png",
-                ylabel="mean reward per iteration", title=f"GenRL on {env_id} (seed {seed})")
+                ylabel="mean reward per iteration", title=f"GenRL on {spec.env_id} (seed {seed})")
     result = {
         "algorithm": "genrl",
-        "task": task,
+        "task": spec.name,
         "seed": seed,
         "model_path": str(out / "genrl_policy.zip"),
         "csv_path": str(curve.csv_path),

@@ -26,7 +26,7 @@ def generator_job(task: str, name: str, scale: dict[str, Any], dataset: str, tas
                   torch_threads: int = 1) -> dict[str, Any]:
     """Train generator ``name`` (a paper table 1 preset), evaluate it and train GenRL with ``scale["seeds"]`` seeds.
 
-    :param task: ``hockey`` or ``basketball``
+    :param task: a task name from :data:`sb3_genrl.envs.TASKS`
     :param name: ``VAE1`` ... ``VAE9``, ``GAN1`` ... ``GAN9``
     :param scale: a :class:`~sb3_genrl.study.scales.StudyScale` as a dict
     :param dataset: the task's demonstration dataset

@@ -15,14 +15,15 @@ from typing import Any
 QUICKSTART_PRESET = "VAE1"
 
 
-def quickstart(out_dir: str | os.PathLike, *, task: str = "hockey", demo_episodes: int = 4000, epochs: int = 300,
+def quickstart(out_dir: str | os.PathLike, *, task: str, demo_episodes: int = 4000, epochs: int = 300,
                policy_episodes: int = 3000, pr_samples: int = 1000, dwpr_samples: int = 500, seed: int = 0,
                video: bool = True, device: str = "auto", log: Callable[[str], None] | None = None) -> pathlib.Path:
     """Run the whole GenRL workflow at a small size and write ``report.md`` in ``out_dir``.
 
     Each stage is skipped when its output exists, so a rerun resumes. Defaults take about four minutes on a 2-core CPU.
 
-    :param task: ``hockey`` or ``basketball``
+    :param out_dir: output folder (a rerun resumes it)
+    :param task: a task name from :data:`sb3_genrl.envs.TASKS`
     :param demo_episodes: demonstrations to generate
     :param epochs: beta-VAE training epochs (:data:`QUICKSTART_PRESET` of paper table 1)
     :param policy_episodes: GenRL episodes
@@ -68,7 +69,7 @@ def quickstart(out_dir: str | os.PathLike, *, task: str = "hockey", demo_episode
           lambda: train_policy(task, str(model_path), episodes=policy_episodes, seed=seed, out_dir=policy,
                                device=device, progress_bar=True))
     if video:
-        from sb3_genrl.envs.video import record_video
+        from sb3_genrl.video import record_video
 
         stage("video", (out / "policy.gif").exists(),
               lambda: record_video(task, out / "policy.gif", policy=policy, goals=4, seed=seed + 1, width=320,

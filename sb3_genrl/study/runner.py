@@ -13,7 +13,6 @@ from sb3_genrl.study.jobs import baseline_job, generator_job
 from sb3_genrl.study.report import write_task_report
 from sb3_genrl.study.scales import SCALES, StudyScale
 
-TASKS = ("hockey", "basketball")
 # PPO and SAC on the feedback task with the demonstrations, and stock algorithms on the best generator's latent space.
 BASELINES = ("ppo", "sac", "latent-ppo", "latent-sac", "latent-trpo")
 MODELS = tuple(f"VAE{i}" for i in range(1, 10)) + tuple(f"GAN{i}" for i in range(1, 10))
@@ -26,7 +25,7 @@ def run_study(task: str, scale: str | StudyScale, out_dir: str | os.PathLike, *,
 
     Results are written as they complete and finished work is skipped on a rerun, so an interrupted study resumes.
 
-    :param task: ``hockey``, ``basketball`` or ``all``
+    :param task: a task name from :data:`sb3_genrl.envs.TASKS`, or ``all`` for every registered task
     :param scale: ``smoke``, ``small`` or ``paper`` (see :data:`~sb3_genrl.study.scales.SCALES`), or a
         :class:`~sb3_genrl.study.scales.StudyScale` of one's own
     :param out_dir: the study folder
@@ -38,8 +37,10 @@ def run_study(task: str, scale: str | StudyScale, out_dir: str | os.PathLike, *,
     :param log: called with a line of progress after each finished job
     :return: the report's path
     """
+    from sb3_genrl.envs import TASKS
+
     if task not in (*TASKS, "all"):
-        raise ValueError(f"unknown task {task!r}; expected one of {TASKS} or 'all'")
+        raise ValueError(f"unknown task {task!r}; expected one of {tuple(TASKS)} or 'all'")
     if not isinstance(scale, StudyScale) and scale not in SCALES:
         raise ValueError(f"unknown scale {scale!r}; expected one of {sorted(SCALES)} or a StudyScale")
     if executor not in ("local", "ray"):
@@ -55,7 +56,7 @@ def run_study(task: str, scale: str | StudyScale, out_dir: str | os.PathLike, *,
     run = _ray_map(address) if executor == "ray" else _local_map(workers or len(os.sched_getaffinity(0)))
     log = log or (lambda _line: None)
     reports = []
-    for name in TASKS if task == "all" else (task,):
+    for name in tuple(TASKS) if task == "all" else (task,):
         reports.append(_run_task(name, preset.as_dict(), out / name, run, models, device, log))
     if len(reports) == 1:
         return reports[0]

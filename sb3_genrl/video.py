@@ -1,4 +1,7 @@
-"""Videos of a trained GenRL policy or of a generator's random trajectories, rendered offscreen."""
+"""Videos of a trained GenRL policy or of a generator's random trajectories, rendered offscreen.
+
+Task-level workflow code: it reads the task registry (:data:`sb3_genrl.envs.TASKS`) inside its function.
+"""
 
 from __future__ import annotations
 
@@ -6,8 +9,8 @@ import os
 import pathlib
 
 import numpy as np
-from sb3_genrl.envs.demonstrations import make_env
-from sb3_genrl.envs.showcase import frame_strip, save_animation
+
+from sb3_genrl.showcase import frame_strip, save_animation
 
 
 def record_video(task: str, out: str | os.PathLike, *, policy: str | os.PathLike | None = None,
@@ -19,13 +22,17 @@ def record_video(task: str, out: str | os.PathLike, *, policy: str | os.PathLike
     (deterministically); with ``generator`` (a generator file) the latent actions are random prior samples. The goal
     is marked in red. A strip of frames (``<out>_strip.png``) is written beside the video unless ``strip=False``.
 
+    :param task: a task name from :data:`sb3_genrl.envs.TASKS`
+    :param goals: episodes (goals) to show, drawn with ``seed`` (which also draws the random latent actions)
     :return: ``video``, ``strip`` paths and per-episode ``rewards``
     """
+    from sb3_genrl.envs import get_task
+
     if (policy is None) == (generator is None):
         raise ValueError("give exactly one of policy= (a GenRL run) or generator= (a generator file)")
     if goals < 1:
         raise ValueError(f"goals must be at least 1, got {goals}")
-    env = make_env(task, render_mode="rgb_array", width=width, height=height)
+    env = get_task(task).make_env(render_mode="rgb_array", width=width, height=height)
     rng = np.random.default_rng(seed)
     goal_list = np.array([env.sample_goal(rng) for _ in range(goals)])
     if policy is not None:

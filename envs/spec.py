@@ -1,0 +1,74 @@
+"""The description of a task that the registry (:data:`sb3_genrl.envs.TASKS`) holds: :class:`TaskSpec`."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from sb3_genrl.envs.base import ArmTaskEnv
+
+
+@dataclass(frozen=True, eq=False)
+class TaskSpec:
+    """Everything the package knows about one task, declared once in the task's module.
+
+    The demonstration generator (:func:`sb3_genrl.envs.demonstrations.make_demonstrations`) makes ``env_class()``
+    and uses its ``horizon``, ``max_joint_delta``, ``home_qpos()``, ``sample_goal(rng)``, ``observation_space``,
+    ``action_space`` and ``play_trajectories(trajectories, goals, n_threads=..., return_joint_states=True)`` (whose
+    infos hold the ``reached`` point): a subclass of :class:`~sb3_genrl.envs.base.ArmTaskEnv` has them all.
+
+    :param name: the short name (``genrl demos --task NAME``)
+    :param env_id: the Gymnasium id, registered by :func:`sb3_genrl.envs.register_task`
+    :param env_class: the env class, made with keyword arguments only
+    :param horizon: control steps ``T`` of an episode (the trajectories' length)
+    :param goal_low: lower corner ``(x, y)`` of the goal region's bounding box (m)
+    :param goal_high: upper corner ``(x, y)`` of the goal region's bounding box (m)
+    :param in_goal_region: ``points (N, 2) -> (N,) bool``: whether each point lies in the goal region
+    :param cell_size: side of the square cells of the coverage report (m)
+    :param sample_expert: ``rng -> (horizon, 7)``: one base motion of the scripted expert, drawn with ``rng``
+    :param perturbation_scales: ``(7,)`` joint travel (rad) of one perturbation bump per joint at level 1
+    :param is_valid: ``info -> bool``: the task's own test of a stable, unclipped episode (e.g. no table contact)
+        for it to become a demonstration
+    :param region_patch: draws the goal region's outline on the coverage plot (a Matplotlib patch); by default
+        the bounding box
+    :param figure_size: size (inches) of the coverage plot
+    """
+
+    name: str
+    env_id: str
+    env_class: type[ArmTaskEnv]
+    horizon: int
+    goal_low: np.ndarray
+    goal_high: np.ndarray
+    in_goal_region: Callable[[np.ndarray], np.ndarray]
+    cell_size: float
+    sample_expert: Callable[[np.random.Generator], np.ndarray]
+    perturbation_scales: np.ndarray
+    is_valid: Callable[[dict[str, Any]], bool]
+    region_patch: Callable[[], Any] | None = None
+    figure_size: tuple[float, float] = (6.0, 6.0)
+
+    def __post_init__(self) -> None:
+        if not self.name or "/" in self.name:
+            raise ValueError(f"a task name must be a non-empty string without '/', got {self.name!r}")
+        if int(self.horizon) != self.horizon or self.horizon < 1:
+            raise ValueError(f"task {self.name!r}: horizon must be a positive integer, got {self.horizon!r}")
+        for field in ("goal_low", "goal_high"):
+            if np.shape(getattr(self, field)) != (2,):
+                raise ValueError(f"task {self.name!r}: {field} must be an (x, y) pair, got {getattr(self, field)!r}")
+        if not np.all(np.asarray(self.goal_low) < np.asarray(self.goal_high)):
+            raise ValueError(f"task {self.name!r}: goal_low {self.goal_low} must be below goal_high {self.goal_high}")
+        if np.shape(self.perturbation_scales) != (7,):
+            raise ValueError(f"task {self.name!r}: perturbation_scales must have shape (7,), "
+                             f"got {np.shape(self.perturbation_scales)}")
+        if getattr(self.env_class, "horizon", self.horizon) != self.horizon:
+            raise ValueError(f"task {self.name!r}: horizon {self.horizon} differs from {self.env_class.__name__}.horizon "
+                             f"{self.env_class.horizon}")
+        if not self.cell_size > 0:
+            raise ValueError(f"task {self.name!r}: cell_size must be positive, got {self.cell_size!r}")
+
+    def make_env(self, **kwargs: Any) -> ArmTaskEnv:
+        """The task's env (unwrapped, without Gymnasium's wrappers), made with ``kwargs``."""
+        return self.env_class(**kwargs)

@@ -1,0 +1,73 @@
+"""Play each task's scripted expert, render it offscreen and write a short Markdown report with images.
+
+Task-level workflow code: it reads the task registry (:data:`sb3_genrl.envs.TASKS`) inside its functions.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+
+def frame_strip(frames: list[np.ndarray], n: int = 6) -> np.ndarray:
+    """``n`` frames evenly spaced over the episode, side by side."""
+    picks = np.linspace(0, len(frames) - 1, n).round().astype(int)
+    return np.concatenate([frames[i] for i in picks], axis=1)
+
+
+def save_animation(frames: list[np.ndarray], path: str | Path, fps: int = 25) -> Path:
+    """Write frames as a GIF or MP4 (by the file's suffix)."""
+    import imageio.v3 as iio
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if path.suffix.lower() == ".gif":
+        iio.imwrite(path, np.stack(frames), duration=1000 / fps, loop=0)
+    else:
+        iio.imwrite(path, np.stack(frames), fps=fps)
+    return path
+
+
+def play_scripted(out_dir: str | Path, *, tasks: tuple[str, ...] | None = None, seed: int = 0, width: int = 320,
+                  height: int = 240) -> Path:
+    """Play one base motion of each task's scripted expert, save frame strips and GIFs, and write ``report.md``.
+
+    The motion is the expert's (:attr:`TaskSpec.sample_expert <sb3_genrl.envs.spec.TaskSpec>`, unperturbed) drawn
+    with ``np.random.default_rng(seed)``; its goal, marked in red, is the point it reaches, as in the demonstrations.
+
+    :param out_dir: output folder (created)
+    :param tasks: task names from :data:`sb3_genrl.envs.TASKS` (default: all registered tasks)
+    :param seed: seed of the motions
+    :param width: frame width (pixels)
+    :param height: frame height (pixels)
+    :return: the report's path
+    """
+    import imageio.v3 as iio
+
+    from sb3_genrl.envs import TASKS, get_task
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    lines = ["# Scripted motions of the GenRL tasks", "",
+             "One base motion of each task's scripted expert played on its MuJoCo task (offscreen rendering); the red "
+             "goal marks the point it reaches.", ""]
+    for name in tasks or tuple(TASKS):
+        spec = get_task(name)
+        env = spec.make_env(render_mode="rgb_array", width=width, height=height)
+        trajectory = spec.sample_expert(np.random.default_rng(seed))
+        _, info = env.play_trajectory(trajectory, 0.5 * (spec.goal_low + spec.goal_high))
+        goal = np.asarray(info["reached"], dtype=np.float64)
+        frames = env.episode_frames(trajectory, goal, every=2)
+        iio.imwrite(out / f"{spec.name}_strip.png", frame_strip(frames))
+        save_animation(frames, out / f"{spec.name}.gif", fps=12)
+        env.close()
+        lines += [f"## {spec.name}", "", f"![{spec.name}]({spec.name}.gif)", "",
+                  f"![{spec.name} frames]({spec.name}_strip.png)", "",
+                  f"- reached: ({goal[0]:.2f}, {goal[1]:.2f}) m; in the goal region: "
+                  f"{'yes' if spec.in_goal_region(goal[None])[0] else 'no'}", ""]
+        if "table_contacts" in info:
+            lines += [f"- table contacts: {info['table_contacts']}", ""]
+    report = out / "report.md"
+    report.write_text("\n".join(lines))
+    return report
