@@ -130,14 +130,12 @@ class ArmTaskEnv(gym.Env, EzPickle):
     # ----------------------------------------------------------------------------------------- gymnasium API
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
-        goal = None if options is None else options.get("goal")
-        if goal is None:
+        options = options or {}
+        if options.get("goal") is None:
             self.goal = self.sample_goal(self.np_random)
         else:
-            goal = np.asarray(goal, dtype=np.float64)
-            if goal.shape != (2,) or not np.all(np.isfinite(goal)):
-                raise ValueError(f"options['goal'] must be a finite (x, y) pair, got {goal!r}")
-            self.goal = goal
+            self.goal = self._check_goals(options["goal"], None, "options['goal']",
+                                          allow_outside_region=bool(options.get("allow_outside_region", False)))
         self._reset_episode()
         return self._get_obs(), {"goal": self.goal.copy()}
 
@@ -247,6 +245,32 @@ class ArmTaskEnv(gym.Env, EzPickle):
         self._done = True
         return frames
 
+    def _check_goals(self, goals: np.ndarray, n: int | None, name: str = "goals", *,
+                     allow_outside_region: bool = False) -> np.ndarray:
+        """Goals as finite float64 ``(x, y)`` pairs inside the goal region, or a ``ValueError`` naming the problem.
+
+        :param goals: one ``(2,)`` goal, or ``(n, 2)`` goals
+        :param n: ``None`` for one ``(2,)`` goal; else the number of goals needed (one ``(2,)`` goal is repeated)
+        :param name: how the error message calls ``goals``
+        :param allow_outside_region: accept goals outside the region (hindsight goals: points demonstrations reached)
+        :return: a ``(2,)`` array when ``n`` is ``None``, else ``(n, 2)``
+        """
+        goals = np.array(goals, dtype=np.float64)
+        if goals.shape != (2,) and (n is None or goals.shape != (n, 2)):
+            expected = "(2,)" if n is None else f"(2,) or ({n}, 2)"
+            raise ValueError(f"{name} must have shape {expected} (x, y in metres), got shape {goals.shape}")
+        if not np.all(np.isfinite(goals)):
+            raise ValueError(f"{name} contains non-finite values (nan or inf): {goals}")
+        if not allow_outside_region:
+            # The region's float32 bounds (the context space's) count too, so that goals passed as float32 pass.
+            low = np.minimum(self.goal_low, self.goal_low.astype(np.float32))
+            high = np.maximum(self.goal_high, self.goal_high.astype(np.float32))
+            outside = np.any((goals < low) | (goals > high), axis=-1)
+            if np.any(outside):
+                raise ValueError(f"{name} {goals[outside] if goals.ndim == 2 else goals} lies outside the goal region "
+                                 f"x in [{low[0]}, {high[0]}], y in [{low[1]}, {high[1]}] of {type(self).__name__}")
+        return goals if n is None else np.broadcast_to(goals, (n, 2))
+
     def _check_trajectories(self, trajectories: np.ndarray) -> np.ndarray:
         trajectories = np.asarray(trajectories, dtype=np.float64)
         if trajectories.ndim == 2:
@@ -258,14 +282,16 @@ class ArmTaskEnv(gym.Env, EzPickle):
         return trajectories
 
     # ----------------------------------------------------------------------------------------- fast path
-    def play_trajectory(self, trajectory: np.ndarray, goal: np.ndarray) -> tuple[float, dict[str, Any]]:
+    def play_trajectory(self, trajectory: np.ndarray, goal: np.ndarray, *,
+                        allow_outside_region: bool = False) -> tuple[float, dict[str, Any]]:
         """Play one ``(horizon, 7)`` trajectory for ``goal``; the same reward and info as stepping through it."""
-        rewards, infos = self.play_trajectories(np.asarray(trajectory)[None], np.asarray(goal)[None])
+        rewards, infos = self.play_trajectories(np.asarray(trajectory)[None], np.asarray(goal)[None],
+                                                allow_outside_region=allow_outside_region)
         return float(rewards[0]), infos[0]
 
     def play_trajectories(
         self, trajectories: np.ndarray, goals: np.ndarray, *, n_threads: int = 1, chunk: int = 256,
-        return_joint_states: bool = False,
+        return_joint_states: bool = False, allow_outside_region: bool = False,
     ) -> tuple[np.ndarray, list[dict[str, Any]]] | tuple[np.ndarray, list[dict[str, Any]], np.ndarray]:
         """Play a batch of open-loop trajectories with :mod:`mujoco.rollout` (no per-step Python).
 
@@ -275,15 +301,14 @@ class ArmTaskEnv(gym.Env, EzPickle):
         :param chunk: trajectories simulated per call, bounding memory (each keeps every physics step's sensors)
         :param return_joint_states: also return the joint part of the step env's observations, ``(B, horizon + 1,
             14)`` float32 (positions then velocities at each control step boundary, the last after the settle phase)
+        :param allow_outside_region: accept goals outside the goal region (hindsight goals); refused by default
         :return: rewards ``(B,)`` and one info dict per trajectory (and the joint states when asked)
         """
         trajectories = self._check_trajectories(trajectories)
-        goals = np.broadcast_to(np.asarray(goals, dtype=np.float64), (len(trajectories), 2)) if np.ndim(goals) == 1 \
-            else np.asarray(goals, dtype=np.float64)
-        if goals.shape != (len(trajectories), 2) or not np.all(np.isfinite(goals)):
-            raise ValueError(f"goals must be finite with shape ({len(trajectories)}, 2), got {goals.shape}")
-        if n_threads < 1:
-            raise ValueError(f"n_threads must be at least 1, got {n_threads}")
+        goals = self._check_goals(goals, len(trajectories), allow_outside_region=allow_outside_region)
+        for name, value in (("n_threads", n_threads), ("chunk", chunk)):
+            if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
+                raise ValueError(f"{name} must be a positive integer, got {value!r}")
         datas = [mujoco.MjData(self.model) for _ in range(n_threads)]
         rewards = np.empty(len(trajectories))
         infos: list[dict[str, Any]] = []

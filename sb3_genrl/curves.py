@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import io
 import os
 import pathlib
 from collections.abc import Sequence
@@ -10,6 +11,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from sb3_genrl.callbacks import read_episodes, windowed_curve
+from sb3_genrl.utils import atomic_path, atomic_write_text
 
 
 def write_learning_curve(episodes_csv: str | os.PathLike, out_dir: str | os.PathLike, *, window: int = 64,
@@ -29,11 +31,12 @@ def write_learning_curve(episodes_csv: str | os.PathLike, out_dir: str | os.Path
                               else np.nan for e in episodes])
     curve = {"episodes": episodes, "mean_reward": mean_reward, "max_reward": max_reward,
              "mean_table_contacts": mean_contacts}
-    with (out / "learning_curve.csv").open("w", newline="") as file:
-        writer = csv.writer(file)
-        writer.writerow(curve)
-        for i in range(n):
-            writer.writerow([curve[key][i] for key in curve])
+    table = io.StringIO()
+    writer = csv.writer(table)
+    writer.writerow(curve)
+    for i in range(n):
+        writer.writerow([curve[key][i] for key in curve])
+    atomic_write_text(out / "learning_curve.csv", table.getvalue(), newline="")
     plot_curves({title or "run": (episodes, mean_reward, None)}, out / "learning_curve.png", ylabel="mean reward",
                 title=title)
     return curve
@@ -83,5 +86,6 @@ def plot_curves(series: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray | Non
     ax.grid(alpha=0.3)
     fig.tight_layout()
     path = pathlib.Path(path)
-    fig.savefig(path, dpi=110)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format=path.suffix[1:] or "png")
     return path

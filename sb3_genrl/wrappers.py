@@ -21,15 +21,21 @@ from sb3_genrl.generative.base import TrajectoryGenerator
 RewardMode = Literal["last", "sum"]
 
 
-class LatentActionWrapper(gym.Env):
+class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """Turn an episodic Gymnasium env with per-step actions into a one-step bandit over a generator's latent space.
 
     ``reset()`` resets the wrapped env and observes the task context. ``step(alpha)`` decodes ``alpha`` into a
     ``(horizon, action_dim)`` trajectory, plays it and ends the episode (``terminated=True``, ``truncated=False``):
     one episode is one bandit pull. When ``env.unwrapped`` has ``play_trajectories(trajectories, goals)`` and
     ``get_context()`` (the GenRL tasks), the trajectory is played through that fast open-loop path for the
-    current goal; otherwise it is played step by step through ``env`` and, if the episode has not ended when the
+    current goal (the task's own ``goal`` attribute when it has one, so that the reward is exactly the step
+    path's); otherwise it is played step by step through ``env`` and, if the episode has not ended when the
     trajectory does, the arm holds still (``hold_action``) until it ends or for at most ``max_hold_steps`` steps.
+
+    A ``gymnasium.Wrapper``: ``unwrapped`` is the task, ``render_mode``, ``render()``, ``metadata`` and ``spec``
+    are the wrapped env's, and SB3's ``VecEnv.get_attr`` / ``env_method`` reach the task's attributes and methods.
+    The constructor arguments are recorded in ``spec``, so ``env.spec.make()`` rebuilds the wrapped env.
+    A task that declares its ``horizon`` (an integer attribute of ``env.unwrapped``) must have the generator's.
 
     Observation: the task context. For envs with ``get_context()`` and ``context_space`` the goal; with a
     ``context`` callable ``context(reset_obs)`` (and its ``context_space``); otherwise the reset observation.
@@ -56,8 +62,6 @@ class LatentActionWrapper(gym.Env):
         play step by step; ``True``: require the fast path
     """
 
-    metadata: dict[str, Any] = {"render_modes": []}
-
     def __init__(
         self,
         env: gym.Env,
@@ -81,7 +85,10 @@ class LatentActionWrapper(gym.Env):
             raise ValueError(f"latent_clip must be positive, got {latent_clip!r}")
         if int(max_hold_steps) != max_hold_steps or max_hold_steps < 0:
             raise ValueError(f"max_hold_steps must be a non-negative integer, got {max_hold_steps!r}")
-        self.env = env
+        gym.utils.RecordConstructorArgs.__init__(
+            self, generator=generator, context=context, context_space=context_space, reward=reward,
+            latent_clip=latent_clip, hold_action=hold_action, max_hold_steps=max_hold_steps, use_fast_path=use_fast_path)
+        gym.Wrapper.__init__(self, env)
         self.generator = generator
         self.reward_mode: RewardMode = reward
         self.latent_clip = float(latent_clip)
@@ -100,8 +107,12 @@ class LatentActionWrapper(gym.Env):
             raise ValueError(f"hold_action must have the env's action shape {step_shape}, got {hold.shape}")
         self.hold_action = hold.astype(env.action_space.dtype)
 
-        # The fast open-loop path of the GenRL tasks (one MuJoCo rollout for the whole trajectory).
         task = env.unwrapped
+        task_horizon = getattr(task, "horizon", None)
+        if isinstance(task_horizon, int | np.integer) and task_horizon != generator.horizon:
+            raise ValueError(f"the generator's trajectories have horizon T = {generator.horizon} time steps, but "
+                             f"{type(task).__name__} has horizon {task_horizon}; use a generator trained on this task")
+        # The fast open-loop path of the GenRL tasks (one MuJoCo rollout for the whole trajectory).
         has_fast_path = hasattr(task, "play_trajectories") and hasattr(task, "get_context")
         if use_fast_path and not has_fast_path:
             raise ValueError(f"use_fast_path=True but {type(task).__name__} has no play_trajectories()/get_context()")
@@ -139,9 +150,8 @@ class LatentActionWrapper(gym.Env):
         return context
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
-        """Reset the wrapped task (``options``, e.g. ``{"goal": xy}``, are passed on) and observe its context."""
-        super().reset(seed=seed)
-        obs, info = self.env.reset(seed=seed, options=options)
+        """Reset the wrapped task (``options``, e.g. ``{"goal": xy}``, are passed on when given) and observe its context."""
+        obs, info = self.env.reset(seed=seed) if options is None else self.env.reset(seed=seed, options=options)
         self._context = self._observe(obs)
         self._needs_reset = False
         return copy.deepcopy(self._context), dict(info)
@@ -185,7 +195,8 @@ class LatentActionWrapper(gym.Env):
 
     def _play_fast(self, tau: np.ndarray) -> dict[str, Any]:
         task = self.env.unwrapped
-        goal = np.asarray(task.get_context(), dtype=np.float64)
+        goal = getattr(task, "goal", None)  # the task's own (float64) goal: get_context() may round it
+        goal = np.asarray(task.get_context() if goal is None else goal, dtype=np.float64)
         rewards, infos = task.play_trajectories(tau[None], goal[None])
         info = dict(infos[0])
         info.update(reward=float(rewards[0]), steps_played=len(tau), hold_steps=0, ended=True, fast_path=True)
@@ -230,11 +241,15 @@ class LatentActionWrapper(gym.Env):
         rewards, infos = task.play_trajectories(self._decode(alphas), goals, n_threads=n_threads)
         return np.asarray(rewards, dtype=np.float64), list(infos)
 
-    def render(self) -> Any:
-        return self.env.render()
 
-    def close(self) -> None:
-        self.env.close()
+def find_latent_wrapper(env: gym.Env) -> LatentActionWrapper | None:
+    """The :class:`LatentActionWrapper` in ``env``'s chain of wrappers (``env`` itself included), or ``None``."""
+    while True:
+        if isinstance(env, LatentActionWrapper):
+            return env
+        if not isinstance(env, gym.Wrapper):
+            return None
+        env = env.env
 
 
 def latent_action_env(
@@ -258,8 +273,8 @@ def latent_action_env(
             env_generator = env.get_attr("generator", indices=[0])[0]
         except AttributeError as error:
             raise ValueError("a VecEnv must hold LatentActionWrapper envs; wrap each env before vectorising") from error
-    elif isinstance(env.unwrapped, LatentActionWrapper):
-        env_generator = env.unwrapped.generator
+    elif find_latent_wrapper(env) is not None:
+        env_generator = find_latent_wrapper(env).generator  # type: ignore[union-attr]
     else:
         if generator is None:
             raise ValueError(f"a generator is needed to wrap {env} (or pass an env already wrapped in LatentActionWrapper)")

@@ -22,8 +22,8 @@ def demo_transitions(n_episodes: int, seed: int = 0) -> dict[str, np.ndarray]:
     out = {key: [] for key in keys}
     for _ in range(n_episodes):
         trajectory = scripted_hit(strength=rng.uniform(0.8, 1.2), direction=rng.uniform(-0.4, 0.4))
-        _, info = env.play_trajectory(trajectory, np.zeros(2))
-        obs, _ = env.reset(options={"goal": info["reached"]})
+        _, info = env.play_trajectory(trajectory, np.array([1.0, 0.0]))
+        obs, _ = env.reset(options={"goal": info["reached"], "allow_outside_region": True})
         for action in trajectory:
             next_obs, reward, terminated, _, _ = env.step(action)
             for key, value in zip(keys, (obs, action, reward, next_obs, terminated), strict=True):

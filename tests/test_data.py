@@ -146,3 +146,56 @@ def test_core_does_not_import_the_tasks() -> None:
             names = [alias.name for alias in node.names] if isinstance(node, ast.Import) else \
                 [node.module or ""] if isinstance(node, ast.ImportFrom) else []
             assert not any(name.startswith(("sb3_genrl.envs", "sb3_genrl.baselines")) for name in names), source
+
+
+def _copy(dataset: tuple[Path, dict[str, np.ndarray]], tmp_path: Path) -> Path:
+    import shutil
+
+    return Path(shutil.copytree(dataset[0], tmp_path / "copy"))
+
+
+def _truncate(path: Path) -> None:
+    path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+
+
+def test_truncated_or_overwritten_npz_gives_an_error_naming_it(dataset, tmp_path: Path) -> None:
+    copy = _copy(dataset, tmp_path)
+    npz = copy / "data" / "genrl_episodes.npz"
+    _truncate(npz)
+    for loader in (load_actions, load_transitions):
+        with pytest.raises(ValueError, match="damaged") as error:
+            loader(copy)
+        assert str(npz) in str(error.value)
+    data = bytearray((dataset[0] / "data" / "genrl_episodes.npz").read_bytes())
+    start = bytes(data).find(dataset[1]["actions"].tobytes()[:64])
+    data[start:start + 64] = bytes(64)  # 64 bytes overwritten inside the actions array: its CRC-32 no longer matches
+    npz.write_bytes(bytes(data))
+    with pytest.raises(ValueError, match="damaged") as error:
+        load_actions(copy)
+    assert str(npz) in str(error.value)
+
+
+def test_corrupted_hdf5_gives_an_error_naming_it(dataset, tmp_path: Path) -> None:
+    pytest.importorskip("h5py")
+    copy = _copy(dataset, tmp_path)
+    hdf5 = copy / "data" / "main_data.hdf5"
+    _truncate(hdf5)  # next to an intact npz: refused, not silently ignored
+    with pytest.raises(ValueError, match="damaged") as error:
+        load_actions(copy)
+    assert str(hdf5) in str(error.value)
+    (copy / "data" / "genrl_episodes.npz").unlink()  # only Minari's storage left, and it is damaged
+    hdf5.write_bytes(b"\x89HDF\r\n\x1a\n" + bytes(4096))
+    with pytest.raises(ValueError, match="damaged") as error:
+        load_transitions(copy)
+    assert str(hdf5) in str(error.value)
+
+
+def test_non_finite_demonstrations_are_refused_by_every_loader(tmp_path: Path) -> None:
+    for key in ("actions", "observations", "rewards"):
+        arrays = _arrays()
+        arrays[key][1, 2, ...] = np.nan
+        path = _write(tmp_path / key, arrays)
+        for loader in (load_transitions, load_actions) if key == "actions" else (load_transitions,):
+            with pytest.raises(ValueError, match=f"{key} hold .* non-finite") as error:
+                loader(path)
+            assert str(path) in str(error.value)

@@ -63,13 +63,13 @@ def test_stored_episodes_are_valid_replays(hockey_dataset: Path) -> None:
     arrays = load_arrays(hockey_dataset, task="hockey")
     assert arrays["actions"].shape == (EPISODES, 69, 7) and arrays["observations"].shape == (EPISODES, 70, 16)
     env = TASKS["hockey"].make_env()
-    rewards, infos = env.play_trajectories(arrays["actions"], arrays["reached"])
+    rewards, infos = env.play_trajectories(arrays["actions"], arrays["reached"], allow_outside_region=True)
     np.testing.assert_array_equal(rewards, 0.0)  # each demonstration's goal is the point it reached
     for i, info in enumerate(infos):
         np.testing.assert_array_equal(info["reached"], arrays["reached"][i])
         assert info["table_contacts"] == 0 and not info["joint_limit_clipped"] and not info["unstable"]
     for i in (0, EPISODES - 1):  # through the step env: the same observations, rewards and terminal flags
-        observation, _ = env.reset(options={"goal": arrays["reached"][i]})
+        observation, _ = env.reset(options={"goal": arrays["reached"][i], "allow_outside_region": True})
         observations, step_rewards, ends = [observation], [], []
         for action in arrays["actions"][i]:
             observation, reward, terminated, truncated, _ = env.step(action)
@@ -142,7 +142,8 @@ def test_cli_demos(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert "3 basketball demonstrations" in printed and str(out) in printed and "coverage:" in printed
     assert dataset_info(out)["task"] == "basketball"
     arrays = load_arrays(out, task="basketball")
-    rewards, infos = TASKS["basketball"].make_env().play_trajectories(arrays["actions"], arrays["reached"])
+    rewards, infos = TASKS["basketball"].make_env().play_trajectories(arrays["actions"], arrays["reached"],
+                                                                     allow_outside_region=True)
     np.testing.assert_array_equal(rewards, 0.0)  # hindsight goals: every demonstration succeeds
     assert all(info["crossings"] > 0 and not info["joint_limit_clipped"] for info in infos)
     assert main(["demos", "--task", "basketball", "--episodes", "3", "--out", str(out), "--no-progress-bar"]) == 2

@@ -215,3 +215,37 @@ def test_throw_family_spans_the_basket_region_smoothly(basketball):
         steps = np.diff(radius)
         assert np.all(steps > 0.2) and np.all(steps < 1.0)
         np.testing.assert_allclose(bearing[radius > 1.0], yaw, atol=np.radians(2))
+
+
+def test_play_trajectories_refuses_a_chunk_or_thread_count_that_is_not_a_positive_integer(hockey):
+    batch, goal = np.stack([scripted_hit(strength=s) for s in (0.8, 1.0, 1.2)]), np.array([1.0, 0.0])
+    for name, value in (("chunk", -1), ("chunk", 0), ("chunk", 1.5), ("n_threads", 0), ("n_threads", 2.5),
+                        ("n_threads", "2")):
+        with pytest.raises(ValueError, match=f"{name} must be a positive integer, got {value!r}"):
+            hockey.play_trajectories(batch, goal, **{name: value})
+    rewards, infos = hockey.play_trajectories(batch, goal, chunk=2)
+    assert len(infos) == 3
+    np.testing.assert_array_equal(rewards, [hockey.play_trajectory(t, goal)[0] for t in batch])
+
+
+def test_goals_outside_the_goal_region_or_of_wrong_length_are_refused(hockey, basketball):
+    batch = np.stack([scripted_hit()] * 2)
+    for bad in ([1.0], [1.0, 0.0, 0.0], [[1.0, 0.0]], [[1.0], [1.0]]):
+        with pytest.raises(ValueError, match=r"goals must have shape \(2,\) or \(2, 2\)"):
+            hockey.play_trajectories(batch, np.array(bad))
+    with pytest.raises(ValueError, match=r"options\['goal'\] must have shape \(2,\)"):
+        hockey.reset(options={"goal": [1.0]})
+    for env, outside in ((hockey, [0.5, 0.0]), (hockey, [1.0, 0.41]), (basketball, [-1.0, 0.0])):
+        with pytest.raises(ValueError, match="outside the goal region"):
+            env.reset(options={"goal": outside})
+        with pytest.raises(ValueError, match="outside the goal region"):
+            env.play_trajectories(np.zeros((2, env.horizon, 7)), np.array([env.goal_low, outside]))
+    with pytest.raises(ValueError, match="outside the goal region"):
+        hockey.play_trajectory(scripted_hit(), np.array([0.5, 0.0]))
+    corner = np.array([0.65, 0.4], dtype=np.float32)  # float32 goals on the region's edge are inside
+    assert hockey.reset(options={"goal": corner})[1]["goal"].tolist() == corner.astype(np.float64).tolist()
+    # Hindsight goals (the points demonstrations reached) may lie outside the region when asked for.
+    reward, info = hockey.play_trajectory(scripted_hit(), np.array([0.5, 0.0]), allow_outside_region=True)
+    assert reward == pytest.approx(-np.linalg.norm(info["reached"] - [0.5, 0.0]))
+    hockey.reset(options={"goal": [0.5, 0.0], "allow_outside_region": True})
+    assert hockey.goal.tolist() == [0.5, 0.0]

@@ -307,3 +307,74 @@ def test_dataset_directory_is_read_with_load_actions(tmp_path, monkeypatch):
     assert calls == [str(tmp_path)]
     with pytest.raises(ValueError, match="neither"):
         load_trajectories(__file__)
+
+
+def test_corrupted_weights_are_refused_on_load(vae, tmp_path):
+    path = tmp_path / "vae.pt"
+    vae.save(path)
+    data = bytearray(path.read_bytes())
+    weight = vae.decoder[-1].weight.detach().cpu().numpy().tobytes()  # the largest tensor, stored uncompressed
+    start = bytes(data).find(weight[:256])
+    assert start > 0
+    data[start + 64:start + 128] = bytes(b ^ 0x5A for b in data[start + 64:start + 128])  # 64 bytes flipped
+    path.write_bytes(bytes(data))
+    with pytest.raises(ValueError, match="checksum") as error:
+        load(path)
+    assert str(path) in str(error.value)
+
+
+def test_file_without_checksum_is_refused_naming_the_file(vae, tmp_path):
+    path = tmp_path / "old.pt"
+    vae.save(path)
+    payload = torch.load(path, weights_only=True)
+    del payload["sha256"]
+    payload["format_version"] = 1
+    torch.save(payload, path)
+    with pytest.raises(ValueError, match="predates") as error:
+        load(path)
+    assert str(path) in str(error.value)
+
+
+def test_diverged_training_is_not_saved(family, tmp_path, capsys):
+    diverged = BetaVAE(HORIZON, ACTION_DIM, 2, beta=0.01, device="cpu").fit(family[0][:300], epochs=4, seed=0, lr=1e6,
+                                                                            progress_bar=False, eval_every=2)
+    assert diverged.best_epoch is None  # every selection MSE was nan
+    with pytest.raises(ValueError, match="no checkpoint was selected"):
+        diverged.save(tmp_path / "nan.pt")
+    diverged.best_epoch = 4
+    with pytest.raises(ValueError, match="non-finite"):
+        diverged.save(tmp_path / "nan.pt")
+    assert not (tmp_path / "nan.pt").exists()
+    npy = tmp_path / "demos.npy"
+    np.save(npy, family[0][:300])
+    for option, value in (("--lr", "1e6"), ("--lr", "inf"), ("--beta", "inf")):
+        out = tmp_path / f"cli{option}{value}.pt"
+        code = cli_main(["train-generator", "--data", str(npy), "--model", "vae", "--latent-dim", "2", option, value,
+                         "--epochs", "2", "--batch-size", "64", "--no-progress-bar", "--out", str(out)])
+        assert code != 0 and not out.exists(), (option, value)
+        assert capsys.readouterr().err.strip(), (option, value)
+
+
+def test_interrupted_save_leaves_no_partial_file(vae, tmp_path, monkeypatch):
+    from sb3_genrl.generative import serialization
+
+    path = tmp_path / "vae.pt"
+    real_save = torch.save
+
+    def killed_save(payload, file):
+        real_save(payload, file)
+        with open(file, "r+b") as handle:
+            handle.truncate(5000)  # what a kill during the write leaves behind
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(serialization.torch, "save", killed_save)
+    with pytest.raises(KeyboardInterrupt):
+        vae.save(path)
+    assert list(tmp_path.iterdir()) == []
+    monkeypatch.setattr(serialization.torch, "save", real_save)
+    vae.save(path)
+    before = path.read_bytes()
+    monkeypatch.setattr(serialization.torch, "save", killed_save)
+    with pytest.raises(KeyboardInterrupt):
+        vae.save(path)
+    assert list(tmp_path.iterdir()) == [path] and path.read_bytes() == before

@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import copy
 import csv
+import warnings
 
 import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
+from stable_baselines3.common.preprocessing import get_flattened_obs_dim
+from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from stable_baselines3.common.vec_env import DummyVecEnv
 from test_wrapper import (
     ContextReachEnv,
@@ -67,7 +71,8 @@ def test_constructor_forms_and_defaults():
     assert th.exp(uniform.policy.log_std).detach().numpy() == pytest.approx([3**-0.5] * 2, rel=1e-5)
     assert uniform.action_space.high.tolist() == [1.0, 1.0]
     gym.register(TOY_ID, entry_point=FastReachEnv) if TOY_ID not in gym.registry else None
-    assert isinstance(GenRL(TOY_ID, generator).env.envs[0].unwrapped, LatentActionWrapper)
+    vec_env = GenRL(TOY_ID, generator).env
+    assert vec_env.get_attr("generator") == [generator] and isinstance(vec_env.envs[0].unwrapped, FastReachEnv)
 
 
 def test_bad_arguments_raise():
@@ -164,8 +169,9 @@ def test_train_policy_writes_curve_model_and_logs(tmp_path, capsys):
     with pytest.raises(ValueError, match="unknown task"):
         train_policy("curling", LinearGenerator(), episodes=10, out_dir=tmp_path)
     argv = ["train-policy", "--task", "curling", "--generator", "x.pt", "--episodes", "8", "--out", str(tmp_path)]
-    assert cli_main(argv) == 2
-    assert "unknown task" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exit_info:  # --task takes its choices from the registry
+        cli_main(argv)
+    assert exit_info.value.code == 2 and "invalid choice: 'curling'" in capsys.readouterr().err
 
 
 def test_on_paper_task_with_saved_generator(tmp_path):
@@ -204,3 +210,132 @@ def test_evaluate_on_goals_plays_the_deterministic_policy(tmp_path):
         assert step_info["table_contacts"] == info["table_contacts"]
     with pytest.raises(ValueError, match="unknown task"):
         evaluate_on_goals(model, "golf")
+
+
+def test_interrupted_save_keeps_the_previous_policy_file(tmp_path, monkeypatch):
+    from stable_baselines3.common import base_class
+
+    model = GenRL(FastReachEnv(), LinearGenerator(), seed=0)
+    model.save(tmp_path / "policy")  # SB3 adds .zip
+    before = (tmp_path / "policy.zip").read_bytes()
+    real_save = base_class.save_to_zip_file
+
+    def killed_save(save_path, *args, **kwargs):
+        real_save(save_path, *args, **kwargs)
+        with open(save_path, "r+b") as file:
+            file.truncate(100)  # what a kill during the write leaves behind
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(base_class, "save_to_zip_file", killed_save)
+    with pytest.raises(KeyboardInterrupt):
+        model.save(tmp_path / "policy.zip")
+    assert (tmp_path / "policy.zip").read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["policy.generator.pt", "policy.zip"]
+
+
+class FlattenBatchNormDropoutExtractor(BaseFeaturesExtractor):
+    """Stable-Baselines3's test extractor (tests/test_train_eval_mode.py): batch norm, then dropout."""
+
+    def __init__(self, observation_space: gym.Space) -> None:
+        super().__init__(observation_space, get_flattened_obs_dim(observation_space))
+        self.flatten = th.nn.Flatten()
+        self.batch_norm = th.nn.BatchNorm1d(self._features_dim)
+        self.dropout = th.nn.Dropout(0.5)
+
+    def forward(self, observations: th.Tensor) -> th.Tensor:
+        return self.dropout(self.batch_norm(self.flatten(observations)))
+
+
+BATCH_NORM_DROPOUT = {"net_arch": [16, 16], "features_extractor_class": FlattenBatchNormDropoutExtractor}
+
+
+def batch_norm_stats(model: GenRL) -> tuple[th.Tensor, th.Tensor]:
+    batch_norm = model.policy.features_extractor.batch_norm
+    return batch_norm.bias.detach().clone(), batch_norm.running_mean.clone()
+
+
+def mean_reward_on_goals(model: GenRL) -> float:
+    latents, _ = model.predict(GOALS, deterministic=True)
+    rewards, _ = FastReachEnv().play_trajectories(LinearGenerator().decode(latents), GOALS)
+    return float(np.mean(rewards))
+
+
+@pytest.mark.parametrize("e_step", ["trpo", "kl_penalty"])
+@pytest.mark.parametrize("seed", range(5))
+def test_train_with_dropout_and_batch_norm(e_step, seed):
+    """SB3's train/eval-mode test for GenRL: the E-step sees the policy in evaluation mode, training works."""
+    model = GenRL(FastReachEnv(), LinearGenerator(), e_step=e_step, policy_kwargs=BATCH_NORM_DROPOUT, seed=seed)
+    bias_before, running_mean_before = batch_norm_stats(model)
+    before = mean_reward_on_goals(model)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no float() of a tensor that requires grad, no invalid distribution
+        model.learn(1280)
+    bias_after, running_mean_after = batch_norm_stats(model)
+    assert not th.isclose(bias_before, bias_after).all() and not th.isclose(running_mean_before, running_mean_after).all()
+    assert all(bool(th.isfinite(p).all()) for p in model.policy.parameters())
+    assert before < -0.35 and mean_reward_on_goals(model) > -0.1  # the optimum is 0
+    if e_step == "trpo":
+        assert model.logger.name_to_value["train/kl"] < model.target_kl
+
+
+def test_collect_rollouts_and_predict_leave_batch_norm_alone_and_predict_is_deterministic():
+    model = GenRL(FastReachEnv(), LinearGenerator(), policy_kwargs=BATCH_NORM_DROPOUT, n_steps=64, seed=1)
+    stats_before = batch_norm_stats(model)
+    _, callback = model._setup_learn(total_timesteps=128)
+    for _ in range(2):
+        model.collect_rollouts(model.get_env(), callback, model.rollout_buffer, n_rollout_steps=model.n_steps)
+    first, _ = model.predict(GOALS, deterministic=True)
+    for _ in range(5):
+        np.testing.assert_array_equal(model.predict(GOALS, deterministic=True)[0], first)
+    for before, after in zip(stats_before, batch_norm_stats(model), strict=True):
+        th.testing.assert_close(before, after, rtol=0, atol=0)
+
+
+def test_trpo_e_step_rejects_non_positive_curvature():
+    from sb3_genrl.genrl.e_step import trpo_e_step
+
+    model = GenRL(FastReachEnv(), LinearGenerator(), seed=0, n_steps=64).learn(64)
+    data = next(model.rollout_buffer.get(batch_size=None))
+    batch = (data.observations, data.actions, data.old_log_prob, (data.advantages - data.advantages.mean()))
+    q = copy.deepcopy(model.policy)
+    before = th.nn.utils.parameters_to_vector(q.parameters()).detach().clone()
+    # A damping of -1000 makes F + damping I negative definite: the quadratic KL model has no positive curvature.
+    stats = trpo_e_step(q, model.policy, batch, target_kl=0.01, cg_max_steps=15, cg_damping=-1000.0,
+                        line_search_shrinking_factor=0.8, line_search_max_iter=10)
+    assert stats["line_search_success"] == 0.0 and stats["step_size"] == 0.0 and np.isfinite(stats["policy_objective"])
+    th.testing.assert_close(th.nn.utils.parameters_to_vector(q.parameters()).detach(), before, rtol=0, atol=0)
+
+
+def test_trpo_e_step_rejects_candidates_whose_distribution_is_invalid():
+    from sb3_genrl.genrl.e_step import trpo_e_step
+
+    model = GenRL(FastReachEnv(), LinearGenerator(), seed=0)
+    observations = th.zeros(64, 2)
+    with th.no_grad():
+        pi = model.policy.get_distribution(observations)
+        offsets = th.cat([th.full((32, 2), 0.1), th.full((32, 2), 2.0)]) * th.tensor([[1.0, -1.0]])
+        actions = pi.distribution.mean + offsets
+        batch = (observations, actions, pi.log_prob(actions), th.cat([th.ones(32), -th.ones(32)]))
+    # Actions near the mean are good, far ones bad: the natural step narrows the policy, and with a KL bound of
+    # 1e6 every candidate's standard deviation underflows to 0, which torch.distributions refuses.
+    q = copy.deepcopy(model.policy)
+    stats = trpo_e_step(q, model.policy, batch, target_kl=1e6, cg_max_steps=15, cg_damping=0.1,
+                        line_search_shrinking_factor=0.8, line_search_max_iter=10)
+    assert stats["line_search_success"] == 0.0 and stats["accepted_fraction"] == 0.0
+    for parameter, original in zip(q.parameters(), model.policy.parameters(), strict=True):
+        th.testing.assert_close(parameter, original, rtol=0, atol=0)
+
+
+def test_box_scaler_on_unbounded_observations_does_not_warn():
+    from sb3_genrl.genrl.policies import BoxScaler
+
+    space = gym.make("Reacher-v5").observation_space  # every bound infinite
+    mixed = gym.spaces.Box(np.array([-np.inf, 0.0, -2.0], np.float32), np.array([np.inf, np.inf, 2.0], np.float32))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        scaler = BoxScaler(space)
+        observations = th.as_tensor(space.sample()[None])
+        th.testing.assert_close(scaler(observations), observations)  # unbounded dimensions pass unchanged
+        mixed_scaler = BoxScaler(mixed)
+        out = mixed_scaler(th.tensor([[5.0, 3.0, 1.0]]))
+    th.testing.assert_close(out, th.tensor([[5.0, 3.0, 0.5]]))

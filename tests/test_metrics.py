@@ -150,6 +150,15 @@ def test_dwpr_separates_decisive_and_ignored_dimensions() -> None:
     np.testing.assert_array_equal(again.delta, result.delta)
 
 
+def test_dwpr_is_unchanged_when_trajectories_are_scaled_by_a_power_of_two() -> None:
+    # Scaling by 2**70 (about 1e21) is exact and keeps every distance comparison: the same precision and recall.
+    generator = two_factor_generator(ignored_dims=1)
+    scaled = LinearGenerator(generator.weights * np.float32(2.0**70), generator.horizon, generator.action_dim)
+    result, large = (dwpr(g, n=100, interventions=3, k=3, seed=0, device="cpu") for g in (generator, scaled))
+    np.testing.assert_array_equal(large.precision, result.precision)
+    np.testing.assert_array_equal(large.recall, result.recall)
+
+
 def test_dwpr_single_dimension_and_explicit_values() -> None:
     generator = LinearGenerator(np.ones((1, 6), dtype=np.float32), horizon=3, action_dim=2, prior="uniform")
     result = dwpr(generator, n=40, k=2, seed=1, intervention_values=[-0.5, 0.5], device="cpu")
@@ -251,3 +260,45 @@ def test_cli_evaluate(tmp_path, capsys) -> None:
     assert code == 0
     assert "vae: precision" in capsys.readouterr().out
     assert (tmp_path / "out" / "results.md").exists() and (tmp_path / "out" / "disentanglement.png").exists()
+
+
+def test_interrupted_outputs_leave_no_partial_file(tmp_path, monkeypatch) -> None:
+    from matplotlib.figure import Figure
+
+    from sb3_genrl.metrics.plots import labelled_scatter
+
+    def killed_savefig(self, path, **kwargs):
+        with open(path, "wb") as file:
+            file.write(b"\x89PNG half")  # what a kill during the write leaves behind
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(Figure, "savefig", killed_savefig)
+    with pytest.raises(KeyboardInterrupt):
+        labelled_scatter([0.1, 0.2], [0.3, 0.4], ["a", "b"], tmp_path / "plot.png", xlabel="x", ylabel="y")
+    table = correlation_table([{"model": f"m{i}", "precision": i, "recall": 1 - i, "score": i} for i in range(4)])
+    monkeypatch.setattr("csv.writer", lambda *args, **kwargs: (_ for _ in ()).throw(KeyboardInterrupt()))
+    with pytest.raises(KeyboardInterrupt):
+        table.to_csv(tmp_path / "table.csv")
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("scale", [1e20, 3e35, 1e-20, 1e-30])
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_precision_recall_equals_brute_force_for_very_large_and_very_small_values(scale: float, dtype: type) -> None:
+    rng = np.random.default_rng(0)
+    real = (rng.normal(size=(60, 5)) * scale).astype(dtype)
+    generated = (rng.normal(0.3, 1.1, size=(50, 5)) * scale).astype(dtype)
+    expected = brute_force(real, generated, 3)
+    assert 0.3 < expected[0] < 1 and 0.3 < expected[1] < 1
+    for batch_size in (7, None):
+        result = precision_recall(real, generated, 3, batch_size=batch_size, device="cpu", return_radii=True)
+        assert (result.precision, result.recall) == expected[:2], (batch_size, result)
+        np.testing.assert_allclose(result.real_radii, expected[2], rtol=1e-12, atol=0)
+        np.testing.assert_allclose(result.generated_radii, expected[3], rtol=1e-12, atol=0)
+
+
+def test_precision_recall_refuses_values_whose_squared_distances_overflow_float64() -> None:
+    points = np.random.default_rng(0).normal(size=(20, 4))
+    with pytest.raises(ValueError, match="overflow") as error:
+        precision_recall(points * 1e160, points)
+    assert "generated" in str(error.value) or "real" in str(error.value)

@@ -111,13 +111,15 @@ def checked_without_warnings(env: gym.Env, allowed: tuple[str, ...] = ()) -> Non
 
 
 NORMALIZED_BOX = "we recommend using a symmetric and normalized space"  # the +-3 sigma box of a normal prior
+# Gymnasium's checker notes that it is given a wrapper; LatentActionWrapper is one by design.
+IS_A_WRAPPER = "is different from the unwrapped version"
 
 
 @pytest.mark.parametrize("env_class", [ReachEnv, ContextReachEnv, FastReachEnv])
 @pytest.mark.parametrize("prior", ["normal", "uniform"])
 def test_check_env(env_class, prior):
     env = LatentActionWrapper(env_class(), LinearGenerator(prior=prior))
-    checked_without_warnings(env, allowed=(NORMALIZED_BOX,) if prior == "normal" else ())
+    checked_without_warnings(env, allowed=(IS_A_WRAPPER, NORMALIZED_BOX) if prior == "normal" else (IS_A_WRAPPER,))
     with warnings.catch_warnings():
         warnings.simplefilter("error" if prior == "uniform" else "ignore")
         sb3_check_env(env)
@@ -257,12 +259,91 @@ def test_on_paper_tasks(task):
     generator = make_generator("VAE1", horizon=horizon, action_dim=7, device="cpu")
     env = LatentActionWrapper(gym.make(task), generator)
     assert env.use_fast_path and env.observation_space == env.env.unwrapped.context_space
-    checked_without_warnings(env, allowed=(NORMALIZED_BOX,))
+    checked_without_warnings(env, allowed=(IS_A_WRAPPER, NORMALIZED_BOX))
     alpha = np.full(generator.latent_dim, 0.5, dtype=np.float32)
     slow = LatentActionWrapper(gym.make(task), generator, use_fast_path=False)
     env.reset(seed=3)
     slow.reset(seed=3)
     fast_result, slow_result = env.step(alpha), slow.step(alpha)
-    assert fast_result[1] == pytest.approx(slow_result[1], abs=1e-6)
+    assert fast_result[1] == slow_result[1]
     assert fast_result[4]["steps_played"] == slow_result[4]["steps_played"] == horizon
 
+
+
+def test_fast_path_reward_equals_the_step_path_reward_exactly_through_the_wrapper():
+    """The fast path plays the task's own float64 goal, not the float32 context the policy observes."""
+    from sb3_genrl.generative import make_generator
+
+    generator = make_generator("VAE1", horizon=69, action_dim=7, device="cpu")
+    fast = LatentActionWrapper(gym.make("GenRL/Hockey-v0"), generator)
+    slow = LatentActionWrapper(gym.make("GenRL/Hockey-v0"), generator, use_fast_path=False)
+    alphas = generator.sample_prior(4, rng=0)
+    for seed, alpha in enumerate(alphas):
+        goal = fast.reset(seed=seed)[0]
+        slow.reset(seed=seed)
+        assert fast.unwrapped.goal.astype(np.float32).tolist() == goal.tolist() != fast.unwrapped.goal.tolist()
+        fast_reward, slow_reward = fast.step(alpha)[1], slow.step(alpha)[1]
+        assert fast_reward == slow_reward, seed
+
+
+def test_generator_of_another_horizon_is_refused_when_the_wrapper_is_built(tmp_path):
+    from sb3_genrl import GenRL
+    from sb3_genrl.generative import make_generator
+    from sb3_genrl.genrl import train_policy
+
+    generator = make_generator("VAE1", horizon=68, action_dim=7, device="cpu")
+    for use_fast_path in (None, False):
+        with pytest.raises(ValueError, match="horizon T = 68 .* HockeyEnv has horizon 69"):
+            LatentActionWrapper(gym.make("GenRL/Hockey-v0"), generator, use_fast_path=use_fast_path)
+    with pytest.raises(ValueError, match="horizon"):
+        GenRL("GenRL/Hockey-v0", generator)
+    with pytest.raises(ValueError, match="horizon"):
+        train_policy("hockey", generator, episodes=8, out_dir=tmp_path / "run", progress_bar=False)
+    assert not (tmp_path / "run").exists()
+
+
+class SeedOnlyResetEnv(ReachEnv):
+    """An env whose ``reset`` takes no ``options`` (older code): the wrapper must not pass ``options=None``."""
+
+    def reset(self, *, seed=None):  # type: ignore[override]
+        return super().reset(seed=seed)
+
+
+def test_wrapper_is_a_gymnasium_wrapper():
+    task = FastReachEnv()
+    env = LatentActionWrapper(task, LinearGenerator())
+    assert isinstance(env, gym.Wrapper) and env.unwrapped is task and env.env is task
+    assert env.get_wrapper_attr("episode_length") == 5 and env.metadata is task.metadata
+    assert env.reset(seed=0, options={"goal": [0.25, 0.5]})[0].tolist() == [0.25, 0.5]
+    plain = LatentActionWrapper(SeedOnlyResetEnv(), LinearGenerator())
+    assert plain.reset(seed=0)[0].shape == (4,)
+    assert plain.step(np.zeros(2, dtype=np.float32))[2]
+
+
+def _hockey_with_frames(generator):
+    from sb3_genrl.envs.hockey import HockeyEnv
+
+    return LatentActionWrapper(HockeyEnv(render_mode="rgb_array", width=64, height=48), generator)
+
+
+def test_subproc_vec_env_reaches_the_task_through_the_wrapper():
+    from sb3_genrl.envs.arm import FRAME_SKIP
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import SubprocVecEnv
+
+    from sb3_genrl.generative import make_generator
+
+    generator = make_generator("VAE1", horizon=69, action_dim=7, device="cpu")
+    env = make_vec_env(lambda: _hockey_with_frames(generator), n_envs=2, vec_env_cls=SubprocVecEnv)
+    try:
+        assert env.get_attr("frame_skip") == [FRAME_SKIP, FRAME_SKIP]
+        assert env.get_attr("render_mode") == ["rgb_array"] * 2 and env.render_mode == "rgb_array"
+        observations = env.reset()
+        contexts = env.env_method("get_context")
+        np.testing.assert_array_equal(np.stack(contexts), observations)
+        frame = env.render()
+        assert frame is not None and frame.dtype == np.uint8 and frame.shape == (96, 64, 3) and frame.std() > 5  # 2 x 1 tiles
+        _, rewards, dones, infos = env.step(np.zeros((2, generator.latent_dim), dtype=np.float32))
+        assert dones.all() and all(info["fast_path"] for info in infos) and np.all(np.isfinite(rewards))
+    finally:
+        env.close()

@@ -13,8 +13,10 @@ The arrays of ``genrl_episodes.npz`` (N episodes, horizon T, action dimension M,
 ``terminations`` and ``truncations (N, T) bool``, ``reached (N, 2)`` and ``sampled_goals (N, 2) float64``.
 
 A dataset is written into a temporary sibling directory and renamed into place at the end, so a directory that
-carries a ``metadata.json`` with a ``"genrl"`` entry is complete. This module does not import the tasks: the task
-and horizon come from the dataset's own metadata.
+carries a ``metadata.json`` with a ``"genrl"`` entry is complete. A file damaged later (truncated, overwritten) is
+refused with a ``ValueError`` naming it: the loaders read ``genrl_episodes.npz`` and check that the HDF5 storage
+beside it still opens, and refuse non-finite observations, actions or rewards. This module does not import the
+tasks: the task and horizon come from the dataset's own metadata.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ import json
 import os
 import secrets
 import shutil
+import zipfile
 from pathlib import Path
 from typing import Any
 
@@ -32,7 +35,11 @@ import numpy as np
 
 ARRAYS_FILE = "genrl_episodes.npz"
 METADATA_FILE = "metadata.json"
+HDF5_FILE = "main_data.hdf5"
 _ARRAY_KEYS = ("observations", "actions", "rewards", "terminations", "truncations", "reached", "sampled_goals")
+_FINITE_KEYS = ("observations", "actions", "rewards")  # "reached" is nan where Minari's metadata lacks it
+# What numpy, zipfile, h5py and Minari raise on damaged files.
+_READ_ERRORS = (OSError, EOFError, ValueError, KeyError, RuntimeError, zipfile.BadZipFile)
 
 
 def _data_dir(path: str | os.PathLike[str]) -> Path:
@@ -97,15 +104,47 @@ def load_arrays(path: str | os.PathLike[str], *, task: str | None = None, horizo
     """
     info = dataset_info(path)
     _check_expected(info, path, task, horizon)
-    arrays_file = _data_dir(path) / ARRAYS_FILE
+    data_dir = _data_dir(path)
+    arrays_file = data_dir / ARRAYS_FILE
     if arrays_file.is_file():
-        with np.load(arrays_file) as stored:
-            missing = [key for key in keys if key not in stored.files]
-            if missing:
-                raise ValueError(f"{str(arrays_file)!r} lacks the arrays {missing}")
-            return {key: stored[key] for key in keys}
-    arrays = _load_with_minari(_data_dir(path))
+        if "hdf5" in info.get("storage", []):
+            _check_hdf5_opens(data_dir / HDF5_FILE)
+        arrays, source = _load_npz(arrays_file, keys), arrays_file
+    else:
+        arrays, source = _load_with_minari(data_dir), data_dir / HDF5_FILE
+    for key in set(keys) & set(_FINITE_KEYS):
+        bad = int(np.size(arrays[key]) - np.count_nonzero(np.isfinite(arrays[key])))
+        if bad:
+            raise ValueError(f"{str(source)!r} is damaged or was written wrongly: its {key} hold {bad} non-finite "
+                             "values (nan or inf)")
     return {key: arrays[key] for key in keys}
+
+
+def _load_npz(arrays_file: Path, keys: tuple[str, ...]) -> dict[str, np.ndarray]:
+    try:
+        with np.load(arrays_file, allow_pickle=False) as stored:
+            missing = [key for key in keys if key not in stored.files]
+            arrays = {key: stored[key] for key in keys if key in stored.files}
+    except _READ_ERRORS as error:
+        raise ValueError(f"{str(arrays_file)!r} is damaged (truncated or overwritten?) and cannot be read: "
+                         f"{type(error).__name__}: {error}") from None
+    if missing:
+        raise ValueError(f"{str(arrays_file)!r} lacks the arrays {missing}")
+    return arrays
+
+
+def _check_hdf5_opens(hdf5_file: Path) -> None:
+    """Refuse a Minari HDF5 storage that no longer opens (e.g. truncated), though the loaders read the npz."""
+    if importlib.util.find_spec("h5py") is None:
+        return
+    import h5py
+
+    try:
+        with h5py.File(hdf5_file, "r") as storage:
+            len(storage)
+    except _READ_ERRORS as error:
+        raise ValueError(f"{str(hdf5_file)!r} is damaged (truncated or overwritten?) and cannot be opened: "
+                         f"{type(error).__name__}: {error}") from None
 
 
 def _load_with_minari(data_dir: Path) -> dict[str, np.ndarray]:
@@ -114,12 +153,12 @@ def _load_with_minari(data_dir: Path) -> dict[str, np.ndarray]:
 
     try:
         storage = MinariStorage.read(data_dir)
-    except (ImportError, KeyError, ValueError) as error:
-        raise ValueError(f"cannot read the episodes of {str(data_dir)!r}: no {ARRAYS_FILE} and Minari's storage "
-                         f"failed ({error})") from None
-    episodes = list(storage.get_episodes(range(storage.total_episodes)))
-    arrays = {key: np.stack([episode[key] for episode in episodes]) for key in _ARRAY_KEYS[:5]}
-    metadata = list(storage.get_episode_metadata(range(storage.total_episodes)))
+        episodes = list(storage.get_episodes(range(storage.total_episodes)))
+        arrays = {key: np.stack([episode[key] for episode in episodes]) for key in _ARRAY_KEYS[:5]}
+        metadata = list(storage.get_episode_metadata(range(storage.total_episodes)))
+    except (ImportError, *_READ_ERRORS) as error:
+        raise ValueError(f"cannot read the episodes of {str(data_dir / HDF5_FILE)!r}: there is no {ARRAYS_FILE} and "
+                         f"Minari's storage failed, the file may be damaged ({type(error).__name__}: {error})") from None
     for key in ("reached", "sampled_goals"):
         arrays[key] = np.array([m.get(key, [np.nan, np.nan]) for m in metadata], dtype=np.float64)
     return arrays

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import torch
@@ -48,8 +49,8 @@ class InfoGAN(TorchTrajectoryGenerator):
 
     def __init__(self, horizon: int, action_dim: int, latent_dim: int, *, info_weight: float, noise_dim: int = 0,
                  std_floor: float = STD_FLOOR, device: torch.device | str = "auto") -> None:
-        if not info_weight >= 0:
-            raise ValueError(f"info_weight must be non-negative, got {info_weight}")
+        if not 0 <= info_weight < math.inf:
+            raise ValueError(f"info_weight must be non-negative and finite, got {info_weight}")
         if int(noise_dim) != noise_dim or noise_dim < 0:
             raise ValueError(f"noise_dim must be a non-negative integer, got {noise_dim!r}")
         self.info_weight = float(info_weight)

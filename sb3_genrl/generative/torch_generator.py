@@ -159,8 +159,8 @@ class TorchTrajectoryGenerator(TrajectoryGenerator, abc.ABC):
         for name, value in (("epochs", epochs), ("selection_samples", selection_samples), ("eval_every", eval_every)):
             if int(value) != value or value < 1:
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
-        if not lr > 0:
-            raise ValueError(f"lr must be positive, got {lr}")
+        if not 0 < lr < math.inf:
+            raise ValueError(f"lr must be positive and finite, got {lr}")
         self.seed = int(np.random.default_rng().integers(2**31)) if seed is None else int(seed)
         rng = np.random.default_rng(self.seed)
         train, held_out = split_train_validation(data, validation_fraction, rng)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -42,8 +43,8 @@ class BetaVAE(TorchTrajectoryGenerator):
 
     def __init__(self, horizon: int, action_dim: int, latent_dim: int, *, beta: float,
                  std_floor: float = STD_FLOOR, device: torch.device | str = "auto") -> None:
-        if not beta >= 0:
-            raise ValueError(f"beta must be non-negative, got {beta}")
+        if not 0 <= beta < math.inf:
+            raise ValueError(f"beta must be non-negative and finite, got {beta}")
         self.beta = float(beta)
         super().__init__(horizon=horizon, action_dim=action_dim, latent_dim=latent_dim, prior="normal",
                          std_floor=std_floor, device=device)

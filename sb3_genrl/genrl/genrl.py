@@ -11,17 +11,17 @@ from typing import Any, ClassVar, Literal, TypeVar
 import numpy as np
 import torch as th
 from gymnasium import spaces
-from sb3_contrib.common.utils import conjugate_gradient_solver, flat_grad
 from stable_baselines3.common.distributions import Distribution, kl_divergence
 from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
 from stable_baselines3.common.policies import ActorCriticPolicy, BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 from stable_baselines3.common.utils import explained_variance
 from torch.nn import functional as F
-from torch.nn.utils import parameters_to_vector, vector_to_parameters
 
 from sb3_genrl.generative.base import TrajectoryGenerator
+from sb3_genrl.genrl.e_step import kl_penalty_e_step, trpo_e_step
 from sb3_genrl.genrl.policies import BoxScaler, MlpPolicy, MultiInputPolicy, default_log_std_init
+from sb3_genrl.utils import atomic_path
 from sb3_genrl.wrappers import latent_action_env
 
 SelfGenRL = TypeVar("SelfGenRL", bound="GenRL")
@@ -45,6 +45,11 @@ class GenRL(OnPolicyAlgorithm):
     not a policy (an alias such as ``"MlpPolicy"`` or a policy class), it is taken as the env and the second as the
     generator. A raw env (or Gymnasium id) is wrapped in :class:`~sb3_genrl.LatentActionWrapper`; a wrapped env
     (or a VecEnv of wrapped envs) is used as is and provides the generator when none is given.
+
+    Policies with dropout or batch norm (``policy_kwargs``) work as in SB3: rollouts and the E-step see the policy in
+    evaluation mode (the E-step's ratio ``q/pi`` then starts at 1 and its KL at 0), the value-function fit in training
+    mode. A TRPO step whose KL model has no positive curvature, or whose candidates' distributions are invalid, is
+    not taken.
 
     Logs (``train/``): ``mean_reward``, ``max_reward`` (of the iteration's N episodes), ``kl`` (achieved
     ``KL(q || pi)``), ``entropy``, ``std``, ``value_loss``, ``explained_variance``, ``policy_objective`` and, for the
@@ -192,7 +197,10 @@ class GenRL(OnPolicyAlgorithm):
 
     def train(self) -> None:
         """One EM iteration (Algorithm 1) on the N episodes in the rollout buffer."""
-        self.policy.set_training_mode(True)
+        # The E-step evaluates pi and q in evaluation mode, the mode that collected the batch (dropout off, batch-norm
+        # running statistics): q/pi = 1 and KL(q || pi) = 0 at phi = theta. Only the value function trains in
+        # training mode.
+        self.policy.set_training_mode(False)
         self._update_learning_rate(self.policy.optimizer)
 
         # One episode per bandit pull (section 4): the buffer holds {s_i, alpha_i, r_i}, i = 1..N, with
@@ -206,11 +214,8 @@ class GenRL(OnPolicyAlgorithm):
         for _ in range(self.n_em_iterations):  # Algorithm 1's inner loop: repeat E-step and M-step on the batch
             # E-step (eq. 4-5): the variational policy q_phi starts as a copy of pi_theta (phi <- theta) and is
             # optimised on E_{alpha ~ pi}[q/pi A] - KL(q || pi) while pi_theta stays fixed.
-            variational_policy = copy.deepcopy(self.policy)
-            if self.e_step == "trpo":
-                stats = self._trpo_e_step(variational_policy, observations, actions, log_prob_pi, advantages)
-            else:
-                stats = self._kl_penalty_e_step(variational_policy, observations, actions, log_prob_pi, advantages)
+            variational_policy = copy.deepcopy(self.policy)  # in evaluation mode, as pi
+            stats = self._e_step(variational_policy, (observations, actions, log_prob_pi, advantages))
             with th.no_grad():
                 q_distribution = variational_policy.get_distribution(observations)
                 stats["kl"] = kl_divergence(q_distribution, self._pi(observations)).mean().item()  # achieved KL(q || pi)
@@ -219,7 +224,9 @@ class GenRL(OnPolicyAlgorithm):
             self.policy.load_state_dict(variational_policy.state_dict())
 
         # Value function (Algorithm 1, last line): V = argmin_V' sum_i (V'(s_i) - r_i)^2, by Adam on minibatches.
+        self.policy.set_training_mode(True)
         value_losses = self._fit_value_function()
+        self.policy.set_training_mode(False)
 
         self._n_updates += 1
         rewards, entropy = self.rollout_buffer.rewards, self._pi(observations).entropy()
@@ -239,69 +246,14 @@ class GenRL(OnPolicyAlgorithm):
         with th.no_grad():
             return self.policy.get_distribution(observations)
 
-    def _surrogate(
-        self, q: ActorCriticPolicy, observations: th.Tensor, actions: th.Tensor, log_prob_pi: th.Tensor, advantages: th.Tensor
-    ) -> tuple[th.Tensor, th.Tensor]:
-        """Eq. 5's terms: E_{alpha ~ pi}[q(alpha|s) / pi(alpha|s) A(s, alpha)] and E_s[KL(q(.|s) || pi(.|s))]."""
-        q_distribution = q.get_distribution(observations)
-        ratio = th.exp(q_distribution.log_prob(actions) - log_prob_pi)
-        return (ratio * advantages).mean(), kl_divergence(q_distribution, self._pi(observations)).mean()
-
-    def _trpo_e_step(self, q: ActorCriticPolicy, *batch: th.Tensor) -> dict[str, float]:
-        """E-step, TRPO variant: maximise eq. 5's surrogate subject to KL(q || pi) < target_kl (Schulman et al. 2015)."""
-        objective, kl = self._surrogate(q, *batch)
-        # Actor parameters of q: those the KL depends on (the value head is not part of q(alpha|s)).
-        named = [p for name, p in q.named_parameters() if "value" not in name]
-        grads_kl = th.autograd.grad(kl, named, create_graph=True, allow_unused=True)
-        params = [p for p, g in zip(named, grads_kl, strict=True) if g is not None]
-        grad_kl = th.cat([g.reshape(-1) for g in grads_kl if g is not None])
-        grad_objective = flat_grad(objective, params, retain_graph=True)
-
-        def fisher_vector_product(vector: th.Tensor, retain_graph: bool = True) -> th.Tensor:
-            return flat_grad((grad_kl * vector).sum(), params, retain_graph=retain_graph) + self.cg_damping * vector
-
-        # Natural-gradient direction F^-1 g (conjugate gradient), scaled so that the quadratic KL model equals target_kl.
-        direction = conjugate_gradient_solver(fisher_vector_product, grad_objective, max_iter=self.cg_max_steps)
-        curvature = float(th.dot(direction, fisher_vector_product(direction, retain_graph=False)))
-        max_step = float(np.sqrt(2 * self.target_kl / max(curvature, 1e-12)))
-
-        # Backtracking line search: accept the first step that improves the surrogate within the KL bound.
-        phi_0 = parameters_to_vector(params).detach().clone()
-        fraction, success = 1.0, False
-        with th.no_grad():
-            for _ in range(self.line_search_max_iter):
-                vector_to_parameters(phi_0 + fraction * max_step * direction, params)
-                new_objective, new_kl = self._surrogate(q, *batch)
-                if new_kl < self.target_kl and new_objective > objective:
-                    success = True
-                    break
-                fraction *= self.line_search_shrinking_factor
-            if not success:  # no acceptable step: q stays equal to pi
-                vector_to_parameters(phi_0, params)
-                new_objective, fraction = objective, 0.0
-        return {
-            "policy_objective": float(new_objective),
-            "line_search_success": float(success),
-            "accepted_fraction": fraction,
-            "step_size": fraction * max_step,
-        }
-
-    def _kl_penalty_e_step(self, q: ActorCriticPolicy, *batch: th.Tensor) -> dict[str, float]:
-        """E-step, KL-penalty variant: eq. 5 taken literally, E[q/pi A] - kl_coef KL(q || pi), by Adam."""
-        params = [p for name, p in q.named_parameters() if "value" not in name]
-        optimizer = th.optim.Adam(params, lr=self.e_step_learning_rate)
-        n = len(batch[0])
-        for _ in range(self.n_e_step_epochs):
-            permutation = th.randperm(n, device=self.device)
-            for start in range(0, n, self.batch_size):
-                indices = permutation[start : start + self.batch_size]
-                objective, kl = self._surrogate(q, *(tensor[indices] for tensor in batch))
-                optimizer.zero_grad()
-                (-(objective - self.kl_coef * kl)).backward()
-                optimizer.step()
-        with th.no_grad():
-            objective, kl = self._surrogate(q, *batch)
-        return {"policy_objective": float(objective - self.kl_coef * kl)}
+    def _e_step(self, q: ActorCriticPolicy, batch: tuple[th.Tensor, th.Tensor, th.Tensor, th.Tensor]) -> dict[str, float]:
+        """E-step (eq. 4-5) on ``q``, a copy of the policy: the TRPO step or the KL-penalty variant."""
+        if self.e_step == "trpo":
+            return trpo_e_step(q, self.policy, batch, target_kl=self.target_kl, cg_max_steps=self.cg_max_steps,
+                               cg_damping=self.cg_damping, line_search_shrinking_factor=self.line_search_shrinking_factor,
+                               line_search_max_iter=self.line_search_max_iter)
+        return kl_penalty_e_step(q, self.policy, batch, kl_coef=self.kl_coef, n_epochs=self.n_e_step_epochs,
+                                 batch_size=self.batch_size, learning_rate=self.e_step_learning_rate)
 
     def _fit_value_function(self) -> list[float]:
         actor_params = [p for name, p in self.policy.named_parameters() if "value" not in name]
@@ -335,13 +287,22 @@ class GenRL(OnPolicyAlgorithm):
         return [*super()._excluded_save_params(), "generator"]
 
     def save(self, path: str | pathlib.Path | io.BufferedIOBase, exclude: Any = None, include: Any = None) -> None:
-        """Save like SB3. An in-memory generator (no known path) is also saved as ``<name>.generator.pt`` beside it."""
-        if self.generator_path is None and self.generator is not None and isinstance(path, str | pathlib.Path):
+        """Save like SB3, atomically for a file path (a ``.zip`` suffix is added when there is none, as SB3 does).
+
+        An in-memory generator (no known path) is also saved as ``<name>.generator.pt`` beside it.
+        """
+        if not isinstance(path, str | pathlib.Path):
+            super().save(path, exclude=exclude, include=include)
+            return
+        final = pathlib.Path(path)
+        final = final if final.suffix else final.with_name(final.name + ".zip")
+        if self.generator_path is None and self.generator is not None:
             try:
-                self.generator.save(str(_generator_file(path)))
+                self.generator.save(str(_generator_file(final)))
             except NotImplementedError:
                 pass  # a generator that cannot be saved: GenRL.load then needs generator=
-        super().save(path, exclude=exclude, include=include)
+        with atomic_path(final) as tmp:
+            super().save(tmp, exclude=exclude, include=include)
 
     @classmethod
     def load(  # type: ignore[override]

@@ -40,8 +40,9 @@ class BoxScaler(BaseFeaturesExtractor):
         low = np.asarray(observation_space.low, dtype=np.float64).ravel()
         high = np.asarray(observation_space.high, dtype=np.float64).ravel()
         bounded = np.isfinite(low) & np.isfinite(high) & (high > low)
-        centre = np.where(bounded, (low + high) / 2, 0.0)
-        half_width = np.where(bounded, (high - low) / 2, 1.0)
+        centre, half_width = np.zeros_like(low), np.ones_like(low)
+        centre[bounded] = (low[bounded] + high[bounded]) / 2  # only bounded entries: inf - inf would warn
+        half_width[bounded] = (high[bounded] - low[bounded]) / 2
         self.register_buffer("centre", th.as_tensor(centre, dtype=th.float32))
         self.register_buffer("half_width", th.as_tensor(half_width, dtype=th.float32))
 

@@ -7,7 +7,6 @@ the functions so that the core library (:class:`~sb3_genrl.GenRL`) never imports
 from __future__ import annotations
 
 import csv
-import json
 import math
 import os
 import pathlib
@@ -21,6 +20,7 @@ from sb3_genrl.callbacks import EpisodeRecorder
 from sb3_genrl.curves import plot_curves
 from sb3_genrl.generative.base import TrajectoryGenerator
 from sb3_genrl.genrl.genrl import EStep, GenRL
+from sb3_genrl.utils import atomic_write_json
 
 
 class LearningCurveCallback(BaseCallback):
@@ -96,6 +96,16 @@ def evaluate_on_goals(model: GenRL, task: str, goals: int = 100, seed: int = 0,
     return goal_array, rewards, infos
 
 
+def _resolve_env_id(task: str) -> tuple[str, str]:
+    """The Gymnasium id and name of a registered task, or of any registered Gymnasium id (a user's own env)."""
+    from sb3_genrl.envs import TASKS, get_task
+
+    if task not in TASKS and task in gym.registry:
+        return task, task
+    spec = get_task(task)  # raises, listing the registered tasks
+    return spec.env_id, spec.name
+
+
 def train_policy(
     task: str,
     generator: TrajectoryGenerator | str,
@@ -116,7 +126,7 @@ def train_policy(
     written as training goes), ``learning_curve.png``, ``episodes.csv`` (one row per episode, as the baselines write it) and
     TensorBoard logs under ``tensorboard/``.
 
-    :param task: a task name from :data:`sb3_genrl.envs.TASKS` or its Gymnasium id
+    :param task: a task name from :data:`sb3_genrl.envs.TASKS`, or any registered Gymnasium id
     :param generator: the trajectory generator or the path of a saved one
     :param episodes: total episodes (trajectories played); rounded up to whole iterations
     :param seed: random seed
@@ -134,13 +144,10 @@ def train_policy(
         raise ValueError(f"episodes must be a positive integer, got {episodes!r}")
     if int(batch_episodes) != batch_episodes or batch_episodes < 2:
         raise ValueError(f"batch_episodes must be an integer >= 2, got {batch_episodes!r}")
-    from sb3_genrl.envs import get_task
-
-    spec = get_task(task)
+    env_id, task_name = _resolve_env_id(task)
     out = pathlib.Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    model = GenRL(
-        gym.make(spec.env_id),
+    model = GenRL(  # built first: a generator that does not fit the task is refused before anything is written
+        gym.make(env_id),
         generator,
         e_step=e_step,
         n_steps=batch_episodes,
@@ -151,6 +158,7 @@ def train_policy(
         verbose=verbose,
         **genrl_kwargs,
     )
+    out.mkdir(parents=True, exist_ok=True)
     curve = LearningCurveCallback(out / "learning_curve.csv")
     callbacks = [EpisodeRecorder(out / "episodes.csv"), curve]
     model.learn(total_timesteps=int(episodes), callback=callbacks, progress_bar=progress_bar, tb_log_name="GenRL")
@@ -158,10 +166,10 @@ def train_policy(
     episodes_played = np.array([row["episodes"] for row in curve.rows])
     mean_rewards = [row["mean_reward"] for row in curve.rows]
     plot_curves({"GenRL": (episodes_played, np.array(mean_rewards), None)}, out / "learning_curve.png",
-                ylabel="mean reward per iteration", title=f"GenRL on {spec.env_id} (seed {seed})")
+                ylabel="mean reward per iteration", title=f"GenRL on {env_id} (seed {seed})")
     result = {
         "algorithm": "genrl",
-        "task": spec.name,
+        "task": task_name,
         "seed": seed,
         "model_path": str(out / "genrl_policy.zip"),
         "csv_path": str(curve.csv_path),
@@ -173,5 +181,5 @@ def train_policy(
         "final_mean_reward": mean_rewards[-1] if mean_rewards else math.nan,
         "best_mean_reward": max(mean_rewards) if mean_rewards else math.nan,
     }
-    (out / "summary.json").write_text(json.dumps(result, indent=2))
+    atomic_write_json(out / "summary.json", result)
     return result

@@ -9,12 +9,15 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import io
 import math
 import os
 from collections.abc import Mapping, Sequence
 
 import numpy as np
 from scipy.stats import pearsonr
+
+from sb3_genrl.utils import atomic_write_text
 
 DEFAULT_MEASURES = ("precision", "recall", "delta_1", "delta_2", "mean_delta")
 ALL_MODELS = "ALL"
@@ -68,11 +71,12 @@ class CorrelationTable:
 
     def to_csv(self, path: str | os.PathLike) -> None:
         """Write the rows to ``path`` as CSV with full float precision (``nan`` for undefined values)."""
-        with open(path, "w", newline="") as file:
-            writer = csv.writer(file)
-            writer.writerow(_COLUMNS)
-            for row in self.rows:
-                writer.writerow([row.group, row.measure, row.num_models, repr(row.pearson_r), repr(row.p_value), row.note])
+        table = io.StringIO()
+        writer = csv.writer(table)
+        writer.writerow(_COLUMNS)
+        for row in self.rows:
+            writer.writerow([row.group, row.measure, row.num_models, repr(row.pearson_r), repr(row.p_value), row.note])
+        atomic_write_text(path, table.getvalue(), newline="")
 
 
 def pearson(x: np.ndarray, y: np.ndarray) -> tuple[float, float, str]:

@@ -22,6 +22,7 @@ from sb3_genrl.metrics.precision_recall import (
     as_points,
     block_size,
     membership,
+    power_of_two_scale,
     prepare,
     squared_radii,
 )
@@ -142,7 +143,7 @@ def dwpr(generator: TrajectoryGenerator, n: int = DEFAULT_DWPR_SAMPLES, interven
 
     reference = as_points(decode_batched(generator, generator.sample_prior(size, rng)), "reference trajectories")
     shift = reference.mean(0, dtype=np.float64)
-    reference_set = prepare(reference, shift, torch_device)
+    reference_set = prepare(reference, shift, power_of_two_scale([("reference", reference)], shift), torch_device)
     precision = np.empty(generator.latent_dim)
     recall = np.empty(generator.latent_dim)
     with torch.no_grad():
@@ -151,7 +152,10 @@ def dwpr(generator: TrajectoryGenerator, n: int = DEFAULT_DWPR_SAMPLES, interven
             latents = generator.sample_prior(size, rng)
             latents[:, dim] = np.repeat(values, n)  # n samples per intervention alpha_l = I_d
             intervened = as_points(decode_batched(generator, latents), f"trajectories intervened on dimension {dim}")
-            intervened_set = prepare(intervened, shift, torch_device)
+            scale = power_of_two_scale([("reference", reference), ("intervened", intervened)], shift)
+            if scale * scale != reference_set.sq_scale:  # both sets in the same float32 units
+                reference_set = prepare(reference, shift, scale, torch_device)
+            intervened_set = prepare(intervened, shift, scale, torch_device)
             intervened_radii = squared_radii(intervened_set, k, block)
             inside_reference, reference_inside = membership(reference_set, reference_radii, intervened_set,
                                                             intervened_radii, block)

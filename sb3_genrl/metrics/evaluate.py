@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
-import json
+import io
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -19,6 +19,7 @@ from sb3_genrl.generative.base import TrajectoryGenerator
 from sb3_genrl.metrics.dwpr import DEFAULT_DWPR_SAMPLES, DEFAULT_INTERVENTIONS, DwPR, decode_batched, dwpr
 from sb3_genrl.metrics.plots import labelled_scatter
 from sb3_genrl.metrics.precision_recall import PrecisionRecall, precision_recall
+from sb3_genrl.utils import atomic_write_json, atomic_write_text
 
 # Paper section 6.1.2: 15000 generated against 15000 fixed, randomly chosen training trajectories, k = 3.
 DEFAULT_SAMPLES = 15000
@@ -84,30 +85,32 @@ def _as_generator(model: str | os.PathLike | TrajectoryGenerator, device: torch.
 
 
 def write_results(evaluations: Sequence[GeneratorEvaluation], out_dir: str | os.PathLike) -> None:
-    """Write ``results.csv``, ``results.md``, ``results.json`` and the two scatter plots into ``out_dir``."""
+    """Write ``results.csv``, ``results.md``, the two scatter plots and, last, ``results.json`` into ``out_dir``
+    (each file atomically)."""
     out = Path(out_dir)
     rows = [evaluation.row() for evaluation in evaluations]
-    with open(out / "results.csv", "w", newline="") as file:
-        writer = csv.DictWriter(file, fieldnames=TABLE_COLUMNS)
-        writer.writeheader()
-        writer.writerows({key: repr(value) if isinstance(value, float) else value for key, value in row.items()}
-                         for row in rows)
+    table = io.StringIO()
+    writer = csv.DictWriter(table, fieldnames=TABLE_COLUMNS)
+    writer.writeheader()
+    writer.writerows({key: repr(value) if isinstance(value, float) else value for key, value in row.items()}
+                     for row in rows)
+    atomic_write_text(out / "results.csv", table.getvalue(), newline="")
     lines = ["| " + " | ".join(TABLE_COLUMNS) + " |", "|---" + "|---:" * (len(TABLE_COLUMNS) - 1) + "|"]
     lines += ["| " + " | ".join([str(row["model"])] + [f"{row[c]:.3f}" for c in TABLE_COLUMNS[1:]]) + " |" for row in rows]
-    (out / "results.md").write_text("\n".join(lines) + "\n")
-    details = [{**evaluation.row(), "delta": evaluation.dwpr.delta.tolist(),
-                "dwpr_precision": evaluation.dwpr.precision.tolist(), "dwpr_recall": evaluation.dwpr.recall.tolist(),
-                "intervention_values": evaluation.dwpr.intervention_values.tolist(), "k": evaluation.dwpr.k,
-                "num_real": evaluation.precision_recall.num_real,
-                "num_generated": evaluation.precision_recall.num_generated, "dwpr_n": evaluation.dwpr.n}
-               for evaluation in evaluations]
-    (out / "results.json").write_text(json.dumps(details, indent=2) + "\n")
+    atomic_write_text(out / "results.md", "\n".join(lines) + "\n")
     labels = [str(row["model"]) for row in rows]
     labelled_scatter([row["precision"] for row in rows], [row["recall"] for row in rows], labels,
                      out / "precision_recall.png", xlabel="precision", ylabel="recall", title="Precision and recall")
     labelled_scatter([row["delta_1"] for row in rows], [row["mean_delta"] for row in rows], labels,
                      out / "disentanglement.png", xlabel="delta_1", ylabel="mean delta (delta tilde)",
                      title="Disentanglement (DwPR)")
+    details = [{**evaluation.row(), "delta": evaluation.dwpr.delta.tolist(),
+                "dwpr_precision": evaluation.dwpr.precision.tolist(), "dwpr_recall": evaluation.dwpr.recall.tolist(),
+                "intervention_values": evaluation.dwpr.intervention_values.tolist(), "k": evaluation.dwpr.k,
+                "num_real": evaluation.precision_recall.num_real,
+                "num_generated": evaluation.precision_recall.num_generated, "dwpr_n": evaluation.dwpr.n}
+               for evaluation in evaluations]
+    atomic_write_json(out / "results.json", details)  # last: its presence marks a complete evaluation
 
 
 def evaluate_generators(models: Sequence[str | os.PathLike | TrajectoryGenerator] | Mapping[str, str | os.PathLike

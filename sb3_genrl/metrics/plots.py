@@ -8,17 +8,19 @@ from collections.abc import Sequence
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from sb3_genrl.utils import atomic_path
+
 
 def labelled_scatter(x: Sequence[float], y: Sequence[float], labels: Sequence[str], path: str | os.PathLike, *,
                      xlabel: str, ylabel: str, title: str = "") -> None:
-    """Save a scatter plot of ``(x, y)`` with each point annotated by its label as a PNG.
+    """Save a scatter plot of ``(x, y)`` with each point annotated by its label as a PNG (written atomically).
 
     Drawn with the Agg canvas directly, so the caller's pyplot backend and state are left alone.
 
     :param x: horizontal values, one per model
     :param y: vertical values, one per model
     :param labels: model names
-    :param path: output PNG path
+    :param path: output path (PNG unless its suffix names another format)
     :param xlabel: horizontal axis label
     :param ylabel: vertical axis label
     :param title: figure title
@@ -37,4 +39,5 @@ def labelled_scatter(x: Sequence[float], y: Sequence[float], labels: Sequence[st
         axes.set_title(title)
     axes.grid(True, alpha=0.3)
     figure.tight_layout()
-    figure.savefig(path, dpi=120)
+    with atomic_path(path) as tmp:
+        figure.savefig(tmp, dpi=120, format=os.path.splitext(path)[1][1:] or "png")

@@ -7,20 +7,23 @@ recall the share of real samples inside the generated manifold (paper eq. (prec_
 Distances are computed block by block as ``|x|^2 + |y|^2 - 2 x.y^T`` with float32 matrix products (BLAS or GPU);
 no ``N x N`` matrix is ever held. Float32 rounding does not change a result: every decision whose float32 margin lies
 within the worst-case rounding bound is settled with the direct float64 sum of squared coordinate differences of
-the original values, which also decides exact ties.
+the original values, which also decides exact ties. The float32 values are centred and scaled by a power of two
+(exact, order-preserving) so that they neither overflow nor underflow, whatever the magnitude of the samples.
 """
 
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
 import torch
 from stable_baselines3.common.utils import get_device
 
-# Unit roundoff of float32.
+# Unit roundoff of float32, and the absolute rounding error of a float32 result in the subnormal range.
 _U32 = 2.0**-24
+_SUBNORMAL32 = 2.0**-149
 DEFAULT_MEMORY_BUDGET_MB = 256.0
 # Bytes of temporaries per element of a distance block (the block, a margin buffer, reductions).
 _BYTES_PER_BLOCK_ELEMENT = 12
@@ -49,11 +52,12 @@ class PrecisionRecall:
 
 
 class _PreparedSet(NamedTuple):
-    """A point set on the device: original values, centred float32 values and their squared norms."""
+    """A point set on the device: original values, centred and scaled float32 values and their squared norms."""
 
     original: torch.Tensor  # (n, d) float32 or float64 as given, used (in float64) for the exact direct distances
-    centred: torch.Tensor  # (n, d) float32, used for the fast matrix products
+    centred: torch.Tensor  # (n, d) float32 (x - shift) * scale, used for the fast matrix products
     sq_norms: torch.Tensor  # (n,) float32
+    sq_scale: float  # scale**2: float32 squared distances are the original ones times sq_scale
 
 
 def as_points(samples: np.ndarray, name: str) -> np.ndarray:
@@ -87,23 +91,54 @@ def block_size(num_points: int, batch_size: int | None, memory_budget_mb: float)
     return -(-num_points // num_blocks)
 
 
-def prepare(points: np.ndarray, shift: np.ndarray, device: torch.device) -> _PreparedSet:
-    """Move a ``(N, D)`` point set to ``device`` and translate it by ``-shift`` (in float64, then rounded to float32)."""
+def _rows_per_chunk(dim: int) -> int:
+    return max(1, 2**22 // max(1, dim))  # rows per float64 chunk (32 MiB)
+
+
+def power_of_two_scale(point_sets: Sequence[tuple[str, np.ndarray]], shift: np.ndarray) -> float:
+    """The power of two that brings the largest ``|x - shift|`` coordinate into ``[0.5, 1)`` (1 when all are 0).
+
+    Scaling by a power of two is exact and keeps every comparison of distances, so the float32 products work on
+    values of order 1 whatever the samples' magnitude. Raises a ``ValueError`` when squared distances would overflow
+    float64, where no exact answer exists.
+    """
+    largest = 0.0
+    for _, points in point_sets:
+        step = _rows_per_chunk(points.shape[1])
+        for start in range(0, len(points), step):
+            largest = max(largest, float(np.abs(points[start:start + step] - shift).max()))
+    dim = point_sets[0][1].shape[1]
+    limit = float(np.sqrt(np.finfo(np.float64).max / (16 * dim)))
+    if largest > limit:
+        names = " and ".join(name for name, _ in point_sets)
+        raise ValueError(f"{names} samples lie up to {largest:.3g} from the real mean: their squared distances would "
+                         f"overflow float64 (the limit for {dim} values per sample is {limit:.3g}); rescale the samples")
+    return 1.0 if largest == 0 else float(np.ldexp(1.0, -np.frexp(largest)[1]))
+
+
+def prepare(points: np.ndarray, shift: np.ndarray, scale: float, device: torch.device) -> _PreparedSet:
+    """Move a ``(N, D)`` point set to ``device``, translate it by ``-shift`` and scale it by ``scale`` (a power of two;
+    in float64, then rounded to float32)."""
     original = torch.as_tensor(points, device=device)
     shift_t = torch.as_tensor(shift, dtype=torch.float64, device=device)
     centred = torch.empty(original.shape, dtype=torch.float32, device=device)
     sq_norms = torch.empty(len(original), dtype=torch.float32, device=device)
-    step = max(1, 2**22 // max(1, original.shape[1]))  # rows per float64 chunk (32 MiB)
+    step = _rows_per_chunk(original.shape[1])
     for start in range(0, len(original), step):
-        centred[start:start + step] = original[start:start + step].double() - shift_t
+        centred[start:start + step] = (original[start:start + step].double() - shift_t) * scale
         sq_norms[start:start + step] = (centred[start:start + step].double() ** 2).sum(1)
-    return _PreparedSet(original, centred, sq_norms)
+    return _PreparedSet(original, centred, sq_norms, scale * scale)
 
 
 def _float32_tolerance(dim: int) -> float:
     # Error bound of a float32 squared distance |x|^2 + |y|^2 - 2 x.y, relative to |x|^2 + |y|^2: the dot
     # products (gamma_D each) plus the rounding of the centred inputs and of the additions.
     return (2 * dim + 16) * _U32
+
+
+def _float32_floor(dim: int) -> float:
+    # The same operations' absolute error bound where their results fall in float32's subnormal range.
+    return (2 * dim + 16) * _SUBNORMAL32
 
 
 def _pair_factors(a: _PreparedSet, a_offset: torch.Tensor, b: _PreparedSet, b_offset: torch.Tensor
@@ -192,7 +227,7 @@ def squared_radii(points: _PreparedSet, k: int, block: int) -> torch.Tensor:
                 best = torch.topk(sq.T.contiguous(), min(keep, i1 - i0), dim=1, largest=False)
                 values[j0:j1], indices[j0:j1] = _merge_topk(values[j0:j1], indices[j0:j1], best.values,
                                                             best.indices + i0, keep)
-    tol = _float32_tolerance(dim) * (points.sq_norms + points.sq_norms.max())
+    tol = _float32_tolerance(dim) * (points.sq_norms + points.sq_norms.max()) + _float32_floor(dim)
     certain = (values[:, k] - values[:, k - 1]) > 2 * tol if keep > k else torch.ones(n, dtype=torch.bool, device=device)
     # Among the first k candidates of a certain row, only those within twice the bound of the k-th can be the
     # farthest; the exact radius is the largest of their direct distances.
@@ -209,7 +244,7 @@ def _exact_inside(points: _PreparedSet, rows: torch.Tensor, others: _PreparedSet
                   tol: torch.Tensor, block: int) -> torch.Tensor:
     """Exact test of ``rows`` of ``points`` against the balls of ``others``: margins clear of 0 by the float32 bound
     ``tol`` decide, the others are settled by direct distances."""
-    left, right = _pair_factors(points, points.sq_norms, others, others.sq_norms - other_sq_radii.float())
+    left, right = _pair_factors(points, points.sq_norms, others, others.sq_norms - (other_sq_radii * others.sq_scale).float())
     inside = torch.zeros(len(rows), dtype=torch.bool, device=rows.device)
     step = _row_chunk(block, len(right))
     for r0 in range(0, len(rows), step):
@@ -232,10 +267,12 @@ def membership(real: _PreparedSet, real_sq_radii: torch.Tensor, generated: _Prep
 
     :return: ``(generated_inside_real, real_inside_generated)`` boolean tensors
     """
+    if real.sq_scale != generated.sq_scale:
+        raise ValueError("both point sets must be prepared with the same scale")
     n_real, n_gen = real.centred.shape[0], generated.centred.shape[0]
     device = real.centred.device
-    r_real = real_sq_radii.float()
-    r_gen = generated_sq_radii.float()
+    r_real = (real_sq_radii * real.sq_scale).float()  # in the units of the float32 values
+    r_gen = (generated_sq_radii * generated.sq_scale).float()
     # Real row i, generated column j: q = |x_i - y_j|^2 - r_real_i - r_gen_j, so that the smallest q of a column
     # plus r_gen_j is that generated sample's margin and the smallest q of a row plus r_real_i the real one's.
     left, right = _pair_factors(real, real.sq_norms - r_real, generated, generated.sq_norms - r_gen)
@@ -253,8 +290,9 @@ def membership(real: _PreparedSet, real_sq_radii: torch.Tensor, generated: _Prep
     results = []
     for points, margin, own_radii, others, other_radii in ((generated, gen_margin, r_gen, real, real_sq_radii),
                                                            (real, real_margin, r_real, generated, generated_sq_radii)):
-        tol = _float32_tolerance(points.centred.shape[1]) * (points.sq_norms + own_radii + others.sq_norms.max()
-                                                             + other_radii.max().float())
+        dim = points.centred.shape[1]
+        tol = _float32_tolerance(dim) * (points.sq_norms + own_radii + others.sq_norms.max()
+                                         + (other_radii.max() * others.sq_scale).float()) + _float32_floor(dim)
         inside = margin < -tol
         rows = (margin.abs() <= tol).nonzero(as_tuple=True)[0]
         if len(rows):
@@ -275,7 +313,9 @@ def precision_recall(real: np.ndarray, generated: np.ndarray, k: int = 3, *, bat
     package uses ``<`` instead, which differs only on exact ties).
 
     Float precision: blocks are computed in float32 as ``|x|^2 + |y|^2 - 2 x.y^T`` after centring both sets on
-    the real set's mean. Each float32 value is within a worst-case rounding bound (``(2D + 16) * 2**-24`` times
+    the real set's mean and scaling them by a power of two (largest coordinate in ``[0.5, 1)``; exact, and it keeps
+    every comparison), so any magnitude works whose squared distances fit in float64 (larger values raise a
+    ``ValueError``). Each float32 value is within a worst-case rounding bound (``(2D + 16) * 2**-24`` times
     ``|x|^2 + |y|^2``, plus the radii for margins) of the exact one. Every comparison that this bound leaves open (a
     radius whose k-th and (k+1)-th float32 candidates are that close, a sample whose margin to a ball is that
     close to 0) is settled with the direct float64 sum of squared differences of the original values. Results
@@ -309,8 +349,9 @@ def precision_recall(real: np.ndarray, generated: np.ndarray, k: int = 3, *, bat
     torch_device = get_device(device)
     block = block_size(max(len(real_points), len(gen_points)), batch_size, memory_budget_mb)
     shift = real_points.mean(0, dtype=np.float64)
-    real_set = prepare(real_points, shift, torch_device)
-    gen_set = prepare(gen_points, shift, torch_device)
+    scale = power_of_two_scale((("real", real_points), ("generated", gen_points)), shift)
+    real_set = prepare(real_points, shift, scale, torch_device)
+    gen_set = prepare(gen_points, shift, scale, torch_device)
     with torch.no_grad():
         real_radii = squared_radii(real_set, k, block)
         gen_radii = squared_radii(gen_set, k, block)

@@ -1,0 +1,114 @@
+"""GenRL's E-step (paper section 4, eq. 4-5): optimise the variational policy ``q_phi`` while ``pi_theta`` stays fixed.
+
+Two variants: a TRPO step (natural gradient of eq. 5's surrogate within the trust region ``KL(q || pi) < delta``,
+with sb3-contrib's conjugate gradient and a backtracking line search) and eq. 5 taken literally (surrogate minus a
+KL penalty, maximised by Adam). Both evaluate ``q`` and ``pi`` as given; :meth:`GenRL.train` puts them in evaluation
+mode, the mode that collected the batch.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch as th
+from sb3_contrib.common.utils import conjugate_gradient_solver, flat_grad
+from stable_baselines3.common.distributions import kl_divergence
+from stable_baselines3.common.policies import ActorCriticPolicy
+from torch.nn.utils import parameters_to_vector, vector_to_parameters
+
+Batch = tuple[th.Tensor, th.Tensor, th.Tensor, th.Tensor]  # observations, actions, log pi(actions), advantages
+
+
+def surrogate(q: ActorCriticPolicy, pi: ActorCriticPolicy, batch: Batch) -> tuple[th.Tensor, th.Tensor]:
+    """Eq. 5's terms: E_{alpha ~ pi}[q(alpha|s) / pi(alpha|s) A(s, alpha)] and E_s[KL(q(.|s) || pi(.|s))].
+
+    :param q: the variational policy (gradients flow through it)
+    :param pi: the fixed policy (no gradient)
+    :param batch: observations, actions, their log-probabilities under the policy that collected them, advantages
+    """
+    observations, actions, log_prob_pi, advantages = batch
+    q_distribution = q.get_distribution(observations)
+    ratio = th.exp(q_distribution.log_prob(actions) - log_prob_pi)
+    with th.no_grad():
+        pi_distribution = pi.get_distribution(observations)
+    return (ratio * advantages).mean(), kl_divergence(q_distribution, pi_distribution).mean()
+
+
+def _candidate(q: ActorCriticPolicy, pi: ActorCriticPolicy, batch: Batch) -> tuple[float, float] | None:
+    """Eq. 5's surrogate and KL for a line-search candidate, or ``None`` when its distribution is invalid."""
+    try:
+        objective, kl = surrogate(q, pi, batch)
+    except ValueError:  # torch.distributions rejected a non-finite mean or a non-positive standard deviation
+        return None
+    objective_value, kl_value = objective.item(), kl.item()
+    return (objective_value, kl_value) if np.isfinite(objective_value) and np.isfinite(kl_value) else None
+
+
+def trpo_e_step(q: ActorCriticPolicy, pi: ActorCriticPolicy, batch: Batch, *, target_kl: float, cg_max_steps: int,
+                cg_damping: float, line_search_shrinking_factor: float, line_search_max_iter: int) -> dict[str, float]:
+    """E-step, TRPO variant: maximise eq. 5's surrogate subject to KL(q || pi) < target_kl (Schulman et al. 2015).
+
+    ``q``'s actor parameters are changed in place; when no step is acceptable (no candidate improves the surrogate
+    within the bound, the quadratic KL model has no positive curvature, or candidates have invalid distributions)
+    ``q`` stays equal to ``pi``.
+
+    :return: ``policy_objective``, ``line_search_success``, ``accepted_fraction`` (of the full step), ``step_size``
+    """
+    objective, kl = surrogate(q, pi, batch)
+    # Actor parameters of q: those the KL depends on (the value head is not part of q(alpha|s)).
+    named = [p for name, p in q.named_parameters() if "value" not in name]
+    grads_kl = th.autograd.grad(kl, named, create_graph=True, allow_unused=True)
+    params = [p for p, g in zip(named, grads_kl, strict=True) if g is not None]
+    grad_kl = th.cat([g.reshape(-1) for g in grads_kl if g is not None])
+    grad_objective = flat_grad(objective, params, retain_graph=True)
+
+    def fisher_vector_product(vector: th.Tensor, retain_graph: bool = True) -> th.Tensor:
+        return flat_grad((grad_kl * vector).sum(), params, retain_graph=retain_graph) + cg_damping * vector
+
+    # Natural-gradient direction F^-1 g (conjugate gradient), scaled so that the quadratic KL model equals target_kl.
+    direction = conjugate_gradient_solver(fisher_vector_product, grad_objective, max_iter=cg_max_steps).detach()
+    curvature = th.dot(direction, fisher_vector_product(direction, retain_graph=False)).item()
+    objective_0 = objective.item()
+    if not (np.isfinite(curvature) and curvature > 0 and bool(th.isfinite(direction).all())):
+        # No step: F is positive definite in exact arithmetic, a non-positive curvature is numerical breakdown.
+        return {"policy_objective": objective_0, "line_search_success": 0.0, "accepted_fraction": 0.0, "step_size": 0.0}
+    max_step = float(np.sqrt(2 * target_kl / curvature))
+
+    # Backtracking line search: accept the first step that improves the surrogate within the KL bound; a candidate
+    # whose distribution is invalid (e.g. a standard deviation that underflows to 0) is rejected like any other.
+    phi_0 = parameters_to_vector(params).detach().clone()
+    fraction, new_objective = 1.0, objective_0
+    with th.no_grad():
+        for _ in range(line_search_max_iter):
+            vector_to_parameters(phi_0 + fraction * max_step * direction, params)
+            candidate = _candidate(q, pi, batch)
+            if candidate is not None and candidate[1] < target_kl and candidate[0] > objective_0:
+                new_objective = candidate[0]
+                break
+            fraction *= line_search_shrinking_factor
+        else:  # no acceptable step: q stays equal to pi
+            vector_to_parameters(phi_0, params)
+            fraction = 0.0
+    return {"policy_objective": new_objective, "line_search_success": float(fraction > 0),
+            "accepted_fraction": fraction, "step_size": fraction * max_step}
+
+
+def kl_penalty_e_step(q: ActorCriticPolicy, pi: ActorCriticPolicy, batch: Batch, *, kl_coef: float, n_epochs: int,
+                      batch_size: int, learning_rate: float) -> dict[str, float]:
+    """E-step, KL-penalty variant: eq. 5 taken literally, E[q/pi A] - kl_coef KL(q || pi), by Adam on minibatches.
+
+    :return: ``policy_objective``, the penalised objective on the whole batch after the last epoch
+    """
+    params = [p for name, p in q.named_parameters() if "value" not in name]
+    optimizer = th.optim.Adam(params, lr=learning_rate)
+    n = len(batch[0])
+    for _ in range(n_epochs):
+        permutation = th.randperm(n, device=batch[0].device)
+        for start in range(0, n, batch_size):
+            indices = permutation[start : start + batch_size]
+            objective, kl = surrogate(q, pi, tuple(tensor[indices] for tensor in batch))  # type: ignore[arg-type]
+            optimizer.zero_grad()
+            (-(objective - kl_coef * kl)).backward()
+            optimizer.step()
+    with th.no_grad():
+        objective, kl = surrogate(q, pi, batch)
+    return {"policy_objective": (objective - kl_coef * kl).item()}
