@@ -168,3 +168,19 @@ def test_hockey_hits_all_swing_at_the_same_step():
     fastest_steps = {int(np.argmin(sample_hit(rng)[:, 5])) for _ in range(200)}
     assert len(fastest_steps) == 1
     assert HOCKEY_SWING_START <= fastest_steps.pop() < HOCKEY_SWING_START + 6  # inside the 6-step forward swing
+
+
+def test_basketball_throws_all_swing_at_the_same_steps():
+    # One family of throws with one timing: every base throw moves the shoulder on the same 4 control steps, with
+    # the elbow in a fixed proportion, so the demonstrations differ only in yaw and strength (and perturbations).
+    from sb3_genrl.envs.basketball import (BASKETBALL_ELBOW_SHARE, BASKETBALL_STRENGTH, BASKETBALL_SWING_STEPS,
+                                           BASKETBALL_THROW_START, BASKETBALL_YAW, sample_throw)
+
+    rng = np.random.default_rng(3)
+    throws = np.stack([sample_throw(rng) for _ in range(200)])
+    swing_steps = {tuple(np.flatnonzero(throw[:, 1])) for throw in throws}
+    assert swing_steps == {tuple(range(BASKETBALL_THROW_START, BASKETBALL_THROW_START + BASKETBALL_SWING_STEPS))}
+    np.testing.assert_allclose(throws[:, :, 3], BASKETBALL_ELBOW_SHARE * throws[:, :, 1])
+    strengths, yaws = throws[:, :, 1].sum(axis=1), throws[:, :, 0].sum(axis=1)
+    assert BASKETBALL_STRENGTH[0] <= strengths.min() and strengths.max() <= BASKETBALL_STRENGTH[1]
+    assert np.abs(yaws).max() <= BASKETBALL_YAW and yaws.min() < -1.5 and yaws.max() > 1.5

@@ -199,6 +199,24 @@ def test_rgb_array_render():
     env.close()
 
 
+def test_throw_family_spans_the_basket_region_smoothly(basketball):
+    # The expert's strengths reach past the near (1 m) and far (8 m) edges of the region at the extreme yaws too,
+    # and the landing distance grows smoothly with the strength: no fold, no jump between nearby strengths.
+    from sb3_genrl.envs.basketball import BASKETBALL_STRENGTH, BASKETBALL_YAW
+
+    strengths = np.linspace(*BASKETBALL_STRENGTH, 12)
+    for yaw in (-BASKETBALL_YAW, 0.0, BASKETBALL_YAW):
+        _, infos = basketball.play_trajectories(np.stack([scripted_throw(strength=s, yaw=yaw) for s in strengths]),
+                                                np.zeros(2))
+        reached = np.array([info["reached"] for info in infos])
+        assert all(info["crossings"] >= 1 and not info["joint_limit_clipped"] for info in infos)
+        radius, bearing = np.linalg.norm(reached, axis=1), np.arctan2(reached[:, 1], reached[:, 0])
+        assert radius[0] < 1.0 and radius[-1] > 8.0
+        steps = np.diff(radius)
+        assert np.all(steps > 0.2) and np.all(steps < 1.0)
+        np.testing.assert_allclose(bearing[radius > 1.0], yaw, atol=np.radians(2))
+
+
 def test_play_trajectories_refuses_a_chunk_or_thread_count_that_is_not_a_positive_integer(hockey):
     batch, goal = np.stack([scripted_hit(strength=s) for s in (0.8, 1.0, 1.2)]), np.array([1.0, 0.0])
     for name, value in (("chunk", -1), ("chunk", 0), ("chunk", 1.5), ("n_threads", 0), ("n_threads", 2.5),

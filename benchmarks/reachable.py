@@ -1,0 +1,110 @@
+"""What a generator allows on a task: a dense set of its latent actions decoded and played, and each goal's best.
+
+Shared by ``benchmarks/genrl_hockey.py``, ``benchmarks/genrl_basketball.py`` and
+``benchmarks/basketball_diagnosis.py``.
+
+A played trajectory's reward for a goal is minus the distance from the goal to the best of the trajectory's
+*candidate points*, which do not depend on the goal: hockey has one (where the puck rests), basketball one per
+moment the ball comes down through the rim's height (the reward takes the crossing nearest the basket). So playing
+a set of latent actions once gives every goal's best reward over that set exactly, with no simulation per goal.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from sb3_genrl.envs.basketball import BASKET_HEIGHT
+from sb3_genrl.envs.demonstrations import make_env
+from scipy.spatial import cKDTree
+
+from sb3_genrl.generative.base import TrajectoryGenerator
+
+
+def held_out_goals(task: str, n: int, seed: int) -> np.ndarray:
+    """``n`` goals drawn with the task's ``sample_goal`` from ``np.random.default_rng(seed)``, as
+    :func:`sb3_genrl.genrl.evaluate_on_goals` draws them (same seed, same goals)."""
+    env = make_env(task)
+    rng = np.random.default_rng(seed)
+    return np.array([env.sample_goal(rng) for _ in range(n)], dtype=np.float32)
+
+
+def latent_set(generator: TrajectoryGenerator, *, grid: int = 201, extent: float = 3.0, samples: int = 10_000,
+               seed: int = 0) -> np.ndarray:
+    """Dense latent actions: a ``grid x grid`` grid over ``[-extent, extent]^2`` for a 2-D latent space (row-major,
+    first coordinate slowest), else ``samples`` draws from the prior clipped to the same box."""
+    if generator.latent_dim == 2:
+        axis = np.linspace(-extent, extent, grid)
+        return np.stack(np.meshgrid(axis, axis, indexing="ij"), axis=-1).reshape(-1, 2).astype(np.float32)
+    alpha = generator.sample_prior(samples, rng=np.random.default_rng(seed))
+    return np.clip(alpha, -extent, extent).astype(np.float32)
+
+
+def candidate_points(task: str, rows: np.ndarray) -> np.ndarray:
+    """The goal-independent points ``(k, 2)`` among which an episode's reward takes the nearest (see module doc).
+
+    :param task: ``"hockey"`` or ``"basketball"``
+    :param rows: the episode's sensor rows (one per physics step), as the env's ``_outcome`` receives them
+    """
+    position = rows[:, 1:4]
+    if task == "hockey":
+        return position[-1:, :2].copy()
+    height = position[:, 2] - BASKET_HEIGHT
+    crossing = np.flatnonzero((height[:-1] >= 0) & (height[1:] < 0))
+    fraction = height[crossing] / (height[crossing] - height[crossing + 1])
+    return position[crossing, :2] + fraction[:, None] * (position[crossing + 1, :2] - position[crossing, :2])
+
+
+def play_candidates(task: str, trajectories: np.ndarray, *, chunk: int = 2048) -> list[np.ndarray]:
+    """Play trajectories (one thread) and return each one's candidate points; none for an unstable episode."""
+    env = make_env(task)
+    out: list[np.ndarray] = []
+    original = env._finish
+
+    def finish(rows: np.ndarray, goal: np.ndarray, clipped_steps: int) -> tuple[float, dict[str, Any]]:
+        reward, info = original(rows, goal, clipped_steps)
+        out.append(np.zeros((0, 2)) if info.get("unstable") else candidate_points(task, rows))
+        return reward, info
+
+    env._finish = finish  # type: ignore[method-assign]
+    for start in range(0, len(trajectories), chunk):
+        batch = trajectories[start:start + chunk]
+        env.play_trajectories(batch, np.zeros((len(batch), 2)), n_threads=1)
+    return out
+
+
+def nearest(candidates: list[np.ndarray], goals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per goal: the distance to the nearest candidate point of any trajectory and that trajectory's index."""
+    points = np.concatenate([c for c in candidates if len(c)])
+    owner = np.concatenate([np.full(len(c), i) for i, c in enumerate(candidates) if len(c)])
+    distance, index = cKDTree(points).query(np.asarray(goals, dtype=np.float64), k=1)
+    return distance, owner[index]
+
+
+def summary(distances: np.ndarray) -> dict[str, float]:
+    """Mean, median, 90th percentile and maximum of distances (m)."""
+    return {"mean": float(np.mean(distances)), "median": float(np.median(distances)),
+            "p90": float(np.percentile(distances, 90)), "max": float(np.max(distances))}
+
+
+def generator_limit(generator: TrajectoryGenerator, task: str, goals: np.ndarray, *, grid: int = 201,
+                    extent: float = 3.0, check: int = 5) -> dict[str, Any]:
+    """The generator's best reachable distance to each goal over :func:`latent_set`, checked by replaying.
+
+    :param generator: the trajectory generator
+    :param task: ``"hockey"`` or ``"basketball"``
+    :param goals: ``(n, 2)`` goals
+    :param grid: grid points per axis (2-D latents)
+    :param extent: half-width of the latent box (prior stds)
+    :param check: goals whose best latent action is replayed with that goal; its reward must be minus the distance
+    :return: ``distances`` (per goal), ``best_latents``, ``latents``, ``candidates`` and a ``summary``
+    """
+    latents = latent_set(generator, grid=grid, extent=extent)
+    candidates = play_candidates(task, generator.decode(latents))
+    distances, owner = nearest(candidates, goals)
+    env = make_env(task)
+    rewards, _ = env.play_trajectories(generator.decode(latents[owner[:check]]), goals[:check])
+    if not np.allclose(-rewards, distances[:check], atol=1e-6):
+        raise RuntimeError(f"replayed rewards {rewards} differ from minus the grid distances {distances[:check]}")
+    return {"distances": distances, "best_latents": latents[owner], "latents": latents, "candidates": candidates,
+            "summary": summary(distances), "n_latents": len(latents), "grid": grid if generator.latent_dim == 2 else None}
