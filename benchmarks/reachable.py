@@ -14,8 +14,8 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from sb3_genrl.envs import get_task
 from sb3_genrl.envs.basketball import BASKET_HEIGHT
-from sb3_genrl.envs.demonstrations import make_env
 from scipy.spatial import cKDTree
 
 from sb3_genrl.generative.base import TrajectoryGenerator
@@ -24,7 +24,7 @@ from sb3_genrl.generative.base import TrajectoryGenerator
 def held_out_goals(task: str, n: int, seed: int) -> np.ndarray:
     """``n`` goals drawn with the task's ``sample_goal`` from ``np.random.default_rng(seed)``, as
     :func:`sb3_genrl.genrl.evaluate_on_goals` draws them (same seed, same goals)."""
-    env = make_env(task)
+    env = get_task(task).make_env()
     rng = np.random.default_rng(seed)
     return np.array([env.sample_goal(rng) for _ in range(n)], dtype=np.float32)
 
@@ -57,7 +57,7 @@ def candidate_points(task: str, rows: np.ndarray) -> np.ndarray:
 
 def play_candidates(task: str, trajectories: np.ndarray, *, chunk: int = 2048) -> list[np.ndarray]:
     """Play trajectories (one thread) and return each one's candidate points; none for an unstable episode."""
-    env = make_env(task)
+    env = get_task(task).make_env()
     out: list[np.ndarray] = []
     original = env._finish
 
@@ -69,7 +69,7 @@ def play_candidates(task: str, trajectories: np.ndarray, *, chunk: int = 2048) -
     env._finish = finish  # type: ignore[method-assign]
     for start in range(0, len(trajectories), chunk):
         batch = trajectories[start:start + chunk]
-        env.play_trajectories(batch, np.zeros((len(batch), 2)), n_threads=1)
+        env.play_trajectories(batch, np.zeros((len(batch), 2)), n_threads=1, allow_outside_region=True)
     return out
 
 
@@ -102,7 +102,7 @@ def generator_limit(generator: TrajectoryGenerator, task: str, goals: np.ndarray
     latents = latent_set(generator, grid=grid, extent=extent)
     candidates = play_candidates(task, generator.decode(latents))
     distances, owner = nearest(candidates, goals)
-    env = make_env(task)
+    env = get_task(task).make_env()
     rewards, _ = env.play_trajectories(generator.decode(latents[owner[:check]]), goals[:check])
     if not np.allclose(-rewards, distances[:check], atol=1e-6):
         raise RuntimeError(f"replayed rewards {rewards} differ from minus the grid distances {distances[:check]}")

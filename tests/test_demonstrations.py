@@ -173,8 +173,14 @@ def test_hockey_hits_all_swing_at_the_same_step():
 def test_basketball_throws_all_swing_at_the_same_steps():
     # One family of throws with one timing: every base throw moves the shoulder on the same 4 control steps, with
     # the elbow in a fixed proportion, so the demonstrations differ only in yaw and strength (and perturbations).
-    from sb3_genrl.envs.basketball import (BASKETBALL_ELBOW_SHARE, BASKETBALL_STRENGTH, BASKETBALL_SWING_STEPS,
-                                           BASKETBALL_THROW_START, BASKETBALL_YAW, sample_throw)
+    from sb3_genrl.envs.basketball import (
+        BASKETBALL_ELBOW_SHARE,
+        BASKETBALL_STRENGTH,
+        BASKETBALL_SWING_STEPS,
+        BASKETBALL_THROW_START,
+        BASKETBALL_YAW,
+        sample_throw,
+    )
 
     rng = np.random.default_rng(3)
     throws = np.stack([sample_throw(rng) for _ in range(200)])
