@@ -43,7 +43,7 @@ from stable_baselines3 import PPO, SAC
 
 from sb3_genrl.checks import check_device, check_input_path, check_output_dir, check_positive_int, check_seed
 from sb3_genrl.curves import MONITOR_FILE, monitor_episodes, read_monitor, training_logger, write_learning_curve
-from sb3_genrl.utils import atomic_write_json
+from sb3_genrl.utils import atomic_path, atomic_write_json
 
 LATENT_BATCH = 64  # episodes per update of the latent-space baselines (GenRL's default N)
 EVAL_GOALS, EVAL_GOAL_SEED = 100, 12345  # held-out goals of the cloned policy's evaluation (never used for tuning)
@@ -104,7 +104,8 @@ def train_baseline(
     model.learn(total_timesteps=steps, progress_bar=progress_bar, tb_log_name=algorithm)
     summary["learn_seconds"] = time.perf_counter() - began
     model.logger.close()
-    model.save(out / f"{algorithm}_policy.zip")
+    with atomic_path(out / f"{algorithm}_policy.zip") as tmp:
+        model.save(tmp)
     curve = write_learning_curve(out / MONITOR_FILE, out, window=window, title=f"{algorithm} on {spec.name}")
     episodes_record = read_monitor(out / MONITOR_FILE)
     returns = episodes_record["return"]
@@ -150,7 +151,8 @@ def _feedback_model(algorithm: str, task: str, transitions: dict[str, np.ndarray
     if algorithm != "ppo":
         return sac_with_demonstrations(env, transitions, steps=steps, prefill=algorithm == "sac", **common)
     model, record = ppo_with_behaviour_cloning(env, transitions, bc_kwargs=bc_kwargs, **common)
-    model.save(out / "bc_policy.zip")  # before PPO changes it
+    with atomic_path(out / "bc_policy.zip") as tmp:  # before PPO changes it
+        model.save(tmp)
     distances = {}
     for mode in ("deterministic", "sampled"):
         rewards = evaluate_feedback_policy(model, task, goals=eval_goals, seed=EVAL_GOAL_SEED,

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from sb3_genrl.checks import check_output_dir, check_positive_int, check_seed
+from sb3_genrl.utils import atomic_path, atomic_write_text
 
 
 def frame_strip(frames: list[np.ndarray], n: int = 6) -> np.ndarray:
@@ -23,12 +24,21 @@ def save_animation(frames: list[np.ndarray], path: str | Path, fps: int = 25) ->
     import imageio.v3 as iio
 
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    if path.suffix.lower() == ".gif":
-        iio.imwrite(path, np.stack(frames), duration=1000 / fps, loop=0)
-    else:
-        iio.imwrite(path, np.stack(frames), fps=fps)
+    with atomic_path(path) as tmp:  # the temporary name keeps the suffix, which picks the format
+        if path.suffix.lower() == ".gif":
+            iio.imwrite(tmp, np.stack(frames), duration=1000 / fps, loop=0)
+        else:
+            iio.imwrite(tmp, np.stack(frames), fps=fps)
     return path
+
+
+def save_image(image: np.ndarray, path: str | Path) -> Path:
+    """Write one image (format by the file's suffix) atomically."""
+    import imageio.v3 as iio
+
+    with atomic_path(path) as tmp:
+        iio.imwrite(tmp, image)
+    return Path(path)
 
 
 def play_scripted(out_dir: str | Path, *, tasks: tuple[str, ...] | None = None, seed: int = 0, width: int = 320,
@@ -45,8 +55,6 @@ def play_scripted(out_dir: str | Path, *, tasks: tuple[str, ...] | None = None, 
     :param height: frame height (pixels)
     :return: the report's path
     """
-    import imageio.v3 as iio
-
     from sb3_genrl.envs import TASKS, get_task
 
     specs = [get_task(name) for name in tasks or tuple(TASKS)]
@@ -64,7 +72,7 @@ def play_scripted(out_dir: str | Path, *, tasks: tuple[str, ...] | None = None, 
         _, info = env.play_trajectory(trajectory, 0.5 * (spec.goal_low + spec.goal_high))
         goal = np.asarray(info["reached"], dtype=np.float64)
         frames = env.episode_frames(trajectory, goal, every=2)
-        iio.imwrite(out / f"{spec.name}_strip.png", frame_strip(frames))
+        save_image(frame_strip(frames), out / f"{spec.name}_strip.png")
         save_animation(frames, out / f"{spec.name}.gif", fps=12)
         env.close()
         lines += [f"## {spec.name}", "", f"![{spec.name}]({spec.name}.gif)", "",
@@ -74,5 +82,5 @@ def play_scripted(out_dir: str | Path, *, tasks: tuple[str, ...] | None = None, 
         if "table_contacts" in info:
             lines += [f"- table contacts: {info['table_contacts']}", ""]
     report = out / "report.md"
-    report.write_text("\n".join(lines))
+    atomic_write_text(report, "\n".join(lines))
     return report

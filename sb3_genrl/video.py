@@ -11,7 +11,7 @@ import pathlib
 import numpy as np
 
 from sb3_genrl.checks import check_input_path, check_output_file, check_positive_int, check_seed
-from sb3_genrl.showcase import frame_strip, save_animation
+from sb3_genrl.showcase import frame_strip, save_animation, save_image
 
 VIDEO_SUFFIXES = (".mp4", ".gif")
 
@@ -70,9 +70,7 @@ def record_video(task: str, out: str | os.PathLike, *, policy: str | os.PathLike
     result = {"video": str(video), "rewards": rewards.tolist()}
     if strip:
         strip_path = video.with_name(video.stem + "_strip.png")
-        import imageio.v3 as iio
-
         ends = [frames[i - 1] for i in [*firsts[1:], len(frames)]]
-        iio.imwrite(strip_path, frame_strip(ends, n=min(6, len(ends))))
+        save_image(frame_strip(ends, n=min(6, len(ends))), strip_path)
         result["strip"] = str(strip_path)
     return result
