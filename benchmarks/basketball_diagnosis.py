@@ -20,7 +20,6 @@ Prints a table, writes JSON and a PNG of the latent grid.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import time
@@ -41,6 +40,7 @@ from sb3_genrl import GenRL  # noqa: E402
 from sb3_genrl.data import load_actions, load_reached  # noqa: E402
 from sb3_genrl.generative import load  # noqa: E402
 from sb3_genrl.genrl import evaluate_on_goals  # noqa: E402
+from sb3_genrl.utils import atomic_path, atomic_write_json  # noqa: E402
 
 RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
 JUMP_M = 1.0  # neighbouring grid points landing further apart than this count as a jump
@@ -156,16 +156,10 @@ def plot(path: str, grid_axis: np.ndarray, points: np.ndarray, sens: dict[str, o
              xlim=extent[:2], ylim=extent[2:])
     axis.legend(loc="lower left", fontsize=7, markerscale=4)
     figure.tight_layout()
-    tmp = path + ".tmp.png"
-    figure.savefig(tmp, dpi=90)
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        figure.savefig(tmp, dpi=90)
 
 
-def write_json(path: str, result: dict[str, object]) -> None:
-    tmp = path + ".tmp"
-    with open(tmp, "w") as file:
-        json.dump(result, file, indent=2)
-    os.replace(tmp, path)
 
 
 def print_table(result: dict[str, object]) -> None:
@@ -218,7 +212,8 @@ def main() -> None:
     prior_radius = [float(radius[np.isfinite(radius)][order][np.searchsorted(cumulative, q)]) for q in (0.1, 0.9)]
     result["generator"] = {"latent_dim": generator.latent_dim, "beta": getattr(generator, "beta", None),
                            "best_epoch": generator.best_epoch, "n_latents": limit["n_latents"],
-                           "best_reachable": limit["summary"], "prior_radius_p10_p90": prior_radius,
+                           "best_reachable": limit["summary"], "coarser_grid_means": limit["coarser_grid_means"],
+                           "prior_radius_p10_p90": prior_radius,
                            "sensitivity": {k: v for k, v in sens.items() if not k.startswith("_")}}
     encoded = peak = policy_latents = None
     if hasattr(generator, "encode"):
@@ -234,7 +229,7 @@ def main() -> None:
                            "latent_gap_to_best_mean": float(gap.mean())}
     result["seconds"] = round(time.perf_counter() - began, 1)
     os.makedirs(RESULTS, exist_ok=True)
-    write_json(os.path.join(RESULTS, args.name + ".json"), result)
+    atomic_write_json(os.path.join(RESULTS, args.name + ".json"), result)
     plot(os.path.join(RESULTS, args.name + ".png"), grid_axis, points, sens, encoded, peak, limit["best_latents"],
          policy_latents)
     print_table(result)

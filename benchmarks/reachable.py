@@ -106,5 +106,13 @@ def generator_limit(generator: TrajectoryGenerator, task: str, goals: np.ndarray
     rewards, _ = env.play_trajectories(generator.decode(latents[owner[:check]]), goals[:check])
     if not np.allclose(-rewards, distances[:check], atol=1e-6):
         raise RuntimeError(f"replayed rewards {rewards} differ from minus the grid distances {distances[:check]}")
+    coarser = {}
+    if generator.latent_dim == 2:  # the same limit over coarser grids (every 2nd and 5th point of this one)
+        index = np.arange(grid * grid).reshape(grid, grid)
+        for step in (2, 5):
+            if (grid - 1) % step == 0:
+                kept = index[::step, ::step].ravel()
+                coarse, _ = nearest([candidates[i] for i in kept], goals)
+                coarser[f"{(grid - 1) // step + 1}x{(grid - 1) // step + 1}"] = float(coarse.mean())
     return {"distances": distances, "best_latents": latents[owner], "latents": latents, "candidates": candidates,
-            "summary": summary(distances), "n_latents": len(latents), "grid": grid if generator.latent_dim == 2 else None}
+            "summary": summary(distances), "n_latents": len(latents), "coarser_grid_means": coarser}

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -37,6 +37,9 @@ class TaskSpec:
     :param goal_env_id: the Gymnasium id of the task's goal-conditioned variant (dict observations and
         ``compute_reward``, for hindsight experience replay; see :mod:`sb3_genrl.envs.goal`), if it has one
     :param goal_env_class: that variant's class
+    :param quickstart: the task's settings of ``genrl quickstart`` (and of its benchmark): ``policy_episodes``
+        (GenRL episodes, default 3000) and ``genrl_kwargs`` (further :class:`~sb3_genrl.GenRL` arguments); a task
+        needing more episodes or other GenRL settings than the defaults says so here
     """
 
     name: str
@@ -54,15 +57,16 @@ class TaskSpec:
     figure_size: tuple[float, float] = (6.0, 6.0)
     goal_env_id: str | None = None
     goal_env_class: type[ArmTaskEnv] | None = None
+    quickstart: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not self.name or "/" in self.name:
             raise ValueError(f"a task name must be a non-empty string without '/', got {self.name!r}")
         if int(self.horizon) != self.horizon or self.horizon < 1:
             raise ValueError(f"task {self.name!r}: horizon must be a positive integer, got {self.horizon!r}")
-        for field in ("goal_low", "goal_high"):
-            if np.shape(getattr(self, field)) != (2,):
-                raise ValueError(f"task {self.name!r}: {field} must be an (x, y) pair, got {getattr(self, field)!r}")
+        for corner in ("goal_low", "goal_high"):
+            if np.shape(getattr(self, corner)) != (2,):
+                raise ValueError(f"task {self.name!r}: {corner} must be an (x, y) pair, got {getattr(self, corner)!r}")
         if not np.all(np.asarray(self.goal_low) < np.asarray(self.goal_high)):
             raise ValueError(f"task {self.name!r}: goal_low {self.goal_low} must be below goal_high {self.goal_high}")
         if np.shape(self.perturbation_scales) != (7,):
@@ -73,6 +77,10 @@ class TaskSpec:
                              f"{self.env_class.horizon}")
         if (self.goal_env_id is None) != (self.goal_env_class is None):
             raise ValueError(f"task {self.name!r}: give both goal_env_id and goal_env_class, or neither")
+        unknown = set(self.quickstart) - {"policy_episodes", "genrl_kwargs"}
+        if unknown:
+            raise ValueError(f"task {self.name!r}: unknown quickstart settings {sorted(unknown)}; expected "
+                             "'policy_episodes' and 'genrl_kwargs'")
         if not self.cell_size > 0:
             raise ValueError(f"task {self.name!r}: cell_size must be positive, got {self.cell_size!r}")
 

@@ -1,0 +1,202 @@
+"""How close GenRL gets on a task, after how many episodes, and next to what its generator allows.
+
+The shared body of ``benchmarks/genrl_hockey.py`` and ``benchmarks/genrl_basketball.py``. Makes demonstrations
+(or reads ``--data``), trains a beta-VAE on them (or reads ``--generator``), measures the generator's own limit
+(the best reachable distance to each held-out goal over a dense grid of its latent actions, see
+``benchmarks/reachable.py``), then trains GenRL with several seeds. Every ``--eval-every`` episodes the
+deterministic policy is evaluated on ``--eval-goals`` goals (SB3's ``EvalCallback`` on the latent-action env: one
+episode = one trajectory, reward = minus the final distance). At the end each seed's deterministic policy plays the
+``--final-goals`` held-out goals (seed 12345); the ratio is its mean distance over the generator's best-reachable
+mean on the same goals. Prints a table, writes JSON (after every seed) and a plot of distance vs episodes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import tempfile
+import time
+from dataclasses import dataclass
+
+import gymnasium as gym
+import matplotlib
+import numpy as np
+import torch
+from stable_baselines3.common.callbacks import EvalCallback
+from stable_baselines3.common.monitor import Monitor
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+from reachable import generator_limit, held_out_goals, summary  # noqa: E402
+from sb3_genrl.envs import get_task  # noqa: E402
+
+from sb3_genrl import GenRL, LatentActionWrapper, __version__  # noqa: E402
+from sb3_genrl.generative import load, train_generator  # noqa: E402
+from sb3_genrl.genrl import evaluate_on_goals  # noqa: E402
+from sb3_genrl.utils import atomic_path, atomic_write_json  # noqa: E402
+
+RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
+FINAL_GOAL_SEED = 12345  # the held-out goals of the final evaluation and of the generator's limit
+
+
+@dataclass(frozen=True)
+class Setting:
+    """A task's benchmark defaults: acceptance bound (m), display unit, the quickstart-size pipeline (its GenRL
+    episodes and settings are the task's ``quickstart`` ones, see :class:`sb3_genrl.envs.TaskSpec`)."""
+
+    task: str
+    target_m: float
+    unit: str  # "cm" or "m", for printing and plotting
+    eval_every: int = 256
+    demos: int = 4000
+    preset: str = "VAE1"
+    epochs: int = 300
+
+    @property
+    def episodes(self) -> int:
+        return int(get_task(self.task).quickstart.get("policy_episodes", 3000))
+
+    @property
+    def genrl_kwargs(self) -> dict[str, object]:
+        return dict(get_task(self.task).quickstart.get("genrl_kwargs", {}))
+
+    @property
+    def scale(self) -> float:
+        return 100.0 if self.unit == "cm" else 1.0
+
+
+def make_generator(setting: Setting, args: argparse.Namespace, work: str) -> tuple[str, dict[str, object]]:
+    """The generator to benchmark: ``--generator``, or a beta-VAE trained on ``--data`` or on new demonstrations."""
+    if args.generator is not None:
+        return args.generator, {"generator": os.path.abspath(args.generator)}
+    data = args.data
+    if data is None:
+        from sb3_genrl.envs.demonstrations import make_demonstrations
+
+        data = os.path.join(work, "demonstrations")
+        start = time.perf_counter()
+        make_demonstrations(setting.task, args.demos, data, seed=0, n_threads=1, progress_bar=False)
+        print(f"{args.demos} demonstrations in {time.perf_counter() - start:.0f} s", flush=True)
+    path = os.path.join(work, "vae.pt")
+    start = time.perf_counter()
+    vae = train_generator(data, preset=args.preset, epochs=args.epochs, seed=0, out=path, progress_bar=False)
+    seconds = time.perf_counter() - start
+    print(f"{args.preset}: best checkpoint at epoch {vae.best_epoch} of {args.epochs} ({seconds:.0f} s)", flush=True)
+    return path, {"demonstrations": args.demos if args.data is None else os.path.abspath(args.data),
+                  "preset": args.preset, "epochs": args.epochs, "best_epoch": vae.best_epoch}
+
+
+def run_seed(setting: Setting, generator_path: str, seed: int, args: argparse.Namespace, work: str) -> dict[str, object]:
+    """Train GenRL with one seed, evaluating on the way; the final deterministic distances to the held-out goals."""
+    generator = load(generator_path, device="cpu")
+    eval_env = LatentActionWrapper(gym.make(get_task(setting.task).env_id), generator)
+    eval_env.reset(seed=10_000 + seed)  # the evaluation goals: one fixed stream per seed
+    evaluation = EvalCallback(Monitor(eval_env), n_eval_episodes=args.eval_goals, eval_freq=args.eval_every,
+                              deterministic=True, log_path=os.path.join(work, f"eval_{seed}"), verbose=0)
+    model = GenRL(gym.make(get_task(setting.task).env_id), generator, seed=seed, device="cpu", **setting.genrl_kwargs)
+    start = time.perf_counter()
+    model.learn(args.episodes, callback=evaluation)
+    seconds = time.perf_counter() - start
+    _, rewards, infos = evaluate_on_goals(model, setting.task, goals=args.final_goals, seed=FINAL_GOAL_SEED)
+    distances = -rewards
+    episodes = [int(n) for n in evaluation.evaluations_timesteps]
+    curve = [float(-np.mean(r)) for r in evaluation.evaluations_results]
+    below = next((n for n, d in zip(episodes, curve, strict=True) if d < setting.target_m), None)
+    row = {"seed": seed, "episodes": int(model.num_timesteps), "seconds": seconds,
+           **{f"{key}_m": value for key, value in summary(distances).items()},
+           "first_episodes_below_target": below, "curve_episodes": episodes, "curve_mean_m": curve}
+    if setting.task == "hockey":
+        row["table_contacts"] = int(sum(info["table_contacts"] for info in infos))
+    return row
+
+
+def plot(setting: Setting, result: dict[str, object], path: str) -> None:
+    """Mean final distance vs episodes, one line per seed, the acceptance bound and the generator's limit."""
+    figure, axis = plt.subplots(figsize=(6, 4))
+    for row in result["runs"]:
+        axis.plot(row["curve_episodes"], np.array(row["curve_mean_m"]) * setting.scale, marker=".",
+                  label=f"seed {row['seed']}")
+    axis.axhline(setting.target_m * setting.scale, color="grey", linestyle="--",
+                 label=f"{setting.target_m * setting.scale:g} {setting.unit}")
+    limit = result["generator_limit"]["mean_m"] * setting.scale
+    axis.axhline(limit, color="k", linestyle=":", label=f"generator best reachable {limit:.3g} {setting.unit}")
+    axis.set(xlabel="episodes (trajectories played)", ylabel=f"mean final distance ({setting.unit})", ylim=(0, None),
+             title=f"GenRL on {setting.task}: deterministic policy, {result['eval_goals']} goals")
+    axis.legend()
+    figure.tight_layout()
+    with atomic_path(path) as tmp:
+        figure.savefig(tmp, dpi=100)
+
+
+
+
+def print_table(setting: Setting, result: dict[str, object]) -> None:
+    unit, scale = setting.unit, setting.scale
+    print(f"\nGenRL on {setting.task}, deterministic policy on {result['final_goals']} held-out goals after "
+          f"{result['episodes']} episodes ({unit})")
+    print(f"{'seed':>4} {'mean':>7} {'median':>7} {'p90':>7} {'max':>7} {'ratio':>6} {'below target after':>19} "
+          f"{'train s':>8}")
+    for row in result["runs"]:
+        below = row["first_episodes_below_target"]
+        print(f"{row['seed']:>4} {row['mean_m'] * scale:>7.3f} {row['median_m'] * scale:>7.3f} {row['p90_m'] * scale:>7.3f} "
+              f"{row['max_m'] * scale:>7.2f} {row['ratio']:>6.2f} {str(below) + ' ep' if below else 'never':>19} "
+              f"{row['seconds']:>8.0f}" + (f"  table contacts {row['table_contacts']}" if "table_contacts" in row else ""))
+    limit = result["generator_limit"]
+    print(f"generator best reachable: mean {limit['mean_m'] * scale:.3f} {unit}, p90 {limit['p90_m'] * scale:.3f} {unit} "
+          f"({limit['n_latents']} latent actions; coarser grids: "
+          + ", ".join(f"{name} {mean * scale:.3f}" for name, mean in limit["coarser_grid_means_m"].items()) + ")")
+    print(f"over seeds: {result['mean_m_over_seeds'] * scale:.3f} +- {result['std_m_over_seeds'] * scale:.3f} {unit} "
+          f"(worst {result['worst_mean_m'] * scale:.3f}); ratio GenRL / generator {result['ratio']:.2f}")
+
+
+def arguments(setting: Setting, description: str) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("--data", default=None, help=f"{setting.task} Minari dataset (default: make --demos demonstrations)")
+    parser.add_argument("--generator", default=None, help="a trained generator (skips demonstrations and training)")
+    parser.add_argument("--demos", type=int, default=setting.demos)
+    parser.add_argument("--preset", default=setting.preset)
+    parser.add_argument("--epochs", type=int, default=setting.epochs)
+    parser.add_argument("--episodes", type=int, default=setting.episodes)
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--eval-every", type=int, default=setting.eval_every, help="episodes between evaluations")
+    parser.add_argument("--eval-goals", type=int, default=100, help="goals per evaluation during training")
+    parser.add_argument("--final-goals", type=int, default=300, help="held-out goals of the final evaluation")
+    parser.add_argument("--grid", type=int, default=201, help="latent grid points per axis for the generator's limit")
+    parser.add_argument("--threads", type=int, default=1, help="torch threads")
+    parser.add_argument("--out", default=os.path.join(RESULTS, f"genrl_{setting.task}.json"),
+                        help="JSON output (a PNG is written beside it)")
+    return parser.parse_args()
+
+
+def main(setting: Setting, description: str) -> None:
+    """Run the benchmark for ``setting`` from the command line."""
+    args = arguments(setting, description)
+    torch.set_num_threads(args.threads)
+    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+    result: dict[str, object] = {
+        "benchmark": f"genrl_{setting.task}", "sb3_genrl": __version__, "torch": torch.__version__,
+        "machine": platform.machine(), "processor": platform.processor(), "cpus": os.cpu_count(), "threads": args.threads,
+        "episodes": args.episodes, "final_goals": args.final_goals, "final_goal_seed": FINAL_GOAL_SEED,
+        "eval_goals": args.eval_goals, "target_m": setting.target_m, "genrl_kwargs": setting.genrl_kwargs, "runs": []}
+    with tempfile.TemporaryDirectory() as work:
+        generator_path, result["generator"] = make_generator(setting, args, work)
+        start = time.perf_counter()
+        goals = held_out_goals(setting.task, args.final_goals, FINAL_GOAL_SEED)
+        limit = generator_limit(load(generator_path, device="cpu"), setting.task, goals, grid=args.grid)
+        result["generator_limit"] = {**{f"{key}_m": value for key, value in limit["summary"].items()},
+                                     "n_latents": limit["n_latents"], "coarser_grid_means_m": limit["coarser_grid_means"],
+                                     "seconds": time.perf_counter() - start}
+        print(f"generator best reachable: {limit['summary']['mean'] * setting.scale:.3f} {setting.unit}", flush=True)
+        for seed in args.seeds:
+            row = run_seed(setting, generator_path, seed, args, work)
+            row["ratio"] = row["mean_m"] / result["generator_limit"]["mean_m"]
+            result["runs"].append(row)
+            means = np.array([r["mean_m"] for r in result["runs"]])
+            result.update(mean_m_over_seeds=float(means.mean()), std_m_over_seeds=float(means.std()),
+                          worst_mean_m=float(means.max()), ratio=float(means.mean() / result["generator_limit"]["mean_m"]))
+            atomic_write_json(args.out, result)
+            plot(setting, result, os.path.splitext(args.out)[0] + ".png")
+            print(f"seed {seed}: mean {row['mean_m'] * setting.scale:.3f} {setting.unit}", flush=True)
+    print_table(setting, result)
+    print(f"wrote {args.out}")
