@@ -219,7 +219,8 @@ def _add_quickstart(sub: argparse._SubParsersAction) -> None:
     _task_option(quick, required=False, default=DEFAULT_TASK)
     quick.add_argument("--demo-episodes", type=COUNT, default=4000, help="demonstrations to generate (default 4000)")
     quick.add_argument("--epochs", type=COUNT, default=300, help="beta-VAE training epochs (default 300)")
-    quick.add_argument("--episodes", type=COUNT, default=3000, help="GenRL episodes (default 3000)")
+    quick.add_argument("--episodes", type=COUNT, default=None,
+                       help="GenRL episodes (default: the task's own, see 'genrl quickstart' in the README)")
     _seed_option(quick)
     quick.add_argument("--no-video", action="store_true", help="skip rendering the policy")
     _device_option(quick)

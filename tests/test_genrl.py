@@ -18,6 +18,7 @@ from conftest import (
     load_linear_generator,
     optimal_latent,
 )
+from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.preprocessing import get_flattened_obs_dim
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from stable_baselines3.common.vec_env import DummyVecEnv
@@ -377,3 +378,36 @@ def test_box_scaler_on_unbounded_observations_does_not_warn():
         mixed_scaler = BoxScaler(mixed)
         out = mixed_scaler(th.tensor([[5.0, 3.0, 1.0]]))
     th.testing.assert_close(out, th.tensor([[5.0, 3.0, 0.5]]))
+
+
+class _LogStdRecorder(BaseCallback):
+    """The policy's log-std at the start of every rollout (after every update but the last) and at the end."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.values: list[np.ndarray] = []
+
+    def _on_rollout_start(self) -> None:
+        self.values.append(self.model.policy.log_std.detach().numpy().copy())
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _on_training_end(self) -> None:
+        self.values.append(self.model.policy.log_std.detach().numpy().copy())
+
+
+@pytest.mark.parametrize("e_step", ["trpo", "kl_penalty"])
+def test_spread_moves_at_most_max_log_std_change_per_iteration(e_step):
+    changes = {}
+    for bound in (None, 0.01):
+        recorder = _LogStdRecorder()
+        GenRL(FastReachEnv(), LinearGenerator(), e_step=e_step, seed=0, n_steps=32,
+              max_log_std_change=bound).learn(8 * 32, callback=recorder)
+        changes[bound] = np.abs(np.diff(np.array(recorder.values), axis=0))
+        assert len(changes[bound]) == 8
+    assert changes[None].max() > 0.02  # unbounded, the spread moves faster than the bound allows
+    assert changes[0.01].max() <= 0.01 + 1e-6
+    assert changes[0.01].min() >= 0.01 - 1e-6  # and here the spread shrinks as fast as the bound lets it
+    with pytest.raises(ValueError, match="max_log_std_change must be positive or None, got 0"):
+        GenRL(FastReachEnv(), LinearGenerator(), max_log_std_change=0)

@@ -140,3 +140,17 @@ def test_task_names_only_in_the_task_modules_and_the_registry():
              for path in sorted((root / folder).rglob("*.py"))
              if path.relative_to(root) not in allowed and pattern.search(path.read_text())]
     assert found == []
+
+
+def test_quickstart_settings_come_from_the_task_spec():
+    from sb3_genrl.study.quickstart import DEFAULT_POLICY_EPISODES, policy_settings
+
+    assert REACH.quickstart == {} and policy_settings(REACH) == (DEFAULT_POLICY_EPISODES, {})
+    assert policy_settings(REACH, 64) == (64, {})
+    tuned = TaskSpec(**{**vars(REACH), "quickstart": {"policy_episodes": 500, "genrl_kwargs": {"target_kl": 0.02}}})
+    assert policy_settings(tuned) == (500, {"target_kl": 0.02}) and policy_settings(tuned, 64) == (64, {"target_kl": 0.02})
+    basketball = get_task("basketball")
+    episodes, kwargs = policy_settings(basketball)
+    assert episodes == basketball.quickstart["policy_episodes"] > DEFAULT_POLICY_EPISODES and kwargs
+    with pytest.raises(ValueError, match=r"unknown quickstart settings \['episodes'\]"):
+        TaskSpec(**{**vars(REACH), "quickstart": {"episodes": 500}})

@@ -24,14 +24,14 @@ from sb3_genrl.utils import atomic_write_text
 # demonstrations out as one unfolded sheet (shot distance along one latent axis, direction along the other); with
 # beta = 0.001 (VAE3) the sheet often folds over itself, and GenRL's Gaussian policy then stalls at the fold.
 QUICKSTART_PRESET = "VAE1"
-
+DEFAULT_POLICY_EPISODES = 3000  # GenRL episodes of a task whose spec does not set its own
 
 QUICKSTART_BATCH = 64  # GenRL episodes per EM iteration
 VIDEO = {"goals": 4, "width": 320, "height": 240, "fps": 20}
 
 
 def quickstart(out_dir: str | os.PathLike, *, task: str, demo_episodes: int = 4000, epochs: int = 300,
-               policy_episodes: int = 3000, pr_samples: int = 1000, dwpr_samples: int = 500, seed: int = 0,
+               policy_episodes: int | None = None, pr_samples: int = 1000, dwpr_samples: int = 500, seed: int = 0,
                video: bool = True, device: str = "auto", progress_bar: bool = True,
                log: Callable[[str], None] | None = None) -> pathlib.Path:
     """Run the whole GenRL workflow at a small size and write ``report.md`` in ``out_dir``.
@@ -46,7 +46,9 @@ def quickstart(out_dir: str | os.PathLike, *, task: str, demo_episodes: int = 40
     :param task: a task name from :data:`sb3_genrl.envs.TASKS`
     :param demo_episodes: demonstrations to generate
     :param epochs: beta-VAE training epochs (:data:`QUICKSTART_PRESET` of paper table 1)
-    :param policy_episodes: GenRL episodes
+    :param policy_episodes: GenRL episodes (default: the task's ``quickstart["policy_episodes"]``, else
+        :data:`DEFAULT_POLICY_EPISODES`); GenRL also takes the task's ``quickstart["genrl_kwargs"]`` (see
+        :class:`~sb3_genrl.envs.TaskSpec`)
     :param pr_samples: samples per set for precision and recall
     :param dwpr_samples: samples per intervention for DwPR
     :param seed: seed of the demonstrations, the generator, the evaluation and the policy (the video uses seed + 1)
@@ -62,7 +64,7 @@ def quickstart(out_dir: str | os.PathLike, *, task: str, demo_episodes: int = 40
     from sb3_genrl.checks import check_device, check_output_dir, check_positive_int, check_seed
     from sb3_genrl.envs import get_task
 
-    get_task(task)
+    policy_episodes, genrl_kwargs = policy_settings(get_task(task), policy_episodes)
     for name, value in (("demo_episodes", demo_episodes), ("epochs", epochs), ("policy_episodes", policy_episodes),
                         ("pr_samples", pr_samples), ("dwpr_samples", dwpr_samples)):
         check_positive_int(value, name)
@@ -77,7 +79,8 @@ def quickstart(out_dir: str | os.PathLike, *, task: str, demo_episodes: int = 40
         "generator": {"preset": QUICKSTART_PRESET, "epochs": epochs, "eval_every": 10, "seed": seed},
         # precision/recall compares at most as many samples as there are demonstrations
         "evaluation": {"n": min(pr_samples, demo_episodes), "dwpr_n": dwpr_samples, "k": 3, "interventions": 5, "seed": seed},
-        "policy": {"task": task, "episodes": policy_episodes, "batch_episodes": QUICKSTART_BATCH, "seed": seed},
+        "policy": {"task": task, "episodes": policy_episodes, "batch_episodes": QUICKSTART_BATCH, "seed": seed,
+                   "genrl_kwargs": genrl_kwargs},
         "video": {**VIDEO, "seed": seed + 1}}
     if not video:
         del settings["video"]
@@ -85,8 +88,9 @@ def quickstart(out_dir: str | os.PathLike, *, task: str, demo_episodes: int = 40
         refuse_conflicts(out, [line for name, wanted in settings.items()
                                for line in settings_conflicts(*_recorded(out, name), wanted,
                                                               output_exists=_done(out, name))])
-        timings = _run_stages(out, settings, device, progress_bar, log or (lambda _line: None))
-        return _write_report(out, task, seed, video, timings)
+        log = log or (lambda _line: None)
+        timings = _run_stages(out, settings, device, progress_bar, log)
+        return _write_report(out, task, seed, video, timings, log)
 
 
 # Where each stage writes (checked for "done") and where it records its settings.
@@ -148,7 +152,7 @@ def _run_stages(out: pathlib.Path, settings: dict[str, dict[str, Any]], device: 
     stage("policy", {"generator": made_from["generator"]}, lambda: train_policy(
         policy_settings["task"], str(model_path), episodes=policy_settings["episodes"],
         batch_episodes=policy_settings["batch_episodes"], seed=policy_settings["seed"], out_dir=policy, device=device,
-        progress_bar=progress_bar))
+        progress_bar=progress_bar, **policy_settings["genrl_kwargs"]))
     if "video" in settings:
         from sb3_genrl.video import record_video
 
@@ -159,7 +163,8 @@ def _run_stages(out: pathlib.Path, settings: dict[str, dict[str, Any]], device: 
     return timings
 
 
-def _write_report(out: pathlib.Path, task: str, seed: int, video: bool, timings: dict[str, float]) -> pathlib.Path:
+def _write_report(out: pathlib.Path, task: str, seed: int, video: bool, timings: dict[str, float],
+                  log: Callable[[str], None]) -> pathlib.Path:
     """``report.md``, with every number read from what the stages recorded."""
     from sb3_genrl.data import dataset_info
     from sb3_genrl.generative import load
@@ -185,7 +190,7 @@ def _write_report(out: pathlib.Path, task: str, seed: int, video: bool, timings:
              f"3. **Evaluation**: {_measure_line(measures)}.",
              f"4. **GenRL**: {summary['episodes']} episodes; best iteration mean reward {summary['best_mean_reward']:.3f},"
              f" final {summary['final_mean_reward']:.3f}; the trained policy's own mean distance to 100 new goals "
-             f"(deterministic): **{final_distance * 100:.1f} cm**.", "",
+             f"(deterministic): **{final_distance:.3f} m** ({final_distance * 100:.1f} cm).", "",
              "![learning curve](policy/learning_curve.png)", "",
              "![precision and recall](evaluation/precision_recall.png)", ""]
     if video:
@@ -193,7 +198,20 @@ def _write_report(out: pathlib.Path, task: str, seed: int, video: bool, timings:
     lines += ["Stage times (s): " + ", ".join(f"{k} {v:.0f}" for k, v in timings.items()), ""]
     report = out / "report.md"
     atomic_write_text(report, "\n".join(lines))
+    log(f"GenRL on {task}: the deterministic policy's mean distance to 100 new goals is {final_distance:.3f} m")
     return report
+
+
+def policy_settings(spec: Any, policy_episodes: int | None = None) -> tuple[int, dict[str, Any]]:
+    """The quickstart's GenRL episodes and further GenRL arguments for a task (its ``TaskSpec.quickstart``).
+
+    :param spec: the task's :class:`~sb3_genrl.envs.TaskSpec`
+    :param policy_episodes: episodes asked for (``None``: the task's, else :data:`DEFAULT_POLICY_EPISODES`)
+    :return: ``(episodes, genrl_kwargs)``
+    """
+    settings = spec.quickstart
+    episodes = int(settings.get("policy_episodes", DEFAULT_POLICY_EPISODES)) if policy_episodes is None else policy_episodes
+    return episodes, dict(settings.get("genrl_kwargs", {}))
 
 
 def _measure_line(measures: list[dict[str, Any]]) -> str:
