@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import collections
 import copy
 import io
 import os
@@ -72,7 +73,8 @@ class GenRL(OnPolicyAlgorithm):
     :param learning_rate: Adam learning rate of the value function (default 3e-3), can be a schedule
     :param n_steps: episodes per env per iteration; ``N = n_steps * n_envs`` (default 64)
     :param batch_size: minibatch size of the value-function fit and of the KL-penalty E-step (default 64)
-    :param n_critic_updates: epochs of the value-function fit per iteration (default 50)
+    :param n_critic_updates: epochs of the value-function fit per iteration, over the returns of the last
+        ``value_history`` batches (default 50)
     :param cg_max_steps: conjugate-gradient iterations of the TRPO E-step (default 15)
     :param cg_damping: damping added to the Fisher-vector product (default 0.1)
     :param line_search_shrinking_factor: step shrinking factor of the backtracking line search (default 0.8)
@@ -85,6 +87,12 @@ class GenRL(OnPolicyAlgorithm):
         policy that collected the batch
     :param e_step_learning_rate: Adam learning rate of the KL-penalty E-step (default 3e-3)
     :param normalize_advantage: standardise the advantages of a batch before the E-step (default True)
+    :param value_history: batches whose returns the value function is fitted on: the current one and those of the
+        iterations before it (default 1: the current batch only, as in Algorithm 1). A batch holds one pull per
+        context; once the policy is narrow, its pulls are too few to estimate ``V(s0)`` to better than the reward
+        differences that the advantage must resolve, and on long runs, where the policy changes little over a few
+        iterations, recent batches estimate it better (basketball uses 10 with ``n_critic_updates=10``). The advantages
+        of a batch always come from the value function fitted before the batch was collected
     :param max_log_std_change: the most the policy's log standard deviation may change per iteration (per batch),
         in each latent dimension and either way, after the E/M pairs (default 0.05; ``None``: only ``target_kl``
         bounds it). The spread's own trust region, decoupled from the mean's as in MPO (Abdolmaleki et al., 2018).
@@ -127,6 +135,7 @@ class GenRL(OnPolicyAlgorithm):
         e_step_learning_rate: float = 3e-3,
         normalize_advantage: bool = True,
         max_log_std_change: float | None = 0.05,
+        value_history: int = 1,
         latent_clip: float = 3.0,
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,
@@ -194,6 +203,9 @@ class GenRL(OnPolicyAlgorithm):
         if max_log_std_change is not None and not max_log_std_change > 0:
             raise ValueError(f"max_log_std_change must be positive or None, got {max_log_std_change!r}")
         self.max_log_std_change = max_log_std_change
+        if int(value_history) != value_history or value_history < 1:
+            raise ValueError(f"value_history must be a positive integer, got {value_history!r}")
+        self.value_history = int(value_history)
         self.latent_clip = latent_clip
 
         if _init_setup_model:
@@ -272,12 +284,25 @@ class GenRL(OnPolicyAlgorithm):
         return kl_penalty_e_step(q, self.policy, batch, kl_coef=self.kl_coef, n_epochs=self.n_e_step_epochs,
                                  batch_size=self.batch_size, learning_rate=self.e_step_learning_rate)
 
+    def _setup_model(self) -> None:
+        super()._setup_model()
+        # (observations, returns) of the last value_history batches, for the value-function fit
+        self._value_memory: collections.deque[tuple[Any, th.Tensor]] = collections.deque(maxlen=self.value_history)
+
     def _fit_value_function(self) -> list[float]:
+        """Fit ``V`` to the returns of the last ``value_history`` batches (Adam on minibatches); the losses."""
+        data = next(self.rollout_buffer.get(batch_size=None))
+        self._value_memory.append((data.observations, data.returns))
+        observations = _concatenate([observations for observations, _ in self._value_memory])
+        returns = th.cat([returns for _, returns in self._value_memory])
         actor_params = actor_parameters(self.policy)
         losses = []
         for _ in range(self.n_critic_updates):
-            for rollout_data in self.rollout_buffer.get(self.batch_size):
-                value_loss = F.mse_loss(self.policy.predict_values(rollout_data.observations).flatten(), rollout_data.returns)
+            permutation = th.randperm(len(returns), device=returns.device)
+            for start in range(0, len(returns), self.batch_size):
+                indices = permutation[start : start + self.batch_size]
+                value_loss = F.mse_loss(self.policy.predict_values(_take(observations, indices)).flatten(),
+                                        returns[indices])
                 self.policy.optimizer.zero_grad()
                 value_loss.backward()
                 for param in actor_params:  # shared parameters stay those of the M-step
@@ -301,7 +326,7 @@ class GenRL(OnPolicyAlgorithm):
         super().set_env(env, force_reset=force_reset)  # type: ignore[arg-type]
 
     def _excluded_save_params(self) -> list[str]:
-        return [*super()._excluded_save_params(), "generator"]
+        return [*super()._excluded_save_params(), "generator", "_value_memory"]
 
     def save(self, path: str | pathlib.Path | io.BufferedIOBase, exclude: Any = None, include: Any = None) -> None:
         """Save like SB3, atomically for a file path (a ``.zip`` suffix is added when there is none, as SB3 does).
@@ -378,6 +403,20 @@ class GenRL(OnPolicyAlgorithm):
             reset_num_timesteps=reset_num_timesteps,
             progress_bar=progress_bar,
         )
+
+
+def _concatenate(batches: list[Any]) -> Any:
+    """Observation batches (tensors, or dicts of tensors for Dict contexts) joined along the first axis."""
+    if isinstance(batches[0], dict):
+        return {key: th.cat([batch[key] for batch in batches]) for key in batches[0]}
+    return th.cat(batches)
+
+
+def _take(observations: Any, indices: th.Tensor) -> Any:
+    """Rows ``indices`` of an observation batch (a tensor or a dict of tensors)."""
+    if isinstance(observations, dict):
+        return {key: value[indices] for key, value in observations.items()}
+    return observations[indices]
 
 
 def _generator_file(path: str | pathlib.Path) -> pathlib.Path:
