@@ -128,14 +128,7 @@ def fit_actor(
     best, best_state, best_epoch, epoch = np.inf, copy.deepcopy(policy.state_dict()), 0, 0
     policy.set_training_mode(True)
     for epoch in range(1, max_epochs + 1):
-        losses = []
-        for batch in th.randperm(len(train_obs), generator=generator).split(batch_size):
-            loss = ((actor_mean(policy, train_obs[batch]) - train_act[batch]) ** 2).mean()
-            optimizer.zero_grad()
-            loss.backward()
-            optimizer.step()
-            losses.append(loss.item())
-        history["train_loss"].append(float(np.mean(losses)))
+        history["train_loss"].append(_train_epoch(policy, optimizer, train_obs, train_act, batch_size, generator))
         history["heldout_loss"].append(float(_residuals(policy, heldout_obs, heldout_act).pow(2).mean()))
         if history["heldout_loss"][-1] < best:
             best, best_state, best_epoch = history["heldout_loss"][-1], copy.deepcopy(policy.state_dict()), epoch
@@ -149,6 +142,19 @@ def fit_actor(
         policy.log_std.copy_(th.as_tensor(np.log(action_std), dtype=policy.log_std.dtype))
     return history | {"best_epoch": best_epoch, "epochs": epoch, "residual_std": residual_std.tolist(),
                       "action_std": action_std.tolist()}
+
+
+def _train_epoch(policy: ActorCriticPolicy, optimizer: th.optim.Optimizer, observations: th.Tensor, actions: th.Tensor,
+                 batch_size: int, generator: th.Generator) -> float:
+    """One pass of MSE steps over shuffled minibatches; returns the mean of the minibatch losses."""
+    losses = []
+    for batch in th.randperm(len(observations), generator=generator).split(batch_size):
+        loss = ((actor_mean(policy, observations[batch]) - actions[batch]) ** 2).mean()
+        optimizer.zero_grad()
+        loss.backward()
+        optimizer.step()
+        losses.append(loss.item())
+    return float(np.mean(losses))
 
 
 def actor_mean(policy: ActorCriticPolicy, observations: th.Tensor) -> th.Tensor:

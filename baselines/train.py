@@ -106,15 +106,21 @@ def train_baseline(
     model.logger.close()
     with atomic_path(out / f"{algorithm}_policy.zip") as tmp:
         model.save(tmp)
-    curve = write_learning_curve(out / MONITOR_FILE, out, window=window, title=f"{algorithm} on {spec.name}")
-    episodes_record = read_monitor(out / MONITOR_FILE)
-    returns = episodes_record["return"]
-    summary |= {"episodes_played": len(returns), "final_mean_reward": float(curve["mean_reward"][-1]),
-                "best_mean_reward": float(np.max(curve["mean_reward"])), "max_reward": float(returns.max())}
-    if algorithm == "ppo":
-        summary["first_batch"] = _first_batch(episodes_record)
+    summary |= _episode_results(algorithm, spec.name, out, window)
     atomic_write_json(out / "summary.json", summary)
     return summary
+
+
+def _episode_results(algorithm: str, task: str, out: pathlib.Path, window: int) -> dict[str, Any]:
+    """Write the run's learning curve; return the summary's entries on the episodes played (from the Monitor file)."""
+    curve = write_learning_curve(out / MONITOR_FILE, out, window=window, title=f"{algorithm} on {task}")
+    episodes_record = read_monitor(out / MONITOR_FILE)
+    returns = episodes_record["return"]
+    results: dict[str, Any] = {"episodes_played": len(returns), "final_mean_reward": float(curve["mean_reward"][-1]),
+                               "best_mean_reward": float(np.max(curve["mean_reward"])), "max_reward": float(returns.max())}
+    if algorithm == "ppo":
+        results["first_batch"] = _first_batch(episodes_record)
+    return results
 
 
 def _check_arguments(algorithm: str, episodes: int, seed: int, demos: Any, demo_episodes: int | None, generator: Any,

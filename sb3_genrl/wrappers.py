@@ -93,7 +93,19 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.reward_mode: RewardMode = reward
         self.latent_clip = float(latent_clip)
         self.max_hold_steps = int(max_hold_steps)
+        self.hold_action = self._checked_hold_action(hold_action)
+        self.use_fast_path = self._checked_fast_path(use_fast_path)
+        self._context_source: Callable[[Any], Any] | str
+        self._context_source, self.observation_space = self._context_setup(context, context_space)
 
+        # Action: the latent action alpha, boxed to the prior's support (uniform) or +-latent_clip sigma (normal).
+        bound = 1.0 if generator.prior == "uniform" else self.latent_clip
+        self.action_space = spaces.Box(-bound, bound, shape=(generator.latent_dim,), dtype=np.float32)
+        self._needs_reset = True
+
+    def _checked_hold_action(self, hold_action: np.ndarray | None) -> np.ndarray:
+        """Check that the env's per-step actions are the generator's rows; return the hold action in the env's dtype."""
+        env, generator = self.env, self.generator
         # Per-step actions: the generator's (T, M) trajectory is played one row (M numbers) per step.
         step_shape = (generator.action_dim,)
         env_shape = getattr(env.action_space, "shape", None)
@@ -105,9 +117,11 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         hold = np.zeros(step_shape, dtype=env.action_space.dtype) if hold_action is None else np.asarray(hold_action)
         if hold.shape != step_shape:
             raise ValueError(f"hold_action must have the env's action shape {step_shape}, got {hold.shape}")
-        self.hold_action = hold.astype(env.action_space.dtype)
+        return hold.astype(env.action_space.dtype)
 
-        task = env.unwrapped
+    def _checked_fast_path(self, use_fast_path: bool | None) -> bool:
+        """Check the task's horizon against the generator's; return whether trajectories are played by the fast path."""
+        task, generator = self.env.unwrapped, self.generator
         task_horizon = getattr(task, "horizon", None)
         if isinstance(task_horizon, int | np.integer) and task_horizon != generator.horizon:
             raise ValueError(f"the generator's trajectories have horizon T = {generator.horizon} time steps, but "
@@ -116,27 +130,22 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         has_fast_path = hasattr(task, "play_trajectories") and hasattr(task, "get_context")
         if use_fast_path and not has_fast_path:
             raise ValueError(f"use_fast_path=True but {type(task).__name__} has no play_trajectories()/get_context()")
-        self.use_fast_path = has_fast_path if use_fast_path is None else bool(use_fast_path)
+        return has_fast_path if use_fast_path is None else bool(use_fast_path)
 
-        # Observation: the task context s0.
+    def _context_setup(
+        self, context: Callable[[Any], np.ndarray] | None, context_space: spaces.Space | None
+    ) -> tuple[Callable[[Any], Any] | str, spaces.Space]:
+        """Return the source of the task context s0 (the callable, ``"task"`` or ``"observation"``) and its space."""
+        task = self.env.unwrapped
         if context is not None:
             if not callable(context) or context_space is None:
                 raise ValueError("context must be a callable context(reset_obs) -> array, given with context_space")
-            self._context_source: Callable[[Any], Any] | str = context
-            self.observation_space = context_space
-        elif hasattr(task, "get_context") and hasattr(task, "context_space"):
-            self._context_source = "task"
-            self.observation_space = task.context_space
-        else:
-            if context_space is not None:
-                raise ValueError("context_space is only used together with a context callable")
-            self._context_source = "observation"
-            self.observation_space = env.observation_space
-
-        # Action: the latent action alpha, boxed to the prior's support (uniform) or +-latent_clip sigma (normal).
-        bound = 1.0 if generator.prior == "uniform" else self.latent_clip
-        self.action_space = spaces.Box(-bound, bound, shape=(generator.latent_dim,), dtype=np.float32)
-        self._needs_reset = True
+            return context, context_space
+        if hasattr(task, "get_context") and hasattr(task, "context_space"):
+            return "task", task.context_space
+        if context_space is not None:
+            raise ValueError("context_space is only used together with a context callable")
+        return "observation", self.env.observation_space
 
     def _observe(self, obs: Any) -> Any:
         if self._context_source == "task":

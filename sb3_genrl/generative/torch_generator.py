@@ -31,6 +31,15 @@ from sb3_genrl.generative.presets import BATCH_SIZE, EPOCHS, LEARNING_RATE, SELE
 SelfTorchTrajectoryGenerator = TypeVar("SelfTorchTrajectoryGenerator", bound="TorchTrajectoryGenerator")
 
 
+def _summary_writer(log_dir: str | None) -> Any:
+    """A TensorBoard ``SummaryWriter`` writing to ``log_dir``, or ``None`` when ``log_dir`` is ``None``."""
+    if log_dir is None:
+        return None
+    from torch.utils.tensorboard import SummaryWriter
+
+    return SummaryWriter(log_dir=log_dir)
+
+
 class TorchTrajectoryGenerator(TrajectoryGenerator, abc.ABC):
     """A neural trajectory generator whose decoder maps ``alpha`` to a normalised, flattened trajectory.
 
@@ -174,29 +183,11 @@ class TorchTrajectoryGenerator(TrajectoryGenerator, abc.ABC):
         optimizers = self._make_optimizers(lr)
         noise_generator = torch.Generator().manual_seed(self.seed)
         selection_latents = self.sample_prior(selection_samples, rng)
-        writer = None
-        if tensorboard_log is not None:
-            from torch.utils.tensorboard import SummaryWriter
-
-            writer = SummaryWriter(log_dir=tensorboard_log)
-
-        self.history, self.best_epoch = [], None
-        best_error, best_state = math.inf, None
+        writer = _summary_writer(tensorboard_log)
         try:
-            for epoch in tqdm(range(1, epochs + 1), disable=not progress_bar, desc=type(self).__name__, unit="epoch"):
-                losses = self._train_epoch(train_tensor, batch_size, optimizers, rng, noise_generator)
-                if writer is not None:
-                    for name, value in losses.items():
-                        writer.add_scalar(f"train/{name}", value, epoch)
-                if epoch % eval_every != 0 and epoch != epochs:
-                    continue
-                error = selection_mse(self.decode(selection_latents), held_out) if len(held_out) else math.nan
-                self.history.append({"epoch": epoch, **losses, "selection_mse": error})
-                if writer is not None and len(held_out):
-                    writer.add_scalar("eval/selection_mse", error, epoch)
-                if not len(held_out) or error < best_error:
-                    best_error, self.best_epoch = error, epoch
-                    best_state = {key: value.detach().clone() for key, value in self.networks.state_dict().items()}
+            best_state = self._train_epochs(train_tensor, held_out, selection_latents, optimizers, rng, noise_generator,
+                                            epochs=epochs, batch_size=batch_size, eval_every=eval_every,
+                                            progress_bar=progress_bar, writer=writer)
         finally:
             if writer is not None:
                 writer.close()
@@ -204,6 +195,29 @@ class TorchTrajectoryGenerator(TrajectoryGenerator, abc.ABC):
             self.networks.load_state_dict(best_state)
         self.networks.eval()
         return self
+
+    def _train_epochs(self, train: torch.Tensor, held_out: np.ndarray, selection_latents: np.ndarray,
+                      optimizers: list[torch.optim.Optimizer], rng: np.random.Generator,
+                      noise_generator: torch.Generator, *, epochs: int, batch_size: int, eval_every: int,
+                      progress_bar: bool, writer: Any) -> dict[str, torch.Tensor] | None:
+        """The epoch loop of :meth:`fit`, filling ``self.history`` and ``self.best_epoch``; returns the best weights."""
+        self.history, self.best_epoch = [], None
+        best_error, best_state = math.inf, None
+        for epoch in tqdm(range(1, epochs + 1), disable=not progress_bar, desc=type(self).__name__, unit="epoch"):
+            losses = self._train_epoch(train, batch_size, optimizers, rng, noise_generator)
+            if writer is not None:
+                for name, value in losses.items():
+                    writer.add_scalar(f"train/{name}", value, epoch)
+            if epoch % eval_every != 0 and epoch != epochs:
+                continue
+            error = selection_mse(self.decode(selection_latents), held_out) if len(held_out) else math.nan
+            self.history.append({"epoch": epoch, **losses, "selection_mse": error})
+            if writer is not None and len(held_out):
+                writer.add_scalar("eval/selection_mse", error, epoch)
+            if not len(held_out) or error < best_error:
+                best_error, self.best_epoch = error, epoch
+                best_state = {key: value.detach().clone() for key, value in self.networks.state_dict().items()}
+        return best_state
 
     def _reset(self, seed: int, device: torch.device | str) -> None:
         """Rebuild the networks on ``device`` with initial weights drawn from ``seed`` (global torch RNG untouched)."""

@@ -125,6 +125,21 @@ def dwpr(generator: TrajectoryGenerator, n: int = DEFAULT_DWPR_SAMPLES, interven
     :param memory_budget_mb: memory for the distance blocks in MiB, used when ``batch_size`` is ``None``
     :return: a :class:`DwPR`
     """
+    values = _checked_intervention_values(generator, n, interventions, k, intervention_values)
+    n, k = int(n), int(k)
+    rng = np.random.default_rng(seed)
+    torch_device = get_device(device)
+    block = block_size(n * len(values), batch_size, memory_budget_mb)
+    precision, recall = _precision_recall_per_dimension(generator, values, n, k, rng, torch_device, block)
+    delta = precision - recall  # eq. (disentanglement)
+    delta_1, delta_2 = top_two(delta)
+    return DwPR(delta=delta, precision=precision, recall=recall, delta_1=delta_1, delta_2=delta_2,
+                mean_delta=(delta_1 + delta_2) / 2, intervention_values=values, n=int(n), k=int(k))
+
+
+def _checked_intervention_values(generator: TrajectoryGenerator, n: int, interventions: int, k: int,
+                                 intervention_values: np.ndarray | None) -> np.ndarray:
+    """Check :func:`dwpr`'s ``n``, ``k`` and interventions; return the ``(D,)`` float32 intervention values."""
     if int(n) != n or n < 1:
         raise ValueError(f"n must be a positive integer, got {n!r}")
     if intervention_values is None:
@@ -136,11 +151,14 @@ def dwpr(generator: TrajectoryGenerator, n: int = DEFAULT_DWPR_SAMPLES, interven
     size = n * len(values)
     if int(k) != k or k < 1 or k >= size:
         raise ValueError(f"k must be a positive integer smaller than n * D = {size}, got {k!r}")
-    n, k = int(n), int(k)
-    rng = np.random.default_rng(seed)
-    torch_device = get_device(device)
-    block = block_size(size, batch_size, memory_budget_mb)
+    return values
 
+
+def _precision_recall_per_dimension(generator: TrajectoryGenerator, values: np.ndarray, n: int, k: int,
+                                    rng: np.random.Generator, torch_device: torch.device,
+                                    block: int) -> tuple[np.ndarray, np.ndarray]:
+    """Return the ``(latent_dim,)`` precision and recall of each dimension's intervened set against the reference."""
+    size = n * len(values)
     reference = as_points(decode_batched(generator, generator.sample_prior(size, rng)), "reference trajectories")
     shift = reference.mean(0, dtype=np.float64)
     reference_set = prepare(reference, shift, power_of_two_scale([("reference", reference)], shift), torch_device)
@@ -161,7 +179,4 @@ def dwpr(generator: TrajectoryGenerator, n: int = DEFAULT_DWPR_SAMPLES, interven
                                                             intervened_radii, block)
             precision[dim] = float(inside_reference.double().mean())
             recall[dim] = float(reference_inside.double().mean())
-    delta = precision - recall  # eq. (disentanglement)
-    delta_1, delta_2 = top_two(delta)
-    return DwPR(delta=delta, precision=precision, recall=recall, delta_1=delta_1, delta_2=delta_2,
-                mean_delta=(delta_1 + delta_2) / 2, intervention_values=values, n=int(n), k=int(k))
+    return precision, recall

@@ -301,6 +301,23 @@ def membership(real: _PreparedSet, real_sq_radii: torch.Tensor, generated: _Prep
     return results[0], results[1]
 
 
+def _checked_sets(real: np.ndarray, generated: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """Check :func:`precision_recall`'s sets and ``k``; return the real and generated ``(N, D)`` points and ``k``."""
+    real_points = as_points(real, "real")
+    gen_points = as_points(generated, "generated")
+    if real_points.shape[1] != gen_points.shape[1]:
+        raise ValueError(f"real and generated samples must have the same size, got {real_points.shape[1]} "
+                         f"and {gen_points.shape[1]} values per sample")
+    if int(k) != k or k < 1:
+        raise ValueError(f"k must be a positive integer, got {k!r}")
+    k = int(k)
+    smallest = min(len(real_points), len(gen_points))
+    if k >= smallest:
+        raise ValueError(f"k must be smaller than both set sizes (a point is not its own neighbour), got k={k} "
+                         f"with {len(real_points)} real and {len(gen_points)} generated samples")
+    return real_points, gen_points, k
+
+
 def precision_recall(real: np.ndarray, generated: np.ndarray, k: int = 3, *, batch_size: int | None = None,
                      device: torch.device | str = "auto", return_radii: bool = False,
                      memory_budget_mb: float = DEFAULT_MEMORY_BUDGET_MB) -> PrecisionRecall:
@@ -334,18 +351,7 @@ def precision_recall(real: np.ndarray, generated: np.ndarray, k: int = 3, *, bat
     :param memory_budget_mb: memory for the distance blocks in MiB, used when ``batch_size`` is ``None``
     :return: a :class:`PrecisionRecall`
     """
-    real_points = as_points(real, "real")
-    gen_points = as_points(generated, "generated")
-    if real_points.shape[1] != gen_points.shape[1]:
-        raise ValueError(f"real and generated samples must have the same size, got {real_points.shape[1]} "
-                         f"and {gen_points.shape[1]} values per sample")
-    if int(k) != k or k < 1:
-        raise ValueError(f"k must be a positive integer, got {k!r}")
-    k = int(k)
-    smallest = min(len(real_points), len(gen_points))
-    if k >= smallest:
-        raise ValueError(f"k must be smaller than both set sizes (a point is not its own neighbour), got k={k} "
-                         f"with {len(real_points)} real and {len(gen_points)} generated samples")
+    real_points, gen_points, k = _checked_sets(real, generated, k)
     torch_device = get_device(device)
     block = block_size(max(len(real_points), len(gen_points)), batch_size, memory_budget_mb)
     shift = real_points.mean(0, dtype=np.float64)

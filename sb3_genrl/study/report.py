@@ -22,6 +22,29 @@ def _write_csv(path: pathlib.Path, header: list[str], rows: list[list[Any]]) -> 
     atomic_write_text(path, text.getvalue(), newline="")
 
 
+def _write_plots(task: str, rows: list[dict[str, Any]], root: pathlib.Path, plots: pathlib.Path) -> None:
+    """Write one task's plots into ``plots`` (learning curves, precision/recall, disentanglement, recall vs reward)."""
+    for kind in ("VAE", "GAN"):
+        series = {}
+        for r in rows:
+            if r["type"] != kind:
+                continue
+            runs = sorted((root / "policies" / r["model"]).glob("seed*/learning_curve.csv"))
+            if runs:
+                series[r["model"]] = mean_std_over_seeds([read_curve(p) for p in runs])
+        if series:
+            plot_curves(series, plots / f"learning_curves_{kind.lower()}.png", ylabel="mean reward per iteration",
+                        title=f"{task}: GenRL with each {kind} (mean +- std over seeds)")
+    names = [r["model"] for r in rows]
+    labelled_scatter([r["precision"] for r in rows], [r["recall"] for r in rows], names, plots / "precision_recall.png",
+                     xlabel="precision", ylabel="recall", title=f"{task}: precision and recall")
+    labelled_scatter([r["delta_1"] for r in rows], [r["mean_delta"] for r in rows], names,
+                     plots / "disentanglement.png", xlabel="delta_1", ylabel="mean delta (delta tilde)",
+                     title=f"{task}: disentanglement (DwPR)")
+    labelled_scatter([r["recall"] for r in rows], [r["score"] for r in rows], names, plots / "recall_vs_reward.png",
+                     xlabel="recall", ylabel="best GenRL reward", title=f"{task}: recall against policy reward")
+
+
 def write_task_report(task: str, rows: list[dict[str, Any]], task_dir: str | pathlib.Path, *,
                       scale: dict[str, Any], comparison: pathlib.Path | None = None) -> pathlib.Path:
     """Tables 1-5 for one task (Markdown and CSV), the plots, and ``report.md`` linking them."""
@@ -46,26 +69,7 @@ def write_task_report(task: str, rows: list[dict[str, Any]], task_dir: str | pat
     correlations = correlation_table(rows, measure_names=list(MEASURES), score_key="score")
     correlations.to_csv(tables / "correlation.csv")
 
-    # Plots: learning curves per generator (mean +- std over seeds), precision/recall, disentanglement.
-    for kind in ("VAE", "GAN"):
-        series = {}
-        for r in rows:
-            if r["type"] != kind:
-                continue
-            runs = sorted((root / "policies" / r["model"]).glob("seed*/learning_curve.csv"))
-            if runs:
-                series[r["model"]] = mean_std_over_seeds([read_curve(p) for p in runs])
-        if series:
-            plot_curves(series, plots / f"learning_curves_{kind.lower()}.png", ylabel="mean reward per iteration",
-                        title=f"{task}: GenRL with each {kind} (mean +- std over seeds)")
-    names = [r["model"] for r in rows]
-    labelled_scatter([r["precision"] for r in rows], [r["recall"] for r in rows], names, plots / "precision_recall.png",
-                     xlabel="precision", ylabel="recall", title=f"{task}: precision and recall")
-    labelled_scatter([r["delta_1"] for r in rows], [r["mean_delta"] for r in rows], names,
-                     plots / "disentanglement.png", xlabel="delta_1", ylabel="mean delta (delta tilde)",
-                     title=f"{task}: disentanglement (DwPR)")
-    labelled_scatter([r["recall"] for r in rows], [r["score"] for r in rows], names, plots / "recall_vs_reward.png",
-                     xlabel="recall", ylabel="best GenRL reward", title=f"{task}: recall against policy reward")
+    _write_plots(task, rows, root, plots)
 
     best = max(rows, key=lambda r: r["score"])
     lines = [f"# GenRL study: {task}", "",
