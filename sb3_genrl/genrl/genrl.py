@@ -149,8 +149,34 @@ class GenRL(OnPolicyAlgorithm):
             if generator is not None:
                 raise TypeError("GenRL(env, generator, generator=...) got the generator twice")
             policy, env, generator = "MlpPolicy", policy, env  # type: ignore[assignment]
-        if e_step not in ("trpo", "kl_penalty"):
-            raise ValueError(f"e_step must be 'trpo' or 'kl_penalty', got {e_step!r}")
+        _check_hyperparameters(e_step=e_step, n_em_iterations=n_em_iterations, max_log_std_change=max_log_std_change,
+                               value_history=value_history)
+        env, policy_kwargs = self._latent_env(env, generator, latent_clip, policy_kwargs)
+        super().__init__(
+            policy, env,  # type: ignore[arg-type]
+            learning_rate=learning_rate, n_steps=n_steps,
+            gamma=1.0, gae_lambda=1.0,  # one-step episodes: no discounting, A = r - V(s0)
+            ent_coef=0.0, vf_coef=0.0,  # the value function is fitted separately (Algorithm 1, last line)
+            max_grad_norm=0.0, use_sde=False, sde_sample_freq=-1, stats_window_size=stats_window_size,
+            tensorboard_log=tensorboard_log, policy_kwargs=policy_kwargs, verbose=verbose, seed=seed, device=device,
+            _init_setup_model=False, supported_action_spaces=(spaces.Box,),
+        )
+        if normalize_advantage and self.env is not None and self.n_steps * self.env.num_envs < 2:
+            raise ValueError(f"normalize_advantage needs n_steps * n_envs >= 2 episodes, got {self.n_steps * self.n_envs}")
+        self.e_step, self.target_kl, self.kl_coef = e_step, target_kl, kl_coef
+        self.batch_size, self.n_critic_updates, self.value_history = batch_size, n_critic_updates, int(value_history)
+        self.cg_max_steps, self.cg_damping = cg_max_steps, cg_damping
+        self.line_search_shrinking_factor, self.line_search_max_iter = line_search_shrinking_factor, line_search_max_iter
+        self.n_e_step_epochs, self.e_step_learning_rate = n_e_step_epochs, e_step_learning_rate
+        self.n_em_iterations, self.normalize_advantage = int(n_em_iterations), normalize_advantage
+        self.max_log_std_change, self.latent_clip = max_log_std_change, latent_clip
+        if _init_setup_model:
+            self._setup_model()
+
+    def _latent_env(self, env: Any, generator: TrajectoryGenerator | str | None, latent_clip: float,
+                  policy_kwargs: dict[str, Any] | None) -> tuple[Any, dict[str, Any]]:
+        """Set ``generator`` and ``generator_path``; the env in its latent-action wrapper, and the policy arguments
+        completed with the prior's spread and, for Box contexts, :class:`BoxScaler`."""
         self.generator_path: str | None = None
         if isinstance(generator, str | os.PathLike):
             self.generator_path = os.path.abspath(generator)
@@ -161,55 +187,7 @@ class GenRL(OnPolicyAlgorithm):
             policy_kwargs.setdefault("log_std_init", default_log_std_init(self.generator.prior))
         if isinstance(getattr(env, "observation_space", None), spaces.Box):
             policy_kwargs.setdefault("features_extractor_class", BoxScaler)  # bounded contexts onto [-1, 1]
-
-        super().__init__(
-            policy,  # type: ignore[arg-type]
-            env,  # type: ignore[arg-type]
-            learning_rate=learning_rate,
-            n_steps=n_steps,
-            gamma=1.0,  # one-step episodes: no discounting
-            gae_lambda=1.0,
-            ent_coef=0.0,
-            vf_coef=0.0,  # the value function is fitted separately (Algorithm 1, last line)
-            max_grad_norm=0.0,
-            use_sde=False,
-            sde_sample_freq=-1,
-            stats_window_size=stats_window_size,
-            tensorboard_log=tensorboard_log,
-            policy_kwargs=policy_kwargs,
-            verbose=verbose,
-            seed=seed,
-            device=device,
-            _init_setup_model=False,
-            supported_action_spaces=(spaces.Box,),
-        )
-        if normalize_advantage and self.env is not None and self.n_steps * self.env.num_envs < 2:
-            raise ValueError(f"normalize_advantage needs n_steps * n_envs >= 2 episodes, got {self.n_steps * self.n_envs}")
-        self.e_step = e_step
-        self.batch_size = batch_size
-        self.n_critic_updates = n_critic_updates
-        self.cg_max_steps = cg_max_steps
-        self.cg_damping = cg_damping
-        self.line_search_shrinking_factor = line_search_shrinking_factor
-        self.line_search_max_iter = line_search_max_iter
-        self.target_kl = target_kl
-        self.kl_coef = kl_coef
-        self.n_e_step_epochs = n_e_step_epochs
-        if int(n_em_iterations) != n_em_iterations or n_em_iterations < 1:
-            raise ValueError(f"n_em_iterations must be a positive integer, got {n_em_iterations!r}")
-        self.n_em_iterations = int(n_em_iterations)
-        self.e_step_learning_rate = e_step_learning_rate
-        self.normalize_advantage = normalize_advantage
-        if max_log_std_change is not None and not max_log_std_change > 0:
-            raise ValueError(f"max_log_std_change must be positive or None, got {max_log_std_change!r}")
-        self.max_log_std_change = max_log_std_change
-        if int(value_history) != value_history or value_history < 1:
-            raise ValueError(f"value_history must be a positive integer, got {value_history!r}")
-        self.value_history = int(value_history)
-        self.latent_clip = latent_clip
-
-        if _init_setup_model:
-            self._setup_model()
+        return env, policy_kwargs
 
     @classmethod
     def _is_policy(cls, policy: Any) -> bool:
@@ -403,6 +381,18 @@ class GenRL(OnPolicyAlgorithm):
             reset_num_timesteps=reset_num_timesteps,
             progress_bar=progress_bar,
         )
+
+
+def _check_hyperparameters(*, e_step: str, n_em_iterations: int, max_log_std_change: float | None,
+                           value_history: int) -> None:
+    """Refuse GenRL settings that SB3 does not check itself, with the setting's name."""
+    if e_step not in ("trpo", "kl_penalty"):
+        raise ValueError(f"e_step must be 'trpo' or 'kl_penalty', got {e_step!r}")
+    for name, value in (("n_em_iterations", n_em_iterations), ("value_history", value_history)):
+        if int(value) != value or value < 1:
+            raise ValueError(f"{name} must be a positive integer, got {value!r}")
+    if max_log_std_change is not None and not max_log_std_change > 0:
+        raise ValueError(f"max_log_std_change must be positive or None, got {max_log_std_change!r}")
 
 
 def _concatenate(batches: list[Any]) -> Any:

@@ -46,9 +46,8 @@ def quickstart(out_dir: str | os.PathLike, *, task: str, demo_episodes: int = 40
     :param task: a task name from :data:`sb3_genrl.envs.TASKS`
     :param demo_episodes: demonstrations to generate
     :param epochs: beta-VAE training epochs (:data:`QUICKSTART_PRESET` of paper table 1)
-    :param policy_episodes: GenRL episodes (default: the task's ``quickstart["policy_episodes"]``, else
-        :data:`DEFAULT_POLICY_EPISODES`); GenRL also takes the task's ``quickstart["genrl_kwargs"]`` (see
-        :class:`~sb3_genrl.envs.TaskSpec`)
+    :param policy_episodes: GenRL episodes (default: the task's, see :func:`policy_settings`); GenRL also takes the
+        task's ``quickstart["genrl_kwargs"]`` (see :class:`~sb3_genrl.envs.TaskSpec`)
     :param pr_samples: samples per set for precision and recall
     :param dwpr_samples: samples per intervention for DwPR
     :param seed: seed of the demonstrations, the generator, the evaluation and the policy (the video uses seed + 1)
