@@ -61,6 +61,12 @@ def run_settings(method: str, args: argparse.Namespace, seed: int, demos: str, g
     if method == "genrl" or method.startswith("latent-"):
         settings |= {"generator": os.path.abspath(generator), "generator_sha256": _file_digest(generator),
                      "batch_episodes": WINDOW}
+        if method == "genrl":  # the task's own GenRL settings, as in its quickstart
+            from sb3_genrl.envs import get_task
+
+            from sb3_genrl.study.quickstart import policy_settings
+
+            settings["genrl_kwargs"] = policy_settings(get_task(args.task))[1]
     else:
         settings |= {"demos": os.path.abspath(demos), "demo_episodes": info["episodes"], "demo_seed": info.get("seed"),
                      "hyperparameters": settings_record()[method]}
@@ -81,7 +87,7 @@ def run_one(method: str, settings: dict[str, Any], demos: str, generator: str, r
         from sb3_genrl.genrl import train_policy
 
         summary = train_policy(settings["task"], generator, episodes=settings["episodes"], seed=settings["seed"],
-                               out_dir=run, batch_episodes=WINDOW, device="cpu")
+                               out_dir=run, batch_episodes=WINDOW, device="cpu", **settings["genrl_kwargs"])
         timing = {"setup_seconds": 0.0, "setup_cpu_seconds": 0.0, "learn_seconds": time.perf_counter() - began}
     else:
         from sb3_genrl.baselines.train import train_baseline

@@ -101,13 +101,21 @@ def _evaluation(generator: Any, name: str, fingerprint: str, scale: dict[str, An
     return evaluation
 
 
+def task_genrl_kwargs(task: str) -> dict[str, Any]:
+    """The task's own GenRL settings (its ``TaskSpec.quickstart["genrl_kwargs"]``), used by every GenRL run of the
+    study; the scale sets the episodes."""
+    from sb3_genrl.envs import get_task
+
+    return dict(get_task(task).quickstart.get("genrl_kwargs", {}))
+
+
 def _policy_reward(task: str, model_path: pathlib.Path, seed: int, scale: dict[str, Any], run_dir: pathlib.Path,
                    device: str) -> float:
     from sb3_genrl.genrl import train_policy
 
     if not (run_dir / "summary.json").exists():
         train_policy(task, str(model_path), episodes=scale["policy_episodes"], seed=seed, out_dir=run_dir,
-                     batch_episodes=scale["batch_episodes"], device=device)
+                     batch_episodes=scale["batch_episodes"], device=device, **task_genrl_kwargs(task))
     return float(json.loads((run_dir / "summary.json").read_text())["best_mean_reward"])
 
 

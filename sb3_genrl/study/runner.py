@@ -16,7 +16,15 @@ from typing import Any
 from sb3_genrl.baselines import BASELINES
 from sb3_genrl.checks import check_device, check_output_dir, check_positive_int
 from sb3_genrl.study.cluster import DEFAULT_CONNECT_TIMEOUT
-from sb3_genrl.study.jobs import EVALUATION_SEED, GENERATOR_SEED, INTERVENTIONS, K, baseline_job, generator_job
+from sb3_genrl.study.jobs import (
+    EVALUATION_SEED,
+    GENERATOR_SEED,
+    INTERVENTIONS,
+    K,
+    baseline_job,
+    generator_job,
+    task_genrl_kwargs,
+)
 from sb3_genrl.study.report import write_task_report
 from sb3_genrl.study.scales import SCALES, StudyScale
 from sb3_genrl.study.state import (
@@ -99,7 +107,8 @@ def _demonstration_settings(task: str, scale: dict[str, Any]) -> dict[str, Any]:
             "version": sb3_genrl.__version__}
 
 
-def _stages(task_dir: pathlib.Path, scale: dict[str, Any], dataset: str | None) -> list[tuple[pathlib.Path, dict, bool]]:
+def _stages(task: str, task_dir: pathlib.Path, scale: dict[str, Any],
+            dataset: str | None) -> list[tuple[pathlib.Path, dict, bool]]:
     """Each stage's record, this run's settings for it and whether it has output. ``dataset`` is the fingerprint
     of the demonstrations (None: not known yet, left out of the settings)."""
     made_from = {} if dataset is None else {"dataset": dataset}
@@ -111,7 +120,8 @@ def _stages(task_dir: pathlib.Path, scale: dict[str, Any], dataset: str | None) 
         (evaluation / STAGE_FILE, {"n": scale["pr_samples"], "dwpr_n": scale["dwpr_samples"], "k": K,
                                    "interventions": INTERVENTIONS, "seed": EVALUATION_SEED, **made_from},
          any(path.name != STAGE_FILE for path in evaluation.glob("*.json"))),
-        (policies / STAGE_FILE, {"episodes": scale["policy_episodes"], "batch_episodes": scale["batch_episodes"]},
+        (policies / STAGE_FILE, {"episodes": scale["policy_episodes"], "batch_episodes": scale["batch_episodes"],
+                                 "genrl_kwargs": task_genrl_kwargs(task)},
          any(policies.glob("*/seed*/summary.json")))]
     if scale["baseline_episodes"] > 0:
         stages.append((comparison / STAGE_FILE, {"episodes": scale["baseline_episodes"],
@@ -128,7 +138,7 @@ def _conflicts(task: str, scale: dict[str, Any], task_dir: pathlib.Path) -> list
     lines = []
     if dataset.is_dir() and any(dataset.iterdir()):
         lines += settings_conflicts(dataset, dataset_info(dataset), _demonstration_settings(task, scale))
-    for record, wanted, exists in _stages(task_dir, scale, None):
+    for record, wanted, exists in _stages(task, task_dir, scale, None):
         lines += settings_conflicts(record.parent, read_settings(record), wanted, output_exists=exists)
     return lines
 
@@ -141,7 +151,7 @@ def _run_task(task: str, scale: dict[str, Any], task_dir: pathlib.Path, run, mod
         make_demonstrations(task, scale["demo_episodes"], dataset, seed=DEMONSTRATION_SEED, progress_bar=False)
     log(f"{task}: {scale['demo_episodes']} demonstrations in {dataset}")
     fingerprint = dataset_fingerprint(dataset)
-    stages = _stages(task_dir, scale, fingerprint)
+    stages = _stages(task, task_dir, scale, fingerprint)
     for record, wanted, exists in stages[:3]:
         check_and_record(record, wanted, output_exists=exists, folder=task_dir)
     jobs = [(generator_job, (task, name, scale, str(dataset), str(task_dir), device)) for name in models]

@@ -1,0 +1,149 @@
+"""Tune GenRL's settings in seconds on a surrogate of a task, and never on the goals the benchmarks evaluate on.
+
+The generator's 2-D latent grid (``--grid`` points per axis over the action box ``[-3, 3]^2``) is decoded and played
+once; each grid point's first candidate point (hockey: where the puck rests; basketball: the first time the ball
+comes down through the rim's height, see ``benchmarks/reachable.py``) gives the task's landing map, interpolated
+bilinearly between grid points. The surrogate bandit draws goals as the task does, and its reward is minus the
+distance from the interpolated landing point to the goal. GenRL trains on it through an identity generator (the
+trajectory is the latent action itself), a hundred times faster than the simulation. Each run reports the
+deterministic policy's mean distance to ``--goals`` tuning goals drawn with seed 777 (the benchmarks evaluate on
+seed 12345), and the grid's own best over those goals.
+
+    python benchmarks/genrl_tuning.py --generator vae.pt --task basketball --episodes 20000 --seeds 0 1 2 \\
+        --genrl-kwargs '{"target_kl": 0.03, "max_log_std_change": 0.02, "value_history": 10, "n_critic_updates": 10}'
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import os
+import time
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+from gymnasium import spaces
+from reachable import held_out_goals, latent_set, play_candidates
+from sb3_genrl.envs import get_task
+from scipy.interpolate import RegularGridInterpolator
+from scipy.spatial import cKDTree
+
+from sb3_genrl import GenRL, LatentActionWrapper
+from sb3_genrl.generative import load
+from sb3_genrl.generative.base import TrajectoryGenerator
+from sb3_genrl.utils import atomic_path, atomic_write_json
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+TUNING_GOAL_SEED = 777
+EXTENT = 3.0  # GenRL's latent action box for a normal prior
+
+
+class IdentityGenerator(TrajectoryGenerator):
+    """The 'trajectory' of a latent action is the latent action itself (one step of two values)."""
+
+    def __init__(self) -> None:
+        super().__init__(horizon=1, action_dim=2, latent_dim=2, prior="normal")
+
+    def decode(self, alpha: np.ndarray) -> np.ndarray:
+        return self.check_latent(alpha)[:, None, :].astype(np.float32)
+
+    def save(self, path: str) -> None:
+        raise NotImplementedError("the identity generator of the tuning surrogate is not saved")
+
+
+class SurrogateTask(gym.Env):
+    """A task's contextual bandit with its landing map interpolated from a latent grid (see the module doc)."""
+
+    def __init__(self, task: str, landing: np.ndarray) -> None:
+        axis = np.linspace(-EXTENT, EXTENT, landing.shape[0])
+        self.landing = RegularGridInterpolator((axis, axis), landing)
+        self.task = get_task(task).make_env()
+        self.observation_space = self.context_space = self.task.context_space
+        self.action_space = spaces.Box(-EXTENT, EXTENT, (2,), np.float32)
+        self.horizon, self.goal = 1, np.zeros(2)
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
+        super().reset(seed=seed)
+        self.goal = self.task.sample_goal(self.np_random)
+        return self.get_context(), {}
+
+    def get_context(self) -> np.ndarray:
+        return np.asarray(self.goal, dtype=np.float32)
+
+    def distances(self, alpha: np.ndarray, goals: np.ndarray) -> np.ndarray:
+        return np.linalg.norm(self.landing(np.clip(alpha, -EXTENT, EXTENT)) - goals, axis=1)
+
+    def play_trajectories(self, trajectories: np.ndarray, goals: np.ndarray, **_: Any) -> tuple[np.ndarray, list]:
+        distances = self.distances(np.asarray(trajectories)[:, 0, :], np.broadcast_to(goals, (len(trajectories), 2)))
+        return -distances, [{"distance": float(d)} for d in distances]
+
+    def step(self, action: np.ndarray) -> tuple:
+        raise NotImplementedError("the surrogate is played through play_trajectories")
+
+
+def landing_map(generator_path: str, task: str, grid: int) -> np.ndarray:
+    """``(grid, grid, 2)`` first candidate point of each grid latent (NaN where there is none), cached per file."""
+    with open(generator_path, "rb") as file:
+        digest = hashlib.sha256(file.read()).hexdigest()[:16]
+    cache = os.path.join(HERE, "runs", "tuning", f"{task}_{digest}_grid{grid}.npy")
+    if os.path.exists(cache):
+        return np.load(cache)
+    generator = load(generator_path, device="cpu")
+    if generator.latent_dim != 2:
+        raise ValueError(f"the tuning surrogate needs a 2-D latent space, {generator_path} has {generator.latent_dim}")
+    candidates = play_candidates(task, generator.decode(latent_set(generator, grid=grid, extent=EXTENT)))
+    points = np.array([c[0] if len(c) else (np.nan, np.nan) for c in candidates]).reshape(grid, grid, 2)
+    os.makedirs(os.path.dirname(cache), exist_ok=True)
+    with atomic_path(cache) as tmp, open(tmp, "wb") as file:
+        np.save(file, points)
+    return points
+
+
+def run(env: SurrogateTask, goals: np.ndarray, seed: int, episodes: int, genrl_kwargs: dict[str, Any]) -> dict:
+    start = time.perf_counter()
+    model = GenRL(LatentActionWrapper(env, IdentityGenerator()), seed=seed, device="cpu", **genrl_kwargs)
+    model.learn(episodes)
+    alpha, _ = model.predict(goals, deterministic=True)
+    distances = env.distances(alpha, goals)
+    return {"seed": seed, "mean_m": float(distances.mean()), "median_m": float(np.median(distances)),
+            "std": float(torch.exp(model.policy.log_std.detach()).mean()), "seconds": time.perf_counter() - start}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--generator", required=True, help="a trained generator with a 2-D latent space")
+    parser.add_argument("--task", default="basketball", choices=["hockey", "basketball"])
+    parser.add_argument("--episodes", type=int, default=20000)
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--genrl-kwargs", default="{}", help="GenRL arguments, as JSON")
+    parser.add_argument("--grid", type=int, default=101, help="latent grid points per axis")
+    parser.add_argument("--goals", type=int, default=300, help="tuning goals (seed 777)")
+    parser.add_argument("--out", default=None, help="JSON output (default: print only)")
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    genrl_kwargs = json.loads(args.genrl_kwargs)
+    landing = landing_map(args.generator, args.task, args.grid)
+    env = SurrogateTask(args.task, np.nan_to_num(landing, nan=0.0))  # no landing point: the ball stays at the robot
+    goals = held_out_goals(args.task, args.goals, TUNING_GOAL_SEED)
+    valid = landing.reshape(-1, 2)[np.isfinite(landing.reshape(-1, 2)).all(axis=1)]
+    grid_best = float(cKDTree(valid).query(goals)[0].mean())
+    result = {"task": args.task, "generator": os.path.abspath(args.generator), "episodes": args.episodes,
+              "genrl_kwargs": genrl_kwargs, "grid": args.grid, "grid_best_mean_m": grid_best, "runs": []}
+    for seed in args.seeds:
+        result["runs"].append(run(env, goals, seed, args.episodes, genrl_kwargs))
+        row = result["runs"][-1]
+        print(f"seed {seed}: mean {row['mean_m']:.4f} m, median {row['median_m']:.4f} m, std {row['std']:.4f} "
+              f"({row['seconds']:.0f} s)", flush=True)
+    means = [row["mean_m"] for row in result["runs"]]
+    result["mean_m_over_seeds"] = float(np.mean(means))
+    print(f"{args.task}, {args.episodes} episodes, {genrl_kwargs}: mean over seeds {np.mean(means):.4f} m "
+          f"(grid best {grid_best:.4f} m)")
+    if args.out:
+        atomic_write_json(args.out, result)
+
+
+if __name__ == "__main__":
+    main()
