@@ -195,9 +195,10 @@ def test_quickstart_and_video(tmp_path, cli):
     assert "policy.gif" not in report and not (out / "policy.gif").exists()
     assert "**Demonstrations**: 200 valid episodes" in report and "3 epochs" in report
     # The reported distance is the policy's: replayed here on the same 100 goals (seed 0 + 12345) through the task.
-    reported = float(re.search(r"to 100 new goals \(deterministic\): \*\*([0-9.]+) cm\*\*", report).group(1))
-    assert reported == pytest.approx(100 * policy_distances(out / "policy" / "genrl_policy.zip", "GenRL/Hockey-v0",
-                                                            100, 12345).mean(), abs=0.051)
+    reported = float(re.search(r"to 100 new goals \(deterministic\): \*\*([0-9.]+) m\*\*", report).group(1))
+    replayed = policy_distances(out / "policy" / "genrl_policy.zip", "GenRL/Hockey-v0", 100, 12345).mean()
+    assert reported == pytest.approx(replayed, abs=0.00051)
+    assert f"mean distance to 100 new goals is {reported:.3f} m" in printed
     measures = json.loads((out / "evaluation" / "results.json").read_text())[0]
     assert f"precision {measures['precision']:.3f}, recall {measures['recall']:.3f}" in report
     summary = json.loads((out / "policy" / "summary.json").read_text())
