@@ -22,10 +22,11 @@ import numpy as np
 import torch as th
 from stable_baselines3.common.policies import ActorCriticPolicy
 
+from sb3_genrl.genrl.policies import actor_parameters
+
 # Bounds of the actor's exploration std after cloning (rad per control step): positive, and a tenth of the action
 # bound at most. On hockey the held-out residual std is 1e-4 to 6e-4 and lies inside.
 STD_RANGE = (1e-4, 0.05)
-CRITIC_PREFIXES = ("value_net", "mlp_extractor.value")
 
 
 def split_episodes(dones: np.ndarray, holdout: float, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -121,7 +122,7 @@ def fit_actor(
         raise ValueError("fit_actor needs a policy with a state-independent log_std (a Gaussian PPO policy without gSDE)")
     train_obs, train_act = (th.as_tensor(np.asarray(a, dtype=np.float32), device=policy.device) for a in train)
     heldout_obs, heldout_act = (th.as_tensor(np.asarray(a, dtype=np.float32), device=policy.device) for a in heldout)
-    actor = [p for name, p in policy.named_parameters() if not name.startswith(CRITIC_PREFIXES) and name != "log_std"]
+    actor = [p for p in actor_parameters(policy) if p is not policy.log_std]  # the mean's; the std is set after
     optimizer = th.optim.Adam(actor, lr=learning_rate)
     generator = th.Generator().manual_seed(seed)
     history: dict[str, list[float]] = {"train_loss": [], "heldout_loss": []}
