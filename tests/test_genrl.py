@@ -470,12 +470,12 @@ def test_value_history_is_checked_and_not_saved(tmp_path):
 
 
 def test_observation_batches_join_and_index_as_tensors_and_dicts():
-    from sb3_genrl.genrl.genrl import _concatenate, _take
+    from sb3_genrl.genrl.value import concatenate, take
 
     first, second = th.arange(6.0).reshape(3, 2), th.arange(6.0, 10.0).reshape(2, 2)
-    joined = _concatenate([first, second])
+    joined = concatenate([first, second])
     th.testing.assert_close(joined, th.arange(10.0).reshape(5, 2))
-    th.testing.assert_close(_take(joined, th.tensor([4, 0])), th.tensor([[8.0, 9.0], [0.0, 1.0]]))
-    dicts = _concatenate([{"goal": first, "t": th.zeros(3)}, {"goal": second, "t": th.ones(2)}])
+    th.testing.assert_close(take(joined, th.tensor([4, 0])), th.tensor([[8.0, 9.0], [0.0, 1.0]]))
+    dicts = concatenate([{"goal": first, "t": th.zeros(3)}, {"goal": second, "t": th.ones(2)}])
     th.testing.assert_close(dicts["goal"], joined)
-    th.testing.assert_close(_take(dicts, th.tensor([3]))["t"], th.ones(1))
+    th.testing.assert_close(take(dicts, th.tensor([3]))["t"], th.ones(1))

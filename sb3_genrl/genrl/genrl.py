@@ -17,11 +17,11 @@ from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
 from stable_baselines3.common.policies import ActorCriticPolicy, BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 from stable_baselines3.common.utils import explained_variance
-from torch.nn import functional as F
 
 from sb3_genrl.generative.base import TrajectoryGenerator
 from sb3_genrl.genrl.e_step import kl_penalty_e_step, trpo_e_step
-from sb3_genrl.genrl.policies import BoxScaler, MlpPolicy, MultiInputPolicy, actor_parameters, default_log_std_init
+from sb3_genrl.genrl.policies import BoxScaler, MlpPolicy, MultiInputPolicy, default_log_std_init
+from sb3_genrl.genrl.value import fit_value_function
 from sb3_genrl.utils import atomic_path
 from sb3_genrl.wrappers import latent_action_env
 
@@ -268,26 +268,11 @@ class GenRL(OnPolicyAlgorithm):
         self._value_memory: collections.deque[tuple[Any, th.Tensor]] = collections.deque(maxlen=self.value_history)
 
     def _fit_value_function(self) -> list[float]:
-        """Fit ``V`` to the returns of the last ``value_history`` batches (Adam on minibatches); the losses."""
+        """Fit ``V`` to the returns of the last ``value_history`` batches; the minibatch losses."""
         data = next(self.rollout_buffer.get(batch_size=None))
         self._value_memory.append((data.observations, data.returns))
-        observations = _concatenate([observations for observations, _ in self._value_memory])
-        returns = th.cat([returns for _, returns in self._value_memory])
-        actor_params = actor_parameters(self.policy)
-        losses = []
-        for _ in range(self.n_critic_updates):
-            permutation = th.randperm(len(returns), device=returns.device)
-            for start in range(0, len(returns), self.batch_size):
-                indices = permutation[start : start + self.batch_size]
-                value_loss = F.mse_loss(self.policy.predict_values(_take(observations, indices)).flatten(),
-                                        returns[indices])
-                self.policy.optimizer.zero_grad()
-                value_loss.backward()
-                for param in actor_params:  # shared parameters stay those of the M-step
-                    param.grad = None
-                self.policy.optimizer.step()
-                losses.append(value_loss.item())
-        return losses
+        return fit_value_function(self.policy, self._value_memory, epochs=self.n_critic_updates,
+                                  batch_size=self.batch_size)
 
     def predict_trajectory(self, observation: np.ndarray, deterministic: bool = True) -> np.ndarray:
         """The trajectory ``g(alpha)`` for the policy's latent action given a context: ``(T, M)``, or ``(n, T, M)``."""
@@ -393,20 +378,6 @@ def _check_hyperparameters(*, e_step: str, n_em_iterations: int, max_log_std_cha
             raise ValueError(f"{name} must be a positive integer, got {value!r}")
     if max_log_std_change is not None and not max_log_std_change > 0:
         raise ValueError(f"max_log_std_change must be positive or None, got {max_log_std_change!r}")
-
-
-def _concatenate(batches: list[Any]) -> Any:
-    """Observation batches (tensors, or dicts of tensors for Dict contexts) joined along the first axis."""
-    if isinstance(batches[0], dict):
-        return {key: th.cat([batch[key] for batch in batches]) for key in batches[0]}
-    return th.cat(batches)
-
-
-def _take(observations: Any, indices: th.Tensor) -> Any:
-    """Rows ``indices`` of an observation batch (a tensor or a dict of tensors)."""
-    if isinstance(observations, dict):
-        return {key: value[indices] for key, value in observations.items()}
-    return observations[indices]
 
 
 def _generator_file(path: str | pathlib.Path) -> pathlib.Path:
