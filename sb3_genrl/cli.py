@@ -160,6 +160,8 @@ def _add_train_policy(sub: argparse._SubParsersAction) -> None:
     policy.add_argument("--e-step", choices=("trpo", "kl_penalty"), default="trpo", help="E-step variant")
     policy.add_argument("--batch-episodes", type=option(check_int, int, minimum=2), default=64,
                         help="episodes per EM iteration N, at least 2 (default 64)")
+    policy.add_argument("--library-defaults", action="store_true",
+                        help="GenRL's own defaults instead of the task's GenRL settings (basketball sets its own)")
     _device_option(policy)
     _progress_option(policy)
     policy.set_defaults(func=_train_policy_command)
@@ -300,11 +302,14 @@ def _evaluate_command(args: argparse.Namespace) -> int:
 
 
 def _train_policy_command(args: argparse.Namespace) -> int:
+    from sb3_genrl.envs import get_task
     from sb3_genrl.genrl import train_policy
+    from sb3_genrl.study.quickstart import policy_settings
 
+    genrl_kwargs = {} if args.library_defaults else policy_settings(get_task(args.task))[1]
     result = train_policy(args.task, str(args.generator), episodes=args.episodes, seed=args.seed, out_dir=args.out,
                           e_step=args.e_step, batch_episodes=args.batch_episodes, device=args.device,
-                          progress_bar=not args.no_progress_bar)
+                          progress_bar=not args.no_progress_bar, **genrl_kwargs)
     print(f"GenRL on {args.task}: {result['episodes']} episodes, {result['iterations']} iterations, mean reward "
           f"final {result['final_mean_reward']:.4g}, best {result['best_mean_reward']:.4g} -> {result['model_path']}")
     return 0

@@ -154,3 +154,21 @@ def test_quickstart_settings_come_from_the_task_spec():
     assert episodes == basketball.quickstart["policy_episodes"] > DEFAULT_POLICY_EPISODES and kwargs
     with pytest.raises(ValueError, match=r"unknown quickstart settings \['episodes'\]"):
         TaskSpec(**{**vars(REACH), "quickstart": {"episodes": 500}})
+
+
+def test_train_policy_takes_the_tasks_genrl_settings(reach_task, tmp_path, monkeypatch):
+    data, generator = tmp_path / "demos", tmp_path / "vae.pt"
+    assert main(["demos", "--task", "reach", "--episodes", "16", "--out", str(data), "--threads", "1",
+                 "--no-progress-bar"]) == 0
+    assert main(["train-generator", "--data", str(data), "--model", "vae", "--latent-dim", "2", "--beta", "0.01",
+                 "--epochs", "1", "--batch-size", "16", "--eval-every", "1", "--device", "cpu", "--no-progress-bar",
+                 "--out", str(generator)]) == 0
+    tuned = {"target_kl": 0.02, "value_history": 2}
+    monkeypatch.setitem(TASKS, "reach", TaskSpec(**{**vars(REACH), "quickstart": {"genrl_kwargs": tuned}}))
+    settings = {}
+    for name, extra in (("task", []), ("library", ["--library-defaults"])):
+        assert main(["train-policy", "--task", "reach", "--generator", str(generator), "--episodes", "16",
+                     "--batch-episodes", "8", "--device", "cpu", "--no-progress-bar", "--out", str(tmp_path / name),
+                     *extra]) == 0
+        settings[name] = json.loads((tmp_path / name / "summary.json").read_text())["genrl_settings"]
+    assert settings == {"task": tuned, "library": {}}

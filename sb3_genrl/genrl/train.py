@@ -111,7 +111,9 @@ def train_policy(
                                  title=f"GenRL on {env_id} (seed {seed})")
     result = {"algorithm": "genrl", "task": task_name, "seed": seed, **_output_paths(out),
               "episodes": int(model.num_timesteps), "iterations": len(curve["episodes"]),
-              "final_mean_reward": float(curve["mean_reward"][-1]), "best_mean_reward": float(np.max(curve["mean_reward"]))}
+              "final_mean_reward": float(curve["mean_reward"][-1]), "best_mean_reward": float(np.max(curve["mean_reward"])),
+              "genrl_settings": {key: value for key, value in genrl_kwargs.items()  # those a JSON file can hold
+                                 if isinstance(value, bool | int | float | str | type(None))}}
     atomic_write_json(out / "summary.json", result)
     return result
 
