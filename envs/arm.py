@@ -41,43 +41,29 @@ def _joint(i: int, axis: str) -> str:
     return f'<joint name="joint{i}" axis="{axis}" range="{low} {high}" armature="{ARMATURE[i - 1]}" damping="0.5"/>'
 
 
+# The arm's links, base to flange: joint axis, the link's geom (MJCF attributes) and where the next link starts
+# (its offset along the link's z axis). Joints alternate between yaw (z) and pitch (y).
+_LINKS = (
+    ("0 0 1", 'type="cylinder" size="0.07 0.03" pos="0 0 0.03" rgba="0.9 0.9 0.92 1"', 0.05),
+    ("0 1 0", 'type="capsule" fromto="0 0 0 0 0 0.2" size="0.05" rgba="0.9 0.9 0.92 1"', 0.2),
+    ("0 0 1", 'type="capsule" fromto="0 0 0 0 0 0.25" size="0.045" rgba="0.95 0.55 0.1 1"', 0.25),
+    ("0 1 0", 'type="capsule" fromto="0 0 0 0 0 0.2" size="0.04" rgba="0.9 0.9 0.92 1"', 0.2),
+    ("0 0 1", 'type="capsule" fromto="0 0 0 0 0 0.25" size="0.035" rgba="0.95 0.55 0.1 1"', 0.25),
+    ("0 1 0", 'type="capsule" fromto="0 0 0 0 0 0.05" size="0.03" rgba="0.9 0.9 0.92 1"', 0.05),
+    ("0 0 1", 'name="flange" type="cylinder" size="0.03 0.01" pos="0 0 0.01" rgba="0.2 0.2 0.2 1"', 0.02),
+)
+
+
 def arm_mjcf(tool: str) -> str:
     """The arm's kinematic tree with ``tool`` (MJCF body content) mounted on the flange (the flange's +z axis)."""
-    return f"""
-    <body name="base" pos="0 0 0" childclass="arm">
-      <geom name="pedestal" type="cylinder" size="0.09 0.2" pos="0 0 0.2" rgba="0.25 0.25 0.28 1"/>
-      <body name="link1" pos="0 0 0.4" gravcomp="1">
-        {_joint(1, "0 0 1")}
-        <geom type="cylinder" size="0.07 0.03" pos="0 0 0.03" rgba="0.9 0.9 0.92 1"/>
-        <body name="link2" pos="0 0 0.05" gravcomp="1">
-          {_joint(2, "0 1 0")}
-          <geom type="capsule" fromto="0 0 0 0 0 0.2" size="0.05" rgba="0.9 0.9 0.92 1"/>
-          <body name="link3" pos="0 0 0.2" gravcomp="1">
-            {_joint(3, "0 0 1")}
-            <geom type="capsule" fromto="0 0 0 0 0 0.25" size="0.045" rgba="0.95 0.55 0.1 1"/>
-            <body name="link4" pos="0 0 0.25" gravcomp="1">
-              {_joint(4, "0 1 0")}
-              <geom type="capsule" fromto="0 0 0 0 0 0.2" size="0.04" rgba="0.9 0.9 0.92 1"/>
-              <body name="link5" pos="0 0 0.2" gravcomp="1">
-                {_joint(5, "0 0 1")}
-                <geom type="capsule" fromto="0 0 0 0 0 0.25" size="0.035" rgba="0.95 0.55 0.1 1"/>
-                <body name="link6" pos="0 0 0.25" gravcomp="1">
-                  {_joint(6, "0 1 0")}
-                  <geom type="capsule" fromto="0 0 0 0 0 0.05" size="0.03" rgba="0.9 0.9 0.92 1"/>
-                  <body name="link7" pos="0 0 0.05" gravcomp="1">
-                    {_joint(7, "0 0 1")}
-                    <geom name="flange" type="cylinder" size="0.03 0.01" pos="0 0 0.01" rgba="0.2 0.2 0.2 1"/>
-                    <body name="tool" pos="0 0 0.02">
-                      {tool}
-                    </body>
-                  </body>
-                </body>
-              </body>
-            </body>
-          </body>
-        </body>
-      </body>
-    </body>"""
+    inner = f'<body name="tool" pos="0 0 {_LINKS[-1][2]:g}">{tool}</body>'
+    for i in range(len(_LINKS), 0, -1):  # from the flange inwards: each link's body holds the next one
+        axis, geom, _ = _LINKS[i - 1]
+        start = 0.4 if i == 1 else _LINKS[i - 2][2]  # link 1 sits on the 0.4 m pedestal
+        inner = (f'<body name="link{i}" pos="0 0 {start:g}" gravcomp="1">{_joint(i, axis)}<geom {geom}/>'
+                 f"{inner}</body>")
+    return ('<body name="base" pos="0 0 0" childclass="arm"><geom name="pedestal" type="cylinder" size="0.09 0.2" '
+            f'pos="0 0 0.2" rgba="0.25 0.25 0.28 1"/>{inner}</body>')
 
 
 def task_mjcf(*, name: str, tool: str, world: str, sensors: str, camera: str) -> str:

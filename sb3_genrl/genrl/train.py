@@ -87,13 +87,10 @@ def train_policy(
     :param verbose: GenRL verbosity
     :param genrl_kwargs: further :class:`~sb3_genrl.GenRL` arguments
     :return: paths of the outputs and a summary (``episodes``, ``iterations``, ``final_mean_reward``,
-        ``best_mean_reward``)
+        ``best_mean_reward``, ``genrl_settings``: the further GenRL arguments that JSON can hold)
     """
     env_id, task_name = _resolve_env_id(task)
-    check_positive_int(episodes, "episodes")
-    check_int(batch_episodes, "batch_episodes", minimum=2)
-    check_seed(seed)
-    check_device(device)
+    _check_arguments(episodes, batch_episodes, seed, device)
     out = check_output_dir(out_dir)
     # Built first: a generator that does not fit the task is refused before anything is written.
     env = LatentActionWrapper(gym.make(env_id), _as_generator(generator))
@@ -112,10 +109,21 @@ def train_policy(
     result = {"algorithm": "genrl", "task": task_name, "seed": seed, **_output_paths(out),
               "episodes": int(model.num_timesteps), "iterations": len(curve["episodes"]),
               "final_mean_reward": float(curve["mean_reward"][-1]), "best_mean_reward": float(np.max(curve["mean_reward"])),
-              "genrl_settings": {key: value for key, value in genrl_kwargs.items()  # those a JSON file can hold
-                                 if isinstance(value, bool | int | float | str | type(None))}}
+              "genrl_settings": _json_settings(genrl_kwargs)}
     atomic_write_json(out / "summary.json", result)
     return result
+
+
+def _check_arguments(episodes: int, batch_episodes: int, seed: int, device: str) -> None:
+    check_positive_int(episodes, "episodes")
+    check_int(batch_episodes, "batch_episodes", minimum=2)
+    check_seed(seed)
+    check_device(device)
+
+
+def _json_settings(genrl_kwargs: dict[str, Any]) -> dict[str, Any]:
+    """The GenRL arguments that a JSON file can hold (numbers, strings, booleans, None)."""
+    return {key: value for key, value in genrl_kwargs.items() if isinstance(value, bool | int | float | str | type(None))}
 
 
 def _output_paths(out: pathlib.Path) -> dict[str, str]:
