@@ -214,15 +214,16 @@ def _add_video(sub: argparse._SubParsersAction) -> None:
 
 
 def _add_quickstart(sub: argparse._SubParsersAction) -> None:
-    from sb3_genrl.envs import DEFAULT_TASK
+    from sb3_genrl.envs import DEFAULT_TASK, TASKS
+    from sb3_genrl.study.quickstart import policy_settings
 
     quick = sub.add_parser("quickstart", help="demonstrations -> VAE -> evaluation -> GenRL policy -> report, in minutes")
     quick.add_argument("--out", required=True, type=OUT_DIR, help="output folder (a rerun resumes it)")
     _task_option(quick, required=False, default=DEFAULT_TASK)
     quick.add_argument("--demo-episodes", type=COUNT, default=4000, help="demonstrations to generate (default 4000)")
     quick.add_argument("--epochs", type=COUNT, default=300, help="beta-VAE training epochs (default 300)")
-    quick.add_argument("--episodes", type=COUNT, default=None,
-                       help="GenRL episodes (default: the task's own, see 'genrl quickstart' in the README)")
+    own = ", ".join(f"{name} {policy_settings(spec)[0]}" for name, spec in TASKS.items())
+    quick.add_argument("--episodes", type=COUNT, default=None, help=f"GenRL episodes (default: the task's own: {own})")
     _seed_option(quick)
     quick.add_argument("--no-video", action="store_true", help="skip rendering the policy")
     _device_option(quick)
