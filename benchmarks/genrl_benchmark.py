@@ -34,6 +34,7 @@ from sb3_genrl.envs import get_task  # noqa: E402
 from sb3_genrl import GenRL, LatentActionWrapper, __version__  # noqa: E402
 from sb3_genrl.generative import load, train_generator  # noqa: E402
 from sb3_genrl.genrl import evaluate_on_goals  # noqa: E402
+from sb3_genrl.study.quickstart import policy_settings  # noqa: E402
 from sb3_genrl.utils import atomic_path, atomic_write_json  # noqa: E402
 
 RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
@@ -55,11 +56,11 @@ class Setting:
 
     @property
     def episodes(self) -> int:
-        return int(get_task(self.task).quickstart.get("policy_episodes", 3000))
+        return policy_settings(get_task(self.task))[0]
 
     @property
     def genrl_kwargs(self) -> dict[str, object]:
-        return dict(get_task(self.task).quickstart.get("genrl_kwargs", {}))
+        return policy_settings(get_task(self.task))[1]
 
     @property
     def scale(self) -> float:
@@ -90,11 +91,12 @@ def make_generator(setting: Setting, args: argparse.Namespace, work: str) -> tup
 def run_seed(setting: Setting, generator_path: str, seed: int, args: argparse.Namespace, work: str) -> dict[str, object]:
     """Train GenRL with one seed, evaluating on the way; the final deterministic distances to the held-out goals."""
     generator = load(generator_path, device="cpu")
-    eval_env = LatentActionWrapper(gym.make(get_task(setting.task).env_id), generator)
+    env_id = get_task(setting.task).env_id
+    eval_env = LatentActionWrapper(gym.make(env_id), generator)
     eval_env.reset(seed=10_000 + seed)  # the evaluation goals: one fixed stream per seed
     evaluation = EvalCallback(Monitor(eval_env), n_eval_episodes=args.eval_goals, eval_freq=args.eval_every,
                               deterministic=True, log_path=os.path.join(work, f"eval_{seed}"), verbose=0)
-    model = GenRL(gym.make(get_task(setting.task).env_id), generator, seed=seed, device="cpu", **setting.genrl_kwargs)
+    model = GenRL(gym.make(env_id), generator, seed=seed, device="cpu", **setting.genrl_kwargs)
     start = time.perf_counter()
     model.learn(args.episodes, callback=evaluation)
     seconds = time.perf_counter() - start
@@ -106,7 +108,7 @@ def run_seed(setting: Setting, generator_path: str, seed: int, args: argparse.Na
     row = {"seed": seed, "episodes": int(model.num_timesteps), "seconds": seconds,
            **{f"{key}_m": value for key, value in summary(distances).items()},
            "first_episodes_below_target": below, "curve_episodes": episodes, "curve_mean_m": curve}
-    if setting.task == "hockey":
+    if "table_contacts" in infos[0]:  # tasks that count the tool's contacts with the table
         row["table_contacts"] = int(sum(info["table_contacts"] for info in infos))
     return row
 
@@ -127,8 +129,6 @@ def plot(setting: Setting, result: dict[str, object], path: str) -> None:
     figure.tight_layout()
     with atomic_path(path) as tmp:
         figure.savefig(tmp, dpi=100)
-
-
 
 
 def print_table(setting: Setting, result: dict[str, object]) -> None:

@@ -102,11 +102,12 @@ def _evaluation(generator: Any, name: str, fingerprint: str, scale: dict[str, An
 
 
 def task_genrl_kwargs(task: str) -> dict[str, Any]:
-    """The task's own GenRL settings (its ``TaskSpec.quickstart["genrl_kwargs"]``), used by every GenRL run of the
-    study; the scale sets the episodes."""
+    """The task's own GenRL settings (:func:`~sb3_genrl.study.quickstart.policy_settings`), used by every GenRL run
+    of the study; the scale sets the episodes."""
     from sb3_genrl.envs import get_task
+    from sb3_genrl.study.quickstart import policy_settings
 
-    return dict(get_task(task).quickstart.get("genrl_kwargs", {}))
+    return policy_settings(get_task(task))[1]
 
 
 def _policy_reward(task: str, model_path: pathlib.Path, seed: int, scale: dict[str, Any], run_dir: pathlib.Path,

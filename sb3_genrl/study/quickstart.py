@@ -122,7 +122,7 @@ def _run_stages(out: pathlib.Path, settings: dict[str, dict[str, Any]], device: 
     from sb3_genrl.metrics import evaluate_generators
 
     dataset, model_path, policy = out / "demonstrations", out / "vae.pt", out / "policy"
-    demos, generator, evaluation, policy_settings = (settings[name] for name in (
+    demos, generator, evaluation, policy_stage = (settings[name] for name in (
         "demonstrations", "generator", "evaluation", "policy"))
     timings: dict[str, float] = {}
 
@@ -149,15 +149,15 @@ def _run_stages(out: pathlib.Path, settings: dict[str, dict[str, Any]], device: 
         {QUICKSTART_PRESET: model_path}, dataset, n=evaluation["n"], k=evaluation["k"], dwpr_n=evaluation["dwpr_n"],
         interventions=evaluation["interventions"], seed=evaluation["seed"], out_dir=out / "evaluation", device=device))
     stage("policy", {"generator": made_from["generator"]}, lambda: train_policy(
-        policy_settings["task"], str(model_path), episodes=policy_settings["episodes"],
-        batch_episodes=policy_settings["batch_episodes"], seed=policy_settings["seed"], out_dir=policy, device=device,
-        progress_bar=progress_bar, **policy_settings["genrl_kwargs"]))
+        policy_stage["task"], str(model_path), episodes=policy_stage["episodes"],
+        batch_episodes=policy_stage["batch_episodes"], seed=policy_stage["seed"], out_dir=policy, device=device,
+        progress_bar=progress_bar, **policy_stage["genrl_kwargs"]))
     if "video" in settings:
         from sb3_genrl.video import record_video
 
         shown = settings["video"]
         stage("video", {"policy": file_fingerprint(policy / "genrl_policy.zip")}, lambda: record_video(
-            policy_settings["task"], out / "policy.gif", policy=policy, goals=shown["goals"], seed=shown["seed"],
+            policy_stage["task"], out / "policy.gif", policy=policy, goals=shown["goals"], seed=shown["seed"],
             width=shown["width"], height=shown["height"], fps=shown["fps"]))
     return timings
 
