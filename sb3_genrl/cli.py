@@ -160,6 +160,9 @@ def _add_train_policy(sub: argparse._SubParsersAction) -> None:
     policy.add_argument("--e-step", choices=("trpo", "kl_penalty"), default="trpo", help="E-step variant")
     policy.add_argument("--batch-episodes", type=option(check_int, int, minimum=2), default=64,
                         help="episodes per EM iteration N, at least 2 (default 64)")
+    policy.add_argument("--n-envs", type=COUNT, default=1,
+                        help="envs played at a time, each in its own process (one per core); a divisor of "
+                             "--batch-episodes (default 1)")
     policy.add_argument("--library-defaults", action="store_true",
                         help="GenRL's own defaults instead of the task's GenRL settings (basketball sets its own)")
     _device_option(policy)
@@ -309,8 +312,8 @@ def _train_policy_command(args: argparse.Namespace) -> int:
 
     genrl_kwargs = {} if args.library_defaults else policy_settings(get_task(args.task))[1]
     result = train_policy(args.task, str(args.generator), episodes=args.episodes, seed=args.seed, out_dir=args.out,
-                          e_step=args.e_step, batch_episodes=args.batch_episodes, device=args.device,
-                          progress_bar=not args.no_progress_bar, **genrl_kwargs)
+                          e_step=args.e_step, batch_episodes=args.batch_episodes, n_envs=args.n_envs,
+                          device=args.device, progress_bar=not args.no_progress_bar, **genrl_kwargs)
     print(f"GenRL on {args.task}: {result['episodes']} episodes, {result['iterations']} iterations, mean reward "
           f"final {result['final_mean_reward']:.4g}, best {result['best_mean_reward']:.4g} -> {result['model_path']}")
     return 0

@@ -60,6 +60,12 @@ class _EpisodeInfo(gym.Wrapper):
         return observation, reward, terminated, truncated, info
 
 
+def episode_info(env: gym.Env, info_keywords: Sequence[str] = EPISODE_INFO) -> gym.Env:
+    """``env`` with every ``info_keywords`` entry and ``cpu_seconds`` in a finished episode's ``info`` (see
+    :class:`_EpisodeInfo`): what SB3's ``VecMonitor`` over several such envs records."""
+    return _EpisodeInfo(env, info_keywords)
+
+
 def monitor_episodes(env: gym.Env, out_dir: str | os.PathLike, info_keywords: Sequence[str] = EPISODE_INFO) -> Monitor:
     """Wrap ``env`` in SB3's Monitor writing ``out_dir/episodes.monitor.csv`` (one row per episode, as it ends).
 
@@ -71,7 +77,7 @@ def monitor_episodes(env: gym.Env, out_dir: str | os.PathLike, info_keywords: Se
     :param info_keywords: entries of a finished episode's ``info`` to record (NaN where missing)
     :return: the monitored env
     """
-    return Monitor(_EpisodeInfo(env, info_keywords), str(pathlib.Path(out_dir) / MONITOR_FILE),
+    return Monitor(episode_info(env, info_keywords), str(pathlib.Path(out_dir) / MONITOR_FILE),
                    info_keywords=(*info_keywords, "cpu_seconds"))
 
 

@@ -213,6 +213,23 @@ def test_train_policy_writes_curve_model_and_logs(fast_reach_task, tmp_path, cap
     assert "missing.pt' does not exist" in capsys.readouterr().err
 
 
+def test_train_policy_plays_several_envs_in_their_own_processes(fast_reach_task, tmp_path):
+    """n_envs > 1: SubprocVecEnv under VecMonitor; every episode recorded, the run reproducible from its seed."""
+    from sb3_genrl.curves import read_monitor
+
+    runs = [train_policy("fast-reach", LinearGenerator(), episodes=64, seed=3, out_dir=tmp_path / name,
+                         batch_episodes=32, n_envs=2) for name in ("a", "b")]
+    assert runs[0]["episodes"] == 64 and runs[0]["iterations"] == 2 and runs[0]["n_envs"] == 2
+    episodes = [read_monitor(run["episodes_csv_path"]) for run in runs]
+    assert len(episodes[0]["return"]) == 64 and np.all(episodes[0]["length"] == 1)
+    assert np.all(np.isfinite(episodes[0]["cpu_seconds"]))
+    np.testing.assert_array_equal(episodes[0]["return"], episodes[1]["return"])
+    assert GenRL.load(runs[0]["model_path"], generator=LinearGenerator()).n_steps == 16  # N = 16 steps x 2 envs
+    with pytest.raises(ValueError, match=r"batch_episodes \(32\) must be a multiple of n_envs \(3\)"):
+        train_policy("fast-reach", LinearGenerator(), episodes=64, out_dir=tmp_path / "c", batch_episodes=32, n_envs=3)
+    assert not (tmp_path / "c").exists()
+
+
 def test_on_paper_task_with_saved_generator(tmp_path):
     """A short run on the hockey task with an untrained beta-VAE saved to a file, then load -> predict_trajectory."""
     from sb3_genrl.generative import make_generator

@@ -203,6 +203,7 @@ def test_quickstart_and_video(tmp_path, cli):
     assert f"precision {measures['precision']:.3f}, recall {measures['recall']:.3f}" in report
     summary = json.loads((out / "policy" / "summary.json").read_text())
     assert summary["episodes"] == 64 and f"{summary['episodes']} episodes" in report
+    assert summary["n_envs"] == 2  # the quickstart plays GenRL's episodes in two env processes
 
     video = tmp_path / "gen.gif"
     code, printed, _ = cli("video", "--task", "hockey", "--generator", out / "vae.pt", "--goals", 1, "--out", video)
@@ -230,7 +231,11 @@ def test_quickstart_and_video(tmp_path, cli):
     assert all(f"{stage}: already there" in printed for stage in ("demonstrations", "generator", "evaluation", "policy"))
     assert "video:" not in printed
     assert stamps == [path.stat().st_mtime_ns for path in outputs]
-    assert "3 epochs" in (out / "report.md").read_text()
+    # The resumed run's report gives the times the stages took when they were made, not the rerun's zeros.
+    made_in = json.loads((out / "stage_times.json").read_text())
+    assert sorted(made_in) == ["demonstrations", "evaluation", "generator", "policy"]
+    report = (out / "report.md").read_text()
+    assert "3 epochs" in report and ", ".join(f"{k} {v:.0f}" for k, v in made_in.items()) in report
 
 
 def test_windowed_curve_and_mean_std_over_seeds():

@@ -8,13 +8,22 @@ from __future__ import annotations
 
 import os
 import pathlib
+from functools import partial
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
 from sb3_genrl.checks import check_device, check_input_path, check_int, check_output_dir, check_positive_int, check_seed
-from sb3_genrl.curves import LOG_DIR, MONITOR_FILE, monitor_episodes, training_logger, write_learning_curve
+from sb3_genrl.curves import (
+    EPISODE_INFO,
+    LOG_DIR,
+    MONITOR_FILE,
+    episode_info,
+    monitor_episodes,
+    training_logger,
+    write_learning_curve,
+)
 from sb3_genrl.generative.base import TrajectoryGenerator
 from sb3_genrl.genrl.genrl import EStep, GenRL
 from sb3_genrl.utils import atomic_write_json
@@ -63,6 +72,7 @@ def train_policy(
     out_dir: str | os.PathLike,
     e_step: EStep = "trpo",
     batch_episodes: int = 64,
+    n_envs: int = 1,
     device: str = "auto",
     progress_bar: bool = False,
     verbose: int = 0,
@@ -82,6 +92,10 @@ def train_policy(
     :param out_dir: output folder (created)
     :param e_step: ``"trpo"`` or ``"kl_penalty"`` (see :class:`~sb3_genrl.GenRL`)
     :param batch_episodes: episodes per EM iteration, ``N``
+    :param n_envs: envs played at a time; above 1, each in its own process (SB3's ``SubprocVecEnv``), which shares
+        the simulation among the cores. ``batch_episodes`` must be a multiple of it. The result depends on it (the
+        envs draw their goals from seeds ``seed``, ``seed + 1``, ...), not on the machine. With several envs, the
+        Monitor file's ``cpu_seconds`` column is the CPU time of the env process that played the episode.
     :param device: torch device
     :param progress_bar: show a progress bar
     :param verbose: GenRL verbosity
@@ -90,23 +104,19 @@ def train_policy(
         ``best_mean_reward``, ``genrl_settings``: the further GenRL arguments that JSON can hold)
     """
     env_id, task_name = _resolve_env_id(task)
-    _check_arguments(episodes, batch_episodes, seed, device)
+    _check_arguments(episodes, batch_episodes, n_envs, seed, device)
     out = check_output_dir(out_dir)
     # Built first: a generator that does not fit the task is refused before anything is written.
     env = LatentActionWrapper(gym.make(env_id), _as_generator(generator))
     out.mkdir(parents=True, exist_ok=True)
     # The generator is given as it came (a path is kept as the model's generator_path, saved in the zip).
-    model = GenRL(monitor_episodes(env, out), generator, e_step=e_step, n_steps=batch_episodes,
-                  batch_size=min(batch_episodes, genrl_kwargs.pop("batch_size", 64)), seed=seed, device=device,
-                  verbose=verbose, **genrl_kwargs)
-    model.set_logger(training_logger(out, verbose))
-    model.learn(total_timesteps=int(episodes), progress_bar=progress_bar, tb_log_name="GenRL")
-    model.logger.dump(model.num_timesteps)  # SB3 dumps before each update: this writes the last one's logs
-    model.logger.close()
-    model.save(out / "genrl_policy.zip")
+    batch_size = min(batch_episodes, genrl_kwargs.pop("batch_size", 64))
+    arguments = {"e_step": e_step, "n_steps": batch_episodes // n_envs, "batch_size": batch_size, "seed": seed,
+                 "device": device, "verbose": verbose, **genrl_kwargs}
+    model = _train(_training_env(env, n_envs, out), generator, int(episodes), out, progress_bar, arguments)
     curve = write_learning_curve(out / MONITOR_FILE, out, window=batch_episodes,
                                  title=f"GenRL on {env_id} (seed {seed})")
-    result = {"algorithm": "genrl", "task": task_name, "seed": seed, **_output_paths(out),
+    result = {"algorithm": "genrl", "task": task_name, "seed": seed, "n_envs": n_envs, **_output_paths(out),
               "episodes": int(model.num_timesteps), "iterations": len(curve["episodes"]),
               "final_mean_reward": float(curve["mean_reward"][-1]), "best_mean_reward": float(np.max(curve["mean_reward"])),
               "genrl_settings": _json_settings(genrl_kwargs)}
@@ -114,11 +124,49 @@ def train_policy(
     return result
 
 
-def _check_arguments(episodes: int, batch_episodes: int, seed: int, device: str) -> None:
+def _train(env: Any, generator: TrajectoryGenerator | str, episodes: int, out: pathlib.Path, progress_bar: bool,
+           genrl_kwargs: dict[str, Any]) -> GenRL:
+    """Train GenRL on ``env`` with SB3's logger in ``out``, save it there, and close ``env``."""
+    try:
+        model = GenRL(env, generator, **genrl_kwargs)
+        model.set_logger(training_logger(out, genrl_kwargs["verbose"]))
+        model.learn(total_timesteps=episodes, progress_bar=progress_bar, tb_log_name="GenRL")
+        model.logger.dump(model.num_timesteps)  # SB3 dumps before each update: this writes the last one's logs
+        model.logger.close()
+        model.save(out / "genrl_policy.zip")
+    finally:
+        env.close()  # the env processes, and the Monitor file
+    return model
+
+
+def _check_arguments(episodes: int, batch_episodes: int, n_envs: int, seed: int, device: str) -> None:
     check_positive_int(episodes, "episodes")
     check_int(batch_episodes, "batch_episodes", minimum=2)
+    check_positive_int(n_envs, "n_envs")
+    if batch_episodes % n_envs:
+        raise ValueError(f"batch_episodes ({batch_episodes}) must be a multiple of n_envs ({n_envs})")
     check_seed(seed)
     check_device(device)
+
+
+def _training_env(env: LatentActionWrapper, n_envs: int, out: pathlib.Path) -> Any:
+    """The monitored training env: ``env`` itself, or ``n_envs`` copies of it in their own processes."""
+    if n_envs == 1:
+        return monitor_episodes(env, out)
+    from stable_baselines3.common.vec_env import SubprocVecEnv, VecMonitor
+
+    spec, generator = env.env.spec, env.generator  # the spec, not the id: the processes need not know the id
+    env.close()
+    venv = SubprocVecEnv([partial(_episode_env, spec, generator) for _ in range(n_envs)])
+    return VecMonitor(venv, str(out / MONITOR_FILE), info_keywords=(*EPISODE_INFO, "cpu_seconds"))
+
+
+def _episode_env(spec: gym.envs.registration.EnvSpec, generator: TrajectoryGenerator) -> gym.Env:
+    """One env of a ``SubprocVecEnv`` (built in its process): the latent-action task with the Monitor's info keys."""
+    import torch
+
+    torch.set_num_threads(1)  # one core per env process
+    return episode_info(LatentActionWrapper(gym.make(spec), generator))
 
 
 def _json_settings(genrl_kwargs: dict[str, Any]) -> dict[str, Any]:
