@@ -26,6 +26,8 @@ TensorBoard), the model (with its normalisation statistics; ``ppo`` also the clo
 
 from __future__ import annotations
 
+import hashlib
+import json
 import os
 import pathlib
 import time
@@ -33,7 +35,17 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from sb3_genrl.baselines import BASELINES, LATENT_BASELINES
+from sb3_genrl.baselines import BASELINES, LATENT_BASELINES, OFF_POLICY_BASELINES
+from sb3_genrl.baselines.checkpoint import (
+    BUFFER,
+    CHECKPOINT_DIR,
+    MODEL,
+    EpisodeCheckpoint,
+    continue_clocks,
+    prepare_resume,
+    remove_checkpoint,
+    resume_state,
+)
 from sb3_genrl.baselines.feedback import add_time_feature, evaluate_feedback_policy, make_feedback_env
 from sb3_genrl.baselines.her import goal_episodes
 from sb3_genrl.baselines.hyperparameters import PPO_SETTINGS, settings_record
@@ -46,6 +58,7 @@ from sb3_genrl.curves import MONITOR_FILE, monitor_episodes, read_monitor, train
 from sb3_genrl.utils import atomic_path, atomic_write_json
 
 LATENT_BATCH = 64  # episodes per update of the latent-space baselines (GenRL's default N)
+CHECKPOINT_EVERY = 250  # episodes between checkpoints of an off-policy baseline (about 5 minutes of one core)
 EVAL_GOALS, EVAL_GOAL_SEED = 100, 12345  # held-out goals of the cloned policy's evaluation (never used for tuning)
 
 
@@ -61,6 +74,7 @@ def train_baseline(
     generator: Any = None,
     bc_kwargs: dict[str, Any] | None = None,
     eval_goals: int = EVAL_GOALS,
+    checkpoint_every: int | None = CHECKPOINT_EVERY,
     device: str = "auto",
     progress_bar: bool = False,
     verbose: int = 0,
@@ -79,36 +93,95 @@ def train_baseline(
     :param generator: a generator (or its file) for the latent-space baselines
     :param bc_kwargs: behaviour cloning options (``ppo``; see :func:`~sb3_genrl.baselines.bc.behaviour_cloning`)
     :param eval_goals: held-out goals on which the cloned policy is evaluated (``ppo``)
+    :param checkpoint_every: episodes between checkpoints of the off-policy baselines (``None``: none); the same run
+        into the same ``out_dir`` resumes from the last one (:mod:`sb3_genrl.baselines.checkpoint`)
     :param window: episodes per point of the learning curve
     """
-    _check_arguments(algorithm, episodes, seed, demos, demo_episodes, generator, eval_goals, device)
+    _check_arguments(algorithm, episodes, seed, demos, demo_episodes, generator, eval_goals, checkpoint_every, device)
     spec = get_task(task)
     out = check_output_dir(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     summary: dict[str, Any] = {"algorithm": algorithm, "task": spec.name, "episodes": int(episodes), "seed": seed}
-    common = {"seed": seed, "device": device, "verbose": verbose}
     began, began_cpu = time.perf_counter(), time.process_time()
-    if algorithm in LATENT_BASELINES:
-        model, steps = _latent_model(algorithm, spec.env_id, generator, episodes, common, out)
+    transitions = None if algorithm in LATENT_BASELINES else _demonstrations(demos, demo_episodes, spec.name)
+    steps = int(episodes) if transitions is None else int(episodes) * spec.horizon
+    summary |= {} if transitions is None else _demonstration_record(algorithm, transitions, bc_kwargs)
+    checkpoint_every = checkpoint_every if algorithm in OFF_POLICY_BASELINES else None  # the others: short runs
+    # A checkpoint of this run is resumed; another run's is refused, before anything is written.
+    state = None if checkpoint_every is None else resume_state(out, _identity(summary))
+    out.mkdir(parents=True, exist_ok=True)
+    if state is not None:
+        model, summary = _resumed_model(algorithm, spec.name, out, state, device)
     else:
-        transitions = _demonstrations(demos, demo_episodes, spec.name)
-        steps = int(episodes) * spec.horizon
-        summary |= {"demo_transitions": len(transitions["observations"]), "settings": settings_record()[algorithm]}
-        if algorithm == "ppo":
-            summary["settings"]["behaviour_cloning"] |= bc_kwargs or {}
-        model = _feedback_model(algorithm, spec.name, transitions, steps, out, summary, eval_goals, bc_kwargs, common)
-    # Demonstrations, behaviour cloning and its evaluation: wall-clock and this process' CPU seconds.
-    summary |= {"setup_seconds": time.perf_counter() - began, "setup_cpu_seconds": time.process_time() - began_cpu}
+        common = {"seed": seed, "device": device, "verbose": verbose}
+        model = (_latent_model(algorithm, spec.env_id, generator, common, out) if transitions is None else
+                 _feedback_model(algorithm, spec.name, transitions, steps, out, summary, eval_goals, bc_kwargs, common))
+        # demonstrations, behaviour cloning and its evaluation: wall-clock and this process' CPU seconds
+        summary |= {"setup_seconds": time.perf_counter() - began, "setup_cpu_seconds": time.process_time() - began_cpu}
+    summary["learn_seconds"] = _learn(model, steps, out, state, checkpoint_every, summary, progress_bar, verbose)
+    summary |= _episode_results(algorithm, spec.name, out, window)
+    atomic_write_json(out / "summary.json", summary)
+    remove_checkpoint(out)
+    return summary
+
+
+def _learn(model: Any, steps: int, out: pathlib.Path, state: dict[str, Any] | None, checkpoint_every: int | None,
+           summary: dict[str, Any], progress_bar: bool, verbose: int) -> float:
+    """Train ``model`` from ``state`` (a checkpoint's, or ``None``: from the start) to ``steps`` environment steps with
+    SB3's logger in ``out``, checkpointing every ``checkpoint_every`` episodes, and save it there; return the seconds
+    it trained in all (those before a resume included)."""
+    algorithm, start = summary["algorithm"], state or {"episodes": 0, "steps": 0, "learn_seconds": 0.0}
+    callback = None if checkpoint_every is None else EpisodeCheckpoint(
+        out / CHECKPOINT_DIR, checkpoint_every, _identity(summary), start, {"summary": summary})
     model.set_logger(training_logger(out, verbose))
     began = time.perf_counter()
-    model.learn(total_timesteps=steps, progress_bar=progress_bar, tb_log_name=algorithm)
-    summary["learn_seconds"] = time.perf_counter() - began
+    model.learn(total_timesteps=steps - start["steps"], progress_bar=progress_bar, tb_log_name=algorithm,
+                reset_num_timesteps=start["steps"] == 0, callback=callback)
+    seconds = time.perf_counter() - began
     model.logger.close()
     with atomic_path(out / f"{algorithm}_policy.zip") as tmp:
         model.save(tmp)
-    summary |= _episode_results(algorithm, spec.name, out, window)
-    atomic_write_json(out / "summary.json", summary)
-    return summary
+    return float(start["learn_seconds"]) + seconds
+
+
+def _demonstration_record(algorithm: str, transitions: dict[str, np.ndarray],
+                          bc_kwargs: dict[str, Any] | None) -> dict[str, Any]:
+    """The summary's entries on the demonstrations and the settings of a feedback baseline."""
+    settings = settings_record()[algorithm]
+    if algorithm == "ppo":
+        settings["behaviour_cloning"] |= bc_kwargs or {}
+    return {"demo_transitions": len(transitions["observations"]), "demo_sha256": _fingerprint(transitions),
+            "settings": settings}
+
+
+def _identity(summary: dict[str, Any]) -> dict[str, Any]:
+    """What a checkpoint must match to be resumed: the run's algorithm, task, budget, seed, data and settings."""
+    keys = ("algorithm", "task", "episodes", "seed", "demo_transitions", "demo_sha256", "settings")
+    return json.loads(json.dumps({key: summary[key] for key in keys}))  # as state.json holds it
+
+
+def _fingerprint(transitions: dict[str, np.ndarray]) -> str:
+    """A digest of the demonstration transitions (what the run learns from)."""
+    digest = hashlib.sha256()
+    for key in ("observations", "actions", "rewards", "dones"):
+        digest.update(np.ascontiguousarray(transitions[key], dtype=np.float32).tobytes())
+    return digest.hexdigest()[:16]
+
+
+def _resumed_model(algorithm: str, task: str, out: pathlib.Path, state: dict[str, Any],
+                   device: str) -> tuple[SAC, dict[str, Any]]:
+    """The off-policy baseline as its checkpoint left it, on a new monitored env that appends to the Monitor file, and
+    the run's summary so far (the setup's record, and the episodes at which it was resumed)."""
+    prepare_resume(out, state)
+    spec = get_task(task)
+    env = gym.make(spec.goal_env_id) if algorithm == "sac-her" else make_feedback_env(task)
+    monitor = monitor_episodes(env, out, append=True)
+    continue_clocks(monitor, state)
+    model = SAC.load(out / CHECKPOINT_DIR / MODEL, env=monitor, device=device)
+    model.load_replay_buffer(out / CHECKPOINT_DIR / BUFFER)
+    model._last_obs = None  # the new env starts with a reset (the saved observation belongs to the old one)
+    model.set_random_seed(state["identity"]["seed"] + state["episodes"])  # a resumed run is reproducible
+    resumed = [*state["summary"].get("resumed_at_episodes", []), state["episodes"]]
+    return model, state["summary"] | {"resumed_at_episodes": resumed}
 
 
 def _episode_results(algorithm: str, task: str, out: pathlib.Path, window: int) -> dict[str, Any]:
@@ -124,7 +197,7 @@ def _episode_results(algorithm: str, task: str, out: pathlib.Path, window: int) 
 
 
 def _check_arguments(algorithm: str, episodes: int, seed: int, demos: Any, demo_episodes: int | None, generator: Any,
-                     eval_goals: int, device: str) -> None:
+                     eval_goals: int, checkpoint_every: int | None, device: str) -> None:
     """Refuse bad arguments before anything is built or simulated."""
     if algorithm not in BASELINES:
         raise ValueError(f"unknown baseline {algorithm!r}; expected one of {BASELINES}")
@@ -135,6 +208,8 @@ def _check_arguments(algorithm: str, episodes: int, seed: int, demos: Any, demo_
     check_positive_int(episodes, "episodes")
     check_seed(seed)
     check_positive_int(eval_goals, "eval_goals")
+    if checkpoint_every is not None:
+        check_positive_int(checkpoint_every, "checkpoint_every")
     check_device(device)
     if demo_episodes is not None:
         check_positive_int(demo_episodes, "demo_episodes")
@@ -200,8 +275,7 @@ def _demonstrations(demos: Any, demo_episodes: int | None, task: str) -> dict[st
     return {key: np.asarray(value)[:n] for key, value in transitions.items()}
 
 
-def _latent_model(algorithm: str, env_id: str, generator: Any, episodes: int, common: dict,
-                  out: pathlib.Path) -> tuple[Any, int]:
+def _latent_model(algorithm: str, env_id: str, generator: Any, common: dict, out: pathlib.Path) -> Any:
     from sb3_genrl import LatentActionWrapper
 
     if isinstance(generator, str | os.PathLike):
@@ -217,4 +291,4 @@ def _latent_model(algorithm: str, env_id: str, generator: Any, episodes: int, co
         from sb3_contrib import TRPO
 
         model = TRPO("MlpPolicy", env, n_steps=LATENT_BATCH, batch_size=LATENT_BATCH, **common)
-    return model, int(episodes)
+    return model

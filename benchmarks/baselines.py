@@ -7,9 +7,10 @@ latent-space episode is one trajectory of that many steps, so both axes (episode
 
 Each run has its own folder under ``--work`` (``METHOD/seedS``) where it writes its per-episode records (SB3's
 Monitor file) as it goes; a run whose ``run.json`` exists is skipped when the settings recorded there match, and the
-benchmark refuses to mix runs of other settings. The results: ``--out`` (JSON), beside it the Markdown table of the
-mean distance at 100, 300, 1000 and 3000 episodes and the curves (reward against episodes and against environment
-steps, table contacts per episode).
+benchmark refuses to mix runs of other settings; a stopped SAC run resumes from its last checkpoint (every 250
+episodes, see :mod:`sb3_genrl.baselines.checkpoint`), the others start again. The results: ``--out`` (JSON), beside
+it the Markdown table of the mean distance at 100, 300, 1000 and 3000 episodes and the curves (reward against
+episodes and against environment steps, table contacts per episode).
 
     python benchmarks/baselines.py                          # hockey, 3 seeds x 3000 episodes, every method
     python benchmarks/baselines.py --jobs 2                 # two runs at a time

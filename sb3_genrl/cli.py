@@ -185,6 +185,9 @@ def _add_baseline(sub: argparse._SubParsersAction) -> None:
     _seed_option(baseline)
     baseline.add_argument("--bc-max-epochs", type=COUNT, default=200,
                           help="most behaviour cloning epochs; it stops earlier on its held-out loss (ppo)")
+    baseline.add_argument("--checkpoint-every", type=option(check_int, int, minimum=0), default=250,
+                          help="episodes between checkpoints of sac, sac-no-prefill and sac-her; a rerun into the same "
+                               "--out resumes from the last one (0: none; default 250)")
     _device_option(baseline)
     _progress_option(baseline)
     baseline.add_argument("--out", required=True, type=OUT_DIR, help="output folder")
@@ -324,8 +327,8 @@ def _baseline_command(args: argparse.Namespace) -> int:
 
     summary = train_baseline(args.algorithm, args.task, episodes=args.episodes, out_dir=args.out, seed=args.seed,
                              demos=args.demos, demo_episodes=args.demo_episodes, generator=args.generator,
-                             bc_kwargs={"max_epochs": args.bc_max_epochs}, device=args.device,
-                             progress_bar=not args.no_progress_bar)
+                             bc_kwargs={"max_epochs": args.bc_max_epochs}, checkpoint_every=args.checkpoint_every or None,
+                             device=args.device, progress_bar=not args.no_progress_bar)
     if "bc" in summary:
         bc, first = summary["bc"], summary["first_batch"]
         print(f"behaviour cloning ({bc['epochs']} epochs, best {bc['best_epoch']}): mean distance to {bc['eval_goals']} "

@@ -51,6 +51,14 @@ class _EpisodeInfo(gym.Wrapper):
             self._cpu_start = time.process_time()
         return self.env.reset(**kwargs)
 
+    def cpu_seconds(self) -> float:
+        """The CPU seconds recorded so far (0 before the first reset)."""
+        return 0.0 if self._cpu_start is None else time.process_time() - self._cpu_start
+
+    def continue_from(self, seconds: float) -> None:
+        """Count on from ``seconds`` (a resumed run: the CPU seconds recorded before it stopped)."""
+        self._cpu_start = time.process_time() - seconds
+
     def step(self, action: Any) -> tuple[Any, Any, bool, bool, dict[str, Any]]:
         observation, reward, terminated, truncated, info = self.env.step(action)
         if terminated or truncated:
@@ -66,7 +74,8 @@ def episode_info(env: gym.Env, info_keywords: Sequence[str] = EPISODE_INFO) -> g
     return _EpisodeInfo(env, info_keywords)
 
 
-def monitor_episodes(env: gym.Env, out_dir: str | os.PathLike, info_keywords: Sequence[str] = EPISODE_INFO) -> Monitor:
+def monitor_episodes(env: gym.Env, out_dir: str | os.PathLike, info_keywords: Sequence[str] = EPISODE_INFO, *,
+                     append: bool = False) -> Monitor:
     """Wrap ``env`` in SB3's Monitor writing ``out_dir/episodes.monitor.csv`` (one row per episode, as it ends).
 
     Each row also holds ``cpu_seconds`` (see :class:`_EpisodeInfo`); the timesteps at an episode's end are the
@@ -75,10 +84,11 @@ def monitor_episodes(env: gym.Env, out_dir: str | os.PathLike, info_keywords: Se
     :param env: the training env (a one-step latent-action env or a step-by-step task env)
     :param out_dir: the run folder
     :param info_keywords: entries of a finished episode's ``info`` to record (NaN where missing)
+    :param append: add rows to an existing file (a resumed run) instead of starting a new one
     :return: the monitored env
     """
     return Monitor(episode_info(env, info_keywords), str(pathlib.Path(out_dir) / MONITOR_FILE),
-                   info_keywords=(*info_keywords, "cpu_seconds"))
+                   info_keywords=(*info_keywords, "cpu_seconds"), override_existing=not append)
 
 
 def training_logger(out_dir: str | os.PathLike, verbose: int = 0) -> Logger:

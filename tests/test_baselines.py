@@ -157,6 +157,47 @@ def test_baselines_run_end_to_end(algorithm, demos, tmp_path):
         np.testing.assert_allclose(cloned.policy.log_std.exp().detach().numpy(), bc["action_std"], rtol=1e-5)
 
 
+class _Killed(Exception):
+    """Stands for the process being killed."""
+
+
+@pytest.mark.parametrize("algorithm", ["sac", "sac-her"])
+def test_a_stopped_off_policy_run_resumes_from_its_checkpoint(algorithm, demos, tmp_path, monkeypatch):
+    from sb3_genrl.baselines import checkpoint
+
+    watch = checkpoint.EpisodeCheckpoint._on_rollout_start
+
+    def killed_in_the_fourth_episode(callback):
+        watch(callback)
+        if callback.model.num_timesteps == 3 * 69 + 10:
+            raise _Killed
+
+    monkeypatch.setattr(checkpoint.EpisodeCheckpoint, "_on_rollout_start", killed_in_the_fourth_episode)
+    run = {"episodes": 5, "out_dir": tmp_path, "demos": demos, "demo_episodes": 10, "checkpoint_every": 2,
+           "device": "cpu", "seed": 1, "window": 5}
+    with pytest.raises(_Killed):
+        train_baseline(algorithm, "hockey", **run)
+    state = json.loads((tmp_path / "checkpoint" / "state.json").read_text())
+    assert state["episodes"] == 2 and state["steps"] == 2 * 69  # the last checkpoint: every 2 episodes
+    before = read_monitor(tmp_path / MONITOR_FILE)
+    assert len(before["return"]) == 3 and not (tmp_path / "summary.json").exists()
+    with pytest.raises(ValueError, match=r"holds a checkpoint of another run \(it differs in seed\)"):
+        train_baseline(algorithm, "hockey", **(run | {"seed": 2}))
+    monkeypatch.undo()
+
+    summary = train_baseline(algorithm, "hockey", **run)
+    after = read_monitor(tmp_path / MONITOR_FILE)
+    # The rows up to the checkpoint are kept, the third episode is played again, and the budget is met exactly.
+    assert len(after["return"]) == 5 == summary["episodes_played"]
+    np.testing.assert_array_equal(after["return"][:2], before["return"][:2])
+    assert summary["resumed_at_episodes"] == [2] and summary["setup_seconds"] == state["summary"]["setup_seconds"]
+    assert np.all(np.diff(after["time"]) >= 0) and np.all(np.diff(after["cpu_seconds"]) >= 0)  # the clocks go on
+    assert not (tmp_path / "checkpoint").exists()  # a finished run removes its checkpoint
+    assert (tmp_path / "logs" / "progress.until_episode_2.csv").exists()
+    env = gym.make("GenRL/HockeyGoal-v0") if algorithm == "sac-her" else None  # SB3 loads HER with its env
+    assert SAC.load(tmp_path / f"{algorithm}_policy.zip", env=env, device="cpu").num_timesteps == 5 * 69
+
+
 def test_demonstrations_enter_the_her_buffer_as_episodes(demos):
     episodes = goal_episodes("hockey", demos)
     assert episodes["observation"].shape == (12, 70, 15) and episodes["achieved_goal"].shape == (12, 70, 2)

@@ -1,0 +1,132 @@
+"""Checkpoints of the off-policy baselines (SAC, SAC without prefill, SAC + HER), so that a stopped run resumes.
+
+A run of 3000 episodes takes about an hour of one core (one gradient step per environment step). Every
+``checkpoint_every`` episodes, at the end of an episode and after its last gradient step, :class:`EpisodeCheckpoint`
+writes into ``OUT/checkpoint/`` the model (SB3's zip: weights, optimisers, entropy coefficient, step counters), its
+replay buffer (SB3's ``save_replay_buffer``) and ``state.json``: the run's identity, the episodes and steps done, and
+the Monitor file's clock and CPU seconds at that point. Each file is written to a temporary name and renamed, the
+state last, so a run killed at any moment leaves the previous checkpoint whole.
+
+Training the same run into the same folder again resumes from it (:func:`resume_state`): the Monitor file keeps its
+first rows up to the checkpoint (later ones are played again), the model and buffer are loaded, and training goes on
+for the steps left. A resumed run is not bitwise the uninterrupted one (the random streams restart), and its
+``logs/progress.csv`` starts at the checkpoint (the earlier one is kept as ``progress.until_episode_K.csv``). A
+finished run removes its checkpoint. A checkpoint of another run (other settings) is refused, naming what differs.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import pathlib
+import shutil
+import time
+from typing import Any
+
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.monitor import Monitor
+
+from sb3_genrl.curves import LOG_DIR, MONITOR_FILE
+from sb3_genrl.utils import atomic_path, atomic_write_json, atomic_write_text
+
+CHECKPOINT_DIR = "checkpoint"
+STATE, MODEL, BUFFER = "state.json", "model.zip", "replay_buffer.pkl"
+
+
+class EpisodeCheckpoint(BaseCallback):
+    """Write a checkpoint every ``every`` episodes (see the module doc).
+
+    :param folder: the checkpoint folder (``OUT/checkpoint``)
+    :param every: episodes between checkpoints
+    :param identity: what the run is (algorithm, task, budget, seed, settings), checked on resume
+    :param start: the state the run started from (``episodes``, ``steps``, ``learn_seconds``; zeros for a new run)
+    :param extra: further entries of ``state.json`` (e.g. the setup's timings and records for the summary)
+    """
+
+    def __init__(self, folder: pathlib.Path, every: int, identity: dict[str, Any], start: dict[str, Any],
+                 extra: dict[str, Any]) -> None:
+        super().__init__()
+        self.folder, self.every, self.identity, self.start, self.extra = folder, int(every), identity, start, extra
+        self._seen = 0  # episodes this process has seen end
+        self._last = int(start["episodes"])
+        self._began = time.perf_counter()
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _on_rollout_start(self) -> None:
+        # Called before each step is collected, after the previous step's gradient step (train_freq = 1 step).
+        monitor = _monitor(self.model)
+        ended = len(monitor.get_episode_lengths())
+        if ended == self._seen:  # no episode ended on the last step: not at an episode's end
+            return
+        self._seen = ended
+        episodes = int(self.start["episodes"]) + ended
+        if episodes - self._last >= self.every:
+            self.save(episodes)
+            self._last = episodes
+
+    def save(self, episodes: int) -> None:
+        """Write the model, its replay buffer and then the state (each atomically)."""
+        monitor = _monitor(self.model)
+        self.folder.mkdir(parents=True, exist_ok=True)
+        with atomic_path(self.folder / MODEL) as tmp:
+            self.model.save(tmp)
+        with atomic_path(self.folder / BUFFER) as tmp:
+            self.model.save_replay_buffer(tmp)
+        atomic_write_json(self.folder / STATE, {
+            "identity": self.identity, "episodes": episodes, "steps": int(self.model.num_timesteps),
+            "monitor_seconds": time.time() - monitor.t_start, "cpu_seconds": _episode_info(monitor).cpu_seconds(),
+            "learn_seconds": float(self.start["learn_seconds"]) + time.perf_counter() - self._began, **self.extra})
+
+
+def resume_state(out: pathlib.Path, identity: dict[str, Any]) -> dict[str, Any] | None:
+    """The checkpoint's state if ``out`` holds one of this run, else ``None``; raises ``ValueError`` for another run's."""
+    path = out / CHECKPOINT_DIR / STATE
+    if not path.is_file():
+        return None
+    state = json.loads(path.read_text())
+    recorded = state["identity"]
+    if recorded != identity:
+        differ = sorted(k for k in set(recorded) | set(identity) if recorded.get(k) != identity.get(k))
+        raise ValueError(f"{out} holds a checkpoint of another run (it differs in {', '.join(differ)}); use another "
+                         f"out_dir, or delete {out / CHECKPOINT_DIR} to start this run afresh")
+    return state
+
+
+def prepare_resume(out: pathlib.Path, state: dict[str, Any]) -> None:
+    """Keep the Monitor file's rows up to the checkpoint and set the earlier training log aside."""
+    monitor_file = out / MONITOR_FILE
+    lines = monitor_file.read_text().splitlines(keepends=True)
+    kept = 2 + int(state["episodes"])  # the JSON header, the column names, one row per episode
+    if len(lines) < kept:
+        raise ValueError(f"{monitor_file} holds {len(lines) - 2} episodes, fewer than its checkpoint's {state['episodes']}")
+    atomic_write_text(monitor_file, "".join(lines[:kept]), newline="")
+    progress = out / LOG_DIR / "progress.csv"
+    if progress.is_file():
+        os.replace(progress, progress.with_name(f"progress.until_episode_{state['episodes']}.csv"))
+
+
+def continue_clocks(monitor: Monitor, state: dict[str, Any]) -> None:
+    """Make the resumed Monitor's ``t`` and ``cpu_seconds`` columns go on from the checkpoint's."""
+    monitor.t_start = time.time() - float(state["monitor_seconds"])
+    _episode_info(monitor).continue_from(float(state["cpu_seconds"]))
+
+
+def remove_checkpoint(out: pathlib.Path) -> None:
+    shutil.rmtree(out / CHECKPOINT_DIR, ignore_errors=True)
+
+
+def _monitor(model: Any) -> Monitor:
+    env = model.get_env().envs[0]
+    if not isinstance(env, Monitor):
+        raise TypeError(f"the checkpointed run's env must be a Monitor, got {type(env).__name__}")
+    return env
+
+
+def _episode_info(monitor: Monitor) -> Any:
+    from sb3_genrl.curves import _EpisodeInfo
+
+    if not isinstance(monitor.env, _EpisodeInfo):
+        raise TypeError("the checkpointed run's Monitor must wrap sb3_genrl.curves.episode_info's wrapper")
+    return monitor.env
