@@ -154,7 +154,8 @@ def method_result(runs: list[pathlib.Path], horizon: int) -> dict[str, Any]:
     contacts = np.stack([columns.get("table_contacts", np.full(n, np.nan))[:n] for columns in per_seed])
     grid, _ = windowed_curve(distances[0], WINDOW)
     curves = np.stack([windowed_curve(d, WINDOW)[1] for d in distances])
-    contact_curves = np.stack([windowed_curve(c, WINDOW)[1] for c in contacts])
+    has_contacts = bool(np.isfinite(contacts).any())  # a task without a table (basketball) reports none
+    contact_curves = np.stack([windowed_curve(c, WINDOW)[1] for c in contacts]) if has_contacts else None
     milestones = {}
     for episodes in MILESTONES:
         if n >= episodes:
@@ -168,9 +169,9 @@ def method_result(runs: list[pathlib.Path], horizon: int) -> dict[str, Any]:
                  for columns in per_seed]
     return {"seeds": len(runs), "episodes": int(n), "env_steps_per_episode": horizon, "milestones": milestones,
             "curve": {"episodes": grid.tolist(), "mean_distance": curves.mean(0).tolist(),
-                      "std_distance": curves.std(0).tolist(), "table_contacts": np.nanmean(contact_curves, 0).tolist()
-                      if np.isfinite(contact_curves).any() else None},
-            "table_contacts_per_episode": float(np.nanmean(contacts)) if np.isfinite(contacts).any() else None,
+                      "std_distance": curves.std(0).tolist(),
+                      "table_contacts": np.nanmean(contact_curves, 0).tolist() if has_contacts else None},
+            "table_contacts_per_episode": float(np.nanmean(contacts)) if has_contacts else None,
             "setup_seconds": float(np.mean([r["setup_seconds"] for r in records])),
             "setup_cpu_seconds": float(np.mean([r["setup_cpu_seconds"] for r in records])),
             "episodes_per_second": float(np.mean([r["episodes_played"] / r["learn_seconds"] for r in records])),
