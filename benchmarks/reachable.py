@@ -11,14 +11,21 @@ a set of latent actions once gives every goal's best reward over that set exactl
 
 from __future__ import annotations
 
+import hashlib
+import os
+import pathlib
 from typing import Any
 
 import numpy as np
 from sb3_genrl.envs import get_task
+from sb3_genrl.envs.base import default_threads
 from sb3_genrl.envs.basketball import BASKET_HEIGHT
 from scipy.spatial import cKDTree
 
 from sb3_genrl.generative.base import TrajectoryGenerator
+from sb3_genrl.utils import atomic_path
+
+CACHE = pathlib.Path(__file__).resolve().parent / "runs" / "limits"  # the played grids (ignored by git)
 
 
 def held_out_goals(task: str, n: int, seed: int) -> np.ndarray:
@@ -55,8 +62,22 @@ def candidate_points(task: str, rows: np.ndarray) -> np.ndarray:
     return position[crossing, :2] + fraction[:, None] * (position[crossing + 1, :2] - position[crossing, :2])
 
 
-def play_candidates(task: str, trajectories: np.ndarray, *, chunk: int = 2048) -> list[np.ndarray]:
-    """Play trajectories (one thread) and return each one's candidate points; none for an unstable episode."""
+def play_candidates(task: str, trajectories: np.ndarray, *, chunk: int = 2048,
+                    cache: str | os.PathLike | None = None) -> list[np.ndarray]:
+    """Play trajectories (on every core) and return each one's candidate points; none for an unstable episode.
+
+    :param cache: a folder where the result is kept, named by a digest of the task and the trajectories (the
+        simulation is deterministic, so the same trajectories give the same points): a rerun on the same generator
+        reads it instead of playing tens of thousands of trajectories again
+    """
+    trajectories = np.ascontiguousarray(trajectories, dtype=np.float32)
+    path = None
+    if cache is not None:
+        digest = hashlib.sha256(task.encode() + trajectories.tobytes()).hexdigest()[:16]
+        path = pathlib.Path(cache) / f"{task}_candidates_{digest}.npz"
+        if path.is_file():
+            with np.load(path) as stored:
+                return np.split(stored["points"], np.cumsum(stored["counts"])[:-1])
     env = get_task(task).make_env()
     out: list[np.ndarray] = []
     original = env._finish
@@ -69,7 +90,11 @@ def play_candidates(task: str, trajectories: np.ndarray, *, chunk: int = 2048) -
     env._finish = finish  # type: ignore[method-assign]
     for start in range(0, len(trajectories), chunk):
         batch = trajectories[start:start + chunk]
-        env.play_trajectories(batch, np.zeros((len(batch), 2)), n_threads=1, allow_outside_region=True)
+        env.play_trajectories(batch, np.zeros((len(batch), 2)), n_threads=default_threads(), allow_outside_region=True)
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_path(path) as tmp, open(tmp, "wb") as file:
+            np.savez(file, points=np.concatenate(out), counts=np.array([len(c) for c in out]))
     return out
 
 
@@ -88,7 +113,7 @@ def summary(distances: np.ndarray) -> dict[str, float]:
 
 
 def generator_limit(generator: TrajectoryGenerator, task: str, goals: np.ndarray, *, grid: int = 201,
-                    extent: float = 3.0, check: int = 5) -> dict[str, Any]:
+                    extent: float = 3.0, check: int = 5, cache: str | os.PathLike | None = CACHE) -> dict[str, Any]:
     """The generator's best reachable distance to each goal over :func:`latent_set`, checked by replaying.
 
     :param generator: the trajectory generator
@@ -97,13 +122,15 @@ def generator_limit(generator: TrajectoryGenerator, task: str, goals: np.ndarray
     :param grid: grid points per axis (2-D latents)
     :param extent: half-width of the latent box (prior stds)
     :param check: goals whose best latent action is replayed with that goal; its reward must be minus the distance
+    :param cache: where the played grid's candidate points are kept (see :func:`play_candidates`; ``None``: nowhere)
     :return: ``distances`` (per goal), ``best_latents``, ``latents``, ``candidates`` and a ``summary``
     """
     latents = latent_set(generator, grid=grid, extent=extent)
-    candidates = play_candidates(task, generator.decode(latents))
+    trajectories = generator.decode(latents)
+    candidates = play_candidates(task, trajectories, cache=cache)
     distances, owner = nearest(candidates, goals)
     env = get_task(task).make_env()
-    rewards, _ = env.play_trajectories(generator.decode(latents[owner[:check]]), goals[:check])
+    rewards, _ = env.play_trajectories(trajectories[owner[:check]], goals[:check])
     if not np.allclose(-rewards, distances[:check], atol=1e-6):
         raise RuntimeError(f"replayed rewards {rewards} differ from minus the grid distances {distances[:check]}")
     coarser = {}
