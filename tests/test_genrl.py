@@ -37,7 +37,7 @@ TOY_TASK_ID = "GenRLTest/FastReachTask-v0"
 def test_converges_to_known_optimum(e_step):
     model = GenRL(FastReachEnv(), LinearGenerator(), e_step=e_step, seed=0)
     before = np.array([model.predict(goal, deterministic=True)[0] for goal in GOALS])
-    model.learn(3200)  # 50 EM iterations of N = 64 episodes
+    model.learn(4800)  # 75 EM iterations of N = 64 episodes (the KL-penalty E-step is 0.06-0.17 off after 50)
     after = np.array([model.predict(goal, deterministic=True)[0] for goal in GOALS])
     optimum = np.array([optimal_latent(goal) for goal in GOALS])
     assert np.abs(before - optimum).max() > 0.5
@@ -496,3 +496,54 @@ def test_observation_batches_join_and_index_as_tensors_and_dicts():
     dicts = concatenate([{"goal": first, "t": th.zeros(3)}, {"goal": second, "t": th.ones(2)}])
     th.testing.assert_close(dicts["goal"], joined)
     th.testing.assert_close(take(dicts, th.tensor([3]))["t"], th.ones(1))
+
+
+class _WeightRecorder(BaseCallback):
+    """The policy's weights after each iteration (recorded before the next rollout, and at the end)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.weights: list[dict[str, np.ndarray]] = []
+
+    def _record(self) -> None:
+        if self.model._n_updates > len(self.weights):
+            self.weights.append({k: v.detach().clone().numpy() for k, v in self.model.policy.named_parameters()})
+
+    def _on_rollout_start(self) -> None:
+        self._record()
+
+    def _on_training_end(self) -> None:
+        self._record()
+
+    def _on_step(self) -> bool:
+        return True
+
+
+def test_policy_averaging_is_the_start_corrected_moving_average_and_acts(tmp_path):
+    from sb3_genrl.genrl.loading import load_policy
+
+    recorder, decay = _WeightRecorder(), 0.7
+    model = GenRL(FastReachEnv(), LinearGenerator(), seed=0, n_steps=16, policy_averaging=decay)
+    model.learn(6 * 16, callback=recorder)
+    assert len(recorder.weights) == 6
+    # Brute force: sum_i d^(n-i) theta_i / sum_i d^(n-i) over the iterates theta_1..6 (the initial policy excluded).
+    factors = decay ** np.arange(5, -1, -1)
+    for name, value in model.policy_average.named_parameters():
+        expected = sum(f * w[name] for f, w in zip(factors, recorder.weights, strict=True)) / factors.sum()
+        np.testing.assert_allclose(value.detach().numpy(), expected, rtol=1e-5, atol=1e-6)
+    assert not np.allclose(model.policy_average.action_net.weight.detach().numpy(), recorder.weights[-1]["action_net.weight"])
+    # predict acts with the average, here and after saving and loading (with SB3's loader and without unpickling).
+    averaged = model.policy_average.predict(GOALS, deterministic=True)[0]
+    np.testing.assert_allclose(model.predict(GOALS, deterministic=True)[0], averaged)
+    assert not np.allclose(model.policy.predict(GOALS, deterministic=True)[0], averaged)
+    model.save(tmp_path / "model.zip")
+    loaded = GenRL.load(tmp_path / "model.zip", generator=LinearGenerator())
+    np.testing.assert_allclose(loaded.predict(GOALS, deterministic=True)[0], averaged, rtol=1e-6)
+    safe = load_policy(tmp_path / "model.zip", FastReachEnv(), generator=LinearGenerator())
+    np.testing.assert_allclose(safe.predict(GOALS, deterministic=True)[0], averaged, rtol=1e-6)
+    # Without averaging nothing changes: predict is the policy's own.
+    plain = GenRL(FastReachEnv(), LinearGenerator(), seed=0, n_steps=16)
+    assert plain.policy_average is None and "policy_average" not in plain._get_torch_save_params()[0]
+    for bad in (0, 1, 1.5):
+        with pytest.raises(ValueError, match=f"policy_averaging must be between 0 and 1 \\(exclusive\\) or None, got {bad}"):
+            GenRL(FastReachEnv(), LinearGenerator(), policy_averaging=bad)

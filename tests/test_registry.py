@@ -171,4 +171,8 @@ def test_train_policy_takes_the_tasks_genrl_settings(reach_task, tmp_path, monke
                      "--batch-episodes", "8", "--device", "cpu", "--no-progress-bar", "--out", str(tmp_path / name),
                      *extra]) == 0
         settings[name] = json.loads((tmp_path / name / "summary.json").read_text())["genrl_settings"]
-    assert settings == {"task": tuned, "library": {}}
+    # Each run records every GenRL hyperparameter in effect: the task's where it sets them, GenRL's defaults elsewhere.
+    assert settings["task"] == settings["library"] | tuned
+    assert settings["library"]["target_kl"] == 0.01 and settings["library"]["value_history"] == 1
+    assert settings["library"]["n_steps"] == 8 and settings["library"]["max_log_std_change"] is None
+    assert "seed" not in settings["library"] and "device" not in settings["library"]

@@ -101,7 +101,7 @@ def train_policy(
     :param verbose: GenRL verbosity
     :param genrl_kwargs: further :class:`~sb3_genrl.GenRL` arguments
     :return: paths of the outputs and a summary (``episodes``, ``iterations``, ``final_mean_reward``,
-        ``best_mean_reward``, ``genrl_settings``: the further GenRL arguments that JSON can hold)
+        ``best_mean_reward``, ``genrl_settings``: every GenRL hyperparameter in effect, see :func:`genrl_settings`)
     """
     env_id, task_name = _resolve_env_id(task)
     _check_arguments(episodes, batch_episodes, n_envs, seed, device)
@@ -119,7 +119,7 @@ def train_policy(
     result = {"algorithm": "genrl", "task": task_name, "seed": seed, "n_envs": n_envs, **_output_paths(out),
               "episodes": int(model.num_timesteps), "iterations": len(curve["episodes"]),
               "final_mean_reward": float(curve["mean_reward"][-1]), "best_mean_reward": float(np.max(curve["mean_reward"])),
-              "genrl_settings": _json_settings(genrl_kwargs)}
+              "genrl_settings": genrl_settings(arguments)}
     atomic_write_json(out / "summary.json", result)
     return result
 
@@ -172,6 +172,23 @@ def _episode_env(spec: gym.envs.registration.EnvSpec, generator: TrajectoryGener
 def _json_settings(genrl_kwargs: dict[str, Any]) -> dict[str, Any]:
     """The GenRL arguments that a JSON file can hold (numbers, strings, booleans, None)."""
     return {key: value for key, value in genrl_kwargs.items() if isinstance(value, bool | int | float | str | type(None))}
+
+
+# GenRL arguments that say where or how verbosely it runs, not what it computes
+_NOT_SETTINGS = ("policy", "env", "generator", "seed", "device", "verbose", "tensorboard_log", "stats_window_size",
+                 "_init_setup_model")
+
+
+def genrl_settings(genrl_kwargs: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Every GenRL hyperparameter in effect with ``genrl_kwargs``: GenRL's defaults, updated with them (those a JSON
+    file can hold). Recorded by the runs and the stages that train GenRL, so that a change of a default is seen when
+    a stage is resumed, not silently mixed with results made under the old one."""
+    import inspect
+
+    defaults = {name: parameter.default for name, parameter in inspect.signature(GenRL.__init__).parameters.items()
+                if parameter.default is not inspect.Parameter.empty}
+    settings = defaults | dict(genrl_kwargs or {})
+    return _json_settings({name: value for name, value in settings.items() if name not in _NOT_SETTINGS})
 
 
 def _output_paths(out: pathlib.Path) -> dict[str, str]:

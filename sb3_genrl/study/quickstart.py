@@ -64,7 +64,6 @@ def quickstart(out_dir: str | os.PathLike, *, task: str, demo_episodes: int = 40
     """
     import torch
 
-    import sb3_genrl
     from sb3_genrl.checks import check_device, check_output_dir, check_positive_int, check_seed
     from sb3_genrl.envs import get_task
 
@@ -78,14 +77,8 @@ def quickstart(out_dir: str | os.PathLike, *, task: str, demo_episodes: int = 40
     # The models are small: one torch thread is as fast as several and leaves the other cores to MuJoCo.
     torch.set_num_threads(1)
     out = pathlib.Path(out_dir)
-    settings = {
-        "demonstrations": {"task": task, "episodes": demo_episodes, "seed": seed, "version": sb3_genrl.__version__},
-        "generator": {"preset": QUICKSTART_PRESET, "epochs": epochs, "eval_every": 10, "seed": seed},
-        # precision/recall compares at most as many samples as there are demonstrations
-        "evaluation": {"n": min(pr_samples, demo_episodes), "dwpr_n": dwpr_samples, "k": 3, "interventions": 5, "seed": seed},
-        "policy": {"task": task, "episodes": policy_episodes, "batch_episodes": QUICKSTART_BATCH,
-                   "n_envs": QUICKSTART_ENVS, "seed": seed, "genrl_kwargs": genrl_kwargs},
-        **({"video": {**VIDEO, "seed": seed + 1}} if video else {})}
+    settings = _stage_settings(task, demo_episodes, epochs, policy_episodes, genrl_kwargs, pr_samples, dwpr_samples,
+                               seed, video)
     with folder_lock(out):
         refuse_conflicts(out, [line for name, wanted in settings.items()
                                for line in settings_conflicts(*_recorded(out, name), wanted,
@@ -93,6 +86,23 @@ def quickstart(out_dir: str | os.PathLike, *, task: str, demo_episodes: int = 40
         log = log or (lambda _line: None)
         timings = _run_stages(out, settings, device, progress_bar, log)
         return _write_report(out, task, seed, video, timings, log)
+
+
+def _stage_settings(task: str, demo_episodes: int, epochs: int, policy_episodes: int, genrl_kwargs: dict[str, Any],
+                    pr_samples: int, dwpr_samples: int, seed: int, video: bool) -> dict[str, dict[str, Any]]:
+    """What each stage is made with: recorded beside its output, and compared with the record on a rerun."""
+    import sb3_genrl
+    from sb3_genrl.genrl.train import genrl_settings
+
+    return {
+        "demonstrations": {"task": task, "episodes": demo_episodes, "seed": seed, "version": sb3_genrl.__version__},
+        "generator": {"preset": QUICKSTART_PRESET, "epochs": epochs, "eval_every": 10, "seed": seed},
+        # precision/recall compares at most as many samples as there are demonstrations
+        "evaluation": {"n": min(pr_samples, demo_episodes), "dwpr_n": dwpr_samples, "k": 3, "interventions": 5, "seed": seed},
+        "policy": {"task": task, "episodes": policy_episodes, "batch_episodes": QUICKSTART_BATCH,
+                   "n_envs": QUICKSTART_ENVS, "seed": seed, "genrl_kwargs": genrl_kwargs,
+                   "genrl": genrl_settings(genrl_kwargs)},  # every GenRL setting in effect, defaults included
+        **({"video": {**VIDEO, "seed": seed + 1}} if video else {})}
 
 
 # Where each stage writes (checked for "done") and where it records its settings.

@@ -111,6 +111,8 @@ def _stages(task: str, task_dir: pathlib.Path, scale: dict[str, Any],
             dataset: str | None) -> list[tuple[pathlib.Path, dict, bool]]:
     """Each stage's record, this run's settings for it and whether it has output. ``dataset`` is the fingerprint
     of the demonstrations (None: not known yet, left out of the settings)."""
+    from sb3_genrl.genrl.train import genrl_settings
+
     made_from = {} if dataset is None else {"dataset": dataset}
     generators, evaluation, policies, comparison = (task_dir / name for name in (
         "generators", "evaluation", "policies", "comparison"))
@@ -121,7 +123,8 @@ def _stages(task: str, task_dir: pathlib.Path, scale: dict[str, Any],
                                    "interventions": INTERVENTIONS, "seed": EVALUATION_SEED, **made_from},
          any(path.name != STAGE_FILE for path in evaluation.glob("*.json"))),
         (policies / STAGE_FILE, {"episodes": scale["policy_episodes"], "batch_episodes": scale["batch_episodes"],
-                                 "genrl_kwargs": task_genrl_kwargs(task)},
+                                 "genrl_kwargs": task_genrl_kwargs(task),
+                                 "genrl": genrl_settings(task_genrl_kwargs(task))},  # GenRL's defaults included
          any(policies.glob("*/seed*/summary.json")))]
     if scale["baseline_episodes"] > 0:
         stages.append((comparison / STAGE_FILE, {"episodes": scale["baseline_episodes"],
