@@ -62,12 +62,14 @@ def run_settings(method: str, args: argparse.Namespace, seed: int, demos: str, g
     if method == "genrl" or method.startswith("latent-"):
         settings |= {"generator": os.path.abspath(generator), "generator_sha256": _file_digest(generator),
                      "batch_episodes": WINDOW}
-        if method == "genrl":  # the task's own GenRL settings, as in its quickstart
+        if method == "genrl":  # the task's own GenRL settings, as in its quickstart, and every setting in effect
             from sb3_genrl.envs import get_task
 
+            from sb3_genrl.genrl.train import genrl_settings
             from sb3_genrl.study.quickstart import policy_settings
 
             settings["genrl_kwargs"] = policy_settings(get_task(args.task))[1]
+            settings["genrl"] = genrl_settings(settings["genrl_kwargs"])
     else:
         settings |= {"demos": os.path.abspath(demos), "demo_episodes": info["episodes"], "demo_seed": info.get("seed"),
                      "hyperparameters": settings_record()[method]}
