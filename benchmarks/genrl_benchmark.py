@@ -34,6 +34,7 @@ from sb3_genrl.envs import get_task  # noqa: E402
 from sb3_genrl import GenRL, LatentActionWrapper, __version__  # noqa: E402
 from sb3_genrl.generative import load, train_generator  # noqa: E402
 from sb3_genrl.genrl import evaluate_on_goals  # noqa: E402
+from sb3_genrl.genrl.train import genrl_settings  # noqa: E402
 from sb3_genrl.study.quickstart import policy_settings  # noqa: E402
 from sb3_genrl.utils import atomic_path, atomic_write_json  # noqa: E402
 
@@ -178,7 +179,8 @@ def main(setting: Setting, description: str) -> None:
         "benchmark": f"genrl_{setting.task}", "sb3_genrl": __version__, "torch": torch.__version__,
         "machine": platform.machine(), "processor": platform.processor(), "cpus": os.cpu_count(), "threads": args.threads,
         "episodes": args.episodes, "final_goals": args.final_goals, "final_goal_seed": FINAL_GOAL_SEED,
-        "eval_goals": args.eval_goals, "target_m": setting.target_m, "genrl_kwargs": setting.genrl_kwargs, "runs": []}
+        "eval_goals": args.eval_goals, "target_m": setting.target_m, "genrl_kwargs": setting.genrl_kwargs,
+        "genrl_settings": genrl_settings(setting.genrl_kwargs), "runs": []}
     with tempfile.TemporaryDirectory() as work:
         generator_path, result["generator"] = make_generator(setting, args, work)
         start = time.perf_counter()
