@@ -92,10 +92,10 @@ def train_policy(
     :param out_dir: output folder (created)
     :param e_step: ``"trpo"`` or ``"kl_penalty"`` (see :class:`~sb3_genrl.GenRL`)
     :param batch_episodes: episodes per EM iteration, ``N``
-    :param n_envs: envs played at a time; above 1, each in its own process (SB3's ``SubprocVecEnv``), which shares
-        the simulation among the cores. ``batch_episodes`` must be a multiple of it. The result depends on it (the
-        envs draw their goals from seeds ``seed``, ``seed + 1``, ...), not on the machine. With several envs, the
-        Monitor file's ``cpu_seconds`` column is the CPU time of the env process that played the episode.
+    :param n_envs: envs played at a time, above 1 each in its own process (SB3's ``SubprocVecEnv``: a script must
+        then run its work under ``if __name__ == "__main__":``); a divisor of ``batch_episodes``. The result depends
+        on it (the envs draw their goals from seeds ``seed``, ``seed + 1``, ...), not on the machine; the Monitor
+        file's ``cpu_seconds`` is then the CPU time of the env process that played the episode.
     :param device: torch device
     :param progress_bar: show a progress bar
     :param verbose: GenRL verbosity
