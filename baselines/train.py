@@ -172,9 +172,7 @@ def _resumed_model(algorithm: str, task: str, out: pathlib.Path, state: dict[str
     """The off-policy baseline as its checkpoint left it, on a new monitored env that appends to the Monitor file, and
     the run's summary so far (the setup's record, and the episodes at which it was resumed)."""
     prepare_resume(out, state)
-    spec = get_task(task)
-    env = gym.make(spec.goal_env_id) if algorithm == "sac-her" else make_feedback_env(task)
-    monitor = monitor_episodes(env, out, append=True)
+    monitor = _monitored_env(algorithm, task, out, append=True)
     continue_clocks(monitor, state)
     model = SAC.load(out / CHECKPOINT_DIR / MODEL, env=monitor, device=device)
     model.load_replay_buffer(out / CHECKPOINT_DIR / BUFFER)
@@ -218,17 +216,22 @@ def _check_arguments(algorithm: str, episodes: int, seed: int, demos: Any, demo_
             check_input_path(path, name)
 
 
+def _monitored_env(algorithm: str, task: str, out: pathlib.Path, *, append: bool = False) -> Any:
+    """A feedback baseline's env under the run's Monitor: the goal-conditioned task for SAC + HER, else the task with
+    the time feature (``append``: a resumed run adds to the Monitor file)."""
+    env = gym.make(get_task(task).goal_env_id) if algorithm == "sac-her" else make_feedback_env(task)
+    return monitor_episodes(env, out, append=append)
+
+
 def _feedback_model(algorithm: str, task: str, transitions: dict[str, np.ndarray], steps: int, out: pathlib.Path,
                     summary: dict[str, Any], eval_goals: int, bc_kwargs: dict[str, Any] | None,
                     common: dict[str, Any]) -> PPO | SAC:
     """The feedback baseline's model on a monitored env, its demonstrations in place; behaviour cloning's record
     goes to ``summary``."""
-    horizon = get_task(task).horizon
+    env = _monitored_env(algorithm, task, out)
     if algorithm == "sac-her":
-        env = monitor_episodes(gym.make(get_task(task).goal_env_id), out)
         return sac_her_with_demonstrations(env, goal_episodes(task, transitions), steps=steps, **common)
-    transitions = add_time_feature(transitions, horizon)
-    env = monitor_episodes(make_feedback_env(task), out)
+    transitions = add_time_feature(transitions, get_task(task).horizon)
     if algorithm != "ppo":
         return sac_with_demonstrations(env, transitions, steps=steps, prefill=algorithm == "sac", **common)
     model, record = ppo_with_behaviour_cloning(env, transitions, bc_kwargs=bc_kwargs, **common)
