@@ -230,6 +230,22 @@ def test_train_policy_plays_several_envs_in_their_own_processes(fast_reach_task,
     assert not (tmp_path / "c").exists()
 
 
+def test_several_envs_without_a_main_guard_fail_with_a_clear_error(hockey_generator, tmp_path):
+    """A script that starts env processes at import time: both the env process and the script say what to do."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "no_guard.py"
+    script.write_text("from sb3_genrl.genrl import train_policy\n"
+                      f"train_policy('hockey', {hockey_generator!r}, episodes=4, batch_episodes=2, n_envs=2, "
+                      f"out_dir={str(tmp_path / 'run')!r})\n")
+    run = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert run.returncode != 0
+    assert "RuntimeError: the 2 env processes did not start" in run.stderr
+    assert 'under `if __name__ == "__main__":`' in run.stderr
+    assert not (tmp_path / "run" / "model.zip").exists()
+
+
 def test_on_paper_task_with_saved_generator(tmp_path):
     """A short run on the hockey task with an untrained beta-VAE saved to a file, then load -> predict_trajectory."""
     from sb3_genrl.generative import make_generator

@@ -6,6 +6,7 @@ the functions so that the core library (:class:`~sb3_genrl.GenRL`) never imports
 
 from __future__ import annotations
 
+import multiprocessing
 import os
 import pathlib
 from functools import partial
@@ -143,10 +144,16 @@ def _check_arguments(episodes: int, batch_episodes: int, n_envs: int, seed: int,
     check_positive_int(episodes, "episodes")
     check_int(batch_episodes, "batch_episodes", minimum=2)
     check_positive_int(n_envs, "n_envs")
+    if n_envs > 1 and getattr(multiprocessing.current_process(), "_inheriting", False):  # Python's own test
+        raise RuntimeError(MAIN_GUARD)  # in an env process that re-imports the script: its stderr shows why
     if batch_episodes % n_envs:
         raise ValueError(f"batch_episodes ({batch_episodes}) must be a multiple of n_envs ({n_envs})")
     check_seed(seed)
     check_device(device)
+
+
+MAIN_GUARD = ("n_envs > 1 plays the envs in their own processes, which import the script that started them: a script "
+              "must run its work under `if __name__ == \"__main__\":`, as any script with SB3's SubprocVecEnv")
 
 
 def _training_env(env: LatentActionWrapper, n_envs: int, out: pathlib.Path) -> Any:
@@ -157,7 +164,10 @@ def _training_env(env: LatentActionWrapper, n_envs: int, out: pathlib.Path) -> A
 
     spec, generator = env.env.spec, env.generator  # the spec, not the id: the processes need not know the id
     env.close()
-    venv = SubprocVecEnv([partial(_episode_env, spec, generator) for _ in range(n_envs)])
+    try:
+        venv = SubprocVecEnv([partial(_episode_env, spec, generator) for _ in range(n_envs)])
+    except (BrokenPipeError, EOFError, ConnectionResetError) as error:  # a process died while starting
+        raise RuntimeError(f"the {n_envs} env processes did not start. {MAIN_GUARD}") from error
     return VecMonitor(venv, str(out / MONITOR_FILE), info_keywords=(*EPISODE_INFO, "cpu_seconds"))
 
 
