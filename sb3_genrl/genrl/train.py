@@ -140,6 +140,10 @@ def _train(env: Any, generator: TrajectoryGenerator | str, episodes: int, out: p
     return model
 
 
+MAIN_GUARD = ("n_envs > 1 plays the envs in their own processes, which import the script that started them: a script "
+              "must run its work under `if __name__ == \"__main__\":`, as any script with SB3's SubprocVecEnv")
+
+
 def _check_arguments(episodes: int, batch_episodes: int, n_envs: int, seed: int, device: str) -> None:
     check_positive_int(episodes, "episodes")
     check_int(batch_episodes, "batch_episodes", minimum=2)
@@ -150,10 +154,6 @@ def _check_arguments(episodes: int, batch_episodes: int, n_envs: int, seed: int,
         raise ValueError(f"batch_episodes ({batch_episodes}) must be a multiple of n_envs ({n_envs})")
     check_seed(seed)
     check_device(device)
-
-
-MAIN_GUARD = ("n_envs > 1 plays the envs in their own processes, which import the script that started them: a script "
-              "must run its work under `if __name__ == \"__main__\":`, as any script with SB3's SubprocVecEnv")
 
 
 def _training_env(env: LatentActionWrapper, n_envs: int, out: pathlib.Path) -> Any:
