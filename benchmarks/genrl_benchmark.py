@@ -97,7 +97,9 @@ def run_seed(setting: Setting, generator_path: str, seed: int, args: argparse.Na
     eval_env.reset(seed=10_000 + seed)  # the evaluation goals: one fixed stream per seed
     evaluation = EvalCallback(Monitor(eval_env), n_eval_episodes=args.eval_goals, eval_freq=args.eval_every,
                               deterministic=True, log_path=os.path.join(work, f"eval_{seed}"), verbose=0)
-    model = GenRL(gym.make(env_id), generator, seed=seed, device="cpu", **setting.genrl_kwargs)
+    genrl_kwargs = dict(setting.genrl_kwargs)
+    policy = genrl_kwargs.pop("policy", "MlpPolicy")
+    model = GenRL(policy, gym.make(env_id), generator, seed=seed, device="cpu", **genrl_kwargs)
     start = time.perf_counter()
     model.learn(args.episodes, callback=evaluation)
     seconds = time.perf_counter() - start

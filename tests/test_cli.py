@@ -288,11 +288,17 @@ def test_policy_zips_are_loaded_without_unpickling(runs, tmp_path, cli):
     goals = np.array([[1.0, 0.1], [0.8, -0.3]], dtype=np.float32)
     expected = GenRL.load(policy, device="cpu").predict(goals, deterministic=True)[0]
     # Payloads in the entries SB3 would unpickle: the safe loader rebuilds them and never unpickles the file's.
-    for key in ("policy_class", "observation_space", "ep_info_buffer", "lr_schedule"):
+    for key in ("observation_space", "ep_info_buffer", "lr_schedule"):
         evil = _with_payload(policy, tmp_path / f"{key}.zip", key, marker)
         model = load_policy(evil, gym.make("GenRL/Hockey-v0"))  # the generator: the file the zip names
         np.testing.assert_array_equal(model.predict(goals, deterministic=True)[0], expected)
         assert not marker.exists(), key
+    # The policy class is read from its pickle's opcodes, never run: anything but a reference to an allowed class
+    # (here a payload, with the readable description of SB3's class beside it) is refused.
+    evil = _with_payload(policy, tmp_path / "policy_class.zip", "policy_class", marker)
+    with pytest.raises(ValueError, match="policy class \\(not a plain class reference\\) that cannot be loaded"):
+        load_policy(evil, gym.make("GenRL/Hockey-v0"))
+    assert not marker.exists()
     # An entry it cannot rebuild is refused, through the command line too, unless the user trusts the file.
     evil = _with_payload(policy, tmp_path / "extra.zip", "backdoor", marker)
     code, _, err = cli("video", "--task", "hockey", "--policy", evil, "--goals", 1, "--out", tmp_path / "v.gif")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import csv
+import itertools
 import warnings
 
 import gymnasium as gym
@@ -27,6 +28,7 @@ from sb3_genrl import GenRL, LatentActionWrapper
 from sb3_genrl.cli import main as cli_main
 from sb3_genrl.genrl import genrl as genrl_module
 from sb3_genrl.genrl import train_policy
+from sb3_genrl.genrl.policies import BoxScaler
 
 GOALS = np.array([[0.5, -0.3], [-0.6, 0.4], [0.0, 0.6], [0.3, 0.3]], dtype=np.float32)
 TOY_ID = "GenRLTest/FastReach-v0"
@@ -563,3 +565,104 @@ def test_policy_averaging_is_the_start_corrected_moving_average_and_acts(tmp_pat
     for bad in (0, 1, 1.5):
         with pytest.raises(ValueError, match=f"policy_averaging must be between 0 and 1 \\(exclusive\\) or None, got {bad}"):
             GenRL(FastReachEnv(), LinearGenerator(), policy_averaging=bad)
+
+
+def _corners(dim: int) -> th.Tensor:
+    """The 2^dim corners of [-1, 1]^dim."""
+    return th.tensor(list(itertools.product((-1.0, 1.0), repeat=dim)))
+
+
+def test_limit_log_std_change_is_the_largest_change_over_the_box_by_brute_force():
+    from sb3_genrl.genrl.policies import ContextStdPolicy, limit_log_std_change, log_std_parameters
+
+    space = gym.spaces.Box(-2.0, 3.0, (3,), np.float32)
+    policy = ContextStdPolicy(space, gym.spaces.Box(-3, 3, (4,), np.float32), lambda _: 1e-3,
+                              features_extractor_class=BoxScaler)
+    before = log_std_parameters(policy)
+    th.testing.assert_close(before["weight"], th.zeros(4, 3))  # it starts independent of the context
+    generator = th.Generator().manual_seed(0)
+    corners, inside = _corners(3), th.rand(1000, 3, generator=generator) * 2 - 1
+    change = lambda features, params: features @ params["weight"].T + params["bias"] - before["bias"]  # noqa: E731
+    for size, bound in ((0.05, 0.02), (0.001, 0.02)):  # a change beyond the bound, and one within it
+        with th.no_grad():
+            policy.log_std_net.weight.copy_(size * th.randn(4, 3, generator=generator))
+            policy.log_std_net.bias.copy_(before["bias"] + size * th.randn(4, generator=generator))
+        unbounded = log_std_parameters(policy)
+        limit_log_std_change(policy, before, bound)
+        after = log_std_parameters(policy)
+        # A linear function's largest size over the box is at one of its corners: brute force over them.
+        largest_before = change(corners, unbounded).abs().max().item()
+        largest = change(corners, after).abs().max().item()
+        assert change(inside, after).abs().max().item() <= largest + 1e-7
+        if largest_before <= bound:  # kept as it was
+            th.testing.assert_close(after, unbounded)
+            continue
+        assert largest == pytest.approx(bound, rel=1e-5)  # scaled back exactly to the bound ...
+        for name in ("weight", "bias"):  # ... by one factor for the whole change: its direction is kept
+            th.testing.assert_close(after[name] - before[name], bound / largest_before * (unbounded[name] - before[name]))
+
+
+class _ContextStdRecorder(BaseCallback):
+    """The policy's log std at the corners of the context box, at the start of every rollout and at the end."""
+
+    def __init__(self, low: float, high: float) -> None:
+        super().__init__()
+        self.corners = low + (_corners(2) + 1) / 2 * (high - low)
+        self.values: list[np.ndarray] = []
+
+    def _record(self) -> None:
+        with th.no_grad():
+            self.values.append(self.model.policy.get_distribution(self.corners).distribution.stddev.log().numpy())
+
+    def _on_rollout_start(self) -> None:
+        self._record()
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _on_training_end(self) -> None:
+        self._record()
+
+
+@pytest.mark.parametrize("e_step", ["trpo", "kl_penalty"])
+def test_context_std_policy_spread_depends_on_the_context_within_its_trust_region(e_step, tmp_path):
+    from sb3_genrl.genrl.loading import load_policy
+    from sb3_genrl.genrl.policies import ContextStdPolicy
+
+    low, high = FastReachEnv.context_space.low[0], FastReachEnv.context_space.high[0]
+    changes = {}
+    for bound in (None, 0.01):
+        recorder = _ContextStdRecorder(low, high)
+        model = GenRL("ContextStdPolicy", FastReachEnv(), LinearGenerator(), e_step=e_step, seed=0, n_steps=32,
+                      max_log_std_change=bound)
+        model.learn(8 * 32, callback=recorder)
+        values = np.array(recorder.values)
+        np.testing.assert_allclose(values[0], 0.0, atol=1e-7)  # the prior's std at first, for every context
+        changes[bound] = np.abs(np.diff(values, axis=0))
+    assert isinstance(model.policy, ContextStdPolicy) and not hasattr(model.policy, "log_std")
+    assert changes[None].max() > 0.02
+    assert changes[0.01].max() <= 0.01 + 1e-6  # at every corner of the box, hence everywhere in it
+    assert np.ptp(values[-1], axis=0).max() > 1e-4  # the spread differs between contexts
+    # The policy's distributions agree however they are computed, and survive saving and loading.
+    observations = th.as_tensor(GOALS)
+    actions, _, log_prob = model.policy(observations)
+    _, evaluated, entropy = model.policy.evaluate_actions(observations, actions)
+    distribution = model.policy.get_distribution(observations)
+    th.testing.assert_close(evaluated, log_prob)
+    th.testing.assert_close(distribution.log_prob(actions), log_prob)
+    th.testing.assert_close(distribution.entropy(), entropy)
+    model.save(tmp_path / "model.zip")
+    for loaded in (GenRL.load(tmp_path / "model.zip", generator=LinearGenerator()),
+                   load_policy(tmp_path / "model.zip", FastReachEnv(), generator=LinearGenerator())):
+        assert isinstance(loaded.policy, ContextStdPolicy)
+        th.testing.assert_close(loaded.policy.get_distribution(observations).distribution.stddev,
+                                distribution.distribution.stddev)
+        np.testing.assert_allclose(loaded.predict(GOALS, deterministic=True)[0], model.predict(GOALS, deterministic=True)[0])
+
+
+def test_context_std_trust_region_needs_a_bounded_context():
+    unbounded = DummyVecEnv([lambda: LatentActionWrapper(FastReachEnv(), LinearGenerator())])
+    unbounded.observation_space = gym.spaces.Box(-np.inf, np.inf, (2,), np.float32)
+    with pytest.raises(ValueError, match="needs a bounded Box context scaled by BoxScaler"):
+        GenRL("ContextStdPolicy", unbounded, max_log_std_change=0.01)
+    GenRL("ContextStdPolicy", unbounded)  # without the trust region the spread may depend on any features

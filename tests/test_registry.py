@@ -163,7 +163,7 @@ def test_train_policy_takes_the_tasks_genrl_settings(reach_task, tmp_path, monke
     assert main(["train-generator", "--data", str(data), "--model", "vae", "--latent-dim", "2", "--beta", "0.01",
                  "--epochs", "1", "--batch-size", "16", "--eval-every", "1", "--device", "cpu", "--no-progress-bar",
                  "--out", str(generator)]) == 0
-    tuned = {"target_kl": 0.02, "value_history": 2}
+    tuned = {"target_kl": 0.02, "value_history": 2, "policy": "ContextStdPolicy"}
     monkeypatch.setitem(TASKS, "reach", TaskSpec(**{**vars(REACH), "quickstart": {"genrl_kwargs": tuned}}))
     settings = {}
     for name, extra in (("task", []), ("library", ["--library-defaults"])):
@@ -176,3 +176,8 @@ def test_train_policy_takes_the_tasks_genrl_settings(reach_task, tmp_path, monke
     assert settings["library"]["target_kl"] == 0.01 and settings["library"]["value_history"] == 1
     assert settings["library"]["n_steps"] == 8 and settings["library"]["max_log_std_change"] is None
     assert "seed" not in settings["library"] and "device" not in settings["library"]
+    assert "policy" not in settings["library"]  # the default policy is not named, as in the records made before
+    from sb3_genrl import GenRL
+    from sb3_genrl.genrl.policies import ContextStdPolicy
+
+    assert isinstance(GenRL.load(tmp_path / "task" / "genrl_policy.zip", device="cpu").policy, ContextStdPolicy)

@@ -21,7 +21,15 @@ from stable_baselines3.common.utils import explained_variance
 from sb3_genrl.generative.base import TrajectoryGenerator
 from sb3_genrl.genrl.averaging import averaged_copy, update_average
 from sb3_genrl.genrl.e_step import kl_penalty_e_step, trpo_e_step
-from sb3_genrl.genrl.policies import BoxScaler, MlpPolicy, MultiInputPolicy, default_log_std_init
+from sb3_genrl.genrl.policies import (
+    BoxScaler,
+    ContextStdPolicy,
+    MlpPolicy,
+    MultiInputPolicy,
+    default_log_std_init,
+    limit_log_std_change,
+    log_std_parameters,
+)
 from sb3_genrl.genrl.value import fit_value_function
 from sb3_genrl.utils import atomic_path
 from sb3_genrl.wrappers import latent_action_env
@@ -64,7 +72,9 @@ class GenRL(OnPolicyAlgorithm):
     pull's advantage is small next to the value function's error. What these defaults reach on hockey is measured
     by ``benchmarks/genrl_hockey.py`` (results in the README and ``benchmarks/results/genrl_hockey.json``).
 
-    :param policy: the policy (``"MlpPolicy"``, the default, or an ``ActorCriticPolicy`` class), or the env (see above)
+    :param policy: the policy (``"MlpPolicy"``, the default; ``"ContextStdPolicy"``, whose spread depends on the
+        context, see :class:`~sb3_genrl.genrl.policies.ContextStdPolicy`; or an ``ActorCriticPolicy`` class), or the
+        env (see above)
     :param env: the env (raw, wrapped, VecEnv of wrapped envs or Gymnasium id), or the generator (see above)
     :param generator: the trajectory generator, or the path of a saved one (restored with
         ``sb3_genrl.generative.load``); default: the wrapped env's
@@ -96,11 +106,13 @@ class GenRL(OnPolicyAlgorithm):
         of a batch always come from the value function fitted before the batch was collected
     :param max_log_std_change: the most the policy's log standard deviation may change per iteration (per batch),
         in each latent dimension and either way, after the E/M pairs (default ``None``: only ``target_kl`` bounds it,
-        as in the paper). The spread's own trust region, decoupled from the mean's as in MPO (Abdolmaleki et al.,
-        2018). Within ``target_kl`` alone the spread may collapse within a few hundred episodes once the mean is good
-        for some contexts, and the mean's steps, which the KL bound scales with the spread, then stall for the
-        others. How fast the spread may anneal: 0.02 suits budgets of 15000 episodes and more (basketball); on
-        hockey, 0.05 ends 10% closer after 3000 episodes but takes 3-4 times the episodes to get within 5 cm
+        as in the paper); with ``ContextStdPolicy``, for every context of the box (see
+        :func:`~sb3_genrl.genrl.policies.limit_log_std_change`). The spread's own trust region, decoupled from the
+        mean's as in MPO (Abdolmaleki et al., 2018). Within ``target_kl`` alone the spread may collapse within a few
+        hundred episodes once the mean is good for some contexts, and the mean's steps, which the KL bound scales with
+        the spread, then stall for the others. How fast the spread may anneal: 0.02-0.03 suits budgets of 15000
+        episodes and more (basketball: 0.03 with ``ContextStdPolicy``); on hockey, 0.05 ends 10% closer after 3000
+        episodes but takes 3-4 times the episodes to get within 5 cm
     :param policy_averaging: decay ``d`` of a moving average of the policy's weights over the iterations (``None``,
         the default: none, as in the paper). The average is kept beside the policy that explores
         (``policy_average``) and ``predict`` acts with it, so do evaluations and saved models; see
@@ -115,7 +127,8 @@ class GenRL(OnPolicyAlgorithm):
     :param _init_setup_model: build the networks now (``load()`` passes False)
     """
 
-    policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = {"MlpPolicy": MlpPolicy, "MultiInputPolicy": MultiInputPolicy}
+    policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = {
+        "MlpPolicy": MlpPolicy, "MultiInputPolicy": MultiInputPolicy, "ContextStdPolicy": ContextStdPolicy}
     policy: ActorCriticPolicy
 
     def __init__(
@@ -218,7 +231,7 @@ class GenRL(OnPolicyAlgorithm):
         if self.normalize_advantage:
             advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
 
-        log_std_before = self.policy.log_std.detach().clone()
+        log_std_before = log_std_parameters(self.policy)
         for _ in range(self.n_em_iterations):  # Algorithm 1's inner loop: repeat E-step and M-step on the batch
             # E-step (eq. 4-5): the variational policy q_phi starts as a copy of pi_theta (phi <- theta) and is
             # optimised on E_{alpha ~ pi}[q/pi A] - KL(q || pi) while pi_theta stays fixed.
@@ -232,9 +245,7 @@ class GenRL(OnPolicyAlgorithm):
             self.policy.load_state_dict(variational_policy.state_dict())
 
         if self.max_log_std_change is not None:  # the spread's own trust region (see the class docstring)
-            with th.no_grad():
-                self.policy.log_std.copy_(th.clamp(self.policy.log_std, log_std_before - self.max_log_std_change,
-                                                   log_std_before + self.max_log_std_change))
+            limit_log_std_change(self.policy, log_std_before, self.max_log_std_change)
 
         # Value function (Algorithm 1, last line): V = argmin_V' sum_i (V'(s_i) - r_i)^2, by Adam on minibatches.
         self.policy.set_training_mode(True)
@@ -244,16 +255,16 @@ class GenRL(OnPolicyAlgorithm):
         self._n_updates += 1
         if self.policy_averaging is not None:
             update_average(self.policy_average, self.policy, self.policy_averaging, self._n_updates)
-        rewards, entropy = self.rollout_buffer.rewards, self._pi(observations).entropy()
+        rewards, pi = self.rollout_buffer.rewards, self._pi(observations)
         self.logger.record("train/mean_reward", float(np.mean(rewards)))
         self.logger.record("train/max_reward", float(np.max(rewards)))
         for key, value in stats.items():
             self.logger.record(f"train/{key}", value)
-        self.logger.record("train/entropy", entropy.mean().item())  # type: ignore[union-attr]
+        self.logger.record("train/entropy", pi.entropy().mean().item())  # type: ignore[union-attr]
         self.logger.record("train/value_loss", float(np.mean(value_losses)))
         values, returns = self.rollout_buffer.values.flatten(), self.rollout_buffer.returns.flatten()
         self.logger.record("train/explained_variance", float(explained_variance(values, returns)))
-        self.logger.record("train/std", th.exp(self.policy.log_std).mean().item())
+        self.logger.record("train/std", pi.distribution.stddev.mean().item())  # type: ignore[attr-defined]
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
 
     def _pi(self, observations: th.Tensor) -> Distribution:
@@ -272,6 +283,12 @@ class GenRL(OnPolicyAlgorithm):
 
     def _setup_model(self) -> None:
         super()._setup_model()
+        extractor = self.policy.pi_features_extractor
+        if (isinstance(self.policy, ContextStdPolicy) and self.max_log_std_change is not None
+                and not (isinstance(extractor, BoxScaler) and extractor.all_bounded)):
+            raise ValueError("max_log_std_change with ContextStdPolicy bounds the log std's change over all contexts, "
+                             "which needs a bounded Box context scaled by BoxScaler (the default for Box contexts); got "
+                             f"{type(extractor).__name__} on {self.observation_space}")
         # (observations, returns) of the last value_history batches, for the value-function fit
         self._value_memory: collections.deque[tuple[Any, th.Tensor]] = collections.deque(maxlen=self.value_history)
         self.policy_average = None if self.policy_averaging is None else averaged_copy(self.policy)

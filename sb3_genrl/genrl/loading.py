@@ -12,8 +12,11 @@ is left empty and rebuilt by SB3. A zip that holds anything else is refused unle
 
 from __future__ import annotations
 
+import base64
+import binascii
 import json
 import os
+import pickletools
 import zipfile
 from typing import Any
 
@@ -23,7 +26,7 @@ from stable_baselines3.common.torch_layers import CombinedExtractor, FlattenExtr
 
 from sb3_genrl.generative.base import TrajectoryGenerator
 from sb3_genrl.genrl.genrl import GenRL, _generator_file, _load_generator
-from sb3_genrl.genrl.policies import BoxScaler, MlpPolicy, MultiInputPolicy
+from sb3_genrl.genrl.policies import BoxScaler, ContextStdPolicy, MlpPolicy, MultiInputPolicy
 from sb3_genrl.wrappers import LatentActionWrapper
 
 # What a prediction does not need: SB3 rebuilds it (schedules, buffer classes) or leaves it empty until learn().
@@ -33,7 +36,10 @@ _LEFT_EMPTY = ("lr_schedule", "clip_range", "clip_range_vf", "rollout_buffer_cla
 _ALLOWED_CLASSES = {str(cls): cls for cls in (
     BoxScaler, FlattenExtractor, CombinedExtractor, th.nn.Tanh, th.nn.ReLU, th.nn.ELU, th.nn.LeakyReLU, th.nn.GELU,
     th.nn.SiLU, th.optim.Adam, th.optim.AdamW, th.optim.SGD, th.optim.RMSprop)}
-_POLICIES = {"ActorCriticPolicy": MlpPolicy, "MultiInputActorCriticPolicy": MultiInputPolicy}
+_POLICIES = {f"{cls.__module__}.{cls.__qualname__}": cls for cls in (MlpPolicy, MultiInputPolicy, ContextStdPolicy)}
+# The pickle opcodes of a reference to a class by its module and name, and nothing else
+_REFERENCE_OPCODES = {"PROTO", "FRAME", "SHORT_BINUNICODE", "BINUNICODE", "UNICODE", "MEMOIZE", "BINPUT", "LONG_BINPUT",
+                      "PUT", "STACK_GLOBAL", "GLOBAL", "STOP"}
 
 
 def load_policy(path: str | os.PathLike, env: gym.Env, *, generator: TrajectoryGenerator | str | None = None,
@@ -96,13 +102,32 @@ def _resolve_generator(path: str, data: dict[str, Any], generator: TrajectoryGen
 
 
 def _policy_class(entry: dict[str, Any], path: str) -> type:
-    """SB3's actor-critic policy class that the readable description of the pickled class names."""
-    init = str(entry.get("__init__", ""))
-    name = init.removeprefix("<function ").split(".", 1)[0]
-    if entry.get("__module__") != "stable_baselines3.common.policies" or name not in _POLICIES:
-        raise ValueError(f"{path} uses a policy class ({entry.get('__module__')}.{name}) that cannot be loaded "
+    """The allowed policy class that the pickled class reference names, read without unpickling it."""
+    name = _class_reference(entry.get(":serialized:"))
+    if name not in _POLICIES:
+        raise ValueError(f"{path} uses a policy class ({name or 'not a plain class reference'}) that cannot be loaded "
                          "without unpickling it; use trust=True only if you trust the file's source")
     return _POLICIES[name]
+
+
+def _class_reference(serialized: Any) -> str | None:
+    """``module.name`` when ``serialized`` (base64 pickle) only references a class by name, else None.
+
+    The opcodes are read with :func:`pickletools.genops`, which parses and runs nothing.
+    """
+    try:
+        operations = list(pickletools.genops(base64.b64decode(str(serialized), validate=True)))
+    except (binascii.Error, ValueError):
+        return None
+    if any(opcode.name not in _REFERENCE_OPCODES for opcode, _, _ in operations):
+        return None
+    strings = [str(argument) for opcode, argument, _ in operations if "UNICODE" in opcode.name or opcode.name == "GLOBAL"]
+    globals_ = [opcode.name for opcode, _, _ in operations if opcode.name in ("STACK_GLOBAL", "GLOBAL")]
+    if globals_ == ["STACK_GLOBAL"] and len(strings) == 2:
+        return ".".join(strings)
+    if globals_ == ["GLOBAL"] and len(strings) == 1:
+        return ".".join(strings[0].split(" ", 1))
+    return None
 
 
 def _allowed_value(value: Any, name: str, path: str) -> Any:

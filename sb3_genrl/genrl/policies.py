@@ -2,6 +2,7 @@
 
 GenRL uses SB3's actor-critic policies: an MLP maps the context ``s0`` to the mean of a diagonal Gaussian over
 ``alpha`` with a state-independent log standard deviation, and a separate MLP head gives the value ``V(s0)``.
+:class:`ContextStdPolicy` (alias ``"ContextStdPolicy"``) lets the log standard deviation depend on the context.
 :class:`~sb3_genrl.GenRL` sets ``log_std_init`` from the generator's prior unless the user gives it (see
 :func:`default_log_std_init`), so that the initial policy explores about as widely as the prior, and, for a Box
 context, the features extractor :class:`BoxScaler`, which maps the context's bounded box onto ``[-1, 1]`` (a goal
@@ -13,8 +14,11 @@ from __future__ import annotations
 import numpy as np
 import torch as th
 from gymnasium import spaces
-from stable_baselines3.common.policies import ActorCriticPolicy, MultiInputActorCriticPolicy
+from stable_baselines3.common.distributions import DiagGaussianDistribution, Distribution
+from stable_baselines3.common.policies import ActorCriticPolicy, BasePolicy, MultiInputActorCriticPolicy
+from stable_baselines3.common.preprocessing import get_action_dim
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
+from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
 
 from sb3_genrl.generative.base import Prior
 
@@ -59,6 +63,88 @@ class BoxScaler(BaseFeaturesExtractor):
         half_width[bounded] = (high[bounded] - low[bounded]) / 2
         self.register_buffer("centre", th.as_tensor(centre, dtype=th.float32))
         self.register_buffer("half_width", th.as_tensor(half_width, dtype=th.float32))
+        self.all_bounded = bool(bounded.all())  # then every context's features lie in [-1, 1]
 
     def forward(self, observations: th.Tensor) -> th.Tensor:
         return (observations.flatten(1) - self.centre) / self.half_width
+
+
+class ContextStdPolicy(ActorCriticPolicy):
+    """:data:`MlpPolicy` with a log standard deviation that depends on the context: ``log std(s) = W phi(s) + b``.
+
+    ``phi(s)`` is the output of the features extractor (for a Box context :class:`BoxScaler`: the context scaled onto
+    ``[-1, 1]``), and ``W, b`` (``log_std_net``) start at ``W = 0, b = log_std_init``: the policy starts as
+    :data:`MlpPolicy` does. The spread may then shrink for the contexts the policy has solved and stay wide for the
+    others. Being linear in ``phi``, the largest change of ``log std`` over all contexts of a bounded box is exact:
+    :class:`~sb3_genrl.GenRL`'s ``max_log_std_change`` bounds it (see :func:`limit_log_std_change`).
+
+    Takes the arguments of SB3's ``ActorCriticPolicy``; the action space must be a Box (no gSDE).
+    """
+
+    def _build(self, lr_schedule: Schedule) -> None:
+        if not isinstance(self.action_dist, DiagGaussianDistribution):
+            raise ValueError("ContextStdPolicy needs a Box action space and use_sde=False")
+        super()._build(lr_schedule)
+        del self.log_std  # replaced by log_std_net
+        self.log_std_net = th.nn.Linear(self.features_dim, get_action_dim(self.action_space))
+        th.nn.init.zeros_(self.log_std_net.weight)
+        th.nn.init.constant_(self.log_std_net.bias, self.log_std_init)
+        self.optimizer = self.optimizer_class(self.parameters(), lr=lr_schedule(1), **self.optimizer_kwargs)  # type: ignore[call-arg]
+
+    def _distribution(self, pi_features: th.Tensor, latent_pi: th.Tensor) -> Distribution:
+        return self.action_dist.proba_distribution(self.action_net(latent_pi), self.log_std_net(pi_features))  # type: ignore[call-arg]
+
+    def _actor_critic(self, obs: PyTorchObs) -> tuple[Distribution, th.Tensor]:
+        """The action distribution and the value for ``obs``, as SB3's ``forward`` computes them."""
+        features = self.extract_features(obs)
+        pi_features, vf_features = (features, features) if self.share_features_extractor else features
+        distribution = self._distribution(pi_features, self.mlp_extractor.forward_actor(pi_features))
+        return distribution, self.value_net(self.mlp_extractor.forward_critic(vf_features))
+
+    def forward(self, obs: th.Tensor, deterministic: bool = False) -> tuple[th.Tensor, th.Tensor, th.Tensor]:
+        distribution, values = self._actor_critic(obs)
+        actions = distribution.get_actions(deterministic=deterministic)
+        log_prob = distribution.log_prob(actions)
+        return actions.reshape((-1, *self.action_space.shape)), values, log_prob  # type: ignore[misc]
+
+    def evaluate_actions(self, obs: PyTorchObs, actions: th.Tensor) -> tuple[th.Tensor, th.Tensor, th.Tensor | None]:
+        distribution, values = self._actor_critic(obs)
+        return values, distribution.log_prob(actions), distribution.entropy()
+
+    def get_distribution(self, obs: PyTorchObs) -> Distribution:
+        features = BasePolicy.extract_features(self, obs, self.pi_features_extractor)
+        return self._distribution(features, self.mlp_extractor.forward_actor(features))
+
+    def _get_action_dist_from_latent(self, latent_pi: th.Tensor) -> Distribution:
+        raise NotImplementedError("ContextStdPolicy's log std needs the features: use get_distribution")
+
+
+def log_std_parameters(policy: ActorCriticPolicy) -> dict[str, th.Tensor]:
+    """A copy of the parameters that set the policy's log std: ``log_std``, or ``log_std_net``'s weight and bias."""
+    if isinstance(policy, ContextStdPolicy):
+        return {name: value.detach().clone() for name, value in policy.log_std_net.state_dict().items()}
+    return {"log_std": policy.log_std.detach().clone()}
+
+
+def limit_log_std_change(policy: ActorCriticPolicy, before: dict[str, th.Tensor], bound: float) -> None:
+    """Bound the change of the policy's log std since ``before`` (:func:`log_std_parameters`) to ``bound``, in every
+    latent dimension and for every context.
+
+    A state-independent ``log_std`` is clamped to ``before +- bound``. For :class:`ContextStdPolicy` the change of
+    dimension ``k`` at features ``phi`` is ``dW_k . phi + db_k``; over features in ``[-1, 1]^d`` its largest size is
+    exactly ``|db_k| + sum_j |dW_kj|`` (at the corner ``phi_j = sign(dW_kj) sign(db_k)``). When the largest over the
+    dimensions exceeds ``bound``, the whole change ``(dW, db)`` is scaled by ``bound / largest``: the step keeps its
+    direction, as in TRPO's line search. (Scaling each dimension's row on its own, which would reduce to the clamp,
+    ended 30% further from the baskets on basketball's tuning surrogate, docs/basketball.md.) The features must lie
+    in ``[-1, 1]`` (:class:`BoxScaler` on a bounded box; :class:`~sb3_genrl.GenRL` checks this).
+    """
+    with th.no_grad():
+        if not isinstance(policy, ContextStdPolicy):
+            policy.log_std.copy_(th.clamp(policy.log_std, before["log_std"] - bound, before["log_std"] + bound))
+            return
+        net = policy.log_std_net
+        d_weight, d_bias = net.weight - before["weight"], net.bias - before["bias"]
+        largest = (d_bias.abs() + d_weight.abs().sum(dim=1)).max().item()
+        if largest > bound:
+            net.weight.copy_(before["weight"] + bound / largest * d_weight)
+            net.bias.copy_(before["bias"] + bound / largest * d_bias)

@@ -27,6 +27,7 @@ from sb3_genrl.curves import (
 )
 from sb3_genrl.generative.base import TrajectoryGenerator
 from sb3_genrl.genrl.genrl import EStep, GenRL
+from sb3_genrl.genrl.policies import MlpPolicy
 from sb3_genrl.utils import atomic_write_json
 from sb3_genrl.wrappers import LatentActionWrapper
 
@@ -129,7 +130,8 @@ def _train(env: Any, generator: TrajectoryGenerator | str, episodes: int, out: p
            genrl_kwargs: dict[str, Any]) -> GenRL:
     """Train GenRL on ``env`` with SB3's logger in ``out``, save it there, and close ``env``."""
     try:
-        model = GenRL(env, generator, **genrl_kwargs)
+        arguments = dict(genrl_kwargs)
+        model = GenRL(arguments.pop("policy", "MlpPolicy"), env, generator, **arguments)
         model.set_logger(training_logger(out, genrl_kwargs["verbose"]))
         model.learn(total_timesteps=episodes, progress_bar=progress_bar, tb_log_name="GenRL")
         model.logger.dump(model.num_timesteps)  # SB3 dumps before each update: this writes the last one's logs
@@ -185,19 +187,23 @@ def _json_settings(genrl_kwargs: dict[str, Any]) -> dict[str, Any]:
 
 
 # GenRL arguments that say where or how verbosely it runs, not what it computes
-_NOT_SETTINGS = ("policy", "env", "generator", "seed", "device", "verbose", "tensorboard_log", "stats_window_size",
+_NOT_SETTINGS = ("env", "generator", "seed", "device", "verbose", "tensorboard_log", "stats_window_size",
                  "_init_setup_model")
 
 
 def genrl_settings(genrl_kwargs: dict[str, Any] | None = None) -> dict[str, Any]:
     """Every GenRL hyperparameter in effect with ``genrl_kwargs``: GenRL's defaults, updated with them (those a JSON
     file can hold). Recorded by the runs and the stages that train GenRL, so that a change of a default is seen when
-    a stage is resumed, not silently mixed with results made under the old one."""
+    a stage is resumed, not silently mixed with results made under the old one. The policy is named only when it is
+    not the default ``"MlpPolicy"`` (the records of runs with the default policy do not name it)."""
     import inspect
 
     defaults = {name: parameter.default for name, parameter in inspect.signature(GenRL.__init__).parameters.items()
-                if parameter.default is not inspect.Parameter.empty}
+                if parameter.default is not inspect.Parameter.empty and name != "policy"}
     settings = defaults | dict(genrl_kwargs or {})
+    policy = settings.pop("policy", "MlpPolicy")
+    if policy not in ("MlpPolicy", MlpPolicy):
+        settings["policy"] = policy if isinstance(policy, str) else f"{policy.__module__}.{policy.__qualname__}"
     return _json_settings({name: value for name, value in settings.items() if name not in _NOT_SETTINGS})
 
 
