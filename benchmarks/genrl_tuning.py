@@ -10,7 +10,10 @@ deterministic policy's mean distance to ``--goals`` tuning goals drawn with seed
 seed 12345), and the grid's own best over those goals.
 
     python benchmarks/genrl_tuning.py --generator vae.pt --task basketball --episodes 20000 --seeds 0 1 2 \\
-        --genrl-kwargs '{"target_kl": 0.03, "max_log_std_change": 0.02, "value_history": 10, "n_critic_updates": 10}'
+        --genrl-kwargs '{"policy": "ContextStdPolicy", "target_kl": 0.03, "max_log_std_change": 0.03,
+                         "value_history": 10, "n_critic_updates": 10, "cg_max_steps": 30, "policy_averaging": 0.97}'
+
+``--genrl-kwargs`` may name the policy (``"policy": "ContextStdPolicy"``).
 """
 
 from __future__ import annotations
