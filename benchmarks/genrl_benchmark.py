@@ -31,10 +31,10 @@ import matplotlib.pyplot as plt  # noqa: E402
 from reachable import generator_limit, held_out_goals, summary  # noqa: E402
 from sb3_genrl.envs import get_task  # noqa: E402
 
-from sb3_genrl import GenRL, LatentActionWrapper, __version__  # noqa: E402
+from sb3_genrl import LatentActionWrapper, __version__  # noqa: E402
 from sb3_genrl.generative import load, train_generator  # noqa: E402
 from sb3_genrl.genrl import evaluate_on_goals  # noqa: E402
-from sb3_genrl.genrl.train import genrl_settings  # noqa: E402
+from sb3_genrl.genrl.train import genrl_settings, make_genrl  # noqa: E402
 from sb3_genrl.study.quickstart import policy_settings  # noqa: E402
 from sb3_genrl.utils import atomic_path, atomic_write_json  # noqa: E402
 
@@ -97,9 +97,7 @@ def run_seed(setting: Setting, generator_path: str, seed: int, args: argparse.Na
     eval_env.reset(seed=10_000 + seed)  # the evaluation goals: one fixed stream per seed
     evaluation = EvalCallback(Monitor(eval_env), n_eval_episodes=args.eval_goals, eval_freq=args.eval_every,
                               deterministic=True, log_path=os.path.join(work, f"eval_{seed}"), verbose=0)
-    genrl_kwargs = dict(setting.genrl_kwargs)
-    policy = genrl_kwargs.pop("policy", "MlpPolicy")
-    model = GenRL(policy, gym.make(env_id), generator, seed=seed, device="cpu", **genrl_kwargs)
+    model = make_genrl(gym.make(env_id), generator, seed=seed, device="cpu", **setting.genrl_kwargs)
     start = time.perf_counter()
     model.learn(args.episodes, callback=evaluation)
     seconds = time.perf_counter() - start

@@ -34,9 +34,10 @@ from sb3_genrl.envs import get_task
 from scipy.interpolate import RegularGridInterpolator
 from scipy.spatial import cKDTree
 
-from sb3_genrl import GenRL, LatentActionWrapper
+from sb3_genrl import LatentActionWrapper
 from sb3_genrl.generative import load
 from sb3_genrl.generative.base import TrajectoryGenerator
+from sb3_genrl.genrl.train import make_genrl
 from sb3_genrl.utils import atomic_path, atomic_write_json
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -107,9 +108,7 @@ def landing_map(generator_path: str, task: str, grid: int) -> np.ndarray:
 
 def run(env: SurrogateTask, goals: np.ndarray, seed: int, episodes: int, genrl_kwargs: dict[str, Any]) -> dict:
     start = time.perf_counter()
-    genrl_kwargs = dict(genrl_kwargs)
-    policy = genrl_kwargs.pop("policy", "MlpPolicy")
-    model = GenRL(policy, LatentActionWrapper(env, IdentityGenerator()), seed=seed, device="cpu", **genrl_kwargs)
+    model = make_genrl(LatentActionWrapper(env, IdentityGenerator()), seed=seed, device="cpu", **genrl_kwargs)
     model.learn(episodes)
     alpha, _ = model.predict(goals, deterministic=True)
     distances = env.distances(alpha, goals)

@@ -130,8 +130,7 @@ def _train(env: Any, generator: TrajectoryGenerator | str, episodes: int, out: p
            genrl_kwargs: dict[str, Any]) -> GenRL:
     """Train GenRL on ``env`` with SB3's logger in ``out``, save it there, and close ``env``."""
     try:
-        arguments = dict(genrl_kwargs)
-        model = GenRL(arguments.pop("policy", "MlpPolicy"), env, generator, **arguments)
+        model = make_genrl(env, generator, **genrl_kwargs)
         model.set_logger(training_logger(out, genrl_kwargs["verbose"]))
         model.learn(total_timesteps=episodes, progress_bar=progress_bar, tb_log_name="GenRL")
         model.logger.dump(model.num_timesteps)  # SB3 dumps before each update: this writes the last one's logs
@@ -140,6 +139,12 @@ def _train(env: Any, generator: TrajectoryGenerator | str, episodes: int, out: p
     finally:
         env.close()  # the env processes, and the Monitor file
     return model
+
+
+def make_genrl(env: Any, generator: TrajectoryGenerator | str | None = None, **genrl_kwargs: Any) -> GenRL:
+    """``GenRL`` with settings that may name the policy (``"policy"``, as a task's ``genrl_kwargs`` may)."""
+    policy = genrl_kwargs.pop("policy", "MlpPolicy")
+    return GenRL(policy, env, generator, **genrl_kwargs)
 
 
 MAIN_GUARD = ("n_envs > 1 plays the envs in their own processes, which import the script that started them: a script "
