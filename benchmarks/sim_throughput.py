@@ -7,7 +7,6 @@ and the bound (raw ``mj_step`` over the same number of physics steps per episode
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from pathlib import Path
 
@@ -17,6 +16,7 @@ from sb3_genrl.envs.basketball import BasketballEnv, scripted_throw
 from sb3_genrl.envs.hockey import HockeyEnv, scripted_hit
 
 from sb3_genrl.markdown import markdown_table
+from sb3_genrl.utils import atomic_write_json
 
 
 def _trajectories(task: str, n: int, rng: np.random.Generator) -> np.ndarray:
@@ -66,6 +66,7 @@ def measure(task: str, episodes: int, step_episodes: int, repeats: int) -> dict:
             repeats, lambda t=threads: env.play_trajectories(trajectories, goals, n_threads=t))
     results["step_by_step"] = step_episodes / _best_of(repeats, step_path)
     results["open_loop_1_thread_vs_bound"] = results["open_loop_1_thread"] / results["raw_mj_step"]
+    results["step_by_step_vs_bound"] = results["step_by_step"] / results["raw_mj_step"]
     return results
 
 
@@ -78,12 +79,14 @@ def main() -> None:
     args = parser.parse_args()
     rows = [measure(task, args.episodes, args.step_episodes, args.repeats) for task in ("hockey", "basketball")]
     print(f"episodes per second (best of {args.repeats} runs, {args.episodes} episodes)")
-    header = ("task", "raw mj_step bound", "open loop 1 thread", "open loop 2 threads", "step by step", "1 thread / bound")
+    header = ("task", "raw mj_step bound", "open loop 1 thread", "open loop 2 threads", "step by step", "1 thread / bound",
+              "step by step / bound")
     print(markdown_table(header, [[r["task"], *(f"{r[key]:.1f}" for key in ("raw_mj_step", "open_loop_1_thread",
-                                    "open_loop_2_thread", "step_by_step")), f"{r['open_loop_1_thread_vs_bound']:.2f}"]
+                                    "open_loop_2_thread", "step_by_step")),
+                                   *(f"{r[key]:.2f}" for key in ("open_loop_1_thread_vs_bound", "step_by_step_vs_bound"))]
                                   for r in rows]))
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(rows, indent=2))
+    atomic_write_json(Path(args.out), rows)
     print(f"wrote {args.out}")
 
 

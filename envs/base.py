@@ -170,13 +170,15 @@ class ArmTaskEnv(gym.Env, EzPickle):
     def _simulate(self, targets: np.ndarray) -> bool:
         """Step the physics once per row of ``targets`` (commanded joint positions), recording each sensor row;
         True when the simulation went unstable."""
+        first = max(len(self._rows) - 1, 0)  # the row before these steps: the clock must advance from it
         for target in targets:
             self.data.ctrl[:] = target
             mujoco.mj_step(self.model, self.data)
             self._rows.append(self.data.sensordata.copy())
-            if _unstable(np.asarray(self._rows[-2:])):
-                return True
-        return False
+        # Checked once per control step, not per physics step (the check costs twice the physics). The rows after a
+        # divergence within this control step change nothing: ``_finish`` reads only the rows before the first bad
+        # one, as for a rollout (:meth:`_episode_length`).
+        return _unstable(np.asarray(self._rows[first:]))
 
     def _finish(self, rows: np.ndarray, goal: np.ndarray, clipped_steps: int) -> tuple[float, dict[str, Any]]:
         info: dict[str, Any] = {"joint_limit_clipped": clipped_steps > 0, "clipped_steps": clipped_steps}
