@@ -40,7 +40,7 @@ from scipy.spatial import cKDTree
 from sb3_genrl import LatentActionWrapper
 from sb3_genrl.generative import load
 from sb3_genrl.generative.base import TrajectoryGenerator
-from sb3_genrl.genrl.train import make_genrl
+from sb3_genrl.genrl.train import check_genrl_kwargs, make_genrl
 from sb3_genrl.utils import atomic_path, atomic_write_json
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -167,7 +167,7 @@ def main() -> None:
     parser.add_argument("--out", default=None, help="JSON output (default: print only)")
     args = parser.parse_args()
     torch.set_num_threads(1)
-    genrl_kwargs = json.loads(args.genrl_kwargs)
+    genrl_kwargs = check_genrl_kwargs(json.loads(args.genrl_kwargs), "--genrl-kwargs")
     landing = landing_map(args.generator, args.task, args.grid)
     env = SurrogateTask(args.task, np.nan_to_num(landing, nan=0.0))  # no landing point: the ball stays at the robot
     goals = held_out_goals(args.task, args.goals, TUNING_GOAL_SEED)

@@ -666,3 +666,18 @@ def test_context_std_trust_region_needs_a_bounded_context():
     with pytest.raises(ValueError, match="needs a bounded Box context scaled by BoxScaler"):
         GenRL("ContextStdPolicy", unbounded, max_log_std_change=0.01)
     GenRL("ContextStdPolicy", unbounded)  # without the trust region the spread may depend on any features
+
+
+def test_check_genrl_kwargs_refuses_unknown_names_and_policies():
+    from sb3_genrl.genrl.train import check_genrl_kwargs
+
+    settings = {"policy": "ContextStdPolicy", "target_kl": 0.03, "policy_kwargs": {"net_arch": [8]}}
+    assert check_genrl_kwargs(settings) is settings
+    with pytest.raises(ValueError, match=r"--genrl-kwargs: 'target_kll' is not a GenRL setting"):
+        check_genrl_kwargs({"target_kll": 0.03}, "--genrl-kwargs")
+    with pytest.raises(ValueError, match=r"'a', 'seed' are not GenRL settings"):  # where it runs is not a setting
+        check_genrl_kwargs({"seed": 1, "a": 2})
+    with pytest.raises(ValueError, match="unknown policy 'CnnPolicy'"):
+        check_genrl_kwargs({"policy": "CnnPolicy"})
+    with pytest.raises(TypeError, match="expected a dict"):
+        check_genrl_kwargs([("target_kl", 0.03)])

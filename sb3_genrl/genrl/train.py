@@ -141,6 +141,26 @@ def _train(env: Any, generator: TrajectoryGenerator | str, episodes: int, out: p
     return model
 
 
+def check_genrl_kwargs(genrl_kwargs: dict[str, Any], name: str | None = "genrl_kwargs") -> dict[str, Any]:
+    """Refuse names that are not GenRL's settings, and unknown policy names, before any work starts (GenRL checks
+    the values when it is built). ``name`` starts the error message (``None``: nothing)."""
+    import inspect
+
+    prefix = f"{name}: " if name else ""
+    if not isinstance(genrl_kwargs, dict):
+        raise TypeError(f"{prefix}expected a dict of GenRL arguments, got {type(genrl_kwargs).__name__}")
+    known = set(inspect.signature(GenRL.__init__).parameters) - {"self", *_NOT_SETTINGS}
+    unknown = sorted(set(genrl_kwargs) - known)
+    if unknown:
+        raise ValueError(f"{prefix}{', '.join(map(repr, unknown))} "
+                         f"{'is not a GenRL setting' if len(unknown) == 1 else 'are not GenRL settings'} "
+                         f"(known: {', '.join(sorted(known))})")
+    policy = genrl_kwargs.get("policy", "MlpPolicy")
+    if isinstance(policy, str) and policy not in GenRL.policy_aliases:
+        raise ValueError(f"{prefix}unknown policy {policy!r} (known: {', '.join(GenRL.policy_aliases)})")
+    return genrl_kwargs
+
+
 def make_genrl(env: Any, generator: TrajectoryGenerator | str | None = None, **genrl_kwargs: Any) -> GenRL:
     """``GenRL`` with settings that may name the policy (``"policy"``, as a task's ``genrl_kwargs`` may)."""
     policy = genrl_kwargs.pop("policy", "MlpPolicy")
