@@ -19,6 +19,7 @@ episodes and against environment steps, table contacts per episode).
 
     python benchmarks/baselines.py                          # hockey, 3 seeds x 3000 episodes, every method
     python benchmarks/baselines.py --jobs 2                 # two runs at a time
+    python benchmarks/baselines.py --task basketball --jobs 2   # basketball (benchmarks/results/baselines_basketball.json)
     python benchmarks/baselines.py --episodes 40 --seeds 0 --out /tmp/tiny.json --work /tmp/tiny   # end-to-end check
 """
 
