@@ -38,6 +38,7 @@ from typing import Any
 
 import numpy as np
 
+from sb3_genrl.genrl.train import genrl_kwargs_argument
 from sb3_genrl.utils import atomic_write_json
 
 HERE = pathlib.Path(__file__).resolve().parent
@@ -247,21 +248,6 @@ def core_hours(result: dict[str, Any], episodes: int, seeds: int) -> float:
     return seconds / 3600
 
 
-def _json_object(text: str) -> dict[str, Any]:
-    try:
-        value = json.loads(text)
-    except json.JSONDecodeError as error:
-        raise argparse.ArgumentTypeError(f"not JSON: {error}") from None
-    if not isinstance(value, dict):
-        raise argparse.ArgumentTypeError(f"expected a JSON object, got {text!r}")
-    from sb3_genrl.genrl.train import check_genrl_kwargs
-
-    try:
-        return check_genrl_kwargs(value, None)
-    except ValueError as error:
-        raise argparse.ArgumentTypeError(str(error)) from None
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--task", default="hockey", help="a registered task (default: hockey)")
@@ -273,7 +259,7 @@ def main() -> None:
     parser.add_argument("--generator", default=None,
                         help=f"generator for GenRL and the latent baselines (default: {GENERATOR_PRESET}, "
                              f"{GENERATOR_EPOCHS} epochs, on the demonstrations)")
-    parser.add_argument("--genrl-kwargs", type=_json_object, default={},
+    parser.add_argument("--genrl-kwargs", type=genrl_kwargs_argument, default={},
                         help="GenRL's arguments, as JSON (default: GenRL's defaults; see the module doc)")
     parser.add_argument("--jobs", type=int, default=1, help="runs at a time, one process (one core) each")
     parser.add_argument("--work", default=None, help="folder of the runs (default: benchmarks/runs/baselines_TASK)")

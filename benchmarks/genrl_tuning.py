@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import argparse
 import hashlib
-import json
 import os
 import time
 from typing import Any
@@ -40,7 +39,7 @@ from scipy.spatial import cKDTree
 from sb3_genrl import LatentActionWrapper
 from sb3_genrl.generative import load
 from sb3_genrl.generative.base import TrajectoryGenerator
-from sb3_genrl.genrl.train import check_genrl_kwargs, make_genrl
+from sb3_genrl.genrl.train import genrl_kwargs_argument, make_genrl
 from sb3_genrl.utils import atomic_path, atomic_write_json
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -128,13 +127,11 @@ def network_fit(env: SurrogateTask, landing: np.ndarray, goals: np.ndarray, genr
     best latent action of ``n_goals`` training goals (seed :data:`FIT_GOAL_SEED`), then the deterministic policy's
     mean distance to ``goals``. A yardstick for the policy search that, unlike the grid's best, does not shrink
     as the grid gets finer."""
-    axis = np.linspace(-EXTENT, EXTENT, landing.shape[0])
-    latents = np.stack(np.meshgrid(axis, axis, indexing="ij"), axis=-1).reshape(-1, 2)
+    latents = latent_set(IdentityGenerator(), grid=landing.shape[0], extent=EXTENT)  # the grid landing_map played
     points = landing.reshape(-1, 2)
     valid = np.isfinite(points).all(axis=1)
     train = held_out_goals(env.name, n_goals, FIT_GOAL_SEED)
     targets = latents[valid][cKDTree(points[valid]).query(train)[1]]
-    torch.manual_seed(seed)
     architecture = {key: value for key, value in genrl_kwargs.items() if key in ("policy", "policy_kwargs")}
     model = make_genrl(LatentActionWrapper(env, IdentityGenerator()), seed=seed, device="cpu", **architecture)
     policy = model.policy
@@ -159,7 +156,7 @@ def main() -> None:
     parser.add_argument("--task", default="basketball", choices=["hockey", "basketball"])
     parser.add_argument("--episodes", type=int, default=20000)
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
-    parser.add_argument("--genrl-kwargs", default="{}", help="GenRL arguments, as JSON")
+    parser.add_argument("--genrl-kwargs", type=genrl_kwargs_argument, default={}, help="GenRL arguments, as JSON")
     parser.add_argument("--grid", type=int, default=101, help="latent grid points per axis")
     parser.add_argument("--goals", type=int, default=300, help="tuning goals (seed 777)")
     parser.add_argument("--network-fit", action="store_true",
@@ -167,7 +164,7 @@ def main() -> None:
     parser.add_argument("--out", default=None, help="JSON output (default: print only)")
     args = parser.parse_args()
     torch.set_num_threads(1)
-    genrl_kwargs = check_genrl_kwargs(json.loads(args.genrl_kwargs), "--genrl-kwargs")
+    genrl_kwargs = args.genrl_kwargs
     landing = landing_map(args.generator, args.task, args.grid)
     env = SurrogateTask(args.task, np.nan_to_num(landing, nan=0.0))  # no landing point: the ball stays at the robot
     goals = held_out_goals(args.task, args.goals, TUNING_GOAL_SEED)

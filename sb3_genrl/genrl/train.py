@@ -161,6 +161,21 @@ def check_genrl_kwargs(genrl_kwargs: dict[str, Any], name: str | None = "genrl_k
     return genrl_kwargs
 
 
+def genrl_kwargs_argument(text: str) -> dict[str, Any]:
+    """An argparse ``type`` for ``--genrl-kwargs``: a JSON object of GenRL settings, checked by name."""
+    import argparse
+    import json
+
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as error:
+        raise argparse.ArgumentTypeError(f"not JSON: {error}") from None
+    try:
+        return check_genrl_kwargs(value, None)
+    except (TypeError, ValueError) as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
 def make_genrl(env: Any, generator: TrajectoryGenerator | str | None = None, **genrl_kwargs: Any) -> GenRL:
     """``GenRL`` with settings that may name the policy (``"policy"``, as a task's ``genrl_kwargs`` may)."""
     policy = genrl_kwargs.pop("policy", "MlpPolicy")
