@@ -681,3 +681,14 @@ def test_check_genrl_kwargs_refuses_unknown_names_and_policies():
         check_genrl_kwargs({"policy": "CnnPolicy"})
     with pytest.raises(TypeError, match="expected a dict"):
         check_genrl_kwargs([("target_kl", 0.03)])
+
+
+def test_genrl_kwargs_argument_parses_and_checks_json():
+    import argparse
+
+    from sb3_genrl.genrl.train import genrl_kwargs_argument
+
+    assert genrl_kwargs_argument('{"target_kl": 0.03}') == {"target_kl": 0.03}
+    for text, message in (("{", "not JSON"), ("[1]", "expected a dict"), ('{"x": 1}', "'x' is not a GenRL setting")):
+        with pytest.raises(argparse.ArgumentTypeError, match=message):
+            genrl_kwargs_argument(text)
