@@ -51,20 +51,29 @@ def held_out_goals(task: str, goals: int, seed: int) -> np.ndarray:
 
 
 def evaluate_feedback_policy(model: Any, task: str, *, goals: int = 100, seed: int = 0, deterministic: bool = True,
-                             time_feature: bool = True) -> dict[str, Any]:
+                             time_feature: bool = True, goal_conditioned: bool = False) -> dict[str, Any]:
     """Play an SB3 feedback policy closed loop on held-out goals, all goals stepped together.
 
-    :param model: an SB3 model (or anything with ``predict``) trained on :func:`make_feedback_env`'s observations
+    :param model: an SB3 model (or anything with ``predict``) trained on :func:`make_feedback_env`'s observations, or
+        on the goal-conditioned task's (``goal_conditioned``)
     :param task: ``hockey`` or ``basketball``
     :param goals: number of goals (see :func:`held_out_goals`)
     :param seed: seed of the goals, and of torch's sampling when ``deterministic=False``
     :param deterministic: the actor's mean (True) or samples from it (False)
-    :param time_feature: whether the policy observes the time feature
+    :param time_feature: whether the policy observes the time feature (the goal-conditioned task always has it)
+    :param goal_conditioned: play the task's goal-conditioned variant (dict observations, e.g. SAC + HER's policy)
     :return: ``goals`` (G, 2), ``rewards`` (G,), ``infos`` (the episodes' last infos), ``actions`` (G, T, 7)
     """
     goal_array = held_out_goals(task, goals, seed)
-    envs = [make_feedback_env(task, time_feature=time_feature) for _ in goal_array]
-    observations = np.stack([env.reset(options={"goal": goal})[0] for env, goal in zip(envs, goal_array, strict=True)])
+    spec = get_task(task)
+    if goal_conditioned and spec.goal_env_id is None:
+        raise ValueError(f"{spec.name} has no goal-conditioned variant")
+    envs = [gym.make(spec.goal_env_id) if goal_conditioned else make_feedback_env(task, time_feature=time_feature)
+            for _ in goal_array]
+    first = [env.reset(options={"goal": goal})[0] for env, goal in zip(envs, goal_array, strict=True)]
+    # One array per observation key (a dict observation) or one array, a row per goal.
+    observations = ({key: np.stack([obs[key] for obs in first]) for key in first[0]} if goal_conditioned
+                    else np.stack(first))
     horizon = envs[0].unwrapped.horizon
     actions = np.zeros((len(envs), horizon, 7), dtype=np.float32)
     rewards, infos = np.zeros(len(envs)), [{} for _ in envs]
@@ -74,7 +83,12 @@ def evaluate_feedback_policy(model: Any, task: str, *, goals: int = 100, seed: i
         batch, _ = model.predict(observations, deterministic=deterministic)
         actions[:, t] = batch
         for i in np.flatnonzero(active):
-            observations[i], reward, terminated, truncated, info = envs[i].step(batch[i])
+            obs, reward, terminated, truncated, info = envs[i].step(batch[i])
+            if goal_conditioned:
+                for key, value in obs.items():
+                    observations[key][i] = value
+            else:
+                observations[i] = obs
             if terminated or truncated:
                 rewards[i], infos[i], active[i] = reward, info, False
     for env in envs:

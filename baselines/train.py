@@ -21,7 +21,8 @@ Every run writes ``episodes.monitor.csv`` (SB3's Monitor: one row per episode wi
 contacts, distance and the process' CPU seconds so far, written as training goes), ``learning_curve.csv`` /
 ``learning_curve.png`` (mean over windows of 64 episodes), SB3's logs in ``logs/`` (``progress.csv`` and
 TensorBoard), the model (with its normalisation statistics; ``ppo`` also the cloned policy before PPO,
-``bc_policy.zip``), and ``summary.json``.
+``bc_policy.zip``), and ``summary.json``, whose ``final_eval`` is the trained policy's deterministic final distance
+to :data:`EVAL_GOALS` held-out goals (:func:`evaluate_trained`, the same goals for every method and for GenRL).
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from sb3_genrl.baselines import BASELINES, LATENT_BASELINES, OFF_POLICY_BASELINES
+from sb3_genrl.baselines import BASELINES, FEEDBACK_BASELINES, LATENT_BASELINES, OFF_POLICY_BASELINES
 from sb3_genrl.baselines.checkpoint import (
     BUFFER,
     CHECKPOINT_DIR,
@@ -46,7 +47,12 @@ from sb3_genrl.baselines.checkpoint import (
     remove_checkpoint,
     resume_state,
 )
-from sb3_genrl.baselines.feedback import add_time_feature, evaluate_feedback_policy, make_feedback_env
+from sb3_genrl.baselines.feedback import (
+    add_time_feature,
+    evaluate_feedback_policy,
+    held_out_goals,
+    make_feedback_env,
+)
 from sb3_genrl.baselines.her import goal_episodes
 from sb3_genrl.baselines.hyperparameters import PPO_SETTINGS, settings_record
 from sb3_genrl.baselines.models import ppo_with_behaviour_cloning, sac_her_with_demonstrations, sac_with_demonstrations
@@ -92,7 +98,8 @@ def train_baseline(
     :param demo_episodes: use only the first ``demo_episodes`` demonstration episodes (default: all)
     :param generator: a generator (or its file) for the latent-space baselines
     :param bc_kwargs: behaviour cloning options (``ppo``; see :func:`~sb3_genrl.baselines.bc.behaviour_cloning`)
-    :param eval_goals: held-out goals on which the cloned policy is evaluated (``ppo``)
+    :param eval_goals: held-out goals on which the trained policy (and ``ppo``'s cloned policy) is evaluated
+        deterministically, the summary's ``final_eval`` (see :func:`evaluate_trained`)
     :param checkpoint_every: episodes between checkpoints of the off-policy baselines (``None``: none); the same run
         into the same ``out_dir`` resumes from the last one (:mod:`sb3_genrl.baselines.checkpoint`)
     :param window: episodes per point of the learning curve
@@ -103,6 +110,10 @@ def train_baseline(
     summary: dict[str, Any] = {"algorithm": algorithm, "task": spec.name, "episodes": int(episodes), "seed": seed}
     began, began_cpu = time.perf_counter(), time.process_time()
     transitions = None if algorithm in LATENT_BASELINES else _demonstrations(demos, demo_episodes, spec.name)
+    if algorithm in LATENT_BASELINES and isinstance(generator, str | os.PathLike):
+        from sb3_genrl.generative import load
+
+        generator = load(generator)
     steps = int(episodes) if transitions is None else int(episodes) * spec.horizon
     summary |= {} if transitions is None else _demonstration_record(algorithm, transitions, bc_kwargs)
     checkpoint_every = checkpoint_every if algorithm in OFF_POLICY_BASELINES else None  # the others: short runs
@@ -119,9 +130,74 @@ def train_baseline(
         summary |= {"setup_seconds": time.perf_counter() - began, "setup_cpu_seconds": time.process_time() - began_cpu}
     summary["learn_seconds"] = _learn(model, steps, out, state, checkpoint_every, summary, progress_bar, verbose)
     summary |= _episode_results(algorithm, spec.name, out, window)
+    summary["final_eval"] = evaluate_trained(algorithm, model, spec.name, generator=generator, goals=eval_goals)
     atomic_write_json(out / "summary.json", summary)
     remove_checkpoint(out)
     return summary
+
+
+def evaluate_trained(algorithm: str, model: Any, task: str, *, generator: Any = None, goals: int = EVAL_GOALS,
+                     seed: int = EVAL_GOAL_SEED) -> dict[str, Any]:
+    """A trained policy's deterministic result on held-out goals, the same goals for every method.
+
+    The feedback baselines play closed loop (:func:`~sb3_genrl.baselines.feedback.evaluate_feedback_policy`; SAC + HER
+    on the goal-conditioned task); GenRL and the latent-space baselines play the trajectory decoded from their
+    deterministic latent action for each goal, clipped to the latent action box as in training.
+
+    :param algorithm: ``genrl`` or one of :data:`BASELINES`
+    :param model: the trained model (e.g. :func:`load_trained`'s)
+    :param task: the task it was trained on
+    :param generator: the generator of GenRL and the latent-space baselines
+    :param goals: number of held-out goals (see :func:`~sb3_genrl.baselines.feedback.held_out_goals`)
+    :param seed: seed of the goals
+    :return: the mean, median and 90th percentile of the final distance (minus the reward, m) and the table contacts
+        per episode (``None`` on a task without a table)
+    """
+    check_positive_int(goals, "goals")
+    check_seed(seed)
+    if algorithm in FEEDBACK_BASELINES:
+        played = evaluate_feedback_policy(model, task, goals=goals, seed=seed, goal_conditioned=algorithm == "sac-her")
+        rewards, infos = played["rewards"], played["infos"]
+    elif algorithm == "genrl" or algorithm in LATENT_BASELINES:
+        if generator is None:
+            raise ValueError(f"{algorithm} needs its generator (generator=...)")
+        from sb3_genrl import LatentActionWrapper
+
+        goal_array = held_out_goals(task, goals, seed)
+        env = LatentActionWrapper(gym.make(get_task(task).env_id), generator)
+        latents, _ = model.predict(goal_array, deterministic=True)
+        latents = np.clip(latents, env.action_space.low, env.action_space.high)
+        rewards, infos = env.unwrapped.play_trajectories(np.asarray(generator.decode(latents)), goal_array)
+        env.close()
+    else:
+        raise ValueError(f"unknown method {algorithm!r}; expected 'genrl' or one of {BASELINES}")
+    distances = -np.asarray(rewards, dtype=float)
+    contacts = [info["table_contacts"] for info in infos if "table_contacts" in info]
+    return {"goals": goals, "goal_seed": seed, "mean_distance": float(distances.mean()),
+            "median_distance": float(np.median(distances)), "p90_distance": float(np.percentile(distances, 90)),
+            "table_contacts": float(np.mean(contacts)) if len(contacts) == len(infos) else None}
+
+
+def load_trained(algorithm: str, path: str | os.PathLike, task: str, *, generator: Any = None,
+                 device: str = "cpu") -> Any:
+    """Load the model a run of ``algorithm`` on ``task`` saved (``{algorithm}_policy.zip``; GenRL's
+    ``genrl_policy.zip`` needs its generator, SAC + HER's the goal-conditioned task, as SB3 loads its buffer class)."""
+    check_input_path(path, "path")
+    if algorithm == "sac-her":
+        return SAC.load(path, env=gym.make(get_task(task).goal_env_id), device=device)
+    if algorithm == "genrl":
+        from sb3_genrl.genrl import GenRL
+
+        return GenRL.load(path, device=device, generator=generator)
+    if algorithm in ("ppo", "latent-ppo"):
+        return PPO.load(path, device=device)
+    if algorithm == "latent-trpo":
+        from sb3_contrib import TRPO
+
+        return TRPO.load(path, device=device)
+    if algorithm in BASELINES:
+        return SAC.load(path, device=device)
+    raise ValueError(f"unknown method {algorithm!r}; expected 'genrl' or one of {BASELINES}")
 
 
 def _learn(model: Any, steps: int, out: pathlib.Path, state: dict[str, Any] | None, checkpoint_every: int | None,
@@ -281,10 +357,6 @@ def _demonstrations(demos: Any, demo_episodes: int | None, task: str) -> dict[st
 def _latent_model(algorithm: str, env_id: str, generator: Any, common: dict, out: pathlib.Path) -> Any:
     from sb3_genrl import LatentActionWrapper
 
-    if isinstance(generator, str | os.PathLike):
-        from sb3_genrl.generative import load
-
-        generator = load(generator)
     env = monitor_episodes(LatentActionWrapper(gym.make(env_id), generator), out)
     if algorithm == "latent-ppo":
         model = PPO("MlpPolicy", env, n_steps=LATENT_BATCH, batch_size=LATENT_BATCH, **common)

@@ -14,8 +14,10 @@ Each run has its own folder under ``--work`` (``METHOD/seedS``) where it writes 
 Monitor file) as it goes; a run whose ``run.json`` exists is skipped when the settings recorded there match, and the
 benchmark refuses to mix runs of other settings; a stopped SAC run resumes from its last checkpoint (every 250
 episodes, see :mod:`sb3_genrl.baselines.checkpoint`), the others start again. The results: ``--out`` (JSON), beside
-it the Markdown table of the mean distance at 100, 300, 1000 and 3000 episodes and the curves (reward against
-episodes and against environment steps, table contacts per episode).
+it the Markdown table of the mean distance at 100, 300, 1000 and 3000 episodes (training episodes as played, which
+for a method still exploring is not what its policy can do) and of each final policy played deterministically on
+the same 100 held-out goals (kept in the run's ``final_eval.json``), and the curves (reward against episodes and
+against environment steps, table contacts per episode).
 
     python benchmarks/baselines.py                          # hockey, 3 seeds x 3000 episodes, every method
     python benchmarks/baselines.py --jobs 2                 # two runs at a time
@@ -149,8 +151,33 @@ def prepare(args: argparse.Namespace, work: pathlib.Path) -> tuple[str, str]:
     return demos, generator
 
 
-def method_result(runs: list[pathlib.Path], horizon: int) -> dict[str, Any]:
-    """Distances, table contacts and timings of one method's runs (one per seed)."""
+def final_evaluation(run: pathlib.Path, method: str, task: str, generator: str | None) -> dict[str, Any]:
+    """The run's trained policy, deterministic, on the held-out goals every method is evaluated on (the cloned
+    policy's, ``sb3_genrl.baselines.train.EVAL_GOALS``); kept in the run's ``final_eval.json`` under the policy
+    file's digest, so a rerun reads it and a retrained policy is evaluated again."""
+    from sb3_genrl.baselines.train import EVAL_GOAL_SEED, EVAL_GOALS, evaluate_trained, load_trained
+
+    policy = run / f"{method}_policy.zip"
+    key = {"policy_sha256": _file_digest(str(policy)), "goals": EVAL_GOALS, "goal_seed": EVAL_GOAL_SEED}
+    cache = run / "final_eval.json"
+    if cache.exists():
+        record = json.loads(cache.read_text())
+        if {name: record.get(name) for name in key} == key:
+            return record
+    latent = None
+    if method == "genrl" or method.startswith("latent-"):
+        from sb3_genrl.generative import load
+
+        latent = load(generator)
+    model = load_trained(method, policy, task, generator=latent)
+    record = key | evaluate_trained(method, model, task, generator=latent, goals=EVAL_GOALS, seed=EVAL_GOAL_SEED)
+    atomic_write_json(cache, record)
+    return record
+
+
+def method_result(runs: list[pathlib.Path], horizon: int, finals: list[dict[str, Any]]) -> dict[str, Any]:
+    """Distances, table contacts and timings of one method's runs (one per seed); ``finals``: their
+    :func:`final_evaluation`."""
     from sb3_genrl.curves import MONITOR_FILE, read_monitor, windowed_curve
 
     per_seed = [read_monitor(run / MONITOR_FILE) for run in runs]
@@ -173,7 +200,14 @@ def method_result(runs: list[pathlib.Path], horizon: int) -> dict[str, Any]:
     half = n // 2
     cpu_rates = [(n - half) / (columns["cpu_seconds"][n - 1] - (columns["cpu_seconds"][half - 1] if half else 0.0))
                  for columns in per_seed]
+    final_distances = np.array([final["mean_distance"] for final in finals])
+    final_contacts = [final["table_contacts"] for final in finals]
+    final = {"goals": finals[0]["goals"], "goal_seed": finals[0]["goal_seed"], "mean": float(final_distances.mean()),
+             "std": float(final_distances.std()), "per_seed": final_distances.tolist(),
+             "median_per_seed": [f["median_distance"] for f in finals], "p90_per_seed": [f["p90_distance"] for f in finals],
+             "table_contacts": None if None in final_contacts else float(np.mean(final_contacts))}
     return {"seeds": len(runs), "episodes": int(n), "env_steps_per_episode": horizon, "milestones": milestones,
+            "final_deterministic": final,
             "curve": {"episodes": grid.tolist(), "mean_distance": curves.mean(0).tolist(),
                       "std_distance": curves.std(0).tolist(),
                       "table_contacts": np.nanmean(contact_curves, 0).tolist() if has_contacts else None},
@@ -211,17 +245,21 @@ def write_outputs(result: dict[str, Any], out: pathlib.Path) -> None:
     if contacts:
         plot_curves(contacts, f"{stem}_contacts.png", ylabel="table contacts per episode (control steps)",
                     title=f"{task}: table contacts")
-    header = ["method", "seeds", *(f"{m} episodes" for m in MILESTONES), "table contacts / episode", "setup (CPU s)",
-              "episodes / CPU s"]
+    goals = next(iter(result["methods"].values()))["final_deterministic"]["goals"]
+    header = ["method", "seeds", *(f"{m} episodes" for m in MILESTONES), "final policy, deterministic",
+              "table contacts / episode", "setup (CPU s)", "episodes / CPU s"]
     rows = []
     for method, row in result["methods"].items():
         cells = [f"{row['milestones'][str(m)]['mean']:.3f} +- {row['milestones'][str(m)]['std']:.3f}"
                  if str(m) in row["milestones"] else "n/a" for m in MILESTONES]
         contacts_cell = "n/a" if row["table_contacts_per_episode"] is None else f"{row['table_contacts_per_episode']:.2f}"
-        rows.append([LABELS.get(method, method), row["seeds"], *cells, contacts_cell,
+        final = row["final_deterministic"]
+        rows.append([LABELS.get(method, method), row["seeds"], *cells, f"{final['mean']:.3f} +- {final['std']:.3f}",
+                     contacts_cell,
                      f"{row['setup_cpu_seconds']:.0f}", f"{row['episodes_per_cpu_second']:.2f}"])
     lines = [f"# {task}: mean distance to the goal (m), mean +- std over seeds", "",
-             f"Mean over the {WINDOW} episodes before each budget (training episodes, as played).", "",
+             f"Mean over the {WINDOW} episodes before each budget (training episodes, as played), and the final "
+             f"policy's deterministic mean distance to {goals} held-out goals (the same goals for every method).", "",
              markdown_table(header, rows)]
     lines += ["", f"![episodes]({stem.name}_episodes.png)", "", f"![environment steps]({stem.name}_env_steps.png)", ""]
     if contacts:
@@ -294,8 +332,11 @@ def main() -> None:
     result = {"benchmark": "baselines", "task": spec.name, "horizon": spec.horizon, "episodes": args.episodes,
               "seeds": args.seeds, "window": WINDOW, "demos": os.path.abspath(demos), "sb3_genrl": sb3_genrl.__version__,
               "machine": platform.machine(), "cpus": os.cpu_count(), "jobs": args.jobs,
-              "methods": {m: method_result([work / m / f"seed{s}" for s in args.seeds], spec.horizon)
-                          for m in args.methods}}
+              "methods": {}}
+    for method in args.methods:
+        runs = [work / method / f"seed{seed}" for seed in args.seeds]
+        finals = [final_evaluation(run, method, spec.name, generator) for run in runs]
+        result["methods"][method] = method_result(runs, spec.horizon, finals)
     result["core_hours_3000_episodes_3_seeds"] = core_hours(result, 3000, 3)
     write_outputs(result, out)
     print(out.with_suffix(".md").read_text())

@@ -335,8 +335,11 @@ def _baseline_command(args: argparse.Namespace) -> int:
               f"held-out goals {bc['deterministic_distance']:.3f} m deterministic, {bc['sampled_distance']:.3f} m sampled;"
               + (f" PPO's first batch ({first['episodes']} episodes) {first['mean_distance']:.3f} m"
                  if first["episodes"] else ""))
+    final = summary["final_eval"]
     print(f"{args.algorithm} on {args.task}: {summary['episodes_played']} episodes, final mean reward "
-          f"{summary['final_mean_reward']:.4g}, best {summary['best_mean_reward']:.4g} -> {args.out}")
+          f"{summary['final_mean_reward']:.4g}, best {summary['best_mean_reward']:.4g}; the trained policy, "
+          f"deterministic: mean distance to {final['goals']} held-out goals {final['mean_distance']:.3f} m "
+          f"-> {args.out}")
     return 0
 
 

@@ -9,13 +9,13 @@ import pytest
 import torch as th
 from sb3_genrl.baselines import FEEDBACK_BASELINES
 from sb3_genrl.baselines.bc import STD_RANGE, actor_mean, fit_actor, split_episodes
-from sb3_genrl.baselines.feedback import add_time_feature, make_feedback_env
+from sb3_genrl.baselines.feedback import add_time_feature, held_out_goals, make_feedback_env
 from sb3_genrl.baselines.her import goal_episodes
 from sb3_genrl.baselines.hyperparameters import PPO_POLICY
 from sb3_genrl.baselines.models import normalized_policy, ppo_with_behaviour_cloning, sac_her_with_demonstrations
 from sb3_genrl.baselines.normalization import STD_FLOOR, NormalizedFlatten
 from sb3_genrl.baselines.prefill import prefill_replay_buffer
-from sb3_genrl.baselines.train import train_baseline
+from sb3_genrl.baselines.train import EVAL_GOAL_SEED, load_trained, train_baseline
 from sb3_genrl.envs.demonstrations import make_demonstrations
 from sb3_genrl.envs.hockey import HOCKEY_HORIZON, HockeyEnv, scripted_hit
 from stable_baselines3 import PPO, SAC
@@ -149,6 +149,24 @@ def test_baselines_run_end_to_end(algorithm, demos, tmp_path):
         assert (tmp_path / name).exists()
     assert any((tmp_path / "logs").glob("events.out.tfevents.*")) and (tmp_path / "logs" / "progress.csv").exists()
     assert json.loads((tmp_path / "summary.json").read_text()) == json.loads(json.dumps(summary)) and "settings" in summary
+    # The final evaluation: the saved policy, deterministic, one goal at a time on a fresh env (the goal-conditioned
+    # task for SAC + HER), against the summary's, which stepped the held-out goals together.
+    model = load_trained(algorithm, tmp_path / f"{algorithm}_policy.zip", "hockey")
+    distances = []
+    for goal in held_out_goals("hockey", 2, EVAL_GOAL_SEED):
+        env = gym.make("GenRL/HockeyGoal-v0") if algorithm == "sac-her" else make_feedback_env("hockey")
+        obs, _ = env.reset(options={"goal": goal})
+        done = False
+        while not done:
+            obs, reward, terminated, truncated, info = env.step(model.predict(obs, deterministic=True)[0])
+            done = terminated or truncated
+        distances.append((-reward, info["table_contacts"]))
+    final = summary["final_eval"]
+    assert final["goals"] == 2 and final["goal_seed"] == EVAL_GOAL_SEED
+    # (batched and single forward passes differ in float32 rounding, which 69 closed-loop steps and the puck's
+    # contacts carry on: a 1% tolerance; another goal, observation or env would be metres off)
+    assert final["mean_distance"] == pytest.approx(np.mean([d for d, _ in distances]), rel=1e-2)
+    assert abs(final["table_contacts"] - np.mean([c for _, c in distances])) <= 1
     if algorithm == "ppo":
         bc, first = summary["bc"], summary["first_batch"]
         assert bc["epochs"] == 2 and bc["deterministic_distance"] > 0 and bc["sampled_distance"] > 0

@@ -214,11 +214,33 @@ def runs(tmp_path_factory, hockey_generator):
     return root
 
 
-def test_baseline_and_compare(runs, tmp_path, cli):
+def test_baseline_and_compare(runs, tmp_path, cli, hockey_generator):
     summary = json.loads((runs / "ppo" / "summary.json").read_text())
     episodes = read_monitor(runs / "ppo" / MONITOR_FILE)
     assert summary["episodes_played"] == len(episodes["return"]) == 64  # one PPO rollout of 64 one-step episodes
     assert summary["max_reward"] == pytest.approx(episodes["return"].max())
+    # The final evaluation of a latent-space baseline: its deterministic latent action for each held-out goal,
+    # played through the latent-action env one goal at a time; GenRL's through evaluate_on_goals.
+    from sb3_genrl.baselines.feedback import held_out_goals
+    from sb3_genrl.baselines.train import EVAL_GOAL_SEED, evaluate_trained, load_trained
+
+    from sb3_genrl import LatentActionWrapper
+    from sb3_genrl.generative import load
+    from sb3_genrl.genrl import evaluate_on_goals
+
+    generator = load(hockey_generator)
+    latent_ppo = load_trained("latent-ppo", runs / "ppo" / "latent-ppo_policy.zip", "hockey")
+    env = LatentActionWrapper(gym.make("GenRL/Hockey-v0"), generator)
+    rewards = []
+    for goal in held_out_goals("hockey", 100, EVAL_GOAL_SEED):
+        obs, _ = env.reset(options={"goal": goal})
+        rewards.append(env.step(latent_ppo.predict(obs, deterministic=True)[0])[1])
+    assert summary["final_eval"]["mean_distance"] == pytest.approx(-np.mean(rewards), rel=1e-5)
+    genrl = load_trained("genrl", runs / "genrl" / "genrl_policy.zip", "hockey", generator=generator)
+    _, genrl_rewards, _ = evaluate_on_goals(genrl, "hockey", goals=100, seed=EVAL_GOAL_SEED)
+    final = evaluate_trained("genrl", genrl, "hockey", generator=generator)
+    assert final["mean_distance"] == pytest.approx(-genrl_rewards.mean(), rel=1e-6)
+    assert final["median_distance"] == pytest.approx(np.median(-genrl_rewards), rel=1e-6)
 
     code, printed, err = cli("compare", "--task", "hockey", "--runs", runs / "genrl", runs / "ppo", "--out", tmp_path)
     assert code == 0, err
