@@ -150,8 +150,9 @@ def evaluate_trained(algorithm: str, model: Any, task: str, *, generator: Any = 
     :param generator: the generator of GenRL and the latent-space baselines
     :param goals: number of held-out goals (see :func:`~sb3_genrl.baselines.feedback.held_out_goals`)
     :param seed: seed of the goals
-    :return: the mean, median and 90th percentile of the final distance (minus the reward, m) and the table contacts
-        per episode (``None`` on a task without a table)
+    :return: the mean, median and 90th percentile of the final distance (minus the reward, m), the table contacts
+        per episode (``None`` on a task without a table) and how many of the episodes' simulations went unstable
+        (those score the task's worst reward)
     """
     check_positive_int(goals, "goals")
     check_seed(seed)
@@ -175,7 +176,8 @@ def evaluate_trained(algorithm: str, model: Any, task: str, *, generator: Any = 
     contacts = [info["table_contacts"] for info in infos if "table_contacts" in info]
     return {"goals": goals, "goal_seed": seed, "mean_distance": float(distances.mean()),
             "median_distance": float(np.median(distances)), "p90_distance": float(np.percentile(distances, 90)),
-            "table_contacts": float(np.mean(contacts)) if len(contacts) == len(infos) else None}
+            "table_contacts": float(np.mean(contacts)) if len(contacts) == len(infos) else None,
+            "unstable": sum(bool(info.get("unstable", False)) for info in infos)}
 
 
 def load_trained(algorithm: str, path: str | os.PathLike, task: str, *, generator: Any = None,

@@ -38,6 +38,7 @@ import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 
 from sb3_genrl.genrl.train import genrl_kwargs_argument
@@ -175,9 +176,10 @@ def final_evaluation(run: pathlib.Path, method: str, task: str, generator: str |
     return record
 
 
-def method_result(runs: list[pathlib.Path], horizon: int, finals: list[dict[str, Any]]) -> dict[str, Any]:
+def method_result(runs: list[pathlib.Path], horizon: int, finals: list[dict[str, Any]],
+                  worst_reward: float) -> dict[str, Any]:
     """Distances, table contacts and timings of one method's runs (one per seed); ``finals``: their
-    :func:`final_evaluation`."""
+    :func:`final_evaluation`; ``worst_reward``: the task's (what an unstable simulation scores)."""
     from sb3_genrl.curves import MONITOR_FILE, read_monitor, windowed_curve
 
     per_seed = [read_monitor(run / MONITOR_FILE) for run in runs]
@@ -205,13 +207,17 @@ def method_result(runs: list[pathlib.Path], horizon: int, finals: list[dict[str,
     final = {"goals": finals[0]["goals"], "goal_seed": finals[0]["goal_seed"], "mean": float(final_distances.mean()),
              "std": float(final_distances.std()), "per_seed": final_distances.tolist(),
              "median_per_seed": [f["median_distance"] for f in finals], "p90_per_seed": [f["p90_distance"] for f in finals],
-             "table_contacts": None if None in final_contacts else float(np.mean(final_contacts))}
+             "table_contacts": None if None in final_contacts else float(np.mean(final_contacts)),
+             "unstable_per_seed": [f["unstable"] for f in finals]}
     return {"seeds": len(runs), "episodes": int(n), "env_steps_per_episode": horizon, "milestones": milestones,
             "final_deterministic": final,
             "curve": {"episodes": grid.tolist(), "mean_distance": curves.mean(0).tolist(),
                       "std_distance": curves.std(0).tolist(),
                       "table_contacts": np.nanmean(contact_curves, 0).tolist() if has_contacts else None},
             "table_contacts_per_episode": float(np.nanmean(contacts)) if has_contacts else None,
+            # training episodes at the task's worst reward: an unstable simulation, or (basketball) a ball that never
+            # came down through the rim's height
+            "worst_reward_share": float(np.isclose(-distances, worst_reward).mean()),
             "setup_seconds": float(np.mean([r["setup_seconds"] for r in records])),
             "setup_cpu_seconds": float(np.mean([r["setup_cpu_seconds"] for r in records])),
             "episodes_per_second": float(np.mean([r["episodes_played"] / r["learn_seconds"] for r in records])),
@@ -247,7 +253,7 @@ def write_outputs(result: dict[str, Any], out: pathlib.Path) -> None:
                     title=f"{task}: table contacts")
     goals = next(iter(result["methods"].values()))["final_deterministic"]["goals"]
     header = ["method", "seeds", *(f"{m} episodes" for m in MILESTONES), "final policy, deterministic",
-              "table contacts / episode", "setup (CPU s)", "episodes / CPU s"]
+              "table contacts / episode", "episodes at the worst reward", "setup (CPU s)", "episodes / CPU s"]
     rows = []
     for method, row in result["methods"].items():
         cells = [f"{row['milestones'][str(m)]['mean']:.3f} +- {row['milestones'][str(m)]['std']:.3f}"
@@ -255,11 +261,13 @@ def write_outputs(result: dict[str, Any], out: pathlib.Path) -> None:
         contacts_cell = "n/a" if row["table_contacts_per_episode"] is None else f"{row['table_contacts_per_episode']:.2f}"
         final = row["final_deterministic"]
         rows.append([LABELS.get(method, method), row["seeds"], *cells, f"{final['mean']:.3f} +- {final['std']:.3f}",
-                     contacts_cell,
+                     contacts_cell, f"{100 * row['worst_reward_share']:.1f}%",
                      f"{row['setup_cpu_seconds']:.0f}", f"{row['episodes_per_cpu_second']:.2f}"])
     lines = [f"# {task}: mean distance to the goal (m), mean +- std over seeds", "",
              f"Mean over the {WINDOW} episodes before each budget (training episodes, as played), and the final "
-             f"policy's deterministic mean distance to {goals} held-out goals (the same goals for every method).", "",
+             f"policy's deterministic mean distance to {goals} held-out goals (the same goals for every method). "
+             f"Episodes at the worst reward ({result['worst_reward']:g} m) are training episodes whose simulation "
+             "went unstable (or, on basketball, whose ball never came down through the rim's height).", "",
              markdown_table(header, rows)]
     lines += ["", f"![episodes]({stem.name}_episodes.png)", "", f"![environment steps]({stem.name}_env_steps.png)", ""]
     if contacts:
@@ -333,10 +341,11 @@ def main() -> None:
               "seeds": args.seeds, "window": WINDOW, "demos": os.path.abspath(demos), "sb3_genrl": sb3_genrl.__version__,
               "machine": platform.machine(), "cpus": os.cpu_count(), "jobs": args.jobs,
               "methods": {}}
+    worst_reward = result["worst_reward"] = float(gym.make(spec.env_id).unwrapped.worst_reward)
     for method in args.methods:
         runs = [work / method / f"seed{seed}" for seed in args.seeds]
         finals = [final_evaluation(run, method, spec.name, generator) for run in runs]
-        result["methods"][method] = method_result(runs, spec.horizon, finals)
+        result["methods"][method] = method_result(runs, spec.horizon, finals, worst_reward)
     result["core_hours_3000_episodes_3_seeds"] = core_hours(result, 3000, 3)
     write_outputs(result, out)
     print(out.with_suffix(".md").read_text())
