@@ -146,7 +146,9 @@ def print_table(setting: Setting, result: dict[str, object]) -> None:
     limit = result["generator_limit"]
     print(f"generator best reachable: mean {limit['mean_m'] * scale:.3f} {unit}, p90 {limit['p90_m'] * scale:.3f} {unit} "
           f"({limit['n_latents']} latent actions; coarser grids: "
-          + ", ".join(f"{name} {mean * scale:.3f}" for name, mean in limit["coarser_grid_means_m"].items()) + ")")
+          + ", ".join(f"{name} {mean * scale:.3f}" for name, mean in limit["coarser_grid_means_m"].items())
+          + (f"; {limit['prior_samples']} prior samples {limit['prior_samples_mean_m'] * scale:.3f}"
+             if limit.get("prior_samples_mean_m") else "") + ")")
     print(f"over seeds: {result['mean_m_over_seeds'] * scale:.3f} +- {result['std_m_over_seeds'] * scale:.3f} {unit} "
           f"(worst {result['worst_mean_m'] * scale:.3f}); ratio GenRL / generator {result['ratio']:.2f}")
 
@@ -188,6 +190,8 @@ def main(setting: Setting, description: str) -> None:
         limit = generator_limit(load(generator_path, device="cpu"), setting.task, goals, grid=args.grid)
         result["generator_limit"] = {**{f"{key}_m": value for key, value in limit["summary"].items()},
                                      "n_latents": limit["n_latents"], "coarser_grid_means_m": limit["coarser_grid_means"],
+                                     "prior_samples": limit["prior_samples"],
+                                     "prior_samples_mean_m": limit["prior_samples_mean"],
                                      "seconds": time.perf_counter() - start}
         print(f"generator best reachable: {limit['summary']['mean'] * setting.scale:.3f} {setting.unit}", flush=True)
         for seed in args.seeds:
@@ -197,6 +201,8 @@ def main(setting: Setting, description: str) -> None:
             means = np.array([r["mean_m"] for r in result["runs"]])
             result.update(mean_m_over_seeds=float(means.mean()), std_m_over_seeds=float(means.std()),
                           worst_mean_m=float(means.max()), ratio=float(means.mean() / result["generator_limit"]["mean_m"]))
+            if limit["prior_samples_mean"]:  # the same ratio against the prior samples' best reachable distance
+                result["ratio_prior_samples"] = float(means.mean() / limit["prior_samples_mean"])
             atomic_write_json(args.out, result)
             plot(setting, result, os.path.splitext(args.out)[0] + ".png")
             print(f"seed {seed}: mean {row['mean_m'] * setting.scale:.3f} {setting.unit}", flush=True)
