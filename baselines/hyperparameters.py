@@ -49,8 +49,80 @@ HER_BUFFER: dict[str, Any] = {"n_sampled_goal": 4, "goal_selection_strategy": "f
 HER_POLICY: dict[str, Any] = {"net_arch": [64, 64]}
 
 
-def settings_record() -> dict[str, Any]:
-    """All settings as plain JSON values (recorded in each run's summary and checked when a benchmark resumes)."""
+# Constructor arguments the baselines set themselves (the env and policy, the demonstrations' buffer and normalisation,
+# seeding, device and logging): a user's ``algorithm_kwargs`` cannot change them.
+RESERVED = frozenset({"self", "policy", "env", "seed", "device", "verbose", "tensorboard_log", "buffer_size",
+                      "replay_buffer_class", "replay_buffer_kwargs", "policy_kwargs", "_init_setup_model",
+                      "rollout_buffer_class", "action_noise"})  # (the last two take Python objects)
+
+
+def algorithm_class(algorithm: str) -> type:
+    """The SB3 / sb3-contrib class of a baseline (PPO, SAC or TRPO)."""
+    from sb3_genrl.baselines import BASELINES
+    from stable_baselines3 import PPO, SAC
+
+    if algorithm not in BASELINES:
+        raise ValueError(f"unknown baseline {algorithm!r}; expected one of {BASELINES}")
+    if algorithm == "latent-trpo":
+        from sb3_contrib import TRPO
+
+        return TRPO
+    return PPO if algorithm in ("ppo", "latent-ppo") else SAC
+
+
+def check_algorithm_kwargs(algorithm: str, kwargs: dict[str, Any] | None) -> dict[str, Any]:
+    """Check a user's changes to a baseline's settings: names of the algorithm's constructor arguments (e.g.
+    ``{"target_kl": 0.02}`` for PPO, ``{"gamma": 1.0}`` for SAC), none of :data:`RESERVED`, values as JSON holds
+    them. Returns them as a plain dict (empty for ``None``)."""
+    import inspect
+    import json
+
+    if kwargs is None:
+        return {}
+    if not isinstance(kwargs, dict):
+        raise ValueError(f"{algorithm}'s settings must be a dict of argument names to values, got {kwargs!r}")
+    cls = algorithm_class(algorithm)
+    names = set(inspect.signature(cls.__init__).parameters) - RESERVED
+    wrong = sorted(set(kwargs) - names)
+    if wrong:
+        raise ValueError(f"{algorithm} ({cls.__name__}) has no setting {', '.join(map(repr, wrong))} that a user may "
+                         f"change; the settable ones: {', '.join(sorted(names))}")
+    try:
+        return json.loads(json.dumps(kwargs))
+    except (TypeError, ValueError) as error:
+        raise ValueError(f"{algorithm}'s settings must be JSON values: {error}") from None
+
+
+def json_object_argument(text: str) -> dict[str, Any]:
+    """An argparse ``type``: a JSON object (``genrl baseline --algorithm-kwargs``, checked by name once the
+    baseline is known)."""
+    import argparse
+    import json
+
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as error:
+        raise argparse.ArgumentTypeError(f"not JSON: {error}") from None
+    if not isinstance(value, dict):
+        raise argparse.ArgumentTypeError(f"expected a JSON object, got {text!r}")
+    return value
+
+
+def baseline_kwargs_argument(text: str) -> dict[str, dict[str, Any]]:
+    """An argparse ``type``: a JSON object of changes per baseline, ``{"ppo": {"target_kl": 0.02}, ...}``, each
+    checked by :func:`check_algorithm_kwargs`."""
+    import argparse
+
+    value = json_object_argument(text)
+    try:
+        return {name: check_algorithm_kwargs(name, kwargs) for name, kwargs in value.items()}
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
+def settings_record(algorithm_kwargs: dict[str, dict[str, Any]] | None = None) -> dict[str, Any]:
+    """All settings as plain JSON values (recorded in each run's summary and checked when a benchmark resumes),
+    with a user's changes (``{baseline: {argument: value}}``, see :func:`check_algorithm_kwargs`) applied."""
     def plain(values: dict[str, Any]) -> dict[str, Any]:
         return {key: value.__name__ if isinstance(value, type) else value for key, value in values.items()}
 
@@ -63,10 +135,12 @@ def settings_record() -> dict[str, Any]:
                for name, parameter in inspect.signature(function).parameters.items()
                if parameter.default is not inspect.Parameter.empty and name != "seed"}
     observations = {"std_floor": STD_FLOOR, "clip": CLIP, "time_feature": True}
-    return {"ppo": plain(PPO_SETTINGS) | {"policy": plain(PPO_POLICY), "behaviour_cloning": cloning,
+    changes = {name: check_algorithm_kwargs(name, kwargs) for name, kwargs in (algorithm_kwargs or {}).items()}
+    record = {"ppo": plain(PPO_SETTINGS) | {"policy": plain(PPO_POLICY), "behaviour_cloning": cloning,
                                           "observations": observations},
             "sac": plain(SAC_SETTINGS | DEMONSTRATIONS_AS_WARM_UP) | {"policy": plain(SAC_POLICY),
                                                                        "observations": observations},
             "sac-no-prefill": plain(SAC_SETTINGS) | {"policy": plain(SAC_POLICY), "observations": observations},
             "sac-her": plain(HER_SETTINGS | DEMONSTRATIONS_AS_WARM_UP) | plain(HER_BUFFER)
             | {"policy": plain(HER_POLICY), "observations": observations}}
+    return {name: values | changes.get(name, {}) for name, values in record.items()}

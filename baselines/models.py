@@ -36,25 +36,28 @@ def normalized_policy(policy_kwargs: dict[str, Any], observations: np.ndarray) -
 
 
 def ppo_with_behaviour_cloning(env: gym.Env, transitions: dict[str, np.ndarray], *, seed: int,
-                               bc_kwargs: dict[str, Any] | None = None, **common: Any) -> tuple[PPO, dict[str, Any]]:
+                               bc_kwargs: dict[str, Any] | None = None, settings: dict[str, Any] | None = None,
+                               **common: Any) -> tuple[PPO, dict[str, Any]]:
     """PPO (rl-zoo3's HalfCheetah-v4 settings) whose actor is cloned from the demonstrations.
 
     :param env: the feedback env (with the time feature)
     :param transitions: demonstrations as the env observes them
     :param seed: seed of the model, the held-out split and the minibatches
     :param bc_kwargs: passed to :func:`~sb3_genrl.baselines.bc.behaviour_cloning` (``holdout``, ``max_epochs``, ...)
+    :param settings: changes to the zoo's settings (``PPO`` arguments, see
+        :func:`~sb3_genrl.baselines.hyperparameters.check_algorithm_kwargs`)
     :param common: passed to ``PPO`` (``device``, ``verbose``, ``tensorboard_log``)
     :return: the model and behaviour cloning's record
     """
     model = PPO("MlpPolicy", env, policy_kwargs=normalized_policy(PPO_POLICY, transitions["observations"]), seed=seed,
-                **PPO_SETTINGS, **common)
+                **(PPO_SETTINGS | (settings or {})), **common)
     record = behaviour_cloning(model.policy, transitions["observations"], transitions["actions"], transitions["dones"],
                                seed=seed, **(bc_kwargs or {}))
     return model, record
 
 
 def sac_with_demonstrations(env: gym.Env, transitions: dict[str, np.ndarray], *, steps: int, prefill: bool, seed: int,
-                            **common: Any) -> SAC:
+                            settings: dict[str, Any] | None = None, **common: Any) -> SAC:
     """SAC (rl-zoo3's MuJoCo defaults), its buffer prefilled with the demonstrations or not (then with the zoo's
     random warm-up).
 
@@ -63,9 +66,10 @@ def sac_with_demonstrations(env: gym.Env, transitions: dict[str, np.ndarray], *,
     :param steps: environment steps of the run (the buffer keeps them all)
     :param prefill: write the demonstrations into the buffer and learn from the first step
     :param seed: seed of the model
+    :param settings: changes to the zoo's settings (``SAC`` arguments)
     :param common: passed to ``SAC``
     """
-    settings = SAC_SETTINGS | (DEMONSTRATIONS_AS_WARM_UP if prefill else {})
+    settings = SAC_SETTINGS | (DEMONSTRATIONS_AS_WARM_UP if prefill else {}) | (settings or {})
     n_demos = len(transitions["observations"]) if prefill else 0
     model = SAC("MlpPolicy", env, policy_kwargs=normalized_policy(SAC_POLICY, transitions["observations"]),
                 buffer_size=n_demos + steps, seed=seed, **settings, **common)
@@ -74,19 +78,21 @@ def sac_with_demonstrations(env: gym.Env, transitions: dict[str, np.ndarray], *,
     return model
 
 
-def sac_her_with_demonstrations(env: gym.Env, episodes: dict[str, Any], *, steps: int, seed: int, **common: Any) -> SAC:
+def sac_her_with_demonstrations(env: gym.Env, episodes: dict[str, Any], *, steps: int, seed: int,
+                                settings: dict[str, Any] | None = None, **common: Any) -> SAC:
     """SAC with a ``HerReplayBuffer`` (rl-zoo3's FetchReach-v1 settings, ``final`` goals) holding the demonstrations.
 
     :param env: the task's goal-conditioned env
     :param episodes: :func:`~sb3_genrl.baselines.her.goal_episodes` of the demonstrations
     :param steps: environment steps of the run
     :param seed: seed of the model
+    :param settings: changes to the zoo's settings (``SAC`` arguments)
     :param common: passed to ``SAC``
     """
     n_demos = int(np.prod(episodes["rewards"].shape))
     policy_kwargs = HER_POLICY | {"features_extractor_class": NormalizedCombined,
                                   "features_extractor_kwargs": {"statistics": goal_statistics(episodes)}}
-    settings = HER_SETTINGS | DEMONSTRATIONS_AS_WARM_UP
+    settings = HER_SETTINGS | DEMONSTRATIONS_AS_WARM_UP | (settings or {})
     model = SAC("MultiInputPolicy", env, replay_buffer_class=HerReplayBuffer, replay_buffer_kwargs=dict(HER_BUFFER),
                 policy_kwargs=policy_kwargs, buffer_size=n_demos + steps, seed=seed, **settings, **common)
     add_goal_demonstrations(model, episodes)

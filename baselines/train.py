@@ -54,7 +54,7 @@ from sb3_genrl.baselines.feedback import (
     make_feedback_env,
 )
 from sb3_genrl.baselines.her import goal_episodes
-from sb3_genrl.baselines.hyperparameters import PPO_SETTINGS, settings_record
+from sb3_genrl.baselines.hyperparameters import algorithm_class, check_algorithm_kwargs, settings_record
 from sb3_genrl.baselines.models import ppo_with_behaviour_cloning, sac_her_with_demonstrations, sac_with_demonstrations
 from sb3_genrl.envs import get_task
 from stable_baselines3 import PPO, SAC
@@ -64,6 +64,10 @@ from sb3_genrl.curves import MONITOR_FILE, monitor_episodes, read_monitor, train
 from sb3_genrl.utils import atomic_path, atomic_write_json
 
 LATENT_BATCH = 64  # episodes per update of the latent-space baselines (GenRL's default N)
+# The latent-space baselines' settings: SB3's (sb3-contrib's) defaults but for GenRL's batch of episodes per update.
+LATENT_SETTINGS: dict[str, dict[str, Any]] = {"latent-ppo": {"n_steps": LATENT_BATCH, "batch_size": LATENT_BATCH},
+                                              "latent-sac": {"learning_starts": LATENT_BATCH},
+                                              "latent-trpo": {"n_steps": LATENT_BATCH, "batch_size": LATENT_BATCH}}
 CHECKPOINT_EVERY = 250  # episodes between checkpoints of an off-policy baseline (about 5 minutes of one core)
 EVAL_GOALS, EVAL_GOAL_SEED = 100, 12345  # held-out goals of the cloned policy's evaluation (never used for tuning)
 
@@ -79,6 +83,7 @@ def train_baseline(
     demo_episodes: int | None = None,
     generator: Any = None,
     bc_kwargs: dict[str, Any] | None = None,
+    algorithm_kwargs: dict[str, Any] | None = None,
     eval_goals: int = EVAL_GOALS,
     checkpoint_every: int | None = CHECKPOINT_EVERY,
     device: str = "auto",
@@ -98,6 +103,9 @@ def train_baseline(
     :param demo_episodes: use only the first ``demo_episodes`` demonstration episodes (default: all)
     :param generator: a generator (or its file) for the latent-space baselines
     :param bc_kwargs: behaviour cloning options (``ppo``; see :func:`~sb3_genrl.baselines.bc.behaviour_cloning`)
+    :param algorithm_kwargs: changes to the baseline's rl-zoo3 settings, as arguments of its SB3 class (e.g.
+        ``{"target_kl": 0.02}`` for PPO; see :func:`~sb3_genrl.baselines.hyperparameters.check_algorithm_kwargs`),
+        recorded in the summary's ``settings``
     :param eval_goals: held-out goals on which the trained policy (and ``ppo``'s cloned policy) is evaluated
         deterministically, the summary's ``final_eval`` (see :func:`evaluate_trained`)
     :param checkpoint_every: episodes between checkpoints of the off-policy baselines (``None``: none); the same run
@@ -105,6 +113,7 @@ def train_baseline(
     :param window: episodes per point of the learning curve
     """
     _check_arguments(algorithm, episodes, seed, demos, demo_episodes, generator, eval_goals, checkpoint_every, device)
+    changes = check_algorithm_kwargs(algorithm, algorithm_kwargs)
     spec = get_task(task)
     out = check_output_dir(out_dir)
     summary: dict[str, Any] = {"algorithm": algorithm, "task": spec.name, "episodes": int(episodes), "seed": seed}
@@ -115,7 +124,8 @@ def train_baseline(
 
         generator = load(generator)
     steps = int(episodes) if transitions is None else int(episodes) * spec.horizon
-    summary |= {} if transitions is None else _demonstration_record(algorithm, transitions, bc_kwargs)
+    summary |= ({"settings": LATENT_SETTINGS.get(algorithm, {}) | changes} if transitions is None
+                else _demonstration_record(algorithm, transitions, bc_kwargs, changes))
     checkpoint_every = checkpoint_every if algorithm in OFF_POLICY_BASELINES else None  # the others: short runs
     # A checkpoint of this run is resumed; another run's is refused, before anything is written.
     state = None if checkpoint_every is None else resume_state(out, _identity(summary))
@@ -124,12 +134,14 @@ def train_baseline(
         model, summary = _resumed_model(algorithm, spec.name, out, state, device)
     else:
         common = {"seed": seed, "device": device, "verbose": verbose}
-        model = (_latent_model(algorithm, spec.env_id, generator, common, out) if transitions is None else
-                 _feedback_model(algorithm, spec.name, transitions, steps, out, summary, eval_goals, bc_kwargs, common))
+        model = (_latent_model(algorithm, spec.env_id, generator, summary["settings"], common, out)
+                 if transitions is None else
+                 _feedback_model(algorithm, spec.name, transitions, steps, out, summary, eval_goals, bc_kwargs,
+                                 common | {"settings": changes}))
         # demonstrations, behaviour cloning and its evaluation: wall-clock and this process' CPU seconds
         summary |= {"setup_seconds": time.perf_counter() - began, "setup_cpu_seconds": time.process_time() - began_cpu}
     summary["learn_seconds"] = _learn(model, steps, out, state, checkpoint_every, summary, progress_bar, verbose)
-    summary |= _episode_results(algorithm, spec.name, out, window)
+    summary |= _episode_results(algorithm, spec.name, out, window, summary["settings"])
     summary["final_eval"] = evaluate_trained(algorithm, model, spec.name, generator=generator, goals=eval_goals)
     atomic_write_json(out / "summary.json", summary)
     remove_checkpoint(out)
@@ -185,21 +197,13 @@ def load_trained(algorithm: str, path: str | os.PathLike, task: str, *, generato
     """Load the model a run of ``algorithm`` on ``task`` saved (``{algorithm}_policy.zip``; GenRL's
     ``genrl_policy.zip`` needs its generator, SAC + HER's the goal-conditioned task, as SB3 loads its buffer class)."""
     check_input_path(path, "path")
-    if algorithm == "sac-her":
-        return SAC.load(path, env=gym.make(get_task(task).goal_env_id), device=device)
     if algorithm == "genrl":
         from sb3_genrl.genrl import GenRL
 
         return GenRL.load(path, device=device, generator=generator)
-    if algorithm in ("ppo", "latent-ppo"):
-        return PPO.load(path, device=device)
-    if algorithm == "latent-trpo":
-        from sb3_contrib import TRPO
-
-        return TRPO.load(path, device=device)
-    if algorithm in BASELINES:
-        return SAC.load(path, device=device)
-    raise ValueError(f"unknown method {algorithm!r}; expected 'genrl' or one of {BASELINES}")
+    if algorithm == "sac-her":
+        return SAC.load(path, env=gym.make(get_task(task).goal_env_id), device=device)
+    return algorithm_class(algorithm).load(path, device=device)
 
 
 def _learn(model: Any, steps: int, out: pathlib.Path, state: dict[str, Any] | None, checkpoint_every: int | None,
@@ -221,10 +225,11 @@ def _learn(model: Any, steps: int, out: pathlib.Path, state: dict[str, Any] | No
     return float(start["learn_seconds"]) + seconds
 
 
-def _demonstration_record(algorithm: str, transitions: dict[str, np.ndarray],
-                          bc_kwargs: dict[str, Any] | None) -> dict[str, Any]:
-    """The summary's entries on the demonstrations and the settings of a feedback baseline."""
-    settings = settings_record()[algorithm]
+def _demonstration_record(algorithm: str, transitions: dict[str, np.ndarray], bc_kwargs: dict[str, Any] | None,
+                          changes: dict[str, Any]) -> dict[str, Any]:
+    """The summary's entries on the demonstrations and the settings of a feedback baseline (``changes``: the user's
+    changes to them)."""
+    settings = settings_record({algorithm: changes})[algorithm]
     if algorithm == "ppo":
         settings["behaviour_cloning"] |= bc_kwargs or {}
     return {"demo_transitions": len(transitions["observations"]), "demo_sha256": _fingerprint(transitions),
@@ -260,7 +265,8 @@ def _resumed_model(algorithm: str, task: str, out: pathlib.Path, state: dict[str
     return model, state["summary"] | {"resumed_at_episodes": resumed}
 
 
-def _episode_results(algorithm: str, task: str, out: pathlib.Path, window: int) -> dict[str, Any]:
+def _episode_results(algorithm: str, task: str, out: pathlib.Path, window: int,
+                     settings: dict[str, Any]) -> dict[str, Any]:
     """Write the run's learning curve; return the summary's entries on the episodes played (from the Monitor file)."""
     curve = write_learning_curve(out / MONITOR_FILE, out, window=window, title=f"{algorithm} on {task}")
     episodes_record = read_monitor(out / MONITOR_FILE)
@@ -268,7 +274,7 @@ def _episode_results(algorithm: str, task: str, out: pathlib.Path, window: int) 
     results: dict[str, Any] = {"episodes_played": len(returns), "final_mean_reward": float(curve["mean_reward"][-1]),
                                "best_mean_reward": float(np.max(curve["mean_reward"])), "max_reward": float(returns.max())}
     if algorithm == "ppo":
-        results["first_batch"] = _first_batch(episodes_record)
+        results["first_batch"] = _first_batch(episodes_record, settings["n_steps"])
     return results
 
 
@@ -329,13 +335,13 @@ def _feedback_model(algorithm: str, task: str, transitions: dict[str, np.ndarray
     return model
 
 
-def _first_batch(episodes: dict[str, np.ndarray]) -> dict[str, Any]:
+def _first_batch(episodes: dict[str, np.ndarray], n_steps: int) -> dict[str, Any]:
     """What PPO's first rollout (sampled from the cloned policy, before any PPO update) and first 64 episodes scored.
 
     :param episodes: the run's Monitor columns (one env: the timesteps at each episode's end are the lengths' sum)
     """
     returns = episodes["return"]
-    first = returns[: int(np.sum(np.cumsum(episodes["length"]) <= PPO_SETTINGS["n_steps"]))]
+    first = returns[: int(np.sum(np.cumsum(episodes["length"]) <= n_steps))]
     return {"episodes": len(first), "mean_distance": float(-first.mean()) if len(first) else None,
             "first_64_mean_distance": float(-returns[:64].mean())}
 
@@ -356,16 +362,9 @@ def _demonstrations(demos: Any, demo_episodes: int | None, task: str) -> dict[st
     return {key: np.asarray(value)[:n] for key, value in transitions.items()}
 
 
-def _latent_model(algorithm: str, env_id: str, generator: Any, common: dict, out: pathlib.Path) -> Any:
+def _latent_model(algorithm: str, env_id: str, generator: Any, settings: dict[str, Any], common: dict,
+                  out: pathlib.Path) -> Any:
     from sb3_genrl import LatentActionWrapper
 
     env = monitor_episodes(LatentActionWrapper(gym.make(env_id), generator), out)
-    if algorithm == "latent-ppo":
-        model = PPO("MlpPolicy", env, n_steps=LATENT_BATCH, batch_size=LATENT_BATCH, **common)
-    elif algorithm == "latent-sac":
-        model = SAC("MlpPolicy", env, learning_starts=LATENT_BATCH, **common)
-    else:
-        from sb3_contrib import TRPO
-
-        model = TRPO("MlpPolicy", env, n_steps=LATENT_BATCH, batch_size=LATENT_BATCH, **common)
-    return model
+    return algorithm_class(algorithm)("MlpPolicy", env, **settings, **common)

@@ -5,7 +5,8 @@ latent space (see :mod:`sb3_genrl.baselines.train` and :mod:`sb3_genrl.baselines
 plays the same number of episodes; a feedback episode is the task's horizon in environment steps, a GenRL or
 latent-space episode is one trajectory of that many steps, so both axes (episodes, environment steps) hold.
 
-GenRL runs with its defaults (``--genrl-kwargs`` changes them). At this benchmark's 3000 episodes they do best on
+GenRL runs with its defaults (``--genrl-kwargs`` changes them), the baselines with rl-zoo3's settings
+(``--baseline-kwargs`` changes them, recorded with each run). At this benchmark's 3000 episodes they do best on
 both tasks' tuning surrogates (``benchmarks/genrl_tuning.py``, tuning goals): basketball's own settings, made to
 anneal the policy's spread over 20000 episodes, end at 0.83 m there after 3000 against 0.50 m with the defaults
 (``benchmarks/results/genrl_tuning_basketball.json``); hockey's settings are the defaults.
@@ -23,6 +24,8 @@ against environment steps, table contacts per episode).
     python benchmarks/baselines.py --jobs 2                 # two runs at a time
     python benchmarks/baselines.py --task basketball --jobs 2   # basketball (benchmarks/results/baselines_basketball.json)
     python benchmarks/baselines.py --episodes 40 --seeds 0 --out /tmp/tiny.json --work /tmp/tiny   # end-to-end check
+    python benchmarks/baselines.py --methods ppo --episodes 1000 --baseline-kwargs '{"ppo": {"target_kl": 0.02}}' \
+        --work benchmarks/runs/ppo_target_kl --out /tmp/ppo_target_kl.json      # a change to the zoo's settings
 """
 
 from __future__ import annotations
@@ -40,6 +43,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from sb3_genrl.baselines.hyperparameters import baseline_kwargs_argument
 
 from sb3_genrl.genrl.train import genrl_kwargs_argument
 from sb3_genrl.utils import atomic_write_json
@@ -69,6 +73,9 @@ def run_settings(method: str, args: argparse.Namespace, seed: int, demos: str, g
     info = dataset_info(demos)
     settings: dict[str, Any] = {"method": method, "task": args.task, "seed": seed, "episodes": args.episodes,
                                 "sb3_genrl": __version__}
+    changes = args.baseline_kwargs.get(method, {})
+    if changes:  # (only when given, so that the records of runs without changes stay as they were)
+        settings["algorithm_kwargs"] = changes
     if method == "genrl" or method.startswith("latent-"):
         settings |= {"generator": os.path.abspath(generator), "generator_sha256": _file_digest(generator),
                      "batch_episodes": WINDOW}
@@ -79,7 +86,7 @@ def run_settings(method: str, args: argparse.Namespace, seed: int, demos: str, g
             settings["genrl"] = genrl_settings(settings["genrl_kwargs"])
     else:
         settings |= {"demos": os.path.abspath(demos), "demo_episodes": info["episodes"], "demo_seed": info.get("seed"),
-                     "hyperparameters": settings_record()[method]}
+                     "hyperparameters": settings_record({method: changes} if changes else None)[method]}
     return json.loads(json.dumps(settings))  # as it reads back from JSON
 
 
@@ -105,7 +112,8 @@ def run_one(method: str, settings: dict[str, Any], demos: str, generator: str, r
         latent = method.startswith("latent-")
         summary = train_baseline(method, settings["task"], episodes=settings["episodes"], out_dir=run,
                                  seed=settings["seed"], demos=None if latent else demos,
-                                 generator=generator if latent else None, device="cpu")
+                                 generator=generator if latent else None,
+                                 algorithm_kwargs=settings.get("algorithm_kwargs"), device="cpu")
         timing = {key: summary[key] for key in ("setup_seconds", "setup_cpu_seconds", "learn_seconds")}
     atomic_write_json(run / "run.json", {"settings": settings, **timing, "episodes_played": _episodes_played(run),
                                          "bc": summary.get("bc"), "first_batch": summary.get("first_batch")})
@@ -307,10 +315,16 @@ def main() -> None:
                              f"{GENERATOR_EPOCHS} epochs, on the demonstrations)")
     parser.add_argument("--genrl-kwargs", type=genrl_kwargs_argument, default={},
                         help="GenRL's arguments, as JSON (default: GenRL's defaults; see the module doc)")
+    parser.add_argument("--baseline-kwargs", type=baseline_kwargs_argument, default={},
+                        help="changes to the baselines' rl-zoo3 settings, as JSON: {baseline: {argument: value}}, e.g. "
+                             "'{\"ppo\": {\"target_kl\": 0.02}}' (default: none)")
     parser.add_argument("--jobs", type=int, default=1, help="runs at a time, one process (one core) each")
     parser.add_argument("--work", default=None, help="folder of the runs (default: benchmarks/runs/baselines_TASK)")
     parser.add_argument("--out", default=None, help="JSON result (default: benchmarks/results/baselines[_TASK].json)")
     args = parser.parse_args()
+    if set(args.baseline_kwargs) - set(args.methods):
+        parser.error(f"--baseline-kwargs changes {', '.join(sorted(set(args.baseline_kwargs) - set(args.methods)))}, "
+                     "which --methods does not run")
     from sb3_genrl.envs import get_task
 
     spec = get_task(args.task)

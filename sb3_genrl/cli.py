@@ -172,6 +172,7 @@ def _add_train_policy(sub: argparse._SubParsersAction) -> None:
 
 def _add_baseline(sub: argparse._SubParsersAction) -> None:
     from sb3_genrl.baselines import BASELINES
+    from sb3_genrl.baselines.hyperparameters import json_object_argument
 
     baseline = sub.add_parser("baseline", help="train PPO (BC), SAC (with or without prefilled buffer), SAC+HER, or a "
                               "stock algorithm on the latent space")
@@ -183,6 +184,9 @@ def _add_baseline(sub: argparse._SubParsersAction) -> None:
     baseline.add_argument("--generator", type=EXISTING, default=None, help="generator file (latent-ppo/-sac/-trpo)")
     baseline.add_argument("--episodes", type=COUNT, required=True, help="budget of episodes")
     _seed_option(baseline)
+    baseline.add_argument("--algorithm-kwargs", type=json_object_argument, default=None, metavar="JSON",
+                          help="changes to the rl-zoo3 settings, as arguments of the SB3 class, e.g. "
+                               "'{\"target_kl\": 0.02}' for ppo (default: none)")
     baseline.add_argument("--bc-max-epochs", type=COUNT, default=200,
                           help="most behaviour cloning epochs; it stops earlier on its held-out loss (ppo)")
     baseline.add_argument("--checkpoint-every", type=option(check_int, int, minimum=0), default=250,
@@ -327,7 +331,8 @@ def _baseline_command(args: argparse.Namespace) -> int:
 
     summary = train_baseline(args.algorithm, args.task, episodes=args.episodes, out_dir=args.out, seed=args.seed,
                              demos=args.demos, demo_episodes=args.demo_episodes, generator=args.generator,
-                             bc_kwargs={"max_epochs": args.bc_max_epochs}, checkpoint_every=args.checkpoint_every or None,
+                             bc_kwargs={"max_epochs": args.bc_max_epochs}, algorithm_kwargs=args.algorithm_kwargs,
+                             checkpoint_every=args.checkpoint_every or None,
                              device=args.device, progress_bar=not args.no_progress_bar)
     if "bc" in summary:
         bc, first = summary["bc"], summary["first_batch"]

@@ -133,8 +133,9 @@ def test_prefilled_buffer_holds_exactly_the_demonstrations(demos):
 @pytest.mark.slow
 @pytest.mark.parametrize("algorithm", FEEDBACK_BASELINES)
 def test_baselines_run_end_to_end(algorithm, demos, tmp_path):
+    change = {"n_steps": 128} if algorithm == "ppo" else {"gamma": 0.95}  # a user's change to the zoo's settings
     summary = train_baseline(algorithm, "hockey", episodes=12, out_dir=tmp_path, demos=demos, demo_episodes=10,
-                             bc_kwargs={"max_epochs": 2}, eval_goals=2, window=5, device="cpu")
+                             bc_kwargs={"max_epochs": 2}, eval_goals=2, window=5, algorithm_kwargs=change, device="cpu")
     assert summary["episodes_played"] >= 12 and summary["demo_transitions"] == 10 * 69
     episodes = read_monitor(tmp_path / MONITOR_FILE)
     assert len(episodes["return"]) == summary["episodes_played"] and np.all(episodes["length"] == 69)
@@ -152,6 +153,8 @@ def test_baselines_run_end_to_end(algorithm, demos, tmp_path):
     # The final evaluation: the saved policy, deterministic, one goal at a time on a fresh env (the goal-conditioned
     # task for SAC + HER), against the summary's, which stepped the held-out goals together.
     model = load_trained(algorithm, tmp_path / f"{algorithm}_policy.zip", "hockey")
+    (name, value), = change.items()
+    assert getattr(model, name) == value and summary["settings"][name] == value
     distances, unstable = [], 0
     for goal in held_out_goals("hockey", 2, EVAL_GOAL_SEED):
         env = gym.make("GenRL/HockeyGoal-v0") if algorithm == "sac-her" else make_feedback_env("hockey")
@@ -171,7 +174,7 @@ def test_baselines_run_end_to_end(algorithm, demos, tmp_path):
     if algorithm == "ppo":
         bc, first = summary["bc"], summary["first_batch"]
         assert bc["epochs"] == 2 and bc["deterministic_distance"] > 0 and bc["sampled_distance"] > 0
-        assert first["episodes"] == 512 // 69 and first["mean_distance"] > 0
+        assert first["episodes"] == 128 // 69 and first["mean_distance"] > 0  # PPO's first rollout: n_steps
         cloned = PPO.load(tmp_path / "bc_policy.zip", device="cpu")
         np.testing.assert_allclose(cloned.policy.log_std.exp().detach().numpy(), bc["action_std"], rtol=1e-5)
 
@@ -292,3 +295,21 @@ def test_baselines_refuse_another_tasks_demonstrations(demos, tmp_path, capsys):
     summary = train_baseline("sac", "hockey", episodes=1, out_dir=tmp_path / "sac_ok", demos=hockey, device="cpu",
                              window=1)
     assert summary["demo_transitions"] == len(demos["observations"])
+
+
+def test_changes_to_the_zoo_settings_are_checked_and_recorded():
+    from sb3_genrl.baselines.hyperparameters import check_algorithm_kwargs, settings_record
+
+    defaults, changed = settings_record(), settings_record({"ppo": {"target_kl": 0.02}, "sac": {"gamma": 1}})
+    assert changed["ppo"] == defaults["ppo"] | {"target_kl": 0.02} and "target_kl" not in defaults["ppo"]
+    assert changed["sac"] == defaults["sac"] | {"gamma": 1} and changed["sac-her"] == defaults["sac-her"]
+    assert check_algorithm_kwargs("latent-trpo", {"target_kl": 0.02}) == {"target_kl": 0.02}
+    assert check_algorithm_kwargs("ppo", None) == {}
+    with pytest.raises(ValueError, match="has no setting 'gama'"):
+        check_algorithm_kwargs("sac", {"gama": 1})
+    with pytest.raises(ValueError, match="has no setting 'seed'"):  # set by the run itself
+        check_algorithm_kwargs("ppo", {"seed": 1})
+    with pytest.raises(ValueError, match="JSON values"):
+        check_algorithm_kwargs("ppo", {"target_kl": object()})
+    with pytest.raises(ValueError, match="unknown baseline 'genrl'"):
+        settings_record({"genrl": {"gamma": 1}})

@@ -210,7 +210,8 @@ def runs(tmp_path_factory, hockey_generator):
     assert main(["train-policy", "--task", "hockey", "--generator", hockey_generator, "--episodes", "32",
                  "--batch-episodes", "16", "--device", "cpu", "--no-progress-bar", "--out", str(root / "genrl")]) == 0
     assert main(["baseline", "latent-ppo", "--task", "hockey", "--generator", hockey_generator, "--episodes", "16",
-                 "--device", "cpu", "--no-progress-bar", "--out", str(root / "ppo")]) == 0
+                 "--algorithm-kwargs", '{"gamma": 0.9}', "--device", "cpu", "--no-progress-bar",
+                 "--out", str(root / "ppo")]) == 0
     return root
 
 
@@ -230,6 +231,7 @@ def test_baseline_and_compare(runs, tmp_path, cli, hockey_generator):
 
     generator = load(hockey_generator)
     latent_ppo = load_trained("latent-ppo", runs / "ppo" / "latent-ppo_policy.zip", "hockey")
+    assert latent_ppo.gamma == 0.9 and summary["settings"] == {"n_steps": 64, "batch_size": 64, "gamma": 0.9}
     env = LatentActionWrapper(gym.make("GenRL/Hockey-v0"), generator)
     rewards = []
     for goal in held_out_goals("hockey", 100, EVAL_GOAL_SEED):
@@ -275,6 +277,12 @@ def test_baseline_offers_every_baseline_and_checks_its_inputs_first(cli, tmp_pat
         needs = "a generator" if algorithm in LATENT_BASELINES else "demonstrations"
         assert code == 2 and f"genrl baseline: error: {algorithm} needs {needs}" in err and printed == "", err
         assert not (tmp_path / algorithm).exists()
+    code, _, err = cli("baseline", "latent-sac", "--task", "hockey", "--generator", tmp_path, "--episodes", 8,
+                       "--algorithm-kwargs", '{"gama": 1}', "--out", tmp_path / "sac")
+    assert code == 2 and "latent-sac (SAC) has no setting 'gama'" in err and not (tmp_path / "sac").exists()
+    code, _, err = cli("baseline", "latent-sac", "--task", "hockey", "--episodes", 8, "--algorithm-kwargs", "[1]",
+                       "--out", tmp_path / "sac")
+    assert code == 2 and "expected a JSON object" in err
 
 
 class _Payload:
