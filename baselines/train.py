@@ -154,7 +154,7 @@ def evaluate_trained(algorithm: str, model: Any, task: str, *, generator: Any = 
 
     The feedback baselines play closed loop (:func:`~sb3_genrl.baselines.feedback.evaluate_feedback_policy`; SAC + HER
     on the goal-conditioned task); GenRL and the latent-space baselines play the trajectory decoded from their
-    deterministic latent action for each goal, clipped to the latent action box as in training.
+    deterministic latent action for each goal, clipped to the model's latent action box as in training.
 
     :param algorithm: ``genrl`` or one of :data:`BASELINES`
     :param model: the trained model (e.g. :func:`load_trained`'s)
@@ -174,13 +174,11 @@ def evaluate_trained(algorithm: str, model: Any, task: str, *, generator: Any = 
     elif algorithm == "genrl" or algorithm in LATENT_BASELINES:
         if generator is None:
             raise ValueError(f"{algorithm} needs its generator (generator=...)")
-        from sb3_genrl import LatentActionWrapper
-
         goal_array = held_out_goals(task, goals, seed)
-        env = LatentActionWrapper(gym.make(get_task(task).env_id), generator)
+        env = gym.make(get_task(task).env_id).unwrapped
         latents, _ = model.predict(goal_array, deterministic=True)
-        latents = np.clip(latents, env.action_space.low, env.action_space.high)
-        rewards, infos = env.unwrapped.play_trajectories(np.asarray(generator.decode(latents)), goal_array)
+        latents = np.clip(latents, model.action_space.low, model.action_space.high)  # the box it was trained in
+        rewards, infos = env.play_trajectories(np.asarray(generator.decode(latents)), goal_array)
         env.close()
     else:
         raise ValueError(f"unknown method {algorithm!r}; expected 'genrl' or one of {BASELINES}")
