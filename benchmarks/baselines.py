@@ -162,12 +162,16 @@ def prepare(args: argparse.Namespace, work: pathlib.Path) -> tuple[str, str]:
 
 def final_evaluation(run: pathlib.Path, method: str, task: str, generator: str | None) -> dict[str, Any]:
     """The run's trained policy, deterministic, on the held-out goals every method is evaluated on (the cloned
-    policy's, ``sb3_genrl.baselines.train.EVAL_GOALS``); kept in the run's ``final_eval.json`` under the policy
-    file's digest, so a rerun reads it and a retrained policy is evaluated again."""
+    policy's, ``sb3_genrl.baselines.train.EVAL_GOALS``); kept in the run's ``final_eval.json`` under the digests of
+    the policy and generator files and the package's version, so a rerun reads it and a retrained policy, another
+    generator or another version is evaluated again."""
     from sb3_genrl.baselines.train import EVAL_GOAL_SEED, EVAL_GOALS, evaluate_trained, load_trained
 
+    import sb3_genrl
+
     policy = run / f"{method}_policy.zip"
-    key = {"policy_sha256": _file_digest(str(policy)), "goals": EVAL_GOALS, "goal_seed": EVAL_GOAL_SEED}
+    key = {"policy_sha256": _file_digest(str(policy)), "task": task, "goals": EVAL_GOALS, "goal_seed": EVAL_GOAL_SEED,
+           "generator_sha256": _file_digest(generator) if generator else None, "sb3_genrl": sb3_genrl.__version__}
     cache = run / "final_eval.json"
     if cache.exists():
         record = json.loads(cache.read_text())
