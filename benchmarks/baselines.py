@@ -191,7 +191,7 @@ def final_evaluation(run: pathlib.Path, method: str, task: str, generator: str |
 def method_result(runs: list[pathlib.Path], horizon: int, finals: list[dict[str, Any]],
                   worst_reward: float) -> dict[str, Any]:
     """Distances, table contacts and timings of one method's runs (one per seed); ``finals``: their
-    :func:`final_evaluation`; ``worst_reward``: the task's (what an unstable simulation scores)."""
+    :func:`final_evaluation`; ``worst_reward``: the task's (the reward's floor)."""
     from sb3_genrl.curves import MONITOR_FILE, read_monitor, windowed_curve
 
     per_seed = [read_monitor(run / MONITOR_FILE) for run in runs]
@@ -227,8 +227,8 @@ def method_result(runs: list[pathlib.Path], horizon: int, finals: list[dict[str,
                       "std_distance": curves.std(0).tolist(),
                       "table_contacts": np.nanmean(contact_curves, 0).tolist() if has_contacts else None},
             "table_contacts_per_episode": float(np.nanmean(contacts)) if has_contacts else None,
-            # training episodes at the task's worst reward: an unstable simulation, or (basketball) a ball that never
-            # came down through the rim's height
+            # training episodes at the task's worst reward, the reward's floor: that far from the goal or further,
+            # a ball that never came down through the rim's height (basketball), or an unstable simulation
             "worst_reward_share": float(np.isclose(-distances, worst_reward).mean()),
             "setup_seconds": float(np.mean([r["setup_seconds"] for r in records])),
             "setup_cpu_seconds": float(np.mean([r["setup_cpu_seconds"] for r in records])),
@@ -278,8 +278,9 @@ def write_outputs(result: dict[str, Any], out: pathlib.Path) -> None:
     lines = [f"# {task}: mean distance to the goal (m), mean +- std over seeds", "",
              f"Mean over the {WINDOW} episodes before each budget (training episodes, as played), and the final "
              f"policy's deterministic mean distance to {goals} held-out goals (the same goals for every method). "
-             f"Episodes at the worst reward ({result['worst_reward']:g} m) are training episodes whose simulation "
-             "went unstable (or, on basketball, whose ball never came down through the rim's height).", "",
+             f"Episodes at the worst reward ({result['worst_reward']:g} m), the reward's floor, are training episodes "
+             "that ended that far from the goal or further (hockey: a puck sent off the table), whose ball never came "
+             "down through the rim's height (basketball), or whose simulation went unstable.", "",
              markdown_table(header, rows)]
     lines += ["", f"![episodes]({stem.name}_episodes.png)", "", f"![environment steps]({stem.name}_env_steps.png)", ""]
     if contacts:
