@@ -17,6 +17,7 @@ import pathlib
 from typing import Any
 
 import numpy as np
+from sb3_genrl.baselines.feedback import held_out_goals  # noqa: F401 (the benchmarks' goals, imported from here)
 from sb3_genrl.envs import get_task
 from sb3_genrl.envs.base import default_threads
 from sb3_genrl.envs.basketball import BASKET_HEIGHT
@@ -26,14 +27,6 @@ from sb3_genrl.generative.base import TrajectoryGenerator
 from sb3_genrl.utils import atomic_path
 
 CACHE = pathlib.Path(__file__).resolve().parent / "runs" / "limits"  # the played grids (ignored by git)
-
-
-def held_out_goals(task: str, n: int, seed: int) -> np.ndarray:
-    """``n`` goals drawn with the task's ``sample_goal`` from ``np.random.default_rng(seed)``, as
-    :func:`sb3_genrl.genrl.evaluate_on_goals` draws them (same seed, same goals)."""
-    env = get_task(task).make_env()
-    rng = np.random.default_rng(seed)
-    return np.array([env.sample_goal(rng) for _ in range(n)], dtype=np.float32)
 
 
 def latent_set(generator: TrajectoryGenerator, *, grid: int = 201, extent: float = 3.0, samples: int = 10_000,
