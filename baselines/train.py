@@ -22,7 +22,9 @@ contacts, distance and the process' CPU seconds so far, written as training goes
 ``learning_curve.png`` (mean over windows of 64 episodes), SB3's logs in ``logs/`` (``progress.csv`` and
 TensorBoard), the model (with its normalisation statistics; ``ppo`` also the cloned policy before PPO,
 ``bc_policy.zip``), and ``summary.json``, whose ``final_eval`` is the trained policy's deterministic final distance
-to :data:`EVAL_GOALS` held-out goals (:func:`evaluate_trained`, the same goals for every method and for GenRL).
+to :data:`EVAL_GOALS` held-out goals (:func:`evaluate_trained`, the same goals for every method and for GenRL), and
+whose ``training_health`` says whether the training stayed stable (:func:`training_health`; a warning is issued
+when it did not).
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ import json
 import os
 import pathlib
 import time
+import warnings
 from typing import Any
 
 import gymnasium as gym
@@ -143,6 +146,9 @@ def train_baseline(
     summary["learn_seconds"] = _learn(model, steps, out, state, checkpoint_every, summary, progress_bar, verbose)
     summary |= _episode_results(algorithm, spec.name, out, window, summary["settings"])
     summary["final_eval"] = evaluate_trained(algorithm, model, spec.name, generator=generator, goals=eval_goals)
+    summary["training_health"] = training_health(out)
+    for warning in summary["training_health"]["warnings"]:
+        warnings.warn(f"{algorithm} on {spec.name}: {warning}", stacklevel=2)
     atomic_write_json(out / "summary.json", summary)
     remove_checkpoint(out)
     return summary
@@ -202,6 +208,54 @@ def load_trained(algorithm: str, path: str | os.PathLike, task: str, *, generato
     if algorithm == "sac-her":
         return SAC.load(path, env=gym.make(get_task(task).goal_env_id), device=device)
     return algorithm_class(algorithm).load(path, device=device)
+
+
+DIVERGED = 1000.0  # a critic loss this many times its early median counts as diverged
+PPO_KL_LIMIT = 1.0  # a median approximate KL per PPO update above this: far outside the trust region clipping assumes
+
+
+def training_health(out_dir: str | os.PathLike) -> dict[str, Any]:
+    """What SB3's logger recorded of a run's stability (``logs/progress.csv`` and, for a resumed run, the
+    ``progress.until_episode_K.csv`` before it): the critic's loss early (median of the first 10 records) and at its
+    worst, the entropy coefficient (SAC), PPO's approximate KL per update and its clip fraction, and ``warnings``:
+    a critic loss above :data:`DIVERGED` times its early median (the critic diverged) or a median approximate KL
+    above :data:`PPO_KL_LIMIT` (each update moves the policy far beyond the trust region).
+
+    :param out_dir: the run folder
+    """
+    import csv
+    import re
+
+    logs = pathlib.Path(out_dir) / "logs"
+    earlier = sorted(logs.glob("progress.until_episode_*.csv"),
+                     key=lambda path: int(re.search(r"_(\d+)\.csv$", path.name).group(1)))
+    columns: dict[str, list[float]] = {key: [] for key in ("train/critic_loss", "train/ent_coef", "train/approx_kl",
+                                                             "train/clip_fraction")}
+    for path in [*earlier, logs / "progress.csv"]:
+        if not path.is_file():
+            continue
+        with open(path, newline="") as file:
+            for row in csv.DictReader(file):
+                for key, values in columns.items():
+                    if row.get(key):
+                        values.append(float(row[key]))
+    health: dict[str, Any] = {"warnings": []}
+    critic, ent_coef = columns["train/critic_loss"], columns["train/ent_coef"]
+    kl, clip = columns["train/approx_kl"], columns["train/clip_fraction"]
+    if critic:
+        early, worst = float(np.median(critic[:10])), float(np.max(critic))
+        health |= {"critic_loss_early": early, "critic_loss_max": worst}
+        if worst > DIVERGED * max(early, 1e-12):
+            health["warnings"].append(f"the critic's loss rose from {early:.3g} to {worst:.3g}: the critic diverged")
+    if ent_coef:
+        health |= {"ent_coef_first": ent_coef[0], "ent_coef_max": float(np.max(ent_coef)), "ent_coef_last": ent_coef[-1]}
+    if kl:
+        health |= {"approx_kl_median": float(np.median(kl)), "approx_kl_max": float(np.max(kl)),
+                   "clip_fraction_median": float(np.median(clip)) if clip else None}
+        if health["approx_kl_median"] > PPO_KL_LIMIT:
+            health["warnings"].append(f"PPO's median approximate KL per update is {health['approx_kl_median']:.3g}: "
+                                      "each update moves the policy far beyond its trust region (see target_kl)")
+    return health
 
 
 def _learn(model: Any, steps: int, out: pathlib.Path, state: dict[str, Any] | None, checkpoint_every: int | None,

@@ -192,6 +192,8 @@ def method_result(runs: list[pathlib.Path], horizon: int, finals: list[dict[str,
                   worst_reward: float) -> dict[str, Any]:
     """Distances, table contacts and timings of one method's runs (one per seed); ``finals``: their
     :func:`final_evaluation`; ``worst_reward``: the task's (the reward's floor)."""
+    from sb3_genrl.baselines.train import training_health
+
     from sb3_genrl.curves import MONITOR_FILE, read_monitor, windowed_curve
 
     per_seed = [read_monitor(run / MONITOR_FILE) for run in runs]
@@ -223,6 +225,7 @@ def method_result(runs: list[pathlib.Path], horizon: int, finals: list[dict[str,
              "unstable_per_seed": [f["unstable"] for f in finals]}
     return {"seeds": len(runs), "episodes": int(n), "env_steps_per_episode": horizon, "milestones": milestones,
             "final_deterministic": final,
+            "training_health": [training_health(run) for run in runs],
             "curve": {"episodes": grid.tolist(), "mean_distance": curves.mean(0).tolist(),
                       "std_distance": curves.std(0).tolist(),
                       "table_contacts": np.nanmean(contact_curves, 0).tolist() if has_contacts else None},
@@ -282,6 +285,11 @@ def write_outputs(result: dict[str, Any], out: pathlib.Path) -> None:
              "that ended that far from the goal or further (hockey: a puck sent off the table), whose ball never came "
              "down through the rim's height (basketball), or whose simulation went unstable.", "",
              markdown_table(header, rows)]
+    warned = [f"- {LABELS.get(method, method)}, seed {seed}: {warning}" for method, row in result["methods"].items()
+              for seed, health in zip(result["seeds"], row["training_health"], strict=True)
+              for warning in health["warnings"]]
+    if warned:
+        lines += ["", "Training that did not stay stable (SB3's logs, `training_health`):", "", *warned]
     lines += ["", f"![episodes]({stem.name}_episodes.png)", "", f"![environment steps]({stem.name}_env_steps.png)", ""]
     if contacts:
         lines += [f"![table contacts]({stem.name}_contacts.png)", ""]

@@ -167,6 +167,9 @@ def test_baselines_run_end_to_end(algorithm, demos, tmp_path):
         unstable += info["unstable"]
     final = summary["final_eval"]
     assert final["goals"] == 2 and final["goal_seed"] == EVAL_GOAL_SEED
+    health = summary["training_health"]  # from the run's own SB3 logs (SAC without prefill is still warming up)
+    assert ("approx_kl_median" in health) == (algorithm == "ppo")
+    assert ("critic_loss_max" in health) == (algorithm in ("sac", "sac-her"))
     # (batched and single forward passes differ in float32 rounding, which 69 closed-loop steps and the puck's
     # contacts carry on: a 1% tolerance; another goal, observation or env would be metres off)
     assert final["mean_distance"] == pytest.approx(np.mean([d for d, _ in distances]), rel=1e-2)
@@ -313,3 +316,29 @@ def test_changes_to_the_zoo_settings_are_checked_and_recorded():
         check_algorithm_kwargs("ppo", {"target_kl": object()})
     with pytest.raises(ValueError, match="unknown baseline 'genrl'"):
         settings_record({"genrl": {"gamma": 1}})
+
+
+def test_training_health_reads_every_progress_file_and_flags_divergence(tmp_path):
+    from sb3_genrl.baselines.train import DIVERGED, training_health
+
+    assert training_health(tmp_path) == {"warnings": []}  # no logs: nothing to say
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    header = "time/total_timesteps,train/critic_loss,train/ent_coef\n"
+    # A resumed run: the rows before its checkpoints are kept in progress.until_episode_K.csv, read in K's order.
+    (logs / "progress.until_episode_20.csv").write_text(header + "".join(f"{i},{v},0.5\n" for i, v in
+                                                                          enumerate([2, 4, 3, 5, 1])))
+    (logs / "progress.until_episode_3.csv").write_text(header + "0,,0.9\n1,1,0.8\n")  # no loss before learning starts
+    (logs / "progress.csv").write_text(header + "9,7,0.2\n")
+    health = training_health(tmp_path)
+    early = float(np.median([1, 2, 4, 3, 5, 1, 7]))  # the first 10 losses, in order
+    assert health["critic_loss_early"] == early and health["critic_loss_max"] == 7 and health["warnings"] == []
+    assert (health["ent_coef_first"], health["ent_coef_max"], health["ent_coef_last"]) == (0.9, 0.9, 0.2)
+    (logs / "progress.csv").write_text(header + f"9,{DIVERGED * early * 1.01},0.2\n")
+    assert "the critic diverged" in training_health(tmp_path)["warnings"][0]
+    for path in logs.iterdir():
+        path.unlink()
+    (logs / "progress.csv").write_text("train/approx_kl,train/clip_fraction\n0.01,0.1\n3,0.9\n5,0.95\n")
+    health = training_health(tmp_path)
+    assert health["approx_kl_median"] == 3 and health["approx_kl_max"] == 5 and health["clip_fraction_median"] == 0.9
+    assert "far beyond its trust region" in health["warnings"][0]
