@@ -63,6 +63,13 @@ def _file_digest(path: str) -> str:
     return digest.hexdigest()[:16]
 
 
+def _shown(path: str) -> str:
+    """A path as the results show it: relative to the repository when inside it, else absolute."""
+    path = os.path.abspath(path)
+    root = str(HERE.parent)
+    return os.path.relpath(path, root) if path.startswith(root + os.sep) else path
+
+
 def run_settings(method: str, args: argparse.Namespace, seed: int, demos: str, generator: str) -> dict[str, Any]:
     """What a run's result depends on: compared with a finished run's record before it is reused."""
     from sb3_genrl.baselines.hyperparameters import settings_record
@@ -365,7 +372,7 @@ def main() -> None:
     import sb3_genrl
 
     result = {"benchmark": "baselines", "task": spec.name, "horizon": spec.horizon, "episodes": args.episodes,
-              "seeds": args.seeds, "window": WINDOW, "demos": os.path.abspath(demos), "sb3_genrl": sb3_genrl.__version__,
+              "seeds": args.seeds, "window": WINDOW, "demos": _shown(demos), "sb3_genrl": sb3_genrl.__version__,
               "machine": platform.machine(), "cpus": os.cpu_count(), "jobs": args.jobs,
               "methods": {}}
     worst_reward = result["worst_reward"] = float(gym.make(spec.env_id).unwrapped.worst_reward)
