@@ -97,12 +97,10 @@ def json_object_argument(text: str) -> dict[str, Any]:
     """An argparse ``type``: a JSON object (``genrl baseline --algorithm-kwargs``, checked by name once the
     baseline is known)."""
     import argparse
-    import json
 
-    try:
-        value = json.loads(text)
-    except json.JSONDecodeError as error:
-        raise argparse.ArgumentTypeError(f"not JSON: {error}") from None
+    from sb3_genrl.checks import json_argument
+
+    value = json_argument(text)
     if not isinstance(value, dict):
         raise argparse.ArgumentTypeError(f"expected a JSON object, got {text!r}")
     return value

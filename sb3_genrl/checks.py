@@ -180,3 +180,13 @@ def option(check: Callable[..., T], parse: Callable[[str], Any] = str, **kwargs:
 
     convert.__name__ = check.__name__.removeprefix("check_")  # argparse names the type in some messages
     return convert
+
+
+def json_argument(text: str) -> Any:
+    """An argparse ``type``: the value a JSON text holds (callers check its shape, e.g. ``--genrl-kwargs``)."""
+    import json
+
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as error:
+        raise argparse.ArgumentTypeError(f"not JSON: {error}") from None

@@ -164,12 +164,10 @@ def check_genrl_kwargs(genrl_kwargs: dict[str, Any], name: str | None = "genrl_k
 def genrl_kwargs_argument(text: str) -> dict[str, Any]:
     """An argparse ``type`` for ``--genrl-kwargs``: a JSON object of GenRL settings, checked by name."""
     import argparse
-    import json
 
-    try:
-        value = json.loads(text)
-    except json.JSONDecodeError as error:
-        raise argparse.ArgumentTypeError(f"not JSON: {error}") from None
+    from sb3_genrl.checks import json_argument
+
+    value = json_argument(text)
     try:
         return check_genrl_kwargs(value, None)
     except (TypeError, ValueError) as error:
