@@ -154,6 +154,9 @@ def train_baseline(
     return summary
 
 
+UNMOVED = 0.01  # m: an object whose (x, y) ends this close to its start was not moved
+
+
 def evaluate_trained(algorithm: str, model: Any, task: str, *, generator: Any = None, goals: int = EVAL_GOALS,
                      seed: int = EVAL_GOAL_SEED) -> dict[str, Any]:
     """A trained policy's deterministic result on held-out goals, the same goals for every method.
@@ -169,8 +172,10 @@ def evaluate_trained(algorithm: str, model: Any, task: str, *, generator: Any = 
     :param goals: number of held-out goals (see :func:`~sb3_genrl.baselines.feedback.held_out_goals`)
     :param seed: seed of the goals
     :return: the mean, median and 90th percentile of the final distance (minus the reward, m), the table contacts
-        per episode (``None`` on a task without a table) and how many of the episodes' simulations went unstable
-        (those score the task's worst reward)
+        per episode (``None`` on a task without a table), how many of the episodes' simulations went unstable
+        (those score the task's worst reward) and ``object_unmoved``: how many episodes left the puck or ball's
+        (x, y) within :data:`UNMOVED` of where it rests at the start (its ``reached`` point; a policy that never
+        hits the puck scores the distance of the arm holding still)
     """
     check_positive_int(goals, "goals")
     check_seed(seed)
@@ -189,11 +194,16 @@ def evaluate_trained(algorithm: str, model: Any, task: str, *, generator: Any = 
     else:
         raise ValueError(f"unknown method {algorithm!r}; expected 'genrl' or one of {BASELINES}")
     distances = -np.asarray(rewards, dtype=float)
+    probe = gym.make(get_task(task).env_id).unwrapped
+    start = probe.initial_state_object_xy()
+    probe.close()
+    unmoved = sum(bool(np.linalg.norm(np.asarray(info["reached"]) - start) < UNMOVED) for info in infos
+                  if "reached" in info)
     contacts = [info["table_contacts"] for info in infos if "table_contacts" in info]
     return {"goals": goals, "goal_seed": seed, "mean_distance": float(distances.mean()),
             "median_distance": float(np.median(distances)), "p90_distance": float(np.percentile(distances, 90)),
             "table_contacts": float(np.mean(contacts)) if len(contacts) == len(infos) else None,
-            "unstable": sum(bool(info.get("unstable", False)) for info in infos)}
+            "unstable": sum(bool(info.get("unstable", False)) for info in infos), "object_unmoved": unmoved}
 
 
 def load_trained(algorithm: str, path: str | os.PathLike, task: str, *, generator: Any = None,

@@ -344,7 +344,7 @@ def _baseline_command(args: argparse.Namespace) -> int:
     print(f"{args.algorithm} on {args.task}: {summary['episodes_played']} episodes, final mean reward "
           f"{summary['final_mean_reward']:.4g}, best {summary['best_mean_reward']:.4g}; the trained policy, "
           f"deterministic: mean distance to {final['goals']} held-out goals {final['mean_distance']:.3f} m "
-          f"-> {args.out}")
+          f"({final['object_unmoved']} of them with the object not moved) -> {args.out}")
     return 0
 
 

@@ -15,7 +15,7 @@ from sb3_genrl.baselines.hyperparameters import PPO_POLICY
 from sb3_genrl.baselines.models import normalized_policy, ppo_with_behaviour_cloning, sac_her_with_demonstrations
 from sb3_genrl.baselines.normalization import STD_FLOOR, NormalizedFlatten
 from sb3_genrl.baselines.prefill import prefill_replay_buffer
-from sb3_genrl.baselines.train import EVAL_GOAL_SEED, load_trained, train_baseline
+from sb3_genrl.baselines.train import EVAL_GOAL_SEED, evaluate_trained, load_trained, train_baseline
 from sb3_genrl.envs.demonstrations import make_demonstrations
 from sb3_genrl.envs.hockey import HOCKEY_HORIZON, HockeyEnv, scripted_hit
 from stable_baselines3 import PPO, SAC
@@ -155,7 +155,7 @@ def test_baselines_run_end_to_end(algorithm, demos, tmp_path):
     model = load_trained(algorithm, tmp_path / f"{algorithm}_policy.zip", "hockey")
     (name, value), = change.items()
     assert getattr(model, name) == value and summary["settings"][name] == value
-    distances, unstable = [], 0
+    distances, unstable, unmoved = [], 0, 0
     for goal in held_out_goals("hockey", 2, EVAL_GOAL_SEED):
         env = gym.make("GenRL/HockeyGoal-v0") if algorithm == "sac-her" else make_feedback_env("hockey")
         obs, _ = env.reset(options={"goal": goal})
@@ -165,6 +165,7 @@ def test_baselines_run_end_to_end(algorithm, demos, tmp_path):
             done = terminated or truncated
         distances.append((-reward, info.get("table_contacts", 0)))
         unstable += info["unstable"]
+        unmoved += bool(np.linalg.norm(info["reached"] - env.unwrapped.initial_state_object_xy()) < 0.01)
     final = summary["final_eval"]
     assert final["goals"] == 2 and final["goal_seed"] == EVAL_GOAL_SEED
     health = summary["training_health"]  # from the run's own SB3 logs (SAC without prefill is still warming up)
@@ -174,12 +175,32 @@ def test_baselines_run_end_to_end(algorithm, demos, tmp_path):
     # contacts carry on: a 1% tolerance; another goal, observation or env would be metres off)
     assert final["mean_distance"] == pytest.approx(np.mean([d for d, _ in distances]), rel=1e-2)
     assert abs(final["table_contacts"] - np.mean([c for _, c in distances])) <= 1 and final["unstable"] == unstable
+    assert final["object_unmoved"] == unmoved
     if algorithm == "ppo":
         bc, first = summary["bc"], summary["first_batch"]
         assert bc["epochs"] == 2 and bc["deterministic_distance"] > 0 and bc["sampled_distance"] > 0
         assert first["episodes"] == 128 // 69 and first["mean_distance"] > 0  # PPO's first rollout: n_steps
         cloned = PPO.load(tmp_path / "bc_policy.zip", device="cpu")
         np.testing.assert_allclose(cloned.policy.log_std.exp().detach().numpy(), bc["action_std"], rtol=1e-5)
+
+
+class _HoldStill:
+    """A policy that never moves the arm (zero joint-position changes)."""
+
+    def predict(self, observations, deterministic=True):
+        n = len(observations["observation"]) if isinstance(observations, dict) else len(observations)
+        return np.zeros((n, 7), dtype=np.float32), None
+
+
+@pytest.mark.parametrize("algorithm", ["ppo", "sac-her"])
+def test_the_final_evaluation_of_an_arm_holding_still(algorithm):
+    # The puck stays where it rests, so every goal is unmoved and scores its distance from the puck's start.
+    final = evaluate_trained(algorithm, _HoldStill(), "hockey", goals=5, seed=3)
+    start = HockeyEnv().initial_state_object_xy()
+    expected = np.linalg.norm(held_out_goals("hockey", 5, 3) - start, axis=1)
+    assert final["object_unmoved"] == 5 and final["unstable"] == 0 and final["table_contacts"] == 0
+    assert final["mean_distance"] == pytest.approx(expected.mean(), abs=1e-4)
+    assert final["median_distance"] == pytest.approx(np.median(expected), abs=1e-4)
 
 
 class _Killed(Exception):
