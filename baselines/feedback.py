@@ -96,10 +96,15 @@ def evaluate_feedback_policy(model: Any, task: str, *, goals: int = 100, seed: i
     return {"goals": goal_array, "rewards": rewards, "infos": infos, "actions": actions}
 
 
-def open_loop_rewards(task: str, actions: np.ndarray, goals: np.ndarray) -> np.ndarray:
+def open_loop_rewards(task: str, actions: np.ndarray, goals: np.ndarray, *,
+                      allow_outside_region: bool = False) -> np.ndarray:
     """Rewards of action sequences played open loop (the task's fast path), e.g. the actions a policy predicts
-    along a demonstration's own states: what its per-step errors cost without compounding."""
+    along a demonstration's own states: what its per-step errors cost without compounding.
+
+    :param allow_outside_region: accept goals outside the task's goal region (demonstrations' own goals)
+    """
     env = gym.make(get_task(task).env_id).unwrapped
-    rewards, _ = env.play_trajectories(np.clip(actions, -env.max_joint_delta, env.max_joint_delta), goals)
+    rewards, _ = env.play_trajectories(np.clip(actions, -env.max_joint_delta, env.max_joint_delta), goals,
+                                       allow_outside_region=allow_outside_region)
     env.close()
     return rewards

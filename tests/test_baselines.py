@@ -9,7 +9,7 @@ import pytest
 import torch as th
 from sb3_genrl.baselines import FEEDBACK_BASELINES
 from sb3_genrl.baselines.bc import STD_RANGE, actor_mean, fit_actor, split_episodes
-from sb3_genrl.baselines.feedback import add_time_feature, held_out_goals, make_feedback_env
+from sb3_genrl.baselines.feedback import add_time_feature, held_out_goals, make_feedback_env, open_loop_rewards
 from sb3_genrl.baselines.her import goal_episodes
 from sb3_genrl.baselines.hyperparameters import PPO_POLICY
 from sb3_genrl.baselines.models import normalized_policy, ppo_with_behaviour_cloning, sac_her_with_demonstrations
@@ -201,6 +201,21 @@ def test_the_final_evaluation_of_an_arm_holding_still(algorithm):
     assert final["object_unmoved"] == 5 and final["unstable"] == 0 and final["table_contacts"] == 0
     assert final["mean_distance"] == pytest.approx(expected.mean(), abs=1e-4)
     assert final["median_distance"] == pytest.approx(np.median(expected), abs=1e-4)
+
+
+def test_open_loop_rewards_play_the_actions_as_the_env_does():
+    trajectory = scripted_hit(strength=1.0, direction=0.2).astype(np.float32)
+    env = HockeyEnv()
+    _, info = env.play_trajectory(trajectory, np.zeros(2), allow_outside_region=True)
+    outside = info["reached"] + np.array([0.0, 2.0])  # a goal off the task's region
+    inside = np.array([1.0, 0.1])
+    rewards = open_loop_rewards("hockey", np.stack([trajectory, trajectory]), np.stack([info["reached"], outside]),
+                                allow_outside_region=True)
+    np.testing.assert_allclose(rewards, [0.0, -2.0], atol=1e-5)  # reached exactly / 2 m beside it
+    assert open_loop_rewards("hockey", trajectory[None], inside[None])[0] == pytest.approx(
+        -np.linalg.norm(info["reached"] - inside), abs=1e-5)
+    with pytest.raises(ValueError, match="outside the goal region"):
+        open_loop_rewards("hockey", trajectory[None], outside[None])
 
 
 class _Killed(Exception):
