@@ -50,27 +50,30 @@ def held_out_goals(task: str, goals: int, seed: int) -> np.ndarray:
     return np.array([env.sample_goal(rng) for _ in range(goals)], dtype=np.float32)
 
 
-def evaluate_feedback_policy(model: Any, task: str, *, goals: int = 100, seed: int = 0, deterministic: bool = True,
-                             time_feature: bool = True, goal_conditioned: bool = False) -> dict[str, Any]:
+def evaluate_feedback_policy(model: Any, task: str, *, goals: int | np.ndarray = 100, seed: int = 0,
+                             deterministic: bool = True, time_feature: bool = True, goal_conditioned: bool = False,
+                             allow_outside_region: bool = False) -> dict[str, Any]:
     """Play an SB3 feedback policy closed loop on held-out goals, all goals stepped together.
 
     :param model: an SB3 model (or anything with ``predict``) trained on :func:`make_feedback_env`'s observations, or
         on the goal-conditioned task's (``goal_conditioned``)
     :param task: ``hockey`` or ``basketball``
-    :param goals: number of goals (see :func:`held_out_goals`)
-    :param seed: seed of the goals, and of torch's sampling when ``deterministic=False``
+    :param goals: number of goals (see :func:`held_out_goals`), or the goals themselves, ``(G, 2)``
+    :param seed: seed of the goals (when ``goals`` is a number), and of torch's sampling when ``deterministic=False``
     :param deterministic: the actor's mean (True) or samples from it (False)
     :param time_feature: whether the policy observes the time feature (the goal-conditioned task always has it)
     :param goal_conditioned: play the task's goal-conditioned variant (dict observations, e.g. SAC + HER's policy)
+    :param allow_outside_region: accept goals outside the task's goal region (demonstrations' own goals)
     :return: ``goals`` (G, 2), ``rewards`` (G,), ``infos`` (the episodes' last infos), ``actions`` (G, T, 7)
     """
-    goal_array = held_out_goals(task, goals, seed)
+    goal_array = np.asarray(goals, dtype=np.float32) if np.ndim(goals) else held_out_goals(task, goals, seed)
     spec = get_task(task)
     if goal_conditioned and spec.goal_env_id is None:
         raise ValueError(f"{spec.name} has no goal-conditioned variant")
     envs = [gym.make(spec.goal_env_id) if goal_conditioned else make_feedback_env(task, time_feature=time_feature)
             for _ in goal_array]
-    first = [env.reset(options={"goal": goal})[0] for env, goal in zip(envs, goal_array, strict=True)]
+    options = {"allow_outside_region": True} if allow_outside_region else {}
+    first = [env.reset(options={"goal": goal, **options})[0] for env, goal in zip(envs, goal_array, strict=True)]
     # One array per observation key (a dict observation) or one array, a row per goal.
     observations = ({key: np.stack([obs[key] for obs in first]) for key in first[0]} if goal_conditioned
                     else np.stack(first))

@@ -179,24 +179,25 @@ def evaluate_trained(algorithm: str, model: Any, task: str, *, generator: Any = 
     """
     check_positive_int(goals, "goals")
     check_seed(seed)
-    if algorithm in FEEDBACK_BASELINES:
-        played = evaluate_feedback_policy(model, task, goals=goals, seed=seed, goal_conditioned=algorithm == "sac-her")
-        rewards, infos = played["rewards"], played["infos"]
-    elif algorithm == "genrl" or algorithm in LATENT_BASELINES:
-        if generator is None:
-            raise ValueError(f"{algorithm} needs its generator (generator=...)")
-        goal_array = held_out_goals(task, goals, seed)
-        env = gym.make(get_task(task).env_id).unwrapped
-        latents, _ = model.predict(goal_array, deterministic=True)
-        latents = np.clip(latents, model.action_space.low, model.action_space.high)  # the box it was trained in
-        rewards, infos = env.play_trajectories(np.asarray(generator.decode(latents)), goal_array)
-        env.close()
-    else:
+    if algorithm not in FEEDBACK_BASELINES and algorithm != "genrl" and algorithm not in LATENT_BASELINES:
         raise ValueError(f"unknown method {algorithm!r}; expected 'genrl' or one of {BASELINES}")
+    if algorithm not in FEEDBACK_BASELINES and generator is None:
+        raise ValueError(f"{algorithm} needs its generator (generator=...)")
+    env = gym.make(get_task(task).env_id).unwrapped  # the task's open-loop fast path, and its object's start
+    try:
+        start = env.initial_state_object_xy()
+        if algorithm in FEEDBACK_BASELINES:
+            played = evaluate_feedback_policy(model, task, goals=goals, seed=seed,
+                                              goal_conditioned=algorithm == "sac-her")
+            rewards, infos = played["rewards"], played["infos"]
+        else:
+            goal_array = held_out_goals(task, goals, seed)
+            latents, _ = model.predict(goal_array, deterministic=True)
+            latents = np.clip(latents, model.action_space.low, model.action_space.high)  # the box it was trained in
+            rewards, infos = env.play_trajectories(np.asarray(generator.decode(latents)), goal_array)
+    finally:
+        env.close()
     distances = -np.asarray(rewards, dtype=float)
-    probe = gym.make(get_task(task).env_id).unwrapped
-    start = probe.initial_state_object_xy()
-    probe.close()
     unmoved = sum(bool(np.linalg.norm(np.asarray(info["reached"]) - start) < UNMOVED) for info in infos
                   if "reached" in info)
     contacts = [info["table_contacts"] for info in infos if "table_contacts" in info]

@@ -35,31 +35,10 @@ class HoldStill:
         return np.zeros((len(observations), 7), dtype=np.float32), None
 
 
-def closed_loop(model: Any, task: str, goals: np.ndarray) -> np.ndarray:
-    """Distances of ``model`` played closed loop, deterministic, on ``goals`` (demonstrations' goals may lie outside
-    the task's goal region)."""
-    from sb3_genrl.baselines.feedback import make_feedback_env
-
-    envs = [make_feedback_env(task) for _ in goals]
-    observations = np.stack([env.reset(options={"goal": goal, "allow_outside_region": True})[0]
-                             for env, goal in zip(envs, goals, strict=True)])
-    distances = np.zeros(len(envs))
-    active = np.ones(len(envs), dtype=bool)
-    while active.any():
-        actions, _ = model.predict(observations, deterministic=True)
-        for i in np.flatnonzero(active):
-            observations[i], reward, terminated, truncated, _ = envs[i].step(actions[i])
-            if terminated or truncated:
-                distances[i], active[i] = -reward, False
-    for env in envs:
-        env.close()
-    return distances
-
-
 def seed_result(run: pathlib.Path, task: str, transitions: dict[str, np.ndarray], seed: int) -> dict[str, Any]:
     """One seed's cloned policy on the held-out goals and on the demonstrations it held out."""
     from sb3_genrl.baselines.bc import split_episodes
-    from sb3_genrl.baselines.feedback import open_loop_rewards
+    from sb3_genrl.baselines.feedback import evaluate_feedback_policy, open_loop_rewards
     from stable_baselines3 import PPO
 
     summary = json.loads((run / "summary.json").read_text())
@@ -74,6 +53,7 @@ def seed_result(run: pathlib.Path, task: str, transitions: dict[str, np.ndarray]
         raise ValueError(f"{run}: {len(goals)} held-out demonstrations, but its cloning held out "
                          f"{summary['bc']['heldout_episodes']}; were these its demonstrations?")
     actions, _ = policy.predict(observations.reshape(-1, observations.shape[-1]), deterministic=True)
+    closed = evaluate_feedback_policy(policy, task, goals=goals, allow_outside_region=True)["rewards"]
     open_loop = -open_loop_rewards(task, actions.reshape(len(goals), horizon, -1), goals,
                                     allow_outside_region=True)
     return {"seed": seed, "held_out_goals": {"deterministic": summary["bc"]["deterministic_distance"],
@@ -81,7 +61,7 @@ def seed_result(run: pathlib.Path, task: str, transitions: dict[str, np.ndarray]
             "first_batch": summary.get("first_batch"),
             "held_out_demonstrations": len(goals),
             "open_loop_on_held_out_demonstrations": float(open_loop.mean()),
-            "closed_loop_on_held_out_demonstrations": float(closed_loop(policy, task, goals).mean())}
+            "closed_loop_on_held_out_demonstrations": float(-closed.mean())}
 
 
 def main(argv: list[str] | None = None) -> int:

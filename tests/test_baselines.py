@@ -9,7 +9,13 @@ import pytest
 import torch as th
 from sb3_genrl.baselines import FEEDBACK_BASELINES
 from sb3_genrl.baselines.bc import STD_RANGE, actor_mean, fit_actor, split_episodes
-from sb3_genrl.baselines.feedback import add_time_feature, held_out_goals, make_feedback_env, open_loop_rewards
+from sb3_genrl.baselines.feedback import (
+    add_time_feature,
+    evaluate_feedback_policy,
+    held_out_goals,
+    make_feedback_env,
+    open_loop_rewards,
+)
 from sb3_genrl.baselines.her import goal_episodes
 from sb3_genrl.baselines.hyperparameters import PPO_POLICY
 from sb3_genrl.baselines.models import normalized_policy, ppo_with_behaviour_cloning, sac_her_with_demonstrations
@@ -201,6 +207,10 @@ def test_the_final_evaluation_of_an_arm_holding_still(algorithm):
     assert final["object_unmoved"] == 5 and final["unstable"] == 0 and final["table_contacts"] == 0
     assert final["mean_distance"] == pytest.approx(expected.mean(), abs=1e-4)
     assert final["median_distance"] == pytest.approx(np.median(expected), abs=1e-4)
+    if algorithm == "ppo":  # goals given, one off the task's region
+        goals = np.array([[1.0, 0.1], [2.0, 1.5]], dtype=np.float32)
+        played = evaluate_feedback_policy(_HoldStill(), "hockey", goals=goals, allow_outside_region=True)
+        np.testing.assert_allclose(-played["rewards"], np.linalg.norm(goals - start, axis=1), atol=1e-4)
 
 
 def test_open_loop_rewards_play_the_actions_as_the_env_does():
