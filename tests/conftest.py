@@ -92,7 +92,7 @@ class LinearGenerator(TrajectoryGenerator):
             np.savez(file, horizon=self.horizon, prior=self.prior)
 
 
-def load_linear_generator(path: str) -> LinearGenerator:
+def load_linear_generator(path: str, device: object = "cpu") -> LinearGenerator:  # a numpy model: no device
     with np.load(path) as data:
         return LinearGenerator(horizon=int(data["horizon"]), prior=str(data["prior"]))
 

@@ -264,6 +264,24 @@ def test_on_paper_task_with_saved_generator(tmp_path):
     assert loaded.predict_trajectory(goal).shape == (69, 7)
 
 
+def test_a_generator_file_is_loaded_onto_the_models_device(tmp_path, monkeypatch):
+    """GenRL(..., "vae.pt", device=D), GenRL.load(..., device=D) and load_policy(..., device=D) place the generator
+    they load from a file on D."""
+    import sb3_genrl.generative as generative
+    from sb3_genrl.generative import make_generator
+    from sb3_genrl.genrl.loading import load_policy
+
+    make_generator("VAE1", horizon=69, action_dim=7, device="cpu").save(str(tmp_path / "vae.pt"))
+    devices, real_load = [], generative.load
+    monkeypatch.setattr(generative, "load", lambda path, device="auto": devices.append(str(device)) or real_load(path, device))
+    model = GenRL("GenRL/Hockey-v0", str(tmp_path / "vae.pt"), n_steps=8, device="cpu")
+    model.save(tmp_path / "policy.zip")
+    loaded = GenRL.load(tmp_path / "policy.zip", device="cpu")
+    safe = load_policy(tmp_path / "policy.zip", gym.make("GenRL/Hockey-v0"), device="cpu")
+    assert devices == ["cpu", "cpu", "cpu"] and safe.generator.device == th.device("cpu")
+    assert model.generator.device == model.device and loaded.generator.device == loaded.device == th.device("cpu")
+
+
 
 def test_evaluate_on_goals_plays_the_deterministic_policy(tmp_path):
     from sb3_genrl.generative import make_generator
@@ -384,12 +402,13 @@ def test_trpo_e_step_rejects_candidates_whose_distribution_is_invalid():
     from sb3_genrl.genrl.e_step import trpo_e_step
 
     model = GenRL(FastReachEnv(), LinearGenerator(), seed=0)
-    observations = th.zeros(64, 2)
+    observations = th.zeros(64, 2, device=model.device)
     with th.no_grad():
         pi = model.policy.get_distribution(observations)
         offsets = th.cat([th.full((32, 2), 0.1), th.full((32, 2), 2.0)]) * th.tensor([[1.0, -1.0]])
-        actions = pi.distribution.mean + offsets
-        batch = (observations, actions, pi.log_prob(actions), th.cat([th.ones(32), -th.ones(32)]))
+        actions = pi.distribution.mean + offsets.to(model.device)
+        advantages = th.cat([th.ones(32), -th.ones(32)]).to(model.device)
+        batch = (observations, actions, pi.log_prob(actions), advantages)
     # Actions near the mean are good, far ones bad: the natural step narrows the policy, and with a KL bound of
     # 1e6 every candidate's standard deviation underflows to 0, which torch.distributions refuses.
     q = copy.deepcopy(model.policy)
@@ -423,13 +442,13 @@ class _LogStdRecorder(BaseCallback):
         self.values: list[np.ndarray] = []
 
     def _on_rollout_start(self) -> None:
-        self.values.append(self.model.policy.log_std.detach().numpy().copy())
+        self.values.append(self.model.policy.log_std.detach().cpu().numpy().copy())
 
     def _on_step(self) -> bool:
         return True
 
     def _on_training_end(self) -> None:
-        self.values.append(self.model.policy.log_std.detach().numpy().copy())
+        self.values.append(self.model.policy.log_std.detach().cpu().numpy().copy())
 
 
 @pytest.mark.parametrize("e_step", ["trpo", "kl_penalty"])
@@ -471,9 +490,10 @@ def test_value_memory_holds_the_last_value_history_batches():
     assert len(recorder.batches) == 5 and len(model._value_memory) == 3
     for (observations, returns), (expected_observations, expected_returns) in zip(
             model._value_memory, recorder.batches[-3:], strict=True):  # the same rows, in another order
-        order, expected_order = np.argsort(returns.numpy()), np.argsort(expected_returns)
-        np.testing.assert_allclose(observations.numpy()[order], expected_observations[expected_order])
-        np.testing.assert_allclose(returns.numpy()[order], expected_returns[expected_order])
+        observations, returns = observations.cpu().numpy(), returns.cpu().numpy()
+        order, expected_order = np.argsort(returns), np.argsort(expected_returns)
+        np.testing.assert_allclose(observations[order], expected_observations[expected_order])
+        np.testing.assert_allclose(returns[order], expected_returns[expected_order])
 
 
 @pytest.mark.parametrize(("value_history", "expected"), [(1, 1.0), (2, 0.5)])
@@ -485,11 +505,11 @@ def test_value_function_is_the_least_squares_fit_over_the_remembered_batches(val
     model.learn(16)
     observations = next(model.rollout_buffer.get(batch_size=None)).observations
     model._value_memory.clear()
-    model._value_memory.append((observations, th.zeros(16)))
+    model._value_memory.append((observations, th.zeros(16, device=model.device)))
     model.rollout_buffer.returns[:] = 1.0
     model._fit_value_function()
     with th.no_grad():
-        values = model.policy.predict_values(observations).flatten().numpy()
+        values = model.policy.predict_values(observations).flatten().cpu().numpy()
     assert abs(values.mean() - expected) < 0.02
     np.testing.assert_allclose(values, expected, atol=0.1)
 
@@ -525,7 +545,7 @@ class _WeightRecorder(BaseCallback):
 
     def _record(self) -> None:
         if self.model._n_updates > len(self.weights):
-            self.weights.append({k: v.detach().clone().numpy() for k, v in self.model.policy.named_parameters()})
+            self.weights.append({k: v.detach().cpu().numpy().copy() for k, v in self.model.policy.named_parameters()})
 
     def _on_rollout_start(self) -> None:
         self._record()
@@ -548,8 +568,9 @@ def test_policy_averaging_is_the_start_corrected_moving_average_and_acts(tmp_pat
     factors = decay ** np.arange(5, -1, -1)
     for name, value in model.policy_average.named_parameters():
         expected = sum(f * w[name] for f, w in zip(factors, recorder.weights, strict=True)) / factors.sum()
-        np.testing.assert_allclose(value.detach().numpy(), expected, rtol=1e-5, atol=1e-6)
-    assert not np.allclose(model.policy_average.action_net.weight.detach().numpy(), recorder.weights[-1]["action_net.weight"])
+        np.testing.assert_allclose(value.detach().cpu().numpy(), expected, rtol=1e-5, atol=1e-6)
+    average_weight = model.policy_average.action_net.weight.detach().cpu().numpy()
+    assert not np.allclose(average_weight, recorder.weights[-1]["action_net.weight"])
     # predict acts with the average, here and after saving and loading (with SB3's loader and without unpickling).
     averaged = model.policy_average.predict(GOALS, deterministic=True)[0]
     np.testing.assert_allclose(model.predict(GOALS, deterministic=True)[0], averaged)
@@ -612,7 +633,8 @@ class _ContextStdRecorder(BaseCallback):
 
     def _record(self) -> None:
         with th.no_grad():
-            self.values.append(self.model.policy.get_distribution(self.corners).distribution.stddev.log().numpy())
+            corners = self.corners.to(self.model.device)
+            self.values.append(self.model.policy.get_distribution(corners).distribution.stddev.log().cpu().numpy())
 
     def _on_rollout_start(self) -> None:
         self._record()
@@ -644,7 +666,7 @@ def test_context_std_policy_spread_depends_on_the_context_within_its_trust_regio
     assert changes[0.01].max() <= 0.01 + 1e-6  # at every corner of the box, hence everywhere in it
     assert np.ptp(values[-1], axis=0).max() > 1e-4  # the spread differs between contexts
     # The policy's distributions agree however they are computed, and survive saving and loading.
-    observations = th.as_tensor(GOALS)
+    observations = th.as_tensor(GOALS, device=model.device)
     actions, _, log_prob = model.policy(observations)
     _, evaluated, entropy = model.policy.evaluate_actions(observations, actions)
     distribution = model.policy.get_distribution(observations)
@@ -653,7 +675,7 @@ def test_context_std_policy_spread_depends_on_the_context_within_its_trust_regio
     th.testing.assert_close(distribution.entropy(), entropy)
     model.save(tmp_path / "model.zip")
     for loaded in (GenRL.load(tmp_path / "model.zip", generator=LinearGenerator()),
-                   load_policy(tmp_path / "model.zip", FastReachEnv(), generator=LinearGenerator())):
+                   load_policy(tmp_path / "model.zip", FastReachEnv(), generator=LinearGenerator(), device=model.device)):
         assert isinstance(loaded.policy, ContextStdPolicy)
         th.testing.assert_close(loaded.policy.get_distribution(observations).distribution.stddev,
                                 distribution.distribution.stddev)

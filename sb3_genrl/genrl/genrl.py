@@ -170,7 +170,7 @@ class GenRL(OnPolicyAlgorithm):
             policy, env, generator = "MlpPolicy", policy, env  # type: ignore[assignment]
         _check_hyperparameters(e_step=e_step, n_em_iterations=n_em_iterations, max_log_std_change=max_log_std_change,
                                value_history=value_history, policy_averaging=policy_averaging)
-        env, policy_kwargs = self._latent_env(env, generator, latent_clip, policy_kwargs)
+        env, policy_kwargs = self._latent_env(env, generator, latent_clip, policy_kwargs, device)
         super().__init__(
             policy, env,  # type: ignore[arg-type]
             learning_rate=learning_rate, n_steps=n_steps,
@@ -193,13 +193,14 @@ class GenRL(OnPolicyAlgorithm):
             self._setup_model()
 
     def _latent_env(self, env: Any, generator: TrajectoryGenerator | str | None, latent_clip: float,
-                  policy_kwargs: dict[str, Any] | None) -> tuple[Any, dict[str, Any]]:
+                  policy_kwargs: dict[str, Any] | None, device: th.device | str) -> tuple[Any, dict[str, Any]]:
         """Set ``generator`` and ``generator_path``; the env in its latent-action wrapper, and the policy arguments
-        completed with the prior's spread and, for Box contexts, :class:`BoxScaler`."""
+        completed with the prior's spread and, for Box contexts, :class:`BoxScaler`. A generator given as a file is
+        loaded onto ``device``."""
         self.generator_path: str | None = None
         if isinstance(generator, str | os.PathLike):
             self.generator_path = os.path.abspath(generator)
-            generator = _load_generator(self.generator_path)
+            generator = _load_generator(self.generator_path, device)
         env, self.generator = latent_action_env(env, generator, latent_clip=latent_clip)  # type: ignore[arg-type]
         policy_kwargs = dict(policy_kwargs or {})
         if self.generator is not None:
@@ -372,8 +373,8 @@ class GenRL(OnPolicyAlgorithm):
             candidates = [data.get("generator_path")]
             candidates += [_generator_file(path)] if isinstance(path, str | pathlib.Path) else []
             generator_path = next((str(p) for p in candidates if p is not None and os.path.isfile(p)), None)
-        if generator_path is not None:
-            generator = _load_generator(generator_path)
+        if generator_path is not None:  # onto the model's device, as SB3 loads the policy
+            generator = _load_generator(generator_path, device)
         if env is not None:  # a raw env is wrapped as at training time
             latent_clip = kwargs.get("latent_clip", data.get("latent_clip", 3.0))
             env, generator = latent_action_env(env, generator, latent_clip=latent_clip)  # type: ignore[arg-type]
@@ -411,7 +412,7 @@ def _generator_file(path: str | pathlib.Path) -> pathlib.Path:
     return path.with_name(path.name + ".generator.pt")
 
 
-def _load_generator(path: str) -> TrajectoryGenerator:
+def _load_generator(path: str, device: th.device | str) -> TrajectoryGenerator:
     from sb3_genrl.generative import load  # imported lazily: the model classes are only needed here
 
-    return load(path)
+    return load(path, device=device)

@@ -55,7 +55,7 @@ def load_policy(path: str | os.PathLike, env: gym.Env, *, generator: TrajectoryG
     """
     path = os.fspath(path)
     data = _read_data(path)
-    generator = _resolve_generator(path, data, generator)
+    generator = _resolve_generator(path, data, generator, device)
     if trust:
         return GenRL.load(path, device=device, generator=generator)
     latent_env = LatentActionWrapper(env, generator, latent_clip=data.get("latent_clip", 3.0))
@@ -89,14 +89,15 @@ def _read_data(path: str) -> dict[str, Any]:
         raise ValueError(f"{path} is not an SB3 model zip ({error})") from None
 
 
-def _resolve_generator(path: str, data: dict[str, Any], generator: TrajectoryGenerator | str | None) -> TrajectoryGenerator:
-    """The given generator, else the file the zip names, else ``<name>.generator.pt`` beside the zip."""
+def _resolve_generator(path: str, data: dict[str, Any], generator: TrajectoryGenerator | str | None,
+                       device: th.device | str) -> TrajectoryGenerator:
+    """The given generator, else the file the zip names, else ``<name>.generator.pt`` beside the zip, onto ``device``."""
     if isinstance(generator, TrajectoryGenerator):
         return generator
     candidates = [generator] if generator is not None else [data.get("generator_path"), _generator_file(path)]
     for candidate in candidates:
         if isinstance(candidate, str | os.PathLike) and os.path.isfile(candidate):
-            return _load_generator(os.fspath(candidate))
+            return _load_generator(os.fspath(candidate), device)
     raise ValueError(f"no generator for {path}: none of {[str(c) for c in candidates if c is not None]} exists; "
                      "pass the generator file")
 
