@@ -10,7 +10,6 @@ The data are the synthetic two-factor family (the speed does not depend on the v
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import time
@@ -19,9 +18,11 @@ import torch
 from sb3_genrl.envs import TASKS
 
 from sb3_genrl import __version__
+from sb3_genrl.checks import check_device, check_output_file, check_positive_int
 from sb3_genrl.generative import make_generator
 from sb3_genrl.generative.presets import BATCH_SIZE, N_DEMONSTRATIONS, N_JOINTS
 from sb3_genrl.generative.synthetic import sine_ramp_trajectories
+from sb3_genrl.utils import atomic_write_json
 
 DEFAULT_OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "generator_training.json")
 MODELS = {"vae": "VAE6", "gan": "GAN5"}  # N_alpha = 3, the paper's best hockey models
@@ -54,6 +55,13 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
     parser.add_argument("--out", default=DEFAULT_OUT, help="JSON file for the results")
     args = parser.parse_args(argv)
+    try:  # before any work
+        for name in ("n", "horizon", "epochs", "batch_size"):
+            check_positive_int(getattr(args, name), f"--{name.replace('_', '-')}")
+        check_device(args.device, "--device")
+        check_output_file(args.out, "--out")
+    except ValueError as error:
+        parser.error(str(error))
     if args.threads is not None:
         torch.set_num_threads(args.threads)
 
@@ -64,12 +72,10 @@ def main(argv: list[str] | None = None) -> None:
               f"{row['seconds']:>9.2f} {row['epochs_per_second']:>9.3f} {1 / row['epochs_per_second']:>8.2f}  {row['device']}")
     paper_hours = {row["model"]: 5000 / row["epochs_per_second"] / 3600 for row in rows}
     print("5000 paper epochs would take " + ", ".join(f"{model}: {hours:.1f} h" for model, hours in paper_hours.items()))
-    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
     environment = {"sb3_genrl": __version__, "torch": torch.__version__, "torch_threads": torch.get_num_threads(),
                    "cuda": torch.cuda.get_device_name() if torch.cuda.is_available() else None,
                    "processor": platform.processor() or platform.machine(), "cpu_count": os.cpu_count()}
-    with open(args.out, "w") as file:
-        json.dump({"environment": environment, "results": rows}, file, indent=2)
+    atomic_write_json(args.out, {"environment": environment, "results": rows})
     print(f"wrote {args.out}")
 
 

@@ -119,6 +119,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--worker", default=None, help=argparse.SUPPRESS)
     parser.add_argument("--size", type=int, default=None, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    if args.worker is None:  # the output is checked before any work (imported here: the workers measure memory)
+        from sb3_genrl.checks import check_output_file
+        from sb3_genrl.utils import atomic_write_json
+
+        try:
+            check_output_file(args.out, "--out")
+        except ValueError as error:
+            parser.error(str(error))
     if args.worker is not None:
         print(json.dumps(_worker(args.worker, args.size, args.dim, args.k, args.seed)))
         return 0
@@ -148,10 +156,8 @@ def main(argv: list[str] | None = None) -> int:
             entry["same_values_as_prdc"] = (ours["precision"], ours["recall"]) == (prdc_run["precision"], prdc_run["recall"])
         summary.append(entry)
         print(json.dumps(entry))
-    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-    with open(args.out, "w") as file:
-        json.dump({"dim": args.dim, "k": args.k, "seed": args.seed, "cpu_count": os.cpu_count(),
-                   "machine": platform.processor() or platform.machine(), "runs": runs, "summary": summary}, file, indent=2)
+    atomic_write_json(args.out, {"dim": args.dim, "k": args.k, "seed": args.seed, "cpu_count": os.cpu_count(),
+                                 "machine": platform.processor() or platform.machine(), "runs": runs, "summary": summary})
     print(f"wrote {args.out}")
     return 0
 
