@@ -16,6 +16,24 @@ from sb3_genrl.showcase import frame_strip, save_animation, save_image
 VIDEO_SUFFIXES = (".mp4", ".gif")
 
 
+def check_mp4_writer(out: str | os.PathLike) -> None:
+    """For an ``.mp4`` output, check that imageio's FFmpeg plugin (the package ``imageio-ffmpeg``) is there.
+
+    Without it imageio would try another writer and fail after all the rendering with an unrelated message.
+
+    :raises ValueError: naming the missing package and the alternatives
+    """
+    if pathlib.Path(out).suffix.lower() != ".mp4":
+        return
+    try:
+        import imageio_ffmpeg
+
+        imageio_ffmpeg.get_ffmpeg_exe()
+    except (ImportError, RuntimeError) as error:
+        raise ValueError(f"out: writing {str(out)!r} needs imageio-ffmpeg, a dependency of sb3-genrl ({error}); "
+                         "install it (pip install imageio-ffmpeg) or write a .gif") from None
+
+
 def record_video(task: str, out: str | os.PathLike, *, policy: str | os.PathLike | None = None,
                  generator: str | os.PathLike | None = None, goals: int = 6, seed: int = 0, width: int = 480,
                  height: int = 352, fps: int = 25, strip: bool = True, trust_policy: bool = False) -> dict:
@@ -40,6 +58,7 @@ def record_video(task: str, out: str | os.PathLike, *, policy: str | os.PathLike
         check_positive_int(value, name)
     check_seed(seed)
     check_output_file(out, "out", suffixes=VIDEO_SUFFIXES)
+    check_mp4_writer(out)
     check_input_path(policy if policy is not None else generator, "policy" if policy is not None else "generator")
     env = spec.make_env(render_mode="rgb_array", width=width, height=height)
     rng = np.random.default_rng(seed)

@@ -86,6 +86,17 @@ def test_arguments_and_paths_are_checked_before_any_work(tmp_path, monkeypatch, 
     assert sorted(p.name for p in tmp_path.iterdir()) == ["D0", "FILE", "GEN"]  # nothing was written
 
 
+def test_an_mp4_without_imageio_ffmpeg_is_refused_before_rendering(tmp_path, monkeypatch, cli):
+    import sys
+
+    monkeypatch.chdir(tmp_path)
+    Path("GEN").write_text("")
+    monkeypatch.setitem(sys.modules, "imageio_ffmpeg", None)  # what an environment without the package gives
+    code, printed, err = cli("video", "--task", "hockey", "--generator", "GEN", "--out", "v.mp4")
+    assert code == 2 and printed == "" and "writing 'v.mp4' needs imageio-ffmpeg" in err and "or write a .gif" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["GEN"]
+
+
 @pytest.mark.parametrize("command", ["play", "quickstart", "study", "evaluate --data . GEN", "compare --runs ."])
 def test_an_output_folder_that_cannot_be_written_is_refused(tmp_path, monkeypatch, cli, command):
     monkeypatch.chdir(tmp_path)
