@@ -66,11 +66,16 @@ def seed_result(run: pathlib.Path, task: str, transitions: dict[str, np.ndarray]
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--task", default="hockey")
-    parser.add_argument("--work", type=pathlib.Path, help="the baselines benchmark's work folder "
+    from sb3_genrl.envs import TASKS
+
+    from sb3_genrl.checks import check_input_path, check_output_file, check_seed, option
+
+    parser.add_argument("--task", default="hockey", choices=sorted(TASKS))
+    parser.add_argument("--work", type=option(check_input_path), help="the baselines benchmark's work folder "
                         "(default: benchmarks/runs/baselines_TASK)")
-    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
-    parser.add_argument("--out", type=pathlib.Path, help="JSON (default: benchmarks/results/behaviour_cloning_TASK.json)")
+    parser.add_argument("--seeds", type=option(check_seed, int), nargs="+", default=[0, 1, 2])
+    parser.add_argument("--out", type=option(check_output_file, suffixes=(".json",)),
+                        help="JSON (default: benchmarks/results/behaviour_cloning_TASK.json)")
     args = parser.parse_args(argv)
     from sb3_genrl.baselines.feedback import add_time_feature, evaluate_feedback_policy
     from sb3_genrl.baselines.train import EVAL_GOAL_SEED, EVAL_GOALS

@@ -18,7 +18,7 @@ import torch
 from sb3_genrl.envs import TASKS
 
 from sb3_genrl import __version__
-from sb3_genrl.checks import check_device, check_output_file, check_positive_int
+from sb3_genrl.checks import check_device, check_output_file, check_positive_int, check_seed, option
 from sb3_genrl.generative import make_generator
 from sb3_genrl.generative.presets import BATCH_SIZE, N_DEMONSTRATIONS, N_JOINTS
 from sb3_genrl.generative.synthetic import sine_ramp_trajectories
@@ -46,22 +46,17 @@ def benchmark(n: int, horizon: int, epochs: int, batch_size: int, device: str, s
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--n", type=int, default=N_DEMONSTRATIONS, help="number of trajectories (paper: ~40000)")
-    parser.add_argument("--horizon", type=int, default=TASKS["hockey"].horizon, help="time steps (hockey: 69)")
-    parser.add_argument("--epochs", type=int, default=3, help="epochs timed per model")
-    parser.add_argument("--batch-size", type=int, default=BATCH_SIZE)
-    parser.add_argument("--device", default="auto")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
-    parser.add_argument("--out", default=DEFAULT_OUT, help="JSON file for the results")
+    count = option(check_positive_int, int)
+    parser.add_argument("--n", type=count, default=N_DEMONSTRATIONS, help="number of trajectories (paper: ~40000)")
+    parser.add_argument("--horizon", type=count, default=TASKS["hockey"].horizon, help="time steps (hockey: 69)")
+    parser.add_argument("--epochs", type=count, default=3, help="epochs timed per model")
+    parser.add_argument("--batch-size", type=count, default=BATCH_SIZE)
+    parser.add_argument("--device", type=option(check_device), default="auto")
+    parser.add_argument("--seed", type=option(check_seed, int), default=0)
+    parser.add_argument("--threads", type=count, default=None, help="torch CPU threads (default: torch's choice)")
+    parser.add_argument("--out", type=option(check_output_file, suffixes=(".json",)), default=DEFAULT_OUT,
+                        help="JSON file for the results")
     args = parser.parse_args(argv)
-    try:  # before any work
-        for name in ("n", "horizon", "epochs", "batch_size"):
-            check_positive_int(getattr(args, name), f"--{name.replace('_', '-')}")
-        check_device(args.device, "--device")
-        check_output_file(args.out, "--out")
-    except ValueError as error:
-        parser.error(str(error))
     if args.threads is not None:
         torch.set_num_threads(args.threads)
 

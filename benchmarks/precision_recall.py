@@ -124,9 +124,9 @@ def main(argv: list[str] | None = None) -> int:
         from sb3_genrl.utils import atomic_write_json
 
         try:
-            check_output_file(args.out, "--out")
+            check_output_file(args.out, "")
         except ValueError as error:
-            parser.error(str(error))
+            parser.error(f"argument --out: {error}")
     if args.worker is not None:
         print(json.dumps(_worker(args.worker, args.size, args.dim, args.k, args.seed)))
         return 0
