@@ -37,6 +37,7 @@ from reachable import generator_limit, held_out_goals, nearest, summary  # noqa:
 from sb3_genrl.envs.coverage import covered_cells, in_goal_region  # noqa: E402
 
 from sb3_genrl import GenRL  # noqa: E402
+from sb3_genrl.checks import check_input_path, check_int, check_positive_int, check_seed, option  # noqa: E402
 from sb3_genrl.data import load_actions, load_reached  # noqa: E402
 from sb3_genrl.generative import load  # noqa: E402
 from sb3_genrl.genrl import evaluate_on_goals  # noqa: E402
@@ -184,16 +185,23 @@ def print_table(result: dict[str, object]) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data", required=True, help="basketball Minari dataset the generator was trained on")
-    parser.add_argument("--generator", required=True, help="the trained generator (2-D latent for the maps)")
-    parser.add_argument("--policy", default=None, help="a trained GenRL policy (default: train one)")
-    parser.add_argument("--policy-episodes", type=int, default=3000, help="GenRL episodes (0: no policy)")
-    parser.add_argument("--seed", type=int, default=0, help="GenRL seed")
-    parser.add_argument("--goals", type=int, default=300)
-    parser.add_argument("--goal-seed", type=int, default=12345, help="seed of the held-out baskets")
-    parser.add_argument("--grid", type=int, default=201, help="latent grid points per axis over [-3, 3]")
+    existing, seed = option(check_input_path), option(check_seed, int)
+    parser.add_argument("--data", required=True, type=existing,
+                        help="basketball Minari dataset the generator was trained on")
+    parser.add_argument("--generator", required=True, type=existing,
+                        help="the trained generator (2-D latent for the maps)")
+    parser.add_argument("--policy", type=existing, default=None, help="a trained GenRL policy (default: train one)")
+    parser.add_argument("--policy-episodes", type=option(check_int, int, minimum=0), default=3000,
+                        help="GenRL episodes (0: no policy)")
+    parser.add_argument("--seed", type=seed, default=0, help="GenRL seed")
+    parser.add_argument("--goals", type=option(check_positive_int, int), default=300)
+    parser.add_argument("--goal-seed", type=seed, default=12345, help="seed of the held-out baskets")
+    parser.add_argument("--grid", type=option(check_int, int, minimum=2), default=201,
+                        help="latent grid points per axis over [-3, 3]")
     parser.add_argument("--name", default="basketball_diagnosis", help="output name under benchmarks/results")
     args = parser.parse_args()
+    if os.path.basename(args.name) != args.name or args.name in ("", ".", ".."):
+        parser.error(f"argument --name: {args.name!r} must be a plain file name (no folder)")
     torch.set_num_threads(1)
     began = time.perf_counter()
     goals = held_out_goals("basketball", args.goals, args.goal_seed)

@@ -15,6 +15,7 @@ import numpy as np
 from sb3_genrl.envs.basketball import BasketballEnv, scripted_throw
 from sb3_genrl.envs.hockey import HockeyEnv, scripted_hit
 
+from sb3_genrl.checks import check_output_file, check_positive_int, option
 from sb3_genrl.markdown import markdown_table
 from sb3_genrl.utils import atomic_write_json
 
@@ -72,10 +73,12 @@ def measure(task: str, episodes: int, step_episodes: int, repeats: int) -> dict:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--episodes", type=int, default=256)
-    parser.add_argument("--step-episodes", type=int, default=16)
-    parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--out", default="benchmarks/results/sim_throughput.json")
+    count = option(check_positive_int, int)
+    parser.add_argument("--episodes", type=count, default=256)
+    parser.add_argument("--step-episodes", type=count, default=16)
+    parser.add_argument("--repeats", type=count, default=3)
+    parser.add_argument("--out", type=option(check_output_file, suffixes=(".json",)),
+                        default="benchmarks/results/sim_throughput.json")
     args = parser.parse_args()
     rows = [measure(task, args.episodes, args.step_episodes, args.repeats) for task in ("hockey", "basketball")]
     print(f"episodes per second (best of {args.repeats} runs, {args.episodes} episodes)")
@@ -85,7 +88,6 @@ def main() -> None:
                                     "open_loop_2_thread", "step_by_step")),
                                    *(f"{r[key]:.2f}" for key in ("open_loop_1_thread_vs_bound", "step_by_step_vs_bound"))]
                                   for r in rows]))
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     atomic_write_json(Path(args.out), rows)
     print(f"wrote {args.out}")
 

@@ -19,6 +19,10 @@ BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
     ("behaviour_cloning.py", ["--out", "result.txt"], "argument --out: 'result.txt' must end in .json"),
     ("generator_training.py", ["--device", "bogus", "--out", "out.json"], "argument --device: must be 'auto' or a torch device"),
     ("precision_recall.py", ["--out", "FOLDER"], "argument --out: 'FOLDER' is a folder; expected a file name"),
+    ("sim_throughput.py", ["--repeats", "0"], "argument --repeats: must be an integer >= 1, got 0"),
+    ("genrl_tuning.py", ["--generator", "missing.pt"], "argument --generator: 'missing.pt' does not exist"),
+    ("basketball_diagnosis.py", ["--data", "FOLDER", "--generator", "FILE", "--name", "../x"], "argument --name: '../x'"),
+    ("reachable.py", ["--task", "hockey", "--generator", "missing.pt", "--out", "out.json"], "missing.pt is not a file"),
 ])
 def test_benchmarks_refuse_bad_arguments_before_any_work(tmp_path, script, argv, message):
     (tmp_path / "FILE").write_text("")
