@@ -46,7 +46,7 @@ import numpy as np
 from sb3_genrl.baselines.hyperparameters import baseline_kwargs_argument
 from sb3_genrl.envs import TASKS
 
-from sb3_genrl.checks import check_input_path, check_output_dir, check_output_file, check_positive_int, check_seed, option
+from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, OUT_DIR, SEED
 from sb3_genrl.genrl.train import genrl_kwargs_argument
 from sb3_genrl.utils import atomic_write_json
 
@@ -335,15 +335,14 @@ def core_hours(result: dict[str, Any], episodes: int, seeds: int) -> float:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    count, existing = option(check_positive_int, int), option(check_input_path)
     parser.add_argument("--task", default="hockey", choices=sorted(TASKS), help="a registered task (default: hockey)")
-    parser.add_argument("--episodes", type=count, default=3000, help="episode budget of every run")
-    parser.add_argument("--seeds", type=option(check_seed, int), nargs="+", default=[0, 1, 2])
+    parser.add_argument("--episodes", type=COUNT, default=3000, help="episode budget of every run")
+    parser.add_argument("--seeds", type=SEED, nargs="+", default=[0, 1, 2])
     parser.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)
-    parser.add_argument("--demos", type=existing, default=None,
+    parser.add_argument("--demos", type=EXISTING, default=None,
                         help="demonstration dataset (default: make --demo-count of them)")
-    parser.add_argument("--demo-count", type=count, default=4000, help="demonstrations to make when --demos is not given")
-    parser.add_argument("--generator", type=existing, default=None,
+    parser.add_argument("--demo-count", type=COUNT, default=4000, help="demonstrations to make when --demos is not given")
+    parser.add_argument("--generator", type=EXISTING, default=None,
                         help=f"generator for GenRL and the latent baselines (default: {GENERATOR_PRESET}, "
                              f"{GENERATOR_EPOCHS} epochs, on the demonstrations)")
     parser.add_argument("--genrl-kwargs", type=genrl_kwargs_argument, default={},
@@ -351,10 +350,10 @@ def main() -> None:
     parser.add_argument("--baseline-kwargs", type=baseline_kwargs_argument, default={},
                         help="changes to the baselines' rl-zoo3 settings, as JSON: {baseline: {argument: value}}, e.g. "
                              "'{\"ppo\": {\"target_kl\": 0.02}}' (default: none)")
-    parser.add_argument("--jobs", type=count, default=1, help="runs at a time, one process (one core) each")
-    parser.add_argument("--work", type=option(check_output_dir), default=None,
+    parser.add_argument("--jobs", type=COUNT, default=1, help="runs at a time, one process (one core) each")
+    parser.add_argument("--work", type=OUT_DIR, default=None,
                         help="folder of the runs (default: benchmarks/runs/baselines_TASK)")
-    parser.add_argument("--out", type=option(check_output_file, suffixes=(".json",)), default=None,
+    parser.add_argument("--out", type=JSON_OUT, default=None,
                         help="JSON result (default: benchmarks/results/baselines[_TASK].json); .md and PNGs beside it")
     args = parser.parse_args()
     if set(args.baseline_kwargs) - set(args.methods):

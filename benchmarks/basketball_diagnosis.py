@@ -37,7 +37,7 @@ from reachable import generator_limit, held_out_goals, nearest, summary  # noqa:
 from sb3_genrl.envs.coverage import covered_cells, in_goal_region  # noqa: E402
 
 from sb3_genrl import GenRL  # noqa: E402
-from sb3_genrl.checks import check_input_path, check_int, check_positive_int, check_seed, option  # noqa: E402
+from sb3_genrl.checks import COUNT, EXISTING, SEED, check_int, option  # noqa: E402
 from sb3_genrl.data import load_actions, load_reached  # noqa: E402
 from sb3_genrl.generative import load  # noqa: E402
 from sb3_genrl.genrl import evaluate_on_goals  # noqa: E402
@@ -185,17 +185,16 @@ def print_table(result: dict[str, object]) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    existing, seed = option(check_input_path), option(check_seed, int)
-    parser.add_argument("--data", required=True, type=existing,
+    parser.add_argument("--data", required=True, type=EXISTING,
                         help="basketball Minari dataset the generator was trained on")
-    parser.add_argument("--generator", required=True, type=existing,
+    parser.add_argument("--generator", required=True, type=EXISTING,
                         help="the trained generator (2-D latent for the maps)")
-    parser.add_argument("--policy", type=existing, default=None, help="a trained GenRL policy (default: train one)")
+    parser.add_argument("--policy", type=EXISTING, default=None, help="a trained GenRL policy (default: train one)")
     parser.add_argument("--policy-episodes", type=option(check_int, int, minimum=0), default=3000,
                         help="GenRL episodes (0: no policy)")
-    parser.add_argument("--seed", type=seed, default=0, help="GenRL seed")
-    parser.add_argument("--goals", type=option(check_positive_int, int), default=300)
-    parser.add_argument("--goal-seed", type=seed, default=12345, help="seed of the held-out baskets")
+    parser.add_argument("--seed", type=SEED, default=0, help="GenRL seed")
+    parser.add_argument("--goals", type=COUNT, default=300)
+    parser.add_argument("--goal-seed", type=SEED, default=12345, help="seed of the held-out baskets")
     parser.add_argument("--grid", type=option(check_int, int, minimum=2), default=201,
                         help="latent grid points per axis over [-3, 3]")
     parser.add_argument("--name", default="basketball_diagnosis", help="output name under benchmarks/results")

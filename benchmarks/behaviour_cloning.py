@@ -65,25 +65,22 @@ def seed_result(run: pathlib.Path, task: str, transitions: dict[str, np.ndarray]
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    from sb3_genrl.envs import TASKS
-
-    from sb3_genrl.checks import check_input_path, check_output_file, check_seed, option
-
-    parser.add_argument("--task", default="hockey", choices=sorted(TASKS))
-    parser.add_argument("--work", type=option(check_input_path), help="the baselines benchmark's work folder "
-                        "(default: benchmarks/runs/baselines_TASK)")
-    parser.add_argument("--seeds", type=option(check_seed, int), nargs="+", default=[0, 1, 2])
-    parser.add_argument("--out", type=option(check_output_file, suffixes=(".json",)),
-                        help="JSON (default: benchmarks/results/behaviour_cloning_TASK.json)")
-    args = parser.parse_args(argv)
     from sb3_genrl.baselines.feedback import add_time_feature, evaluate_feedback_policy
     from sb3_genrl.baselines.train import EVAL_GOAL_SEED, EVAL_GOALS
-    from sb3_genrl.envs import get_task
+    from sb3_genrl.envs import TASKS, get_task
 
+    from sb3_genrl.checks import EXISTING, JSON_OUT, SEED
     from sb3_genrl.data import load_transitions
     from sb3_genrl.utils import atomic_write_json
 
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--task", default="hockey", choices=sorted(TASKS))
+    parser.add_argument("--work", type=EXISTING, help="the baselines benchmark's work folder "
+                        "(default: benchmarks/runs/baselines_TASK)")
+    parser.add_argument("--seeds", type=SEED, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--out", type=JSON_OUT,
+                        help="JSON (default: benchmarks/results/behaviour_cloning_TASK.json)")
+    args = parser.parse_args(argv)
     spec = get_task(args.task)
     work = args.work or HERE / "runs" / f"baselines_{spec.name}"
     out = args.out or HERE / "results" / f"behaviour_cloning_{spec.name}.json"

@@ -18,7 +18,7 @@ import torch
 from sb3_genrl.envs import TASKS
 
 from sb3_genrl import __version__
-from sb3_genrl.checks import check_device, check_output_file, check_positive_int, check_seed, option
+from sb3_genrl.checks import COUNT, JSON_OUT, SEED, check_device, option
 from sb3_genrl.generative import make_generator
 from sb3_genrl.generative.presets import BATCH_SIZE, N_DEMONSTRATIONS, N_JOINTS
 from sb3_genrl.generative.synthetic import sine_ramp_trajectories
@@ -46,15 +46,14 @@ def benchmark(n: int, horizon: int, epochs: int, batch_size: int, device: str, s
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    count = option(check_positive_int, int)
-    parser.add_argument("--n", type=count, default=N_DEMONSTRATIONS, help="number of trajectories (paper: ~40000)")
-    parser.add_argument("--horizon", type=count, default=TASKS["hockey"].horizon, help="time steps (hockey: 69)")
-    parser.add_argument("--epochs", type=count, default=3, help="epochs timed per model")
-    parser.add_argument("--batch-size", type=count, default=BATCH_SIZE)
+    parser.add_argument("--n", type=COUNT, default=N_DEMONSTRATIONS, help="number of trajectories (paper: ~40000)")
+    parser.add_argument("--horizon", type=COUNT, default=TASKS["hockey"].horizon, help="time steps (hockey: 69)")
+    parser.add_argument("--epochs", type=COUNT, default=3, help="epochs timed per model")
+    parser.add_argument("--batch-size", type=COUNT, default=BATCH_SIZE)
     parser.add_argument("--device", type=option(check_device), default="auto")
-    parser.add_argument("--seed", type=option(check_seed, int), default=0)
-    parser.add_argument("--threads", type=count, default=None, help="torch CPU threads (default: torch's choice)")
-    parser.add_argument("--out", type=option(check_output_file, suffixes=(".json",)), default=DEFAULT_OUT,
+    parser.add_argument("--seed", type=SEED, default=0)
+    parser.add_argument("--threads", type=COUNT, default=None, help="torch CPU threads (default: torch's choice)")
+    parser.add_argument("--out", type=JSON_OUT, default=DEFAULT_OUT,
                         help="JSON file for the results")
     args = parser.parse_args(argv)
     if args.threads is not None:

@@ -32,7 +32,7 @@ from reachable import generator_limit, held_out_goals, summary  # noqa: E402
 from sb3_genrl.envs import get_task  # noqa: E402
 
 from sb3_genrl import LatentActionWrapper, __version__  # noqa: E402
-from sb3_genrl.checks import check_input_path, check_int, check_output_file, check_positive_int, check_seed, option  # noqa: E402
+from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, SEED, check_int, option  # noqa: E402
 from sb3_genrl.generative import load, train_generator  # noqa: E402
 from sb3_genrl.generative.presets import PRESETS  # noqa: E402
 from sb3_genrl.genrl import evaluate_on_goals  # noqa: E402
@@ -157,23 +157,22 @@ def print_table(setting: Setting, result: dict[str, object]) -> None:
 
 def arguments(setting: Setting, description: str) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=description)
-    count, existing = option(check_positive_int, int), option(check_input_path)
-    parser.add_argument("--data", type=existing, default=None,
+    parser.add_argument("--data", type=EXISTING, default=None,
                         help=f"{setting.task} Minari dataset (default: make --demos demonstrations)")
-    parser.add_argument("--generator", type=existing, default=None,
+    parser.add_argument("--generator", type=EXISTING, default=None,
                         help="a trained generator (skips demonstrations and training)")
-    parser.add_argument("--demos", type=count, default=setting.demos)
+    parser.add_argument("--demos", type=COUNT, default=setting.demos)
     parser.add_argument("--preset", type=str.upper, choices=tuple(PRESETS), default=setting.preset)
-    parser.add_argument("--epochs", type=count, default=setting.epochs)
-    parser.add_argument("--episodes", type=count, default=setting.episodes)
-    parser.add_argument("--seeds", type=option(check_seed, int), nargs="+", default=[0, 1, 2])
-    parser.add_argument("--eval-every", type=count, default=setting.eval_every, help="episodes between evaluations")
-    parser.add_argument("--eval-goals", type=count, default=100, help="goals per evaluation during training")
-    parser.add_argument("--final-goals", type=count, default=300, help="held-out goals of the final evaluation")
+    parser.add_argument("--epochs", type=COUNT, default=setting.epochs)
+    parser.add_argument("--episodes", type=COUNT, default=setting.episodes)
+    parser.add_argument("--seeds", type=SEED, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--eval-every", type=COUNT, default=setting.eval_every, help="episodes between evaluations")
+    parser.add_argument("--eval-goals", type=COUNT, default=100, help="goals per evaluation during training")
+    parser.add_argument("--final-goals", type=COUNT, default=300, help="held-out goals of the final evaluation")
     parser.add_argument("--grid", type=option(check_int, int, minimum=2), default=201,
                         help="latent grid points per axis for the generator's limit")
-    parser.add_argument("--threads", type=count, default=1, help="torch threads")
-    parser.add_argument("--out", type=option(check_output_file, suffixes=(".json",)),
+    parser.add_argument("--threads", type=COUNT, default=1, help="torch threads")
+    parser.add_argument("--out", type=JSON_OUT,
                         default=os.path.join(RESULTS, f"genrl_{setting.task}.json"),
                         help="JSON output (a PNG is written beside it)")
     return parser.parse_args()

@@ -37,7 +37,7 @@ from scipy.interpolate import RegularGridInterpolator
 from scipy.spatial import cKDTree
 
 from sb3_genrl import LatentActionWrapper
-from sb3_genrl.checks import check_input_path, check_int, check_output_file, check_positive_int, check_seed, option
+from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, SEED, check_int, option
 from sb3_genrl.generative import load
 from sb3_genrl.generative.base import TrajectoryGenerator
 from sb3_genrl.genrl.train import genrl_kwargs_argument, make_genrl
@@ -153,18 +153,17 @@ def network_fit(env: SurrogateTask, landing: np.ndarray, goals: np.ndarray, genr
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    count = option(check_positive_int, int)
-    parser.add_argument("--generator", required=True, type=option(check_input_path),
+    parser.add_argument("--generator", required=True, type=EXISTING,
                         help="a trained generator with a 2-D latent space")
     parser.add_argument("--task", default="basketball", choices=["hockey", "basketball"])
-    parser.add_argument("--episodes", type=count, default=20000)
-    parser.add_argument("--seeds", type=option(check_seed, int), nargs="+", default=[0, 1, 2])
+    parser.add_argument("--episodes", type=COUNT, default=20000)
+    parser.add_argument("--seeds", type=SEED, nargs="+", default=[0, 1, 2])
     parser.add_argument("--genrl-kwargs", type=genrl_kwargs_argument, default={}, help="GenRL arguments, as JSON")
     parser.add_argument("--grid", type=option(check_int, int, minimum=2), default=101, help="latent grid points per axis")
-    parser.add_argument("--goals", type=count, default=300, help="tuning goals (seed 777)")
+    parser.add_argument("--goals", type=COUNT, default=300, help="tuning goals (seed 777)")
     parser.add_argument("--network-fit", action="store_true",
                         help="also fit the policy network to the grid's best latent actions (see network_fit)")
-    parser.add_argument("--out", type=option(check_output_file, suffixes=(".json",)), default=None,
+    parser.add_argument("--out", type=JSON_OUT, default=None,
                         help="JSON output (default: print only)")
     args = parser.parse_args()
     torch.set_num_threads(1)

@@ -119,17 +119,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--worker", default=None, help=argparse.SUPPRESS)
     parser.add_argument("--size", type=int, default=None, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
-    if args.worker is None:  # the output is checked before any work (imported here: the workers measure memory)
-        from sb3_genrl.checks import check_output_file
-        from sb3_genrl.utils import atomic_write_json
-
-        try:
-            check_output_file(args.out, "")
-        except ValueError as error:
-            parser.error(f"argument --out: {error}")
     if args.worker is not None:
         print(json.dumps(_worker(args.worker, args.size, args.dim, args.k, args.seed)))
         return 0
+    # The output is checked before any work; imported here, not at the top, since the workers measure their memory.
+    from sb3_genrl.checks import check_output_file
+    from sb3_genrl.utils import atomic_write_json
+
+    try:
+        check_output_file(args.out, "")
+    except ValueError as error:
+        parser.error(f"argument --out: {error}")
 
     runs = []
     methods = ["matmul", "ours"] + ([] if args.skip_prdc else ["prdc"])

@@ -8,14 +8,13 @@ from __future__ import annotations
 
 import argparse
 import time
-from pathlib import Path
 
 import mujoco
 import numpy as np
 from sb3_genrl.envs.basketball import BasketballEnv, scripted_throw
 from sb3_genrl.envs.hockey import HockeyEnv, scripted_hit
 
-from sb3_genrl.checks import check_output_file, check_positive_int, option
+from sb3_genrl.checks import COUNT, JSON_OUT
 from sb3_genrl.markdown import markdown_table
 from sb3_genrl.utils import atomic_write_json
 
@@ -73,11 +72,10 @@ def measure(task: str, episodes: int, step_episodes: int, repeats: int) -> dict:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    count = option(check_positive_int, int)
-    parser.add_argument("--episodes", type=count, default=256)
-    parser.add_argument("--step-episodes", type=count, default=16)
-    parser.add_argument("--repeats", type=count, default=3)
-    parser.add_argument("--out", type=option(check_output_file, suffixes=(".json",)),
+    parser.add_argument("--episodes", type=COUNT, default=256)
+    parser.add_argument("--step-episodes", type=COUNT, default=16)
+    parser.add_argument("--repeats", type=COUNT, default=3)
+    parser.add_argument("--out", type=JSON_OUT,
                         default="benchmarks/results/sim_throughput.json")
     args = parser.parse_args()
     rows = [measure(task, args.episodes, args.step_episodes, args.repeats) for task in ("hockey", "basketball")]
@@ -88,7 +86,7 @@ def main() -> None:
                                     "open_loop_2_thread", "step_by_step")),
                                    *(f"{r[key]:.2f}" for key in ("open_loop_1_thread_vs_bound", "step_by_step_vs_bound"))]
                                   for r in rows]))
-    atomic_write_json(Path(args.out), rows)
+    atomic_write_json(args.out, rows)
     print(f"wrote {args.out}")
 
 

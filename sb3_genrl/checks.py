@@ -182,6 +182,14 @@ def option(check: Callable[..., T], parse: Callable[[str], Any] = str, **kwargs:
     return convert
 
 
+# The argparse types the command line and the benchmark scripts share.
+COUNT = option(check_positive_int, int)
+SEED = option(check_seed, int)
+EXISTING = option(check_input_path)
+OUT_DIR = option(check_output_dir)
+JSON_OUT = option(check_output_file, suffixes=(".json",))
+
+
 def json_argument(text: str) -> Any:
     """An argparse ``type``: the value a JSON text holds (callers check its shape, e.g. ``--genrl-kwargs``)."""
     import json

@@ -15,15 +15,16 @@ from collections.abc import Callable
 from pathlib import Path
 
 from sb3_genrl.checks import (
+    COUNT,
+    EXISTING,
+    OUT_DIR,
+    SEED,
     check_device,
-    check_input_path,
     check_int,
     check_non_negative_float,
     check_output_dir,
     check_output_file,
     check_positive_float,
-    check_positive_int,
-    check_seed,
     option,
 )
 
@@ -31,12 +32,6 @@ WORKFLOW = ("play", "demos", "train-generator", "evaluate", "train-policy", "bas
             "study")
 # Errors that a bad argument or path raises in the library: printed as one line, exit status 2 (as argparse does).
 KNOWN_ERRORS = (ValueError, FileNotFoundError, PermissionError, FileExistsError, IsADirectoryError, NotADirectoryError)
-
-COUNT = option(check_positive_int, int)
-SEED = option(check_seed, int)
-EXISTING = option(check_input_path)
-OUT_DIR = option(check_output_dir)
-
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``genrl`` parser: one sub-parser per command, in workflow order (:data:`WORKFLOW`)."""
