@@ -18,7 +18,13 @@ episodes, see :mod:`sb3_genrl.baselines.checkpoint`), the others start again. Th
 it the Markdown table of the mean distance at 100, 300, 1000 and 3000 episodes (training episodes as played, which
 for a method still exploring is not what its policy can do) and of each final policy played deterministically on
 the same 100 held-out goals (kept in the run's ``final_eval.json``), and the curves (reward against episodes and
-against environment steps, table contacts per episode).
+against environment steps, table contacts per episode). A finished run's records (``run.json``, the Monitor file,
+``logs/progress*.csv`` and ``final_eval.json``) are all the results need: a run folder kept without its policy file
+and checkpoints (as ``benchmarks/results/runs/`` keeps runs finished but not yet in a table) is reused as it is, and
+refused if its evaluation was made with other goals, another generator or another version. ``--merge`` keeps the
+other methods of an existing ``--out`` and adds (or replaces) the methods run now, so that methods run at different
+times share one table; it refuses a result of another task, budget, seed list, demonstration dataset, generator or
+package version.
 
     python benchmarks/baselines.py                          # hockey, 3 seeds x 3000 episodes, every method
     python benchmarks/baselines.py --jobs 2                 # two runs at a time
@@ -26,6 +32,7 @@ against environment steps, table contacts per episode).
     python benchmarks/baselines.py --episodes 40 --seeds 0 --out /tmp/tiny.json --work /tmp/tiny   # end-to-end check
     python benchmarks/baselines.py --methods ppo --episodes 1000 --baseline-kwargs '{"ppo": {"target_kl": 0.02}}' \
         --work benchmarks/runs/ppo_target_kl --out /tmp/ppo_target_kl.json      # a change to the zoo's settings
+    python benchmarks/baselines.py --task basketball --methods sac-her --merge   # add one method to the committed table
 """
 
 from __future__ import annotations
@@ -65,6 +72,20 @@ def _file_digest(path: str) -> str:
         for block in iter(lambda: file.read(1 << 20), b""):
             digest.update(block)
     return digest.hexdigest()[:16]
+
+
+def _version() -> str:
+    import sb3_genrl
+
+    return sb3_genrl.__version__
+
+
+def _dataset(demos: str) -> dict[str, Any]:
+    """What identifies a demonstration dataset made by the package: its task, seed and number of episodes."""
+    from sb3_genrl.data import dataset_info
+
+    info = dataset_info(demos)
+    return {key: info.get(key) for key in ("task", "seed", "episodes")}
 
 
 def _shown(path: str) -> str:
@@ -181,9 +202,20 @@ def final_evaluation(run: pathlib.Path, method: str, task: str, generator: str |
     import sb3_genrl
 
     policy = run / f"{method}_policy.zip"
-    key = {"policy_sha256": _file_digest(str(policy)), "task": task, "goals": EVAL_GOALS, "goal_seed": EVAL_GOAL_SEED,
-           "generator_sha256": _file_digest(generator) if generator else None, "sb3_genrl": sb3_genrl.__version__}
+    key = {"policy_sha256": _file_digest(str(policy)) if policy.exists() else None, "task": task, "goals": EVAL_GOALS,
+           "goal_seed": EVAL_GOAL_SEED, "generator_sha256": _file_digest(generator) if generator else None,
+           "sb3_genrl": sb3_genrl.__version__}
     cache = run / "final_eval.json"
+    if not policy.exists():  # an archived run (see the module doc): its evaluation is all there is
+        if not cache.exists():
+            raise ValueError(f"{run} has neither {policy.name} nor its final evaluation ({cache.name})")
+        record = json.loads(cache.read_text())
+        differ = [name for name in key if name != "policy_sha256" and record.get(name) != key[name]]
+        missing = sorted(FINAL_RESULTS - record.keys())
+        if differ or missing:
+            why = f"was made with another {', '.join(differ)}" if differ else f"lacks {', '.join(missing)}"
+            raise ValueError(f"{run} has no {policy.name} to evaluate again, and its {cache.name} {why}")
+        return record
     if cache.exists():
         record = json.loads(cache.read_text())
         # (a record from before a result was added, e.g. ``object_unmoved``, is evaluated again)
@@ -252,6 +284,30 @@ def method_result(runs: list[pathlib.Path], horizon: int, finals: list[dict[str,
             "episodes_per_cpu_second": float(np.mean(cpu_rates)),
             "bc": [r["bc"] for r in records if r.get("bc")], "first_batch": [r["first_batch"] for r in records
                                                                               if r.get("first_batch")]}
+
+
+# what must agree between a result and the methods merged into it (see ``merge_results``)
+MERGE_KEYS = ("benchmark", "task", "horizon", "episodes", "seeds", "window", "sb3_genrl", "worst_reward", "demos",
+              "demo_dataset", "generator_sha256")
+
+
+def merge_results(previous: dict[str, Any], current: dict[str, Any]) -> dict[str, Any]:
+    """``current`` with the methods of ``previous`` that it did not run, in the benchmark's order of methods.
+
+    Raises ``ValueError`` naming what differs when the two are not results of the same benchmark settings; a key that
+    ``previous`` does not hold (a result written before it was recorded) is not compared, except ``demos``, the
+    dataset's path, which every result holds; one that only ``previous`` holds (the generator's digest, when
+    ``current`` ran no method that uses it) is kept. ``merged_methods`` lists the methods taken from ``previous``."""
+    differ = [key for key in MERGE_KEYS
+              if (key in previous or key == "demos") and key in current and previous.get(key) != current[key]]
+    if differ:
+        shown = "; ".join(f"{key}: {previous.get(key)!r} there, {current[key]!r} now" for key in differ)
+        raise ValueError(f"the result to merge into was made with other settings ({shown})")
+    kept = [method for method in previous["methods"] if method not in current["methods"]]
+    methods = previous["methods"] | current["methods"]
+    order = [m for m in METHODS if m in methods] + [m for m in methods if m not in METHODS]
+    carried = {key: previous[key] for key in MERGE_KEYS if key in previous and key not in current}
+    return carried | current | {"methods": {method: methods[method] for method in order}, "merged_methods": kept}
 
 
 def write_outputs(result: dict[str, Any], out: pathlib.Path) -> None:
@@ -355,6 +411,8 @@ def main() -> None:
                         help="folder of the runs (default: benchmarks/runs/baselines_TASK)")
     parser.add_argument("--out", type=JSON_OUT, default=None,
                         help="JSON result (default: benchmarks/results/baselines[_TASK].json); .md and PNGs beside it")
+    parser.add_argument("--merge", action="store_true",
+                        help="keep the methods of an existing --out that this call does not run (same settings only)")
     args = parser.parse_args()
     if set(args.baseline_kwargs) - set(args.methods):
         parser.error(f"--baseline-kwargs changes {', '.join(sorted(set(args.baseline_kwargs) - set(args.methods)))}, "
@@ -366,8 +424,23 @@ def main() -> None:
     work = pathlib.Path(args.work or HERE / "runs" / f"baselines_{spec.name}")
     out = pathlib.Path(args.out or HERE / "results" / ("baselines.json" if spec.name == "hockey"
                                                        else f"baselines_{spec.name}.json"))
+    previous = None
+    if args.merge and out.exists():
+        try:
+            previous = json.loads(out.read_text())
+            merge_results(previous, {"benchmark": "baselines", "task": spec.name, "episodes": args.episodes,
+                                     "seeds": args.seeds, "window": WINDOW, "sb3_genrl": _version(), "methods": {}})
+        except (ValueError, KeyError, TypeError) as error:  # (a JSON error is a ValueError)
+            raise SystemExit(f"baselines.py: --merge: cannot merge into {out}: {error}") from None
     work.mkdir(parents=True, exist_ok=True)
     demos, generator = prepare(args, work)
+    dataset = _dataset(demos)
+    if previous is not None:  # the dataset and generator, now known, before any run
+        try:
+            merge_results(previous, {"demos": _shown(demos), "demo_dataset": dataset, "methods": {}}
+                          | ({"generator_sha256": _file_digest(generator)} if generator else {}))
+        except ValueError as error:
+            raise SystemExit(f"baselines.py: --merge: cannot merge into {out}: {error}") from None
     jobs = [(method, run_settings(method, args, seed, demos, generator), demos, generator,
              str(work / method / f"seed{seed}")) for method in args.methods for seed in args.seeds]
     try:  # refuse before running anything if a finished run of other settings is in the way
@@ -383,17 +456,22 @@ def main() -> None:
         with ProcessPoolExecutor(args.jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
             for future in as_completed([pool.submit(run_one, *job) for job in todo]):
                 print(f"done {future.result()} ({time.perf_counter() - began:.0f} s)", flush=True)
-    import sb3_genrl
-
     result = {"benchmark": "baselines", "task": spec.name, "horizon": spec.horizon, "episodes": args.episodes,
-              "seeds": args.seeds, "window": WINDOW, "demos": _shown(demos), "sb3_genrl": sb3_genrl.__version__,
-              "machine": platform.machine(), "cpus": os.cpu_count(), "jobs": args.jobs,
+              "seeds": args.seeds, "window": WINDOW, "demos": _shown(demos), "demo_dataset": dataset,
+              "sb3_genrl": _version(), "machine": platform.machine(), "cpus": os.cpu_count(), "jobs": args.jobs,
               "methods": {}}
+    if generator:
+        result["generator_sha256"] = _file_digest(generator)
     worst_reward = result["worst_reward"] = float(gym.make(spec.env_id).unwrapped.worst_reward)
     for method in args.methods:
         runs = [work / method / f"seed{seed}" for seed in args.seeds]
-        finals = [final_evaluation(run, method, spec.name, generator) for run in runs]
+        try:
+            finals = [final_evaluation(run, method, spec.name, generator) for run in runs]
+        except ValueError as error:
+            raise SystemExit(f"baselines.py: {error}") from None
         result["methods"][method] = method_result(runs, spec.horizon, finals, worst_reward)
+    if previous is not None:
+        result = merge_results(previous, result)
     result["core_hours_3000_episodes_3_seeds"] = core_hours(result, 3000, 3)
     write_outputs(result, out)
     print(out.with_suffix(".md").read_text())
