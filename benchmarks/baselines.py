@@ -20,11 +20,10 @@ for a method still exploring is not what its policy can do) and of each final po
 the same 100 held-out goals (kept in the run's ``final_eval.json``), and the curves (reward against episodes and
 against environment steps, table contacts per episode). A finished run's records (``run.json``, the Monitor file,
 ``logs/progress*.csv`` and ``final_eval.json``) are all the results need: a run folder kept without its policy file
-and checkpoints (as ``benchmarks/results/runs/`` keeps runs finished but not yet in a table) is reused as it is, and
-refused if its evaluation was made with other goals, another generator or another version. ``--merge`` keeps the
-other methods of an existing ``--out`` and adds (or replaces) the methods run now, so that methods run at different
-times share one table; it refuses a result of another task, budget, seed list, demonstration dataset, generator or
-package version.
+and checkpoints (to store or move it) is reused as it is, and refused if its evaluation was made with other goals,
+another generator or another version. ``--merge`` keeps the other methods of an existing ``--out`` and adds (or
+replaces) the methods run now, so that methods run at different times share one table; it refuses a result of
+another task, budget, seed list, demonstration dataset, generator or package version.
 
     python benchmarks/baselines.py                          # hockey, 3 seeds x 3000 episodes, every method
     python benchmarks/baselines.py --jobs 2                 # two runs at a time
