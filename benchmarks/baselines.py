@@ -423,23 +423,31 @@ def main() -> None:
     work = pathlib.Path(args.work or HERE / "runs" / f"baselines_{spec.name}")
     out = pathlib.Path(args.out or HERE / "results" / ("baselines.json" if spec.name == "hockey"
                                                        else f"baselines_{spec.name}.json"))
+    # what the result is a result of, built up as it becomes known; with --merge, compared with --out's at each step
+    # (before the demonstrations or the generator are made, then before any run)
+    benchmark = {"benchmark": "baselines", "task": spec.name, "horizon": spec.horizon, "episodes": args.episodes,
+                 "seeds": args.seeds, "window": WINDOW, "sb3_genrl": _version(), "methods": {}}
     previous = None
-    if args.merge and out.exists():
+
+    def check_merge() -> None:
+        """Refuse --out's result when it was made with other settings than those in ``benchmark`` so far."""
+        nonlocal previous
         try:
-            previous = json.loads(out.read_text())
-            merge_results(previous, {"benchmark": "baselines", "task": spec.name, "episodes": args.episodes,
-                                     "seeds": args.seeds, "window": WINDOW, "sb3_genrl": _version(), "methods": {}})
+            previous = json.loads(out.read_text()) if previous is None else previous
+            merge_results(previous, benchmark)
         except (ValueError, KeyError, TypeError) as error:  # (a JSON error is a ValueError)
             raise SystemExit(f"baselines.py: --merge: cannot merge into {out}: {error}") from None
+
+    merge = args.merge and out.exists()
+    if merge:
+        check_merge()
     work.mkdir(parents=True, exist_ok=True)
     demos, generator = prepare(args, work)
-    dataset = _dataset(demos)
-    if previous is not None:  # the dataset and generator, now known, before any run
-        try:
-            merge_results(previous, {"demos": _shown(demos), "demo_dataset": dataset, "methods": {}}
-                          | ({"generator_sha256": _file_digest(generator)} if generator else {}))
-        except ValueError as error:
-            raise SystemExit(f"baselines.py: --merge: cannot merge into {out}: {error}") from None
+    benchmark |= {"demos": _shown(demos), "demo_dataset": _dataset(demos)}
+    if generator:
+        benchmark["generator_sha256"] = _file_digest(generator)
+    if merge:
+        check_merge()
     jobs = [(method, run_settings(method, args, seed, demos, generator), demos, generator,
              str(work / method / f"seed{seed}")) for method in args.methods for seed in args.seeds]
     try:  # refuse before running anything if a finished run of other settings is in the way
@@ -455,12 +463,7 @@ def main() -> None:
         with ProcessPoolExecutor(args.jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
             for future in as_completed([pool.submit(run_one, *job) for job in todo]):
                 print(f"done {future.result()} ({time.perf_counter() - began:.0f} s)", flush=True)
-    result = {"benchmark": "baselines", "task": spec.name, "horizon": spec.horizon, "episodes": args.episodes,
-              "seeds": args.seeds, "window": WINDOW, "demos": _shown(demos), "demo_dataset": dataset,
-              "sb3_genrl": _version(), "machine": platform.machine(), "cpus": os.cpu_count(), "jobs": args.jobs,
-              "methods": {}}
-    if generator:
-        result["generator_sha256"] = _file_digest(generator)
+    result = benchmark | {"machine": platform.machine(), "cpus": os.cpu_count(), "jobs": args.jobs}
     worst_reward = result["worst_reward"] = float(gym.make(spec.env_id).unwrapped.worst_reward)
     for method in args.methods:
         runs = [work / method / f"seed{seed}" for seed in args.seeds]
