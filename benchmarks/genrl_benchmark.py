@@ -36,7 +36,7 @@ from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, SEED, check_int, option 
 from sb3_genrl.generative import load, train_generator  # noqa: E402
 from sb3_genrl.generative.presets import PRESETS  # noqa: E402
 from sb3_genrl.genrl import evaluate_on_goals  # noqa: E402
-from sb3_genrl.genrl.train import genrl_settings, make_genrl  # noqa: E402
+from sb3_genrl.genrl.train import genrl_kwargs_argument, genrl_settings, make_genrl  # noqa: E402
 from sb3_genrl.study.quickstart import policy_settings  # noqa: E402
 from sb3_genrl.utils import atomic_path, atomic_write_json  # noqa: E402
 
@@ -99,7 +99,7 @@ def run_seed(setting: Setting, generator_path: str, seed: int, args: argparse.Na
     eval_env.reset(seed=10_000 + seed)  # the evaluation goals: one fixed stream per seed
     evaluation = EvalCallback(Monitor(eval_env), n_eval_episodes=args.eval_goals, eval_freq=args.eval_every,
                               deterministic=True, log_path=os.path.join(work, f"eval_{seed}"), verbose=0)
-    model = make_genrl(gym.make(env_id), generator, seed=seed, device="cpu", **setting.genrl_kwargs)
+    model = make_genrl(gym.make(env_id), generator, seed=seed, device="cpu", **genrl_kwargs(setting, args))
     start = time.perf_counter()
     model.learn(args.episodes, callback=evaluation)
     seconds = time.perf_counter() - start
@@ -172,10 +172,17 @@ def arguments(setting: Setting, description: str) -> argparse.Namespace:
     parser.add_argument("--grid", type=option(check_int, int, minimum=2), default=201,
                         help="latent grid points per axis for the generator's limit")
     parser.add_argument("--threads", type=COUNT, default=1, help="torch threads")
+    parser.add_argument("--genrl-kwargs", type=genrl_kwargs_argument, default={},
+                        help='GenRL settings as JSON, over the task\'s (e.g. \'{"hindsight": true}\')')
     parser.add_argument("--out", type=JSON_OUT,
                         default=os.path.join(RESULTS, f"genrl_{setting.task}.json"),
                         help="JSON output (a PNG is written beside it)")
     return parser.parse_args()
+
+
+def genrl_kwargs(setting: Setting, args: argparse.Namespace) -> dict[str, object]:
+    """The task's GenRL settings with ``--genrl-kwargs`` over them."""
+    return {**setting.genrl_kwargs, **args.genrl_kwargs}
 
 
 def main(setting: Setting, description: str) -> None:
@@ -187,8 +194,8 @@ def main(setting: Setting, description: str) -> None:
         "benchmark": f"genrl_{setting.task}", "sb3_genrl": __version__, "torch": torch.__version__,
         "machine": platform.machine(), "processor": platform.processor(), "cpus": os.cpu_count(), "threads": args.threads,
         "episodes": args.episodes, "final_goals": args.final_goals, "final_goal_seed": FINAL_GOAL_SEED,
-        "eval_goals": args.eval_goals, "target_m": setting.target_m, "genrl_kwargs": setting.genrl_kwargs,
-        "genrl_settings": genrl_settings(setting.genrl_kwargs), "runs": []}
+        "eval_goals": args.eval_goals, "target_m": setting.target_m, "genrl_kwargs": genrl_kwargs(setting, args),
+        "genrl_settings": genrl_settings(genrl_kwargs(setting, args)), "runs": []}
     with tempfile.TemporaryDirectory() as work:
         generator_path, result["generator"] = make_generator(setting, args, work)
         start = time.perf_counter()

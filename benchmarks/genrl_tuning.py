@@ -67,7 +67,8 @@ class SurrogateTask(gym.Env):
 
     def __init__(self, task: str, landing: np.ndarray) -> None:
         axis = np.linspace(-EXTENT, EXTENT, landing.shape[0])
-        self.landing = RegularGridInterpolator((axis, axis), landing)
+        self.landing = RegularGridInterpolator((axis, axis), np.nan_to_num(landing, nan=0.0))  # none: at the robot
+        self.reached = RegularGridInterpolator((axis, axis), landing)  # NaN next to a grid point without landing
         self.name, self.task = task, get_task(task).make_env()
         self.observation_space = self.context_space = self.task.context_space
         self.action_space = spaces.Box(-EXTENT, EXTENT, (2,), np.float32)
@@ -85,8 +86,15 @@ class SurrogateTask(gym.Env):
         return np.linalg.norm(self.landing(np.clip(alpha, -EXTENT, EXTENT)) - goals, axis=1)
 
     def play_trajectories(self, trajectories: np.ndarray, goals: np.ndarray, **_: Any) -> tuple[np.ndarray, list]:
-        distances = self.distances(np.asarray(trajectories)[:, 0, :], np.broadcast_to(goals, (len(trajectories), 2)))
-        return -distances, [{"distance": float(d)} for d in distances]
+        alpha = np.clip(np.asarray(trajectories)[:, 0, :], -EXTENT, EXTENT)
+        distances = self.distances(alpha, np.broadcast_to(goals, (len(trajectories), 2)))
+        reached = self.reached(alpha)
+        return -distances, [{"distance": float(d), "reached": p} for d, p in zip(distances, reached, strict=True)]
+
+    def hindsight(self, info: dict[str, Any]) -> tuple[np.ndarray, float] | None:
+        """The landing point and 0, as the task's (GenRL's ``hindsight=True``); ``None`` where the grid has none."""
+        reached = np.asarray(info["reached"], dtype=np.float32)
+        return (reached, 0.0) if np.isfinite(reached).all() else None
 
     def step(self, action: np.ndarray) -> tuple:
         raise NotImplementedError("the surrogate is played through play_trajectories")
@@ -169,7 +177,7 @@ def main() -> None:
     torch.set_num_threads(1)
     genrl_kwargs = args.genrl_kwargs
     landing = landing_map(args.generator, args.task, args.grid)
-    env = SurrogateTask(args.task, np.nan_to_num(landing, nan=0.0))  # no landing point: the ball stays at the robot
+    env = SurrogateTask(args.task, landing)
     goals = held_out_goals(args.task, args.goals, TUNING_GOAL_SEED)
     valid = landing.reshape(-1, 2)[np.isfinite(landing.reshape(-1, 2)).all(axis=1)]
     grid_best = float(cKDTree(valid).query(goals)[0].mean())

@@ -210,6 +210,14 @@ class ArmTaskEnv(gym.Env, EzPickle):
         """The task context of the current episode: the goal's (x, y) in metres."""
         return self.goal.astype(np.float32)
 
+    def hindsight(self, info: dict[str, Any]) -> tuple[np.ndarray, float] | None:
+        """The goal an episode with this terminal ``info`` solved, and its reward there: the point it reached
+        (``info["reached"]``) and 0, its distance to itself; ``None`` when the simulation was unstable. The context
+        that GenRL's ``hindsight=True`` relabels the episode with (see :class:`~sb3_genrl.LatentActionWrapper`)."""
+        if info.get("unstable", False) or "reached" not in info:
+            return None
+        return np.asarray(info["reached"], dtype=np.float32), 0.0
+
     def render(self):
         if self.render_mode != "rgb_array":
             return None

@@ -123,6 +123,11 @@ class BasketballEnv(ArmTaskEnv):
     def _settled(self, row: np.ndarray) -> bool:
         return bool(row[3] < BALL_RADIUS + 0.01 and np.linalg.norm(row[4:7]) < 0.05)
 
+    def hindsight(self, info: dict[str, Any]) -> tuple[np.ndarray, float] | None:
+        """As the base task's, and ``None`` when the ball never came down through the rim's height (``reached`` is
+        then where it ended, which no basket position rewards)."""
+        return super().hindsight(info) if info.get("crossings", 0) > 0 else None
+
     def _outcome(self, rows: np.ndarray, goal: np.ndarray) -> tuple[float, dict[str, Any]]:
         points = crossing_points(rows)
         if len(points) == 0:

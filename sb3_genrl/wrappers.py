@@ -46,7 +46,10 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     ``info`` after ``step``: the task's own trajectory summary (e.g. ``table_contacts``, ``reached``,
     ``unstable`` for the GenRL tasks) plus ``reward``, ``steps_played`` (trajectory steps played),
-    ``hold_steps``, ``ended`` (whether the wrapped episode ended), ``latent_clipped`` and ``fast_path``.
+    ``hold_steps``, ``ended`` (whether the wrapped episode ended), ``latent_clipped`` and ``fast_path``. When the
+    context is the task's ``get_context()`` and the task has a method ``hindsight(info)``, also ``hindsight``: what it
+    returns for the step's info, ``(context', reward')`` (a context this trajectory solves, and its reward there) or
+    ``None``; :class:`~sb3_genrl.GenRL` relabels pulls with it when ``hindsight=True``.
 
     :param env: the episodic task; its per-step action shape must be ``(generator.action_dim,)``
     :param generator: the trajectory generator (see :class:`~sb3_genrl.generative.TrajectoryGenerator`)
@@ -199,6 +202,9 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         else:
             info = self._play_steps(tau)
         info["latent_clipped"] = latent_clipped
+        relabel = getattr(self.env.unwrapped, "hindsight", None)
+        if self._context_source == "task" and callable(relabel):  # for GenRL's hindsight=True
+            info["hindsight"] = relabel(info)
         self._needs_reset = True
         return copy.deepcopy(self._context), info["reward"], True, False, info
 

@@ -249,3 +249,25 @@ def test_goals_outside_the_goal_region_or_of_wrong_length_are_refused(hockey, ba
     assert reward == pytest.approx(-np.linalg.norm(info["reached"] - [0.5, 0.0]))
     hockey.reset(options={"goal": [0.5, 0.0], "allow_outside_region": True})
     assert hockey.goal.tolist() == [0.5, 0.0]
+
+
+def test_hindsight_goal_is_the_point_reached_and_rewards_zero(hockey, basketball):
+    # The relabelled goal is one the same trajectory solves: replayed for it, the reward is 0 (its distance to itself).
+    for env, trajectory, goal in ((hockey, scripted_hit(strength=1.1, direction=0.2), np.array([1.0, 0.0])),
+                                  (basketball, scripted_throw(yaw=0.3), np.array([3.0, 0.0]))):
+        reward, info = env.play_trajectory(trajectory, goal)
+        context, relabelled_reward = env.hindsight(info)
+        assert context.dtype == np.float32 and context.shape == (2,) and relabelled_reward == 0.0
+        np.testing.assert_allclose(context, info["reached"], atol=1e-6)
+        assert reward < -0.05  # the original goal was missed
+        replayed, _ = env.play_trajectory(trajectory, context.astype(np.float64), allow_outside_region=True)
+        assert replayed == pytest.approx(0.0, abs=1e-6)
+
+
+def test_no_hindsight_goal_without_a_crossing_or_for_an_unstable_simulation(basketball):
+    _, info = basketball.play_trajectory(np.zeros((78, 7)), np.array([3.0, 0.0]))
+    assert info["crossings"] == 0 and basketball.hindsight(info) is None
+    env = HockeyEnv()
+    env.model.opt.timestep = 0.2  # unstable, as above
+    _, info = env.play_trajectory(scripted_hit(), np.array([1.0, 0.0]))
+    assert info["unstable"] and env.hindsight(info) is None

@@ -117,6 +117,17 @@ class GenRL(OnPolicyAlgorithm):
         the default: none, as in the paper). The average is kept beside the policy that explores
         (``policy_average``) and ``predict`` acts with it, so do evaluations and saved models; see
         :mod:`sb3_genrl.genrl.averaging`. Basketball's long runs land about 12% closer with ``d = 0.97``
+    :param hindsight: relabel each pull with the context it would have solved (default ``False``: no relabelling, as
+        in the paper). A pull whose info holds ``info["hindsight"] = (context', r')`` (the context for which its
+        trajectory earns the best reward, and that reward: for a goal-reaching task, the point it reached and 0;
+        :class:`~sb3_genrl.LatentActionWrapper` asks the task's ``hindsight(info)`` method for it) joins the E-step's
+        batch a second time as ``(context', alpha, A' = r' - V(context'))``, its advantage standardised with the
+        batch's. The relabelled pull is treated as if ``pi(.|context')`` had drawn it (its ratio ``q/pi`` is taken
+        at ``context'``), and it stays inside the same KL bound; the value function is fitted on the pulls as played
+        only. Relabelled contexts outside the observation box, and pulls whose info holds ``None`` (nothing reached),
+        are left out. The latent-space counterpart of hindsight experience replay (Andrychowicz et al., 2017); needs
+        a Box context. Hockey's 3000 episodes and basketball's 20000 end 10-25% closer on their tuning surrogates
+        (``docs/basketball.md``)
     :param latent_clip: action box half-width (prior stds) when wrapping a raw env with a normal-prior generator
     :param stats_window_size: episodes averaged in the ``rollout/`` logs
     :param tensorboard_log: TensorBoard log folder (None: no TensorBoard)
@@ -155,6 +166,7 @@ class GenRL(OnPolicyAlgorithm):
         max_log_std_change: float | None = None,
         value_history: int = 1,
         policy_averaging: float | None = None,
+        hindsight: bool = False,
         latent_clip: float = 3.0,
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,
@@ -169,7 +181,7 @@ class GenRL(OnPolicyAlgorithm):
                 raise TypeError("GenRL(env, generator, generator=...) got the generator twice")
             policy, env, generator = "MlpPolicy", policy, env  # type: ignore[assignment]
         _check_hyperparameters(e_step=e_step, n_em_iterations=n_em_iterations, max_log_std_change=max_log_std_change,
-                               value_history=value_history, policy_averaging=policy_averaging)
+                               value_history=value_history, policy_averaging=policy_averaging, hindsight=hindsight)
         env, policy_kwargs = self._latent_env(env, generator, latent_clip, policy_kwargs, device)
         super().__init__(
             policy, env,  # type: ignore[arg-type]
@@ -189,6 +201,8 @@ class GenRL(OnPolicyAlgorithm):
         self.n_e_step_epochs, self.e_step_learning_rate = n_e_step_epochs, e_step_learning_rate
         self.n_em_iterations, self.normalize_advantage = int(n_em_iterations), normalize_advantage
         self.max_log_std_change, self.latent_clip, self.policy_averaging = max_log_std_change, latent_clip, policy_averaging
+        self.hindsight = hindsight
+        self._pull_infos: list[list[dict[str, Any]]] = []  # the infos of the rollout's pulls, step by step (hindsight)
         if _init_setup_model:
             self._setup_model()
 
@@ -229,15 +243,20 @@ class GenRL(OnPolicyAlgorithm):
         data = next(self.rollout_buffer.get(batch_size=None))
         observations, actions, log_prob_pi = data.observations, data.actions, data.old_log_prob
         advantages = data.advantages
-        if self.normalize_advantage:
-            advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
+        advantage_mean, advantage_std = (advantages.mean(), advantages.std() + 1e-8) if self.normalize_advantage else (0, 1)
+        advantages = (advantages - advantage_mean) / advantage_std
+        batch = (observations, actions, log_prob_pi, advantages)
+        if self.hindsight:  # the relabelled pulls join the E-step's batch (see the class docstring)
+            relabelled = self._hindsight_batch(advantage_mean, advantage_std)
+            batch = tuple(th.cat([played, extra]) for played, extra in zip(batch, relabelled, strict=True))
+            self.logger.record("train/hindsight_pulls", len(relabelled[0]) / len(observations))
 
         log_std_before = log_std_parameters(self.policy)
         for _ in range(self.n_em_iterations):  # Algorithm 1's inner loop: repeat E-step and M-step on the batch
             # E-step (eq. 4-5): the variational policy q_phi starts as a copy of pi_theta (phi <- theta) and is
             # optimised on E_{alpha ~ pi}[q/pi A] - KL(q || pi) while pi_theta stays fixed.
             variational_policy = copy.deepcopy(self.policy)  # in evaluation mode, as pi
-            stats = self._e_step(variational_policy, (observations, actions, log_prob_pi, advantages))
+            stats = self._e_step(variational_policy, batch)
             with th.no_grad():
                 q_distribution = variational_policy.get_distribution(observations)
                 stats["kl"] = kl_divergence(q_distribution, self._pi(observations)).mean().item()  # achieved KL(q || pi)
@@ -268,6 +287,47 @@ class GenRL(OnPolicyAlgorithm):
         self.logger.record("train/std", pi.distribution.stddev.mean().item())  # type: ignore[attr-defined]
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
 
+    def _update_info_buffer(self, infos: list[dict[str, Any]], dones: np.ndarray | None = None) -> None:
+        super()._update_info_buffer(infos, dones)
+        if self.hindsight:
+            self._pull_infos.append(infos)
+
+    def collect_rollouts(self, env: Any, callback: Any, rollout_buffer: Any, n_rollout_steps: int) -> bool:
+        self._pull_infos = []
+        return super().collect_rollouts(env, callback, rollout_buffer, n_rollout_steps)
+
+    def _hindsight_batch(self, advantage_mean: th.Tensor | float, advantage_std: th.Tensor | float,
+                         ) -> tuple[th.Tensor, th.Tensor, th.Tensor, th.Tensor]:
+        """The rollout's relabelled pulls: contexts, latent actions, their log-probabilities under the policy at the
+        relabelled contexts, and advantages ``r' - V(context')`` standardised like the batch's."""
+        buffer, space = self.rollout_buffer, self.observation_space
+        if len(self._pull_infos) != buffer.buffer_size:
+            raise RuntimeError(f"hindsight: {len(self._pull_infos)} steps of infos for a rollout of {buffer.buffer_size}")
+        contexts, actions, rewards = [], [], []
+        for step, infos in enumerate(self._pull_infos):
+            for env_index, info in enumerate(infos):
+                if "hindsight" not in info:
+                    raise ValueError("hindsight=True needs every pull's info['hindsight']: (context, reward) or None. "
+                                     "LatentActionWrapper reports it when the task defines hindsight(info) and the "
+                                     "context is the task's get_context(); this env's info has no such key")
+                if info["hindsight"] is None:
+                    continue
+                context, reward = info["hindsight"]
+                context = np.asarray(context, dtype=space.dtype).reshape(space.shape)
+                if np.all(np.isfinite(context)) and np.all(context >= space.low) and np.all(context <= space.high):
+                    contexts.append(context)
+                    # (steps, envs, ...) until the buffer's get() has flattened it env by env
+                    actions.append(buffer.actions[env_index * buffer.buffer_size + step] if buffer.generator_ready
+                                   else buffer.actions[step, env_index])
+                    rewards.append(float(reward))
+        observations = th.as_tensor(np.array(contexts, dtype=space.dtype).reshape(-1, *space.shape), device=self.device)
+        action_tensor = th.as_tensor(np.array(actions, dtype=np.float32).reshape(len(actions), -1), device=self.device)
+        with th.no_grad():
+            log_prob = self.policy.get_distribution(observations).log_prob(action_tensor)
+            values = self.policy.predict_values(observations).flatten()
+        advantages = (th.as_tensor(rewards, dtype=values.dtype, device=self.device) - values - advantage_mean) / advantage_std
+        return observations, action_tensor, log_prob, advantages
+
     def _pi(self, observations: th.Tensor) -> Distribution:
         """The fixed policy pi_theta(.|s) (no gradient)."""
         with th.no_grad():
@@ -290,6 +350,8 @@ class GenRL(OnPolicyAlgorithm):
             raise ValueError("max_log_std_change with ContextStdPolicy bounds the log std's change over all contexts, "
                              "which needs a bounded Box context scaled by BoxScaler (the default for Box contexts); got "
                              f"{type(extractor).__name__} on {self.observation_space}")
+        if self.hindsight and not isinstance(self.observation_space, spaces.Box):
+            raise ValueError(f"hindsight=True relabels Box contexts; this env's context space is {self.observation_space}")
         # (observations, returns) of the last value_history batches, for the value-function fit
         self._value_memory: collections.deque[tuple[Any, th.Tensor]] = collections.deque(maxlen=self.value_history)
         self.policy_average = None if self.policy_averaging is None else averaged_copy(self.policy)
@@ -325,7 +387,7 @@ class GenRL(OnPolicyAlgorithm):
         super().set_env(env, force_reset=force_reset)  # type: ignore[arg-type]
 
     def _excluded_save_params(self) -> list[str]:
-        return [*super()._excluded_save_params(), "generator", "_value_memory", "policy_average"]
+        return [*super()._excluded_save_params(), "generator", "_value_memory", "policy_average", "_pull_infos"]
 
     def save(self, path: str | pathlib.Path | io.BufferedIOBase, exclude: Any = None, include: Any = None) -> None:
         """Save like SB3, atomically for a file path (a ``.zip`` suffix is added when there is none, as SB3 does).
@@ -391,7 +453,7 @@ class GenRL(OnPolicyAlgorithm):
 
 
 def _check_hyperparameters(*, e_step: str, n_em_iterations: int, max_log_std_change: float | None,
-                           value_history: int, policy_averaging: float | None) -> None:
+                           value_history: int, policy_averaging: float | None, hindsight: bool) -> None:
     """Refuse GenRL settings that SB3 does not check itself, with the setting's name."""
     if e_step not in ("trpo", "kl_penalty"):
         raise ValueError(f"e_step must be 'trpo' or 'kl_penalty', got {e_step!r}")
@@ -402,6 +464,8 @@ def _check_hyperparameters(*, e_step: str, n_em_iterations: int, max_log_std_cha
         raise ValueError(f"max_log_std_change must be positive or None, got {max_log_std_change!r}")
     if policy_averaging is not None and not 0 < policy_averaging < 1:
         raise ValueError(f"policy_averaging must be between 0 and 1 (exclusive) or None, got {policy_averaging!r}")
+    if not isinstance(hindsight, bool | np.bool_):
+        raise ValueError(f"hindsight must be True or False, got {hindsight!r}")
 
 
 def _generator_file(path: str | pathlib.Path) -> pathlib.Path:
