@@ -160,6 +160,8 @@ def _add_train_policy(sub: argparse._SubParsersAction) -> None:
                              "--batch-episodes (default 1)")
     policy.add_argument("--library-defaults", action="store_true",
                         help="GenRL's own defaults instead of the task's GenRL settings (basketball sets its own)")
+    policy.add_argument("--hindsight", action="store_true",
+                        help="relabel each episode with the goal it reached (GenRL's hindsight=True)")
     _device_option(policy)
     _progress_option(policy)
     policy.set_defaults(func=_train_policy_command)
@@ -313,6 +315,8 @@ def _train_policy_command(args: argparse.Namespace) -> int:
     from sb3_genrl.study.quickstart import policy_settings
 
     genrl_kwargs = {} if args.library_defaults else policy_settings(get_task(args.task))[1]
+    if args.hindsight:
+        genrl_kwargs = {**genrl_kwargs, "hindsight": True}
     result = train_policy(args.task, str(args.generator), episodes=args.episodes, seed=args.seed, out_dir=args.out,
                           e_step=args.e_step, batch_episodes=args.batch_episodes, n_envs=args.n_envs,
                           device=args.device, progress_bar=not args.no_progress_bar, **genrl_kwargs)
