@@ -762,6 +762,19 @@ def test_hindsight_relabels_each_pull_with_the_point_its_own_action_reached():
     assert model.logger.name_to_value["train/hindsight_pulls"] == pytest.approx(inside.sum() / n_played)
 
 
+class _NothingReachedEnv(FastReachEnv):
+    def hindsight(self, info):
+        return None
+
+
+def test_hindsight_with_no_pull_to_relabel_leaves_the_batch_as_played():
+    model = _EStepBatchRecorder("MlpPolicy", LatentActionWrapper(_NothingReachedEnv(), LinearGenerator()), seed=0,
+                                n_steps=16, hindsight=True)
+    model.learn(16)
+    observations = model.recorded[0][0]
+    assert len(observations) == 16 and model.logger.name_to_value["train/hindsight_pulls"] == 0
+
+
 def test_hindsight_reaches_new_goals_sooner_on_the_toy():
     distances = {}
     for hindsight in (False, True):

@@ -321,7 +321,8 @@ class GenRL(OnPolicyAlgorithm):
                                    else buffer.actions[step, env_index])
                     rewards.append(float(reward))
         observations = th.as_tensor(np.array(contexts, dtype=space.dtype).reshape(-1, *space.shape), device=self.device)
-        action_tensor = th.as_tensor(np.array(actions, dtype=np.float32).reshape(len(actions), -1), device=self.device)
+        action_shape = (len(actions), *self.action_space.shape)  # also when no pull was relabelled
+        action_tensor = th.as_tensor(np.array(actions, dtype=np.float32).reshape(action_shape), device=self.device)
         with th.no_grad():
             log_prob = self.policy.get_distribution(observations).log_prob(action_tensor)
             values = self.policy.predict_values(observations).flatten()
