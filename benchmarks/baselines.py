@@ -450,6 +450,7 @@ def main() -> None:
         check_merge()
     jobs = [(method, run_settings(method, args, seed, demos, generator), demos, generator,
              str(work / method / f"seed{seed}")) for method in args.methods for seed in args.seeds]
+    jobs_settings = {job[0]: job[1] for job in jobs}  # (the settings shared by a method's seeds are the same)
     try:  # refuse before running anything if a finished run of other settings is in the way
         todo = [job for job in jobs if not finished(pathlib.Path(job[-1]), job[1])]
     except ValueError as error:
@@ -472,6 +473,8 @@ def main() -> None:
         except ValueError as error:
             raise SystemExit(f"baselines.py: {error}") from None
         result["methods"][method] = method_result(runs, spec.horizon, finals, worst_reward)
+        if method == "genrl":  # what GenRL ran with (e.g. hindsight), as each run's settings record it
+            result["methods"][method] |= {key: jobs_settings[method][key] for key in ("genrl_kwargs", "genrl")}
     if previous is not None:
         result = merge_results(previous, result)
     result["core_hours_3000_episodes_3_seeds"] = core_hours(result, 3000, 3)
