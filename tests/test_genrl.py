@@ -791,6 +791,7 @@ def test_hindsight_is_checked():
     model = GenRL(FastReachEnv(), LinearGenerator(), seed=0, hindsight=True)  # its task has no hindsight(info)
     with pytest.raises(ValueError, match=r"info\['hindsight'\]"):
         model.learn(64)
+    assert model.num_timesteps == 1  # refused at the first pull, not after the rollout
     dict_env = LatentActionWrapper(ReachEnv(), LinearGenerator(), context=lambda obs: {"goal": obs[:2]},
                                    context_space=gym.spaces.Dict({"goal": gym.spaces.Box(-1, 1, (2,))}))
     with pytest.raises(ValueError, match="hindsight=True relabels Box contexts"):

@@ -35,6 +35,9 @@ from sb3_genrl.utils import atomic_path
 from sb3_genrl.wrappers import latent_action_env
 
 SelfGenRL = TypeVar("SelfGenRL", bound="GenRL")
+NO_HINDSIGHT_INFO = ("hindsight=True needs every pull's info['hindsight']: (context, reward) or None. LatentActionWrapper "
+                     "reports it when the task defines hindsight(info) and the context is the task's get_context(); "
+                     "this env's info has no such key")
 EStep = Literal["trpo", "kl_penalty"]
 
 
@@ -290,6 +293,8 @@ class GenRL(OnPolicyAlgorithm):
     def _update_info_buffer(self, infos: list[dict[str, Any]], dones: np.ndarray | None = None) -> None:
         super()._update_info_buffer(infos, dones)
         if self.hindsight:
+            if not all("hindsight" in info for info in infos):  # refused at the first pull, not after a rollout
+                raise ValueError(NO_HINDSIGHT_INFO)
             self._pull_infos.append(infos)
 
     def collect_rollouts(self, env: Any, callback: Any, rollout_buffer: Any, n_rollout_steps: int) -> bool:
@@ -306,10 +311,6 @@ class GenRL(OnPolicyAlgorithm):
         contexts, actions, rewards = [], [], []
         for step, infos in enumerate(self._pull_infos):
             for env_index, info in enumerate(infos):
-                if "hindsight" not in info:
-                    raise ValueError("hindsight=True needs every pull's info['hindsight']: (context, reward) or None. "
-                                     "LatentActionWrapper reports it when the task defines hindsight(info) and the "
-                                     "context is the task's get_context(); this env's info has no such key")
                 if info["hindsight"] is None:
                     continue
                 context, reward = info["hindsight"]
