@@ -174,10 +174,15 @@ def arguments(setting: Setting, description: str) -> argparse.Namespace:
     parser.add_argument("--threads", type=COUNT, default=1, help="torch threads")
     parser.add_argument("--genrl-kwargs", type=genrl_kwargs_argument, default={},
                         help='GenRL settings as JSON, over the task\'s (e.g. \'{"hindsight": true}\')')
-    parser.add_argument("--out", type=JSON_OUT,
-                        default=os.path.join(RESULTS, f"genrl_{setting.task}.json"),
-                        help="JSON output (a PNG is written beside it)")
-    return parser.parse_args()
+    parser.add_argument("--out", type=JSON_OUT, default=None,
+                        help=f"JSON output, a PNG beside it (default: {os.path.relpath(RESULTS)}/genrl_{setting.task}.json, "
+                             "the result of the task's own settings; with --genrl-kwargs, --out is needed)")
+    args = parser.parse_args()
+    if args.out is None:
+        if args.genrl_kwargs:
+            parser.error("--genrl-kwargs needs --out: the default output is the result of the task's own settings")
+        args.out = os.path.join(RESULTS, f"genrl_{setting.task}.json")
+    return args
 
 
 def genrl_kwargs(setting: Setting, args: argparse.Namespace) -> dict[str, object]:

@@ -15,6 +15,8 @@ BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 @pytest.mark.parametrize(("script", "argv", "message"), [
     ("genrl_hockey.py", ["--episodes", "0"], "argument --episodes: must be an integer >= 1, got 0"),
     ("genrl_basketball.py", ["--out", "FILE/result.json"], "argument --out: 'FILE/result.json' cannot be created"),
+    ("genrl_hockey.py", ["--genrl-kwargs", '{"hindsight": true}'], "--genrl-kwargs needs --out"),
+    ("genrl_hockey.py", ["--genrl-kwargs", '{"hindsigt": true}', "--out", "r.json"], "hindsigt"),
     ("baselines.py", ["--task", "golf"], "argument --task: invalid choice: 'golf'"),
     ("baselines.py", ["--work", "FILE"], "argument --work: 'FILE' is a file; expected a folder"),
     ("behaviour_cloning.py", ["--out", "result.txt"], "argument --out: 'result.txt' must end in .json"),
