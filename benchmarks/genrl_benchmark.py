@@ -99,7 +99,7 @@ def run_seed(setting: Setting, generator_path: str, seed: int, args: argparse.Na
     eval_env.reset(seed=10_000 + seed)  # the evaluation goals: one fixed stream per seed
     evaluation = EvalCallback(Monitor(eval_env), n_eval_episodes=args.eval_goals, eval_freq=args.eval_every,
                               deterministic=True, log_path=os.path.join(work, f"eval_{seed}"), verbose=0)
-    model = make_genrl(gym.make(env_id), generator, seed=seed, device="cpu", **genrl_kwargs(setting, args))
+    model = make_genrl(gym.make(env_id), generator, seed=seed, device="cpu", **args.genrl_kwargs)
     start = time.perf_counter()
     model.learn(args.episodes, callback=evaluation)
     seconds = time.perf_counter() - start
@@ -182,12 +182,8 @@ def arguments(setting: Setting, description: str) -> argparse.Namespace:
         if args.genrl_kwargs:
             parser.error("--genrl-kwargs needs --out: the default output is the result of the task's own settings")
         args.out = os.path.join(RESULTS, f"genrl_{setting.task}.json")
+    args.genrl_kwargs = {**setting.genrl_kwargs, **args.genrl_kwargs}  # the task's settings, --genrl-kwargs over them
     return args
-
-
-def genrl_kwargs(setting: Setting, args: argparse.Namespace) -> dict[str, object]:
-    """The task's GenRL settings with ``--genrl-kwargs`` over them."""
-    return {**setting.genrl_kwargs, **args.genrl_kwargs}
 
 
 def main(setting: Setting, description: str) -> None:
@@ -199,8 +195,8 @@ def main(setting: Setting, description: str) -> None:
         "benchmark": f"genrl_{setting.task}", "sb3_genrl": __version__, "torch": torch.__version__,
         "machine": platform.machine(), "processor": platform.processor(), "cpus": os.cpu_count(), "threads": args.threads,
         "episodes": args.episodes, "final_goals": args.final_goals, "final_goal_seed": FINAL_GOAL_SEED,
-        "eval_goals": args.eval_goals, "target_m": setting.target_m, "genrl_kwargs": genrl_kwargs(setting, args),
-        "genrl_settings": genrl_settings(genrl_kwargs(setting, args)), "runs": []}
+        "eval_goals": args.eval_goals, "target_m": setting.target_m, "genrl_kwargs": args.genrl_kwargs,
+        "genrl_settings": genrl_settings(args.genrl_kwargs), "runs": []}
     with tempfile.TemporaryDirectory() as work:
         generator_path, result["generator"] = make_generator(setting, args, work)
         start = time.perf_counter()

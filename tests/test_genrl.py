@@ -724,7 +724,7 @@ class HindsightReachEnv(FastReachEnv):
 
 
 class _EStepBatchRecorder(GenRL):
-    """GenRL that keeps the first E-step batch of each iteration, with V and the policy's log-probabilities then."""
+    """GenRL that keeps its first E-step batch, with V and the policy's log-probabilities then."""
 
     def _e_step(self, q, batch):
         if not hasattr(self, "recorded"):

@@ -306,7 +306,7 @@ class GenRL(OnPolicyAlgorithm):
         """The rollout's relabelled pulls: contexts, latent actions, their log-probabilities under the policy at the
         relabelled contexts, and advantages ``r' - V(context')`` standardised like the batch's."""
         buffer, space = self.rollout_buffer, self.observation_space
-        if len(self._pull_infos) != buffer.buffer_size:
+        if len(self._pull_infos) != buffer.buffer_size or not buffer.generator_ready:  # (train() has called get())
             raise RuntimeError(f"hindsight: {len(self._pull_infos)} steps of infos for a rollout of {buffer.buffer_size}")
         contexts, actions, rewards = [], [], []
         for step, infos in enumerate(self._pull_infos):
@@ -317,9 +317,7 @@ class GenRL(OnPolicyAlgorithm):
                 context = np.asarray(context, dtype=space.dtype).reshape(space.shape)
                 if np.all(np.isfinite(context)) and np.all(context >= space.low) and np.all(context <= space.high):
                     contexts.append(context)
-                    # (steps, envs, ...) until the buffer's get() has flattened it env by env
-                    actions.append(buffer.actions[env_index * buffer.buffer_size + step] if buffer.generator_ready
-                                   else buffer.actions[step, env_index])
+                    actions.append(buffer.actions[env_index * buffer.buffer_size + step])  # as get() flattened it
                     rewards.append(float(reward))
         observations = th.as_tensor(np.array(contexts, dtype=space.dtype).reshape(-1, *space.shape), device=self.device)
         action_shape = (len(actions), *self.action_space.shape)  # also when no pull was relabelled
