@@ -162,6 +162,9 @@ def _add_train_policy(sub: argparse._SubParsersAction) -> None:
                         help="GenRL's own defaults instead of the task's GenRL settings (basketball sets its own)")
     policy.add_argument("--hindsight", action="store_true",
                         help="relabel each episode with the goal it reached (GenRL's hindsight=True)")
+    policy.add_argument("--hindsight-history", type=COUNT, default=None, metavar="K",
+                        help="with --hindsight: reuse the relabelled episodes of the last K iterations (GenRL's "
+                             "hindsight_history; default: the task's setting, else 1)")
     _device_option(policy)
     _progress_option(policy)
     policy.set_defaults(func=_train_policy_command)
@@ -315,8 +318,12 @@ def _train_policy_command(args: argparse.Namespace) -> int:
     from sb3_genrl.study.quickstart import policy_settings
 
     genrl_kwargs = {} if args.library_defaults else policy_settings(get_task(args.task))[1]
+    if args.hindsight_history is not None and not args.hindsight:
+        raise ValueError("argument --hindsight-history: needs --hindsight")
     if args.hindsight:
         genrl_kwargs = {**genrl_kwargs, "hindsight": True}
+    if args.hindsight_history is not None:
+        genrl_kwargs["hindsight_history"] = args.hindsight_history
     result = train_policy(args.task, str(args.generator), episodes=args.episodes, seed=args.seed, out_dir=args.out,
                           e_step=args.e_step, batch_episodes=args.batch_episodes, n_envs=args.n_envs,
                           device=args.device, progress_bar=not args.no_progress_bar, **genrl_kwargs)

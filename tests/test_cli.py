@@ -57,6 +57,10 @@ def test_help_lists_the_commands_in_workflow_order_and_version(cli):
      "argument --batch-episodes: must be an integer >= 2, got 1"),
     (("train-policy", "--task", "hockey", "--generator", "missing.pt", "--episodes", "8", "--out", "D"),
      "argument --generator: 'missing.pt' does not exist"),
+    (("train-policy", "--task", "hockey", "--generator", "GEN", "--episodes", "8", "--hindsight-history", "4",
+      "--out", "D"), "argument --hindsight-history: needs --hindsight"),
+    (("train-policy", "--task", "hockey", "--generator", "GEN", "--episodes", "8", "--hindsight",
+      "--hindsight-history", "0", "--out", "D"), "argument --hindsight-history: must be an integer >= 1, got 0"),
     (("baseline", "ppo", "--task", "hockey", "--demos", "D0", "--episodes", "8", "--bc-max-epochs", "-1", "--out", "D"),
      "argument --bc-max-epochs: must be an integer >= 1, got -1"),
     (("baseline", "ppo", "--task", "hockey", "--demos", "D0", "--episodes", "8", "--device", "cuda:7", "--out", "D"),
@@ -214,13 +218,14 @@ def test_play_renders_the_scripted_motion_it_reports(tmp_path, cli):
 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory, hockey_generator):
-    """A GenRL run (relabelling with the goal reached) and a latent-space PPO run on hockey, both through the
-    command line."""
+    """A GenRL run (relabelling with the goal reached, kept for two iterations) and a latent-space PPO run on hockey,
+    both through the command line."""
     from sb3_genrl.cli import main
 
     root = tmp_path_factory.mktemp("runs")
     assert main(["train-policy", "--task", "hockey", "--generator", hockey_generator, "--episodes", "32",
-                 "--batch-episodes", "16", "--hindsight", "--device", "cpu", "--no-progress-bar",
+                 "--batch-episodes", "16", "--hindsight", "--hindsight-history", "2", "--device", "cpu",
+                 "--no-progress-bar",
                  "--out", str(root / "genrl")]) == 0
     assert main(["baseline", "latent-ppo", "--task", "hockey", "--generator", hockey_generator, "--episodes", "16",
                  "--algorithm-kwargs", '{"gamma": 0.9}', "--device", "cpu", "--no-progress-bar",
@@ -252,7 +257,8 @@ def test_baseline_and_compare(runs, tmp_path, cli, hockey_generator):
         rewards.append(env.step(latent_ppo.predict(obs, deterministic=True)[0])[1])
     assert summary["final_eval"]["mean_distance"] == pytest.approx(-np.mean(rewards), rel=1e-5)
     genrl = load_trained("genrl", runs / "genrl" / "genrl_policy.zip", "hockey", generator=generator)
-    assert genrl.hindsight and json.loads((runs / "genrl" / "summary.json").read_text())["genrl_settings"]["hindsight"]
+    settings = json.loads((runs / "genrl" / "summary.json").read_text())["genrl_settings"]
+    assert genrl.hindsight and settings["hindsight"] and genrl.hindsight_history == settings["hindsight_history"] == 2
     _, genrl_rewards, _ = evaluate_on_goals(genrl, "hockey", goals=100, seed=EVAL_GOAL_SEED)
     final = evaluate_trained("genrl", genrl, "hockey", generator=generator)
     assert final["mean_distance"] == pytest.approx(-genrl_rewards.mean(), rel=1e-6)

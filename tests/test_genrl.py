@@ -762,6 +762,47 @@ def test_hindsight_relabels_each_pull_with_the_point_its_own_action_reached():
     assert model.logger.name_to_value["train/hindsight_pulls"] == pytest.approx(inside.sum() / n_played)
 
 
+class _EveryBatchRecorder(GenRL):
+    """GenRL that keeps the first E-step batch of every iteration, with the policy's log-probabilities then and the
+    actions as played."""
+
+    def _e_step(self, q, batch):
+        self.recorded = getattr(self, "recorded", [])
+        if len(self.recorded) == self._n_updates:
+            with th.no_grad():
+                log_prob = self.policy.get_distribution(batch[0]).log_prob(batch[1])
+            played = self.rollout_buffer.actions.reshape(-1, self.action_space.shape[0]).copy()
+            self.recorded.append(([t.clone() for t in batch], log_prob, played))
+        return super()._e_step(q, batch)
+
+
+def test_hindsight_history_keeps_the_relabelled_pulls_of_the_last_batches():
+    model = _EveryBatchRecorder(LatentActionWrapper(HindsightReachEnv(), LinearGenerator()), seed=1, n_steps=16,
+                                hindsight=True, hindsight_history=2)
+    model.learn(64)  # four iterations
+    inside_actions = []
+    for iteration, ((observations, actions, log_prob_pi, _), log_prob, played) in enumerate(model.recorded):
+        reached = np.clip(LinearGenerator().decode(np.clip(played, -3, 3)), -1, 1).sum(axis=1)
+        inside_actions.append(played[np.all(np.abs(reached) <= 0.8, axis=1)])
+        kept = np.concatenate(inside_actions[max(0, iteration - 1):])  # this batch's and the one before
+        relabelled = slice(len(played), None)
+        assert len(observations) == len(played) + len(kept)
+        np.testing.assert_allclose(np.sort(actions[relabelled].numpy(), axis=0), np.sort(kept, axis=0))
+        expected_contexts = np.clip(LinearGenerator().decode(np.clip(actions[relabelled].numpy(), -3, 3)), -1, 1)
+        np.testing.assert_allclose(observations[relabelled].numpy(), expected_contexts.sum(axis=1), atol=1e-5)
+        # the earlier batch's pulls are weighed with the current policy, not the one that played them
+        np.testing.assert_allclose(log_prob_pi[relabelled].numpy(), log_prob[relabelled].numpy(), rtol=1e-5)
+    assert len(model.recorded) == 4 and all(len(actions) > 0 for actions in inside_actions)
+
+
+def test_hindsight_history_is_checked():
+    for value in (0, 1.5):
+        with pytest.raises(ValueError, match="hindsight_history must be a positive integer"):
+            GenRL(FastReachEnv(), LinearGenerator(), hindsight=True, hindsight_history=value)
+    with pytest.raises(ValueError, match="hindsight_history=4 keeps relabelled pulls, which needs hindsight=True"):
+        GenRL(FastReachEnv(), LinearGenerator(), hindsight_history=4)
+
+
 class _NothingReachedEnv(FastReachEnv):
     def hindsight(self, info):
         return None

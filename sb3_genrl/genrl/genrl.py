@@ -131,6 +131,12 @@ class GenRL(OnPolicyAlgorithm):
         are left out. The latent-space counterpart of hindsight experience replay (Andrychowicz et al., 2017); needs
         a Box context. On the tasks' tuning surrogates hockey's 3000 episodes end 23% closer (1.34 against 1.73 cm)
         and basketball's 20000 22% closer (0.063 against 0.080 m); see ``docs/basketball.md``
+    :param hindsight_history: batches whose relabelled pulls join the E-step: the current one and those of the
+        iterations before it (default 1: the current batch only). A relabelled pull stays true after the policy has
+        moved on (the trajectory of ``alpha`` still reaches ``context'``), so, unlike the pulls as played, it can be
+        reused: its ratio ``q/pi`` and its advantage ``r' - V(context')`` are recomputed with the current policy
+        and value function at every iteration. Needs ``hindsight=True``. Like the value history's batches, the kept
+        pulls are not saved with the model: a loaded model starts keeping them anew
     :param latent_clip: action box half-width (prior stds) when wrapping a raw env with a normal-prior generator
     :param stats_window_size: episodes averaged in the ``rollout/`` logs
     :param tensorboard_log: TensorBoard log folder (None: no TensorBoard)
@@ -170,6 +176,7 @@ class GenRL(OnPolicyAlgorithm):
         value_history: int = 1,
         policy_averaging: float | None = None,
         hindsight: bool = False,
+        hindsight_history: int = 1,
         latent_clip: float = 3.0,
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,
@@ -184,7 +191,8 @@ class GenRL(OnPolicyAlgorithm):
                 raise TypeError("GenRL(env, generator, generator=...) got the generator twice")
             policy, env, generator = "MlpPolicy", policy, env  # type: ignore[assignment]
         _check_hyperparameters(e_step=e_step, n_em_iterations=n_em_iterations, max_log_std_change=max_log_std_change,
-                               value_history=value_history, policy_averaging=policy_averaging, hindsight=hindsight)
+                               value_history=value_history, policy_averaging=policy_averaging, hindsight=hindsight,
+                               hindsight_history=hindsight_history)
         env, policy_kwargs = self._latent_env(env, generator, latent_clip, policy_kwargs, device)
         super().__init__(
             policy, env,  # type: ignore[arg-type]
@@ -204,7 +212,7 @@ class GenRL(OnPolicyAlgorithm):
         self.n_e_step_epochs, self.e_step_learning_rate = n_e_step_epochs, e_step_learning_rate
         self.n_em_iterations, self.normalize_advantage = int(n_em_iterations), normalize_advantage
         self.max_log_std_change, self.latent_clip, self.policy_averaging = max_log_std_change, latent_clip, policy_averaging
-        self.hindsight = hindsight
+        self.hindsight, self.hindsight_history = hindsight, int(hindsight_history)
         self._pull_infos: list[list[dict[str, Any]]] = []  # the infos of the rollout's pulls, step by step (hindsight)
         if _init_setup_model:
             self._setup_model()
@@ -303,8 +311,9 @@ class GenRL(OnPolicyAlgorithm):
 
     def _hindsight_batch(self, advantage_mean: th.Tensor | float, advantage_std: th.Tensor | float,
                          ) -> tuple[th.Tensor, th.Tensor, th.Tensor, th.Tensor]:
-        """The rollout's relabelled pulls: contexts, latent actions, their log-probabilities under the policy at the
-        relabelled contexts, and advantages ``r' - V(context')`` standardised like the batch's."""
+        """The relabelled pulls of this rollout and of the ``hindsight_history - 1`` before it: contexts, latent
+        actions, their log-probabilities under the current policy at the relabelled contexts, and advantages
+        ``r' - V(context')`` standardised like the batch's."""
         buffer, space = self.rollout_buffer, self.observation_space
         if len(self._pull_infos) != buffer.buffer_size or not buffer.generator_ready:  # (train() has called get())
             raise RuntimeError(f"hindsight: {len(self._pull_infos)} steps of infos for a rollout of {buffer.buffer_size}")
@@ -319,13 +328,16 @@ class GenRL(OnPolicyAlgorithm):
                     contexts.append(context)
                     actions.append(buffer.actions[env_index * buffer.buffer_size + step])  # as get() flattened it
                     rewards.append(float(reward))
-        observations = th.as_tensor(np.array(contexts, dtype=space.dtype).reshape(-1, *space.shape), device=self.device)
         action_shape = (len(actions), *self.action_space.shape)  # also when no pull was relabelled
-        action_tensor = th.as_tensor(np.array(actions, dtype=np.float32).reshape(action_shape), device=self.device)
-        with th.no_grad():
+        self._hindsight_memory.append((
+            th.as_tensor(np.array(contexts, dtype=space.dtype).reshape(-1, *space.shape), device=self.device),
+            th.as_tensor(np.array(actions, dtype=np.float32).reshape(action_shape), device=self.device),
+            th.as_tensor(np.array(rewards, dtype=np.float32), device=self.device)))
+        observations, action_tensor, reward_tensor = (th.cat(part) for part in zip(*self._hindsight_memory, strict=True))
+        with th.no_grad():  # the current policy and value function, also for the pulls of earlier batches
             log_prob = self.policy.get_distribution(observations).log_prob(action_tensor)
             values = self.policy.predict_values(observations).flatten()
-        advantages = (th.as_tensor(rewards, dtype=values.dtype, device=self.device) - values - advantage_mean) / advantage_std
+        advantages = (reward_tensor.to(values.dtype) - values - advantage_mean) / advantage_std
         return observations, action_tensor, log_prob, advantages
 
     def _pi(self, observations: th.Tensor) -> Distribution:
@@ -354,6 +366,9 @@ class GenRL(OnPolicyAlgorithm):
             raise ValueError(f"hindsight=True relabels Box contexts; this env's context space is {self.observation_space}")
         # (observations, returns) of the last value_history batches, for the value-function fit
         self._value_memory: collections.deque[tuple[Any, th.Tensor]] = collections.deque(maxlen=self.value_history)
+        # (contexts, latent actions, rewards) relabelled in the last hindsight_history batches
+        self._hindsight_memory: collections.deque[tuple[th.Tensor, th.Tensor, th.Tensor]] = collections.deque(
+            maxlen=self.hindsight_history)
         self.policy_average = None if self.policy_averaging is None else averaged_copy(self.policy)
 
     def predict(self, observation: np.ndarray | dict[str, np.ndarray], state: Any = None, episode_start: Any = None,
@@ -387,7 +402,8 @@ class GenRL(OnPolicyAlgorithm):
         super().set_env(env, force_reset=force_reset)  # type: ignore[arg-type]
 
     def _excluded_save_params(self) -> list[str]:
-        return [*super()._excluded_save_params(), "generator", "_value_memory", "policy_average", "_pull_infos"]
+        return [*super()._excluded_save_params(), "generator", "_value_memory", "policy_average", "_pull_infos",
+                                                      "_hindsight_memory"]
 
     def save(self, path: str | pathlib.Path | io.BufferedIOBase, exclude: Any = None, include: Any = None) -> None:
         """Save like SB3, atomically for a file path (a ``.zip`` suffix is added when there is none, as SB3 does).
@@ -453,11 +469,13 @@ class GenRL(OnPolicyAlgorithm):
 
 
 def _check_hyperparameters(*, e_step: str, n_em_iterations: int, max_log_std_change: float | None,
-                           value_history: int, policy_averaging: float | None, hindsight: bool) -> None:
+                           value_history: int, policy_averaging: float | None, hindsight: bool,
+                           hindsight_history: int) -> None:
     """Refuse GenRL settings that SB3 does not check itself, with the setting's name."""
     if e_step not in ("trpo", "kl_penalty"):
         raise ValueError(f"e_step must be 'trpo' or 'kl_penalty', got {e_step!r}")
-    for name, value in (("n_em_iterations", n_em_iterations), ("value_history", value_history)):
+    for name, value in (("n_em_iterations", n_em_iterations), ("value_history", value_history),
+                        ("hindsight_history", hindsight_history)):
         if int(value) != value or value < 1:
             raise ValueError(f"{name} must be a positive integer, got {value!r}")
     if max_log_std_change is not None and not max_log_std_change > 0:
@@ -466,6 +484,8 @@ def _check_hyperparameters(*, e_step: str, n_em_iterations: int, max_log_std_cha
         raise ValueError(f"policy_averaging must be between 0 and 1 (exclusive) or None, got {policy_averaging!r}")
     if not isinstance(hindsight, bool | np.bool_):
         raise ValueError(f"hindsight must be True or False, got {hindsight!r}")
+    if hindsight_history != 1 and not hindsight:
+        raise ValueError(f"hindsight_history={hindsight_history!r} keeps relabelled pulls, which needs hindsight=True")
 
 
 def _generator_file(path: str | pathlib.Path) -> pathlib.Path:
