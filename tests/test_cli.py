@@ -156,6 +156,10 @@ def test_library_functions_check_before_any_work(tmp_path):
         quickstart(tmp_path / "quick", task="hockey", policy_episodes=-1)
     with pytest.raises(ValueError, match="device"):
         quickstart(tmp_path / "quick", task="hockey", device="bogus")
+    from sb3_genrl.genrl import train_policy
+
+    with pytest.raises(ValueError, match="hindsight=True needs e_step='trpo'"):  # GenRL's settings, before its Monitor
+        train_policy("hockey", "missing.pt", episodes=8, out_dir=tmp_path / "policy", e_step="kl_penalty", hindsight=True)
     assert list(tmp_path.iterdir()) == []  # no demonstrations were made, no folder created
 
 

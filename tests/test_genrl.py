@@ -703,6 +703,14 @@ def test_check_genrl_kwargs_refuses_unknown_names_and_policies():
         check_genrl_kwargs({"policy": "CnnPolicy"})
     with pytest.raises(TypeError, match="expected a dict"):
         check_genrl_kwargs([("target_kl", 0.03)])
+    # the values GenRL would refuse, before any work: alone, and against the others' defaults (e_step="trpo")
+    with pytest.raises(ValueError, match="--genrl-kwargs: value_history must be a positive integer, got 0"):
+        check_genrl_kwargs({"value_history": 0}, "--genrl-kwargs")
+    with pytest.raises(ValueError, match="hindsight_history=2 keeps relabelled pulls, which needs hindsight=True"):
+        check_genrl_kwargs({"hindsight_history": 2})
+    with pytest.raises(ValueError, match="hindsight=True needs e_step='trpo'"):
+        check_genrl_kwargs({"hindsight": True, "e_step": "kl_penalty"})
+    assert check_genrl_kwargs({"hindsight": True, "hindsight_history": 2}) == {"hindsight": True, "hindsight_history": 2}
 
 
 def test_genrl_kwargs_argument_parses_and_checks_json():
@@ -829,6 +837,8 @@ def test_hindsight_reaches_new_goals_sooner_on_the_toy():
 def test_hindsight_is_checked():
     with pytest.raises(ValueError, match="hindsight must be True or False"):
         GenRL(FastReachEnv(), LinearGenerator(), hindsight="yes")
+    with pytest.raises(ValueError, match="hindsight=True needs e_step='trpo'"):
+        GenRL(FastReachEnv(), LinearGenerator(), hindsight=True, e_step="kl_penalty")
     model = GenRL(FastReachEnv(), LinearGenerator(), seed=0, hindsight=True)  # its task has no hindsight(info)
     with pytest.raises(ValueError, match=r"info\['hindsight'\]"):
         model.learn(64)

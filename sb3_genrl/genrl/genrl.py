@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import collections
 import copy
+import inspect
 import io
 import os
 import pathlib
@@ -129,8 +130,10 @@ class GenRL(OnPolicyAlgorithm):
         at ``context'``), and it stays inside the same KL bound; the value function is fitted on the pulls as played
         only. Relabelled contexts outside the observation box, and pulls whose info holds ``None`` (nothing reached),
         are left out. The latent-space counterpart of hindsight experience replay (Andrychowicz et al., 2017); needs
-        a Box context. On the tasks' tuning surrogates hockey's 3000 episodes end 23% closer (1.34 against 1.73 cm)
-        and basketball's 20000 22% closer (0.063 against 0.080 m); see ``docs/basketball.md``
+        a Box context and ``e_step="trpo"`` (under the KL penalty the ratio of a pull that ``pi`` makes unlikely
+        at its new context grows faster than the penalty: that objective has no maximum). On the tasks' tuning
+        surrogates hockey's 3000 episodes end 23% closer (1.34 against 1.73 cm) and basketball's 20000 22% closer
+        (0.063 against 0.080 m); see ``docs/basketball.md``
     :param hindsight_history: batches whose relabelled pulls join the E-step: the current one and those of the
         iterations before it (default 1: the current batch only). A relabelled pull stays true after the policy has
         moved on (the trajectory of ``alpha`` still reaches ``context'``), so, unlike the pulls as played, it can be
@@ -468,6 +471,14 @@ class GenRL(OnPolicyAlgorithm):
         return super().learn(total_timesteps, callback, log_interval, tb_log_name, reset_num_timesteps, progress_bar)
 
 
+def check_hyperparameters(settings: dict[str, Any]) -> None:
+    """Refuse, before any work, the GenRL settings that ``GenRL(**settings)`` would refuse (the values that SB3 does
+    not check itself), each missing one taken at GenRL's default."""
+    defaults = inspect.signature(GenRL.__init__).parameters
+    _check_hyperparameters(**{name: settings.get(name, defaults[name].default)
+                              for name in inspect.signature(_check_hyperparameters).parameters})
+
+
 def _check_hyperparameters(*, e_step: str, n_em_iterations: int, max_log_std_change: float | None,
                            value_history: int, policy_averaging: float | None, hindsight: bool,
                            hindsight_history: int) -> None:
@@ -484,6 +495,10 @@ def _check_hyperparameters(*, e_step: str, n_em_iterations: int, max_log_std_cha
         raise ValueError(f"policy_averaging must be between 0 and 1 (exclusive) or None, got {policy_averaging!r}")
     if not isinstance(hindsight, bool | np.bool_):
         raise ValueError(f"hindsight must be True or False, got {hindsight!r}")
+    if hindsight and e_step != "trpo":
+        raise ValueError("hindsight=True needs e_step='trpo': a relabelled pull that pi makes unlikely at its new context "
+                         "has a ratio q/pi that grows exponentially as q moves towards it, faster than the KL penalty "
+                         "grows, so the KL-penalty E-step's objective has no maximum (TRPO's step keeps the KL bound)")
     if hindsight_history != 1 and not hindsight:
         raise ValueError(f"hindsight_history={hindsight_history!r} keeps relabelled pulls, which needs hindsight=True")
 

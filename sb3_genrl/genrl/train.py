@@ -26,7 +26,7 @@ from sb3_genrl.curves import (
     write_learning_curve,
 )
 from sb3_genrl.generative.base import TrajectoryGenerator
-from sb3_genrl.genrl.genrl import EStep, GenRL
+from sb3_genrl.genrl.genrl import EStep, GenRL, check_hyperparameters
 from sb3_genrl.genrl.policies import MlpPolicy
 from sb3_genrl.utils import atomic_write_json
 from sb3_genrl.wrappers import LatentActionWrapper
@@ -107,6 +107,7 @@ def train_policy(
     """
     env_id, task_name = _resolve_env_id(task)
     _check_arguments(episodes, batch_episodes, n_envs, seed, device)
+    check_genrl_kwargs({"e_step": e_step, **genrl_kwargs}, None)
     out = check_output_dir(out_dir)
     # Built first: a generator that does not fit the task is refused before anything is written.
     env = LatentActionWrapper(gym.make(env_id), _as_generator(generator))
@@ -142,8 +143,9 @@ def _train(env: Any, generator: TrajectoryGenerator | str, episodes: int, out: p
 
 
 def check_genrl_kwargs(genrl_kwargs: dict[str, Any], name: str | None = "genrl_kwargs") -> dict[str, Any]:
-    """Refuse names that are not GenRL's settings, and unknown policy names, before any work starts (GenRL checks
-    the values when it is built). ``name`` starts the error message (``None``: nothing)."""
+    """Refuse names that are not GenRL's settings, unknown policy names, and the values that GenRL would refuse
+    (:func:`~sb3_genrl.genrl.genrl.check_hyperparameters`, the others at their defaults), before any work starts.
+    ``name`` starts the error message (``None``: nothing)."""
     import inspect
 
     prefix = f"{name}: " if name else ""
@@ -158,6 +160,10 @@ def check_genrl_kwargs(genrl_kwargs: dict[str, Any], name: str | None = "genrl_k
     policy = genrl_kwargs.get("policy", "MlpPolicy")
     if isinstance(policy, str) and policy not in GenRL.policy_aliases:
         raise ValueError(f"{prefix}unknown policy {policy!r} (known: {', '.join(GenRL.policy_aliases)})")
+    try:
+        check_hyperparameters(genrl_kwargs)
+    except ValueError as error:
+        raise ValueError(f"{prefix}{error}") from None
     return genrl_kwargs
 
 
