@@ -109,7 +109,7 @@ def run_settings(method: str, args: argparse.Namespace, seed: int, demos: str, g
         settings["algorithm_kwargs"] = changes
     if method == "genrl" or method.startswith("latent-"):
         settings |= {"generator": os.path.abspath(generator), "generator_sha256": _file_digest(generator),
-                     "batch_episodes": WINDOW}
+                     "batch_episodes": args.genrl_kwargs.get("n_steps", WINDOW) if method == "genrl" else WINDOW}
         if method == "genrl":  # the chosen GenRL arguments, and every setting in effect
             from sb3_genrl.genrl.train import genrl_settings
 
@@ -134,8 +134,9 @@ def run_one(method: str, settings: dict[str, Any], demos: str, generator: str, r
     if method == "genrl":
         from sb3_genrl.genrl import train_policy
 
+        genrl_kwargs = {key: value for key, value in settings["genrl_kwargs"].items() if key != "n_steps"}
         summary = train_policy(settings["task"], generator, episodes=settings["episodes"], seed=settings["seed"],
-                               out_dir=run, batch_episodes=WINDOW, device="cpu", **settings["genrl_kwargs"])
+                               out_dir=run, batch_episodes=settings["batch_episodes"], device="cpu", **genrl_kwargs)
         timing = {"setup_seconds": 0.0, "setup_cpu_seconds": 0.0, "learn_seconds": time.perf_counter() - began}
     else:
         from sb3_genrl.baselines.train import train_baseline

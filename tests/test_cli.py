@@ -160,6 +160,8 @@ def test_library_functions_check_before_any_work(tmp_path):
 
     with pytest.raises(ValueError, match="hindsight=True needs e_step='trpo'"):  # GenRL's settings, before its Monitor
         train_policy("hockey", "missing.pt", episodes=8, out_dir=tmp_path / "policy", e_step="kl_penalty", hindsight=True)
+    with pytest.raises(ValueError, match="n_steps=16: give the episodes per iteration as batch_episodes"):
+        train_policy("hockey", "missing.pt", episodes=8, out_dir=tmp_path / "policy", n_steps=16)
     assert list(tmp_path.iterdir()) == []  # no demonstrations were made, no folder created
 
 

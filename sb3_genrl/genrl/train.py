@@ -107,6 +107,9 @@ def train_policy(
     """
     env_id, task_name = _resolve_env_id(task)
     _check_arguments(episodes, batch_episodes, n_envs, seed, device)
+    if "n_steps" in genrl_kwargs:  # the learning curve's window and the summary's iterations follow batch_episodes
+        raise ValueError(f"n_steps={genrl_kwargs['n_steps']!r}: give the episodes per iteration as batch_episodes "
+                         "(n_steps is batch_episodes / n_envs)")
     check_genrl_kwargs({"e_step": e_step, **genrl_kwargs}, None)
     out = check_output_dir(out_dir)
     # Built first: a generator that does not fit the task is refused before anything is written.
