@@ -164,7 +164,7 @@ def _add_train_policy(sub: argparse._SubParsersAction) -> None:
                         help="relabel each episode with the goal it reached (GenRL's hindsight=True)")
     policy.add_argument("--hindsight-history", type=COUNT, default=None, metavar="K",
                         help="with --hindsight: reuse the relabelled episodes of the last K iterations (GenRL's "
-                             "hindsight_history; default: the task's setting, else 1)")
+                             "hindsight_history; default 1: this iteration's only)")
     _device_option(policy)
     _progress_option(policy)
     policy.set_defaults(func=_train_policy_command)

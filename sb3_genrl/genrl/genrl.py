@@ -408,7 +408,7 @@ class GenRL(OnPolicyAlgorithm):
 
     def _excluded_save_params(self) -> list[str]:
         return [*super()._excluded_save_params(), "generator", "_value_memory", "policy_average", "_pull_infos",
-                                                      "_hindsight_memory"]
+                "_hindsight_memory"]
 
     def save(self, path: str | pathlib.Path | io.BufferedIOBase, exclude: Any = None, include: Any = None) -> None:
         """Save like SB3, atomically for a file path (a ``.zip`` suffix is added when there is none, as SB3 does).
