@@ -25,6 +25,9 @@ BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
     ("precision_recall.py", ["--out", "FOLDER"], "argument --out: 'FOLDER' is a folder; expected a file name"),
     ("sim_throughput.py", ["--repeats", "0"], "argument --repeats: must be an integer >= 1, got 0"),
     ("genrl_tuning.py", ["--generator", "missing.pt"], "argument --generator: 'missing.pt' does not exist"),
+    ("network_fit.py", ["--task", "hockey", "--generator", "missing.pt"], "argument --generator: 'missing.pt' does not exist"),
+    ("network_fit.py", ["--task", "hockey", "--generator", "FILE", "--out", "FOLDER"], "argument --out: 'FOLDER' is a folder"),
+    ("network_fit.py", ["--task", "golf", "--generator", "FILE"], "argument --task: invalid choice: 'golf'"),
     ("basketball_diagnosis.py", ["--data", "FOLDER", "--generator", "FILE", "--name", "../x"], "argument --name: '../x'"),
     ("reachable.py", ["--task", "hockey", "--generator", "missing.pt", "--out", "out.json"], "missing.pt is not a file"),
 ])
