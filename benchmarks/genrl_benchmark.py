@@ -36,8 +36,8 @@ from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, SEED, check_int, option 
 from sb3_genrl.generative import load, train_generator  # noqa: E402
 from sb3_genrl.generative.presets import PRESETS  # noqa: E402
 from sb3_genrl.genrl import evaluate_on_goals  # noqa: E402
-from sb3_genrl.genrl.train import genrl_kwargs_argument, genrl_settings, make_genrl  # noqa: E402
-from sb3_genrl.study.quickstart import policy_settings  # noqa: E402
+from sb3_genrl.genrl.train import check_genrl_kwargs, genrl_kwargs_argument, genrl_settings, make_genrl  # noqa: E402
+from sb3_genrl.study.quickstart import policy_batch_episodes, policy_settings  # noqa: E402
 from sb3_genrl.utils import atomic_path, atomic_write_json  # noqa: E402
 
 RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
@@ -63,7 +63,9 @@ class Setting:
 
     @property
     def genrl_kwargs(self) -> dict[str, object]:
-        return policy_settings(get_task(self.task))[1]
+        """The task's GenRL settings, its episodes per iteration as ``n_steps`` (one env)."""
+        spec = get_task(self.task)
+        return {**policy_settings(spec)[1], "n_steps": policy_batch_episodes(spec)}
 
     @property
     def scale(self) -> float:
@@ -151,8 +153,11 @@ def print_table(setting: Setting, result: dict[str, object]) -> None:
           + ", ".join(f"{name} {mean * scale:.3f}" for name, mean in limit["coarser_grid_means_m"].items())
           + (f"; {limit['prior_samples']} prior samples {limit['prior_samples_mean_m'] * scale:.3f}"
              if limit.get("prior_samples_mean_m") else "") + ")")
+    prior = (f", {result['ratio_prior_samples']:.2f} ({limit['prior_samples']} prior samples)"
+             if "ratio_prior_samples" in result else "")
     print(f"over seeds: {result['mean_m_over_seeds'] * scale:.3f} +- {result['std_m_over_seeds'] * scale:.3f} {unit} "
-          f"(worst {result['worst_mean_m'] * scale:.3f}); ratio GenRL / generator {result['ratio']:.2f}")
+          f"(worst {result['worst_mean_m'] * scale:.3f}); ratio GenRL / generator's best reachable {result['ratio']:.2f} "
+          f"(its {limit['n_latents']} latent actions){prior}")
 
 
 def arguments(setting: Setting, description: str) -> argparse.Namespace:
@@ -173,16 +178,25 @@ def arguments(setting: Setting, description: str) -> argparse.Namespace:
                         help="latent grid points per axis for the generator's limit")
     parser.add_argument("--threads", type=COUNT, default=1, help="torch threads")
     parser.add_argument("--genrl-kwargs", type=genrl_kwargs_argument, default={},
-                        help='GenRL settings as JSON, over the task\'s (e.g. \'{"hindsight": true}\')')
+                        help='GenRL settings as JSON, over the task\'s (e.g. \'{"target_kl": 0.02}\')')
+    parser.add_argument("--library-defaults", action="store_true",
+                        help="GenRL's own defaults (64 episodes per iteration, no hindsight) under --genrl-kwargs, "
+                             "instead of the task's settings")
     parser.add_argument("--out", type=JSON_OUT, default=None,
                         help=f"JSON output, a PNG beside it (default: {os.path.relpath(RESULTS)}/genrl_{setting.task}.json, "
                              "the result of the task's own settings; with --genrl-kwargs, --out is needed)")
     args = parser.parse_args()
     if args.out is None:
-        if args.genrl_kwargs:
-            parser.error("--genrl-kwargs needs --out: the default output is the result of the task's own settings")
+        if args.genrl_kwargs or args.library_defaults:
+            parser.error(f"{'--genrl-kwargs' if args.genrl_kwargs else '--library-defaults'} needs --out: the "
+                         "default output is the result of the task's own settings")
         args.out = os.path.join(RESULTS, f"genrl_{setting.task}.json")
-    args.genrl_kwargs = {**setting.genrl_kwargs, **args.genrl_kwargs}  # the task's settings, --genrl-kwargs over them
+    # the task's settings (or none: GenRL's defaults), --genrl-kwargs over them
+    args.genrl_kwargs = {**({} if args.library_defaults else setting.genrl_kwargs), **args.genrl_kwargs}
+    try:  # the settings together, as GenRL will take them (e.g. hindsight_history needs hindsight)
+        check_genrl_kwargs(dict(args.genrl_kwargs), None)
+    except (TypeError, ValueError) as error:
+        parser.error(f"argument --genrl-kwargs: {error}")
     return args
 
 

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
+from sb3_genrl.envs import get_task
 from sb3_genrl.envs.demonstrations import make_demonstrations
 
 from sb3_genrl import GenRL  # importing sb3_genrl registers GenRL/Hockey-v0 with Gymnasium
@@ -47,9 +48,13 @@ def main() -> None:
 
     # 3. GenRL: a policy from the goal to a latent action, trained with the paper's EM algorithm. train_policy wraps
     #    the task in LatentActionWrapper, logs to TensorBoard and writes the learning curve as training goes; the
-    #    lower-level equivalent is GenRL(gym.make("GenRL/Hockey-v0"), vae).learn(args.episodes).
+    #    lower-level equivalent is GenRL(gym.make("GenRL/Hockey-v0"), vae, n_steps=16, ...).learn(args.episodes).
+    #    Hockey's own settings, as genrl quickstart uses them: 16 episodes per iteration, and each hit also relabelled
+    #    with where the puck came to rest (hindsight=True), those of the last 120 iterations kept.
+    settings = get_task("hockey").quickstart
     result = train_policy("hockey", str(out / "vae.pt"), episodes=args.episodes, seed=args.seed,
-                          out_dir=out / "policy", progress_bar=True)
+                          out_dir=out / "policy", batch_episodes=settings["batch_episodes"], progress_bar=True,
+                          **settings["genrl_kwargs"])
     print(f"GenRL: {result['episodes']} episodes, learning curve in {result['png_path']}")
 
     # 4. The trained policy, deterministic, on 100 goals it has not seen: play the decoded trajectories.

@@ -153,18 +153,19 @@ def _add_train_policy(sub: argparse._SubParsersAction) -> None:
     _seed_option(policy)
     policy.add_argument("--out", required=True, type=OUT_DIR, help="output folder (model, learning curve, logs)")
     policy.add_argument("--e-step", choices=("trpo", "kl_penalty"), default="trpo", help="E-step variant")
-    policy.add_argument("--batch-episodes", type=option(check_int, int, minimum=2), default=64,
-                        help="episodes per EM iteration N, at least 2 (default 64)")
+    policy.add_argument("--batch-episodes", type=option(check_int, int, minimum=2), default=None,
+                        help="episodes per EM iteration N, at least 2 (default: the task's, or 64 with "
+                             "--library-defaults)")
     policy.add_argument("--n-envs", type=COUNT, default=1,
                         help="envs played at a time, each in its own process (one per core); a divisor of "
                              "--batch-episodes (default 1)")
     policy.add_argument("--library-defaults", action="store_true",
-                        help="GenRL's own defaults instead of the task's GenRL settings (basketball sets its own)")
+                        help="GenRL's own defaults instead of the task's GenRL settings and batch_episodes")
     policy.add_argument("--hindsight", action="store_true",
                         help="relabel each episode with the goal it reached (GenRL's hindsight=True)")
     policy.add_argument("--hindsight-history", type=COUNT, default=None, metavar="K",
                         help="with --hindsight: reuse the relabelled episodes of the last K iterations (GenRL's "
-                             "hindsight_history; default 1: this iteration's only)")
+                             "hindsight_history; default: the task's, else 1: this iteration's only)")
     _device_option(policy)
     _progress_option(policy)
     policy.set_defaults(func=_train_policy_command)
@@ -315,17 +316,24 @@ def _evaluate_command(args: argparse.Namespace) -> int:
 def _train_policy_command(args: argparse.Namespace) -> int:
     from sb3_genrl.envs import get_task
     from sb3_genrl.genrl import train_policy
-    from sb3_genrl.study.quickstart import policy_settings
+    from sb3_genrl.study.quickstart import DEFAULT_BATCH_EPISODES, policy_batch_episodes, policy_settings
 
-    genrl_kwargs = {} if args.library_defaults else policy_settings(get_task(args.task))[1]
+    spec = get_task(args.task)
+    genrl_kwargs = {} if args.library_defaults else policy_settings(spec)[1]
+    batch_episodes = args.batch_episodes or (DEFAULT_BATCH_EPISODES if args.library_defaults
+                                             else policy_batch_episodes(spec))
     if args.hindsight_history is not None and not args.hindsight:
         raise ValueError("argument --hindsight-history: needs --hindsight")
+    if args.e_step == "kl_penalty" and genrl_kwargs.get("hindsight") and not args.hindsight:
+        raise ValueError(f"argument --e-step: {args.task}'s GenRL settings relabel episodes in hindsight, which the "
+                         "KL-penalty E-step does not support; add --library-defaults to train with GenRL's own "
+                         "defaults")
     if args.hindsight:
         genrl_kwargs = {**genrl_kwargs, "hindsight": True}
     if args.hindsight_history is not None:
         genrl_kwargs["hindsight_history"] = args.hindsight_history
     result = train_policy(args.task, str(args.generator), episodes=args.episodes, seed=args.seed, out_dir=args.out,
-                          e_step=args.e_step, batch_episodes=args.batch_episodes, n_envs=args.n_envs,
+                          e_step=args.e_step, batch_episodes=batch_episodes, n_envs=args.n_envs,
                           device=args.device, progress_bar=not args.no_progress_bar, **genrl_kwargs)
     print(f"GenRL on {args.task}: {result['episodes']} episodes, {result['iterations']} iterations, mean reward "
           f"final {result['final_mean_reward']:.4g}, best {result['best_mean_reward']:.4g} -> {result['model_path']}")

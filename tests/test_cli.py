@@ -61,6 +61,8 @@ def test_help_lists_the_commands_in_workflow_order_and_version(cli):
       "--out", "D"), "argument --hindsight-history: needs --hindsight"),
     (("train-policy", "--task", "hockey", "--generator", "GEN", "--episodes", "8", "--hindsight",
       "--hindsight-history", "0", "--out", "D"), "argument --hindsight-history: must be an integer >= 1, got 0"),
+    (("train-policy", "--task", "basketball", "--generator", "GEN", "--episodes", "8", "--e-step", "kl_penalty",
+      "--out", "D"), "argument --e-step: basketball's GenRL settings relabel episodes in hindsight"),
     (("baseline", "ppo", "--task", "hockey", "--demos", "D0", "--episodes", "8", "--bc-max-epochs", "-1", "--out", "D"),
      "argument --bc-max-epochs: must be an integer >= 1, got -1"),
     (("baseline", "ppo", "--task", "hockey", "--demos", "D0", "--episodes", "8", "--device", "cuda:7", "--out", "D"),

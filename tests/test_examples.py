@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import pathlib
 import re
@@ -30,6 +31,8 @@ def test_quickstart_example_runs_the_whole_workflow(tmp_path):
     for path in ("demonstrations", "vae.pt", "policy/genrl_policy.zip", "policy/learning_curve.png",
                  "policy/learning_curve.csv"):
         assert (out / path).exists(), path
+    summary = json.loads((out / "policy" / "summary.json").read_text())  # hockey's own settings, as the quickstart's
+    assert (summary["iterations"], summary["genrl_settings"]["hindsight"]) == (64 // 16, True)
     match = re.search(r"mean final distance to 100 new goals: ([0-9.]+) cm \(median ([0-9.]+) cm", stdout)
     assert match is not None, stdout
     # What the example prints is the saved policy's distance to the 100 goals of seed 0 + 1, replayed here.

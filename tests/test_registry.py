@@ -143,17 +143,36 @@ def test_task_names_only_in_the_task_modules_and_the_registry():
 
 
 def test_quickstart_settings_come_from_the_task_spec():
-    from sb3_genrl.study.quickstart import DEFAULT_POLICY_EPISODES, policy_settings
+    from sb3_genrl.study.quickstart import (
+        DEFAULT_BATCH_EPISODES,
+        DEFAULT_POLICY_EPISODES,
+        policy_batch_episodes,
+        policy_settings,
+    )
 
     assert REACH.quickstart == {} and policy_settings(REACH) == (DEFAULT_POLICY_EPISODES, {})
-    assert policy_settings(REACH, 64) == (64, {})
-    tuned = TaskSpec(**{**vars(REACH), "quickstart": {"policy_episodes": 500, "genrl_kwargs": {"target_kl": 0.02}}})
+    assert policy_settings(REACH, 64) == (64, {}) and policy_batch_episodes(REACH) == DEFAULT_BATCH_EPISODES == 64
+    tuned = TaskSpec(**{**vars(REACH), "quickstart": {"policy_episodes": 500, "batch_episodes": 16,
+                                                      "genrl_kwargs": {"target_kl": 0.02}}})
     assert policy_settings(tuned) == (500, {"target_kl": 0.02}) and policy_settings(tuned, 64) == (64, {"target_kl": 0.02})
+    assert policy_batch_episodes(tuned) == 16
     basketball = get_task("basketball")
     episodes, kwargs = policy_settings(basketball)
     assert episodes == basketball.quickstart["policy_episodes"] > DEFAULT_POLICY_EPISODES and kwargs
-    with pytest.raises(ValueError, match=r"unknown quickstart settings \['episodes'\]"):
-        TaskSpec(**{**vars(REACH), "quickstart": {"episodes": 500}})
+
+
+@pytest.mark.parametrize(("quickstart", "message"), [
+    ({"episodes": 500}, r"unknown quickstart settings \['episodes'\]"),
+    ({"policy_episodes": 0}, "policy_episodes must be an integer of at least 1, got 0"),
+    ({"policy_episodes": 500.0}, "policy_episodes must be an integer"),
+    ({"batch_episodes": 1}, "batch_episodes must be an integer of at least 2, got 1"),
+    ({"batch_episodes": True}, "batch_episodes must be an integer"),
+    ({"genrl_kwargs": [("target_kl", 0.02)]}, "genrl_kwargs must be a mapping"),
+    ({"genrl_kwargs": {"n_steps": 16}}, "as quickstart batch_episodes, not as genrl_kwargs n_steps"),
+])
+def test_task_spec_refuses_bad_quickstart_settings(quickstart, message):
+    with pytest.raises(ValueError, match=message):
+        TaskSpec(**{**vars(REACH), "quickstart": quickstart})
 
 
 def test_train_policy_takes_the_tasks_genrl_settings(reach_task, tmp_path, monkeypatch):
@@ -164,13 +183,18 @@ def test_train_policy_takes_the_tasks_genrl_settings(reach_task, tmp_path, monke
                  "--epochs", "1", "--batch-size", "16", "--eval-every", "1", "--device", "cpu", "--no-progress-bar",
                  "--out", str(generator)]) == 0
     tuned = {"target_kl": 0.02, "value_history": 2, "policy": "ContextStdPolicy"}
-    monkeypatch.setitem(TASKS, "reach", TaskSpec(**{**vars(REACH), "quickstart": {"genrl_kwargs": tuned}}))
-    settings = {}
-    for name, extra in (("task", []), ("library", ["--library-defaults"])):
+    monkeypatch.setitem(TASKS, "reach", TaskSpec(**{**vars(REACH), "quickstart": {"genrl_kwargs": tuned,
+                                                                                  "batch_episodes": 4}}))
+    settings, iterations = {}, {}
+    for name, extra in (("task", ["--batch-episodes", "8"]), ("library", ["--batch-episodes", "8", "--library-defaults"]),
+                        ("task_batch", [])):
         assert main(["train-policy", "--task", "reach", "--generator", str(generator), "--episodes", "16",
-                     "--batch-episodes", "8", "--device", "cpu", "--no-progress-bar", "--out", str(tmp_path / name),
-                     *extra]) == 0
-        settings[name] = json.loads((tmp_path / name / "summary.json").read_text())["genrl_settings"]
+                     "--device", "cpu", "--no-progress-bar", "--out", str(tmp_path / name), *extra]) == 0
+        summary = json.loads((tmp_path / name / "summary.json").read_text())
+        settings[name], iterations[name] = summary["genrl_settings"], summary["iterations"]
+    # Without --batch-episodes the task's episodes per iteration apply; --batch-episodes overrides them.
+    assert (settings["task_batch"]["n_steps"], iterations["task_batch"]) == (4, 4)
+    assert settings["task_batch"] == settings["task"] | {"n_steps": 4, "batch_size": 4} and iterations["task"] == 2
     # Each run records every GenRL hyperparameter in effect: the task's where it sets them, GenRL's defaults elsewhere.
     assert settings["task"] == settings["library"] | tuned
     assert settings["library"]["target_kl"] == 0.01 and settings["library"]["value_history"] == 1

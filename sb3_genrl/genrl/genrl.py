@@ -74,7 +74,8 @@ class GenRL(OnPolicyAlgorithm):
     (``log_std_init`` 0 for a normal prior). The value function is fitted harder than sb3-contrib does (50 epochs
     at 3e-3 instead of 10 at 1e-3) and the E/M pair is repeated 3 times per batch: once the policy is narrow, a
     pull's advantage is small next to the value function's error. What these defaults reach on hockey is measured
-    by ``benchmarks/genrl_hockey.py`` (results in the README and ``benchmarks/results/genrl_hockey.json``).
+    by ``benchmarks/genrl_hockey.py --library-defaults`` (results in the README and
+    ``benchmarks/results/genrl_hockey_without_hindsight.json``; the tasks' own settings add hindsight relabelling).
 
     :param policy: the policy (``"MlpPolicy"``, the default; ``"ContextStdPolicy"``, whose spread depends on the
         context, see :class:`~sb3_genrl.genrl.policies.ContextStdPolicy`; or an ``ActorCriticPolicy`` class), or the

@@ -27,7 +27,7 @@ from sb3_genrl.utils import atomic_write_json, atomic_write_text
 QUICKSTART_PRESET = "VAE1"
 DEFAULT_POLICY_EPISODES = 3000  # GenRL episodes of a task whose spec does not set its own
 
-QUICKSTART_BATCH = 64  # GenRL episodes per EM iteration
+DEFAULT_BATCH_EPISODES = 64  # GenRL episodes per EM iteration of a task whose spec does not set its own
 # GenRL plays its episodes in two env processes, one per core of the 2-core machine the quickstart is sized for
 # (the simulation is most of the policy stage's time). Fixed, not the machine's core count: the result depends on it.
 QUICKSTART_ENVS = 2
@@ -68,17 +68,21 @@ def quickstart(out_dir: str | os.PathLike, *, task: str, demo_episodes: int = 40
     from sb3_genrl.envs import get_task
 
     policy_episodes, genrl_kwargs = policy_settings(get_task(task), policy_episodes)
+    batch_episodes = policy_batch_episodes(get_task(task))
     for name, value in dict(demo_episodes=demo_episodes, epochs=epochs, policy_episodes=policy_episodes,
                             pr_samples=pr_samples, dwpr_samples=dwpr_samples).items():
         check_positive_int(value, name)
+    if batch_episodes % QUICKSTART_ENVS:
+        raise ValueError(f"task {task!r}: the quickstart plays its GenRL episodes in {QUICKSTART_ENVS} env processes, "
+                         f"so the task's batch_episodes ({batch_episodes}) must be a multiple of {QUICKSTART_ENVS}")
     check_seed(seed)
     check_device(device)
     check_output_dir(out_dir)
     # The models are small: one torch thread is as fast as several and leaves the other cores to MuJoCo.
     torch.set_num_threads(1)
     out = pathlib.Path(out_dir)
-    settings = _stage_settings(task, demo_episodes, epochs, policy_episodes, genrl_kwargs, pr_samples, dwpr_samples,
-                               seed, video)
+    settings = _stage_settings(task, demo_episodes, epochs, policy_episodes, batch_episodes, genrl_kwargs, pr_samples,
+                               dwpr_samples, seed, video)
     with folder_lock(out):
         refuse_conflicts(out, [line for name, wanted in settings.items()
                                for line in settings_conflicts(*_recorded(out, name), wanted,
@@ -88,8 +92,9 @@ def quickstart(out_dir: str | os.PathLike, *, task: str, demo_episodes: int = 40
         return _write_report(out, task, seed, video, timings, log)
 
 
-def _stage_settings(task: str, demo_episodes: int, epochs: int, policy_episodes: int, genrl_kwargs: dict[str, Any],
-                    pr_samples: int, dwpr_samples: int, seed: int, video: bool) -> dict[str, dict[str, Any]]:
+def _stage_settings(task: str, demo_episodes: int, epochs: int, policy_episodes: int, batch_episodes: int,
+                    genrl_kwargs: dict[str, Any], pr_samples: int, dwpr_samples: int, seed: int,
+                    video: bool) -> dict[str, dict[str, Any]]:
     """What each stage is made with: recorded beside its output, and compared with the record on a rerun."""
     import sb3_genrl
     from sb3_genrl.genrl.train import genrl_settings
@@ -99,7 +104,7 @@ def _stage_settings(task: str, demo_episodes: int, epochs: int, policy_episodes:
         "generator": {"preset": QUICKSTART_PRESET, "epochs": epochs, "eval_every": 10, "seed": seed},
         # precision/recall compares at most as many samples as there are demonstrations
         "evaluation": {"n": min(pr_samples, demo_episodes), "dwpr_n": dwpr_samples, "k": 3, "interventions": 5, "seed": seed},
-        "policy": {"task": task, "episodes": policy_episodes, "batch_episodes": QUICKSTART_BATCH,
+        "policy": {"task": task, "episodes": policy_episodes, "batch_episodes": batch_episodes,
                    "n_envs": QUICKSTART_ENVS, "seed": seed, "genrl_kwargs": genrl_kwargs,
                    "genrl": genrl_settings(genrl_kwargs)},  # every GenRL setting in effect, defaults included
         **({"video": {**VIDEO, "seed": seed + 1}} if video else {})}
@@ -237,6 +242,12 @@ def policy_settings(spec: Any, policy_episodes: int | None = None) -> tuple[int,
     settings = spec.quickstart
     episodes = int(settings.get("policy_episodes", DEFAULT_POLICY_EPISODES)) if policy_episodes is None else policy_episodes
     return episodes, dict(settings.get("genrl_kwargs", {}))
+
+
+def policy_batch_episodes(spec: Any) -> int:
+    """A task's GenRL episodes per EM iteration (its ``TaskSpec.quickstart["batch_episodes"]``, else
+    :data:`DEFAULT_BATCH_EPISODES`): the quickstart's, ``genrl train-policy``'s and the task benchmark's."""
+    return int(spec.quickstart.get("batch_episodes", DEFAULT_BATCH_EPISODES))
 
 
 def _measure_line(measures: list[dict[str, Any]]) -> str:
