@@ -1,7 +1,7 @@
 """GenRL on the hockey task, step by step: demonstrations -> beta-VAE -> GenRL policy -> learning curve.
 
 The same workflow as ``genrl quickstart``, written out with the library's functions so that each step can be changed.
-About four minutes on a 2-core CPU with the defaults below.
+About five minutes on a 2-core CPU with the defaults below.
 
     python examples/quickstart.py --out hockey_example
     python examples/quickstart.py --out hockey_small --demo-episodes 1000 --epochs 60 --episodes 640   # about a minute
