@@ -263,8 +263,9 @@ def is_valid(info: dict[str, Any]) -> bool:
 # steps), and the policy acts with the moving average of its weights over about the last 67 iterations. Each throw
 # is also relabelled with the point where the ball came down (hindsight), those of the last 60 batches are kept,
 # and the batches are small (32 throws) so that the search takes more steps; the settings that count per iteration
-# (the spread's bound, the value history, the average's decay) are those of 64 throws per iteration kept per throw
-# (docs/basketball.md, tuned on baskets other than the evaluation's).
+# (the spread's bound, the value history, the average's decay) are scaled from those tuned for 64 throws per
+# iteration so that their pace per throw stays the same (docs/basketball.md, tuned on baskets other than the
+# evaluation's).
 QUICKSTART = {"policy_episodes": 20000, "batch_episodes": 32,
               "genrl_kwargs": {"policy": "ContextStdPolicy", "target_kl": 0.03, "max_log_std_change": 0.015,
                                "value_history": 20, "n_critic_updates": 10, "cg_max_steps": 30,
