@@ -111,11 +111,22 @@ def landing_map(generator_path: str, task: str, grid: int) -> np.ndarray:
     if generator.latent_dim != 2:
         raise ValueError(f"the tuning surrogate needs a 2-D latent space, {generator_path} has {generator.latent_dim}")
     candidates = play_candidates(task, generator.decode(latent_set(generator, grid=grid, extent=EXTENT)))
-    points = np.array([c[0] if len(c) else (np.nan, np.nan) for c in candidates]).reshape(grid, grid, 2)
+    points = first_points(candidates).reshape(grid, grid, 2)
     os.makedirs(os.path.dirname(cache), exist_ok=True)
     with atomic_path(cache) as tmp, open(tmp, "wb") as file:
         np.save(file, points)
     return points
+
+
+def first_points(candidates: list[np.ndarray]) -> np.ndarray:
+    """``(n, 2)``: each played latent action's first candidate point, the landing map (NaN where there is none)."""
+    return np.array([c[0] if len(c) else (np.nan, np.nan) for c in candidates]).reshape(-1, 2)
+
+
+def landing_targets(latents: np.ndarray, points: np.ndarray, goals: np.ndarray) -> np.ndarray:
+    """Per goal, the latent action whose landing point (``points``, NaN: none) is nearest: the network fit's target."""
+    valid = np.isfinite(points).all(axis=1)
+    return latents[valid][cKDTree(points[valid]).query(goals)[1]]
 
 
 def run(env: SurrogateTask, goals: np.ndarray, seed: int, episodes: int, genrl_kwargs: dict[str, Any]) -> dict:
@@ -137,10 +148,8 @@ def network_fit(env: SurrogateTask, landing: np.ndarray, goals: np.ndarray, genr
     mean distance to ``goals``. A yardstick for the policy search that, unlike the grid's best, does not shrink
     as the grid gets finer."""
     latents = latent_set(IdentityGenerator(), grid=landing.shape[0], extent=EXTENT)  # the grid landing_map played
-    points = landing.reshape(-1, 2)
-    valid = np.isfinite(points).all(axis=1)
     train = held_out_goals(env.name, n_goals, FIT_GOAL_SEED)
-    targets = latents[valid][cKDTree(points[valid]).query(train)[1]]
+    targets = landing_targets(latents, landing.reshape(-1, 2), train)
     model = fit_policy_mean(env, train, targets, genrl_kwargs, epochs=epochs, seed=seed)
     alpha, _ = model.predict(goals, deterministic=True)
     return float(env.distances(alpha, goals).mean())

@@ -22,17 +22,15 @@ import time
 
 import numpy as np
 import torch
-from genrl_tuning import EXTENT, FIT_GOAL_SEED, TUNING_GOAL_SEED, SurrogateTask, fit_policy_mean
+from genrl_benchmark import FINAL_GOAL_SEED
+from genrl_tuning import EXTENT, FIT_GOAL_SEED, TUNING_GOAL_SEED, SurrogateTask, first_points, fit_policy_mean, landing_targets
 from reachable import CACHE, held_out_goals, latent_set, nearest, play_candidates, summary
 from sb3_genrl.envs import TASKS, get_task
-from scipy.spatial import cKDTree
 
 from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, SEED, check_int, option
 from sb3_genrl.generative import load
 from sb3_genrl.genrl.train import genrl_kwargs_argument
 from sb3_genrl.utils import atomic_write_json
-
-FINAL_GOAL_SEED = 12345  # the GenRL benchmarks' held-out goals
 
 
 def main() -> None:
@@ -58,11 +56,9 @@ def main() -> None:
     # where the ball first comes down through the rim's height) is nearest: a later crossing of the rim's height
     # (a ball coming down a second time) lies on another branch of the map, and a regression onto a target that
     # jumps between branches averages them.
-    first = np.array([c[0] if len(c) else (np.nan, np.nan) for c in candidates])
-    valid = np.isfinite(first).all(axis=1)
-    targets = latents[valid][cKDTree(first[valid]).query(train)[1]]
-    first = first.reshape(args.grid, args.grid, 2)
-    surrogate = SurrogateTask(args.task, first)  # the spaces GenRL's policy is built for
+    first = first_points(candidates)
+    targets = landing_targets(latents, first, train)
+    surrogate = SurrogateTask(args.task, first.reshape(args.grid, args.grid, 2))  # the spaces GenRL's policy is built for
     env = get_task(args.task).make_env()
     goal_sets = {"tuning": held_out_goals(args.task, args.goals, TUNING_GOAL_SEED),
                  "held_out": held_out_goals(args.task, args.goals, FINAL_GOAL_SEED)}
