@@ -36,7 +36,12 @@ from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, SEED, check_int, option 
 from sb3_genrl.generative import load, train_generator  # noqa: E402
 from sb3_genrl.generative.presets import PRESETS  # noqa: E402
 from sb3_genrl.genrl import evaluate_on_goals  # noqa: E402
-from sb3_genrl.genrl.train import check_genrl_kwargs, genrl_kwargs_argument, genrl_settings, make_genrl  # noqa: E402
+from sb3_genrl.genrl.train import (  # noqa: E402
+    check_genrl_kwargs,
+    genrl_kwargs_override_argument,
+    genrl_settings,
+    make_genrl,
+)
 from sb3_genrl.study.quickstart import policy_batch_episodes, policy_settings  # noqa: E402
 from sb3_genrl.utils import atomic_path, atomic_write_json  # noqa: E402
 
@@ -177,7 +182,7 @@ def arguments(setting: Setting, description: str) -> argparse.Namespace:
     parser.add_argument("--grid", type=option(check_int, int, minimum=2), default=201,
                         help="latent grid points per axis for the generator's limit")
     parser.add_argument("--threads", type=COUNT, default=1, help="torch threads")
-    parser.add_argument("--genrl-kwargs", type=genrl_kwargs_argument, default={},
+    parser.add_argument("--genrl-kwargs", type=genrl_kwargs_override_argument, default={},
                         help='GenRL settings as JSON, over the task\'s (e.g. \'{"target_kl": 0.02}\')')
     parser.add_argument("--library-defaults", action="store_true",
                         help="GenRL's own defaults (64 episodes per iteration, no hindsight) under --genrl-kwargs, "

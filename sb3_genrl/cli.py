@@ -166,6 +166,10 @@ def _add_train_policy(sub: argparse._SubParsersAction) -> None:
     policy.add_argument("--hindsight-history", type=COUNT, default=None, metavar="K",
                         help="with --hindsight: reuse the relabelled episodes of the last K iterations (GenRL's "
                              "hindsight_history; default: the task's, else 1: this iteration's only)")
+    policy.add_argument("--hindsight-regression", type=option(check_int, int, minimum=0), default=None,
+                        metavar="STEPS",
+                        help="with --hindsight: Adam steps per iteration fitting the policy's mean to the kept "
+                             "relabelled episodes (GenRL's hindsight_regression; default: the task's, else 0: none)")
     _device_option(policy)
     _progress_option(policy)
     policy.set_defaults(func=_train_policy_command)
@@ -322,8 +326,10 @@ def _train_policy_command(args: argparse.Namespace) -> int:
     genrl_kwargs = {} if args.library_defaults else policy_settings(spec)[1]
     batch_episodes = args.batch_episodes or (DEFAULT_BATCH_EPISODES if args.library_defaults
                                              else policy_batch_episodes(spec))
-    if args.hindsight_history is not None and not args.hindsight:
-        raise ValueError("argument --hindsight-history: needs --hindsight")
+    for flag, value in (("--hindsight-history", args.hindsight_history),
+                        ("--hindsight-regression", args.hindsight_regression)):
+        if value is not None and not args.hindsight:
+            raise ValueError(f"argument {flag}: needs --hindsight")
     if args.e_step == "kl_penalty" and genrl_kwargs.get("hindsight") and not args.hindsight:
         raise ValueError(f"argument --e-step: {args.task}'s GenRL settings relabel episodes in hindsight, which the "
                          "KL-penalty E-step does not support; add --library-defaults to train with GenRL's own "
@@ -332,6 +338,8 @@ def _train_policy_command(args: argparse.Namespace) -> int:
         genrl_kwargs = {**genrl_kwargs, "hindsight": True}
     if args.hindsight_history is not None:
         genrl_kwargs["hindsight_history"] = args.hindsight_history
+    if args.hindsight_regression is not None:
+        genrl_kwargs["hindsight_regression"] = args.hindsight_regression
     result = train_policy(args.task, str(args.generator), episodes=args.episodes, seed=args.seed, out_dir=args.out,
                           e_step=args.e_step, batch_episodes=batch_episodes, n_envs=args.n_envs,
                           device=args.device, progress_bar=not args.no_progress_bar, **genrl_kwargs)

@@ -20,6 +20,8 @@ BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
     ("genrl_basketball.py", ["--genrl-kwargs", '{"hindsight": false}', "--out", "r.json"],
      "argument --genrl-kwargs: hindsight_history"),
     ("genrl_hockey.py", ["--genrl-kwargs", '{"hindsigt": true}', "--out", "r.json"], "hindsigt"),
+    ("genrl_hockey.py", ["--library-defaults", "--genrl-kwargs", '{"hindsight_regression": 8}', "--out", "r.json"],
+     "argument --genrl-kwargs: hindsight_regression=8 fits the policy to relabelled pulls, which needs hindsight=True"),
     ("baselines.py", ["--task", "golf"], "argument --task: invalid choice: 'golf'"),
     ("baselines.py", ["--work", "FILE"], "argument --work: 'FILE' is a file; expected a folder"),
     ("behaviour_cloning.py", ["--out", "result.txt"], "argument --out: 'result.txt' must end in .json"),

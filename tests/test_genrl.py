@@ -713,10 +713,30 @@ def test_check_genrl_kwargs_refuses_unknown_names_and_policies():
     assert check_genrl_kwargs({"hindsight": True, "hindsight_history": 2}) == {"hindsight": True, "hindsight_history": 2}
 
 
+def test_genrl_settings_record_the_policy_arguments_as_json():
+    from sb3_genrl.genrl.train import genrl_settings
+
+    settings = genrl_settings({"policy_kwargs": {"net_arch": {"pi": [64, 64, 64], "vf": (64, 64)},
+                                                 "activation_fn": th.nn.Tanh},
+                               "learning_rate": lambda progress: 1e-3 * progress})
+    assert settings["policy_kwargs"] == {"net_arch": {"pi": [64, 64, 64], "vf": [64, 64]},
+                                         "activation_fn": "torch.nn.modules.activation.Tanh"}
+    assert "learning_rate" not in settings  # a schedule is no JSON value
+    assert genrl_settings({"policy_kwargs": {"net_arch": [8], "optimizer_kwargs": {"eps": object()}}}).get(
+        "policy_kwargs", "left out") == "left out"
+
+
 def test_genrl_kwargs_argument_parses_and_checks_json():
     import argparse
 
-    from sb3_genrl.genrl.train import genrl_kwargs_argument
+    from sb3_genrl.genrl.train import genrl_kwargs_argument, genrl_kwargs_override_argument
+
+    # settings laid over a task's are checked by name only: their values may need the task's (hindsight=True)
+    assert genrl_kwargs_override_argument('{"hindsight_regression": 8}') == {"hindsight_regression": 8}
+    with pytest.raises(argparse.ArgumentTypeError, match="needs hindsight=True"):
+        genrl_kwargs_argument('{"hindsight_regression": 8}')
+    with pytest.raises(argparse.ArgumentTypeError, match="'x' is not a GenRL setting"):
+        genrl_kwargs_override_argument('{"x": 1}')
 
     assert genrl_kwargs_argument('{"target_kl": 0.03}') == {"target_kl": 0.03}
     for text, message in (("{", "not JSON"), ("[1]", "expected a dict"), ('{"x": 1}', "'x' is not a GenRL setting")):
@@ -832,6 +852,87 @@ def test_hindsight_reaches_new_goals_sooner_on_the_toy():
         after = np.array([model.predict(goal, deterministic=True)[0] for goal in GOALS])
         distances[hindsight] = np.abs(after - np.array([optimal_latent(goal) for goal in GOALS])).max()
     assert distances[True] < 0.6 * distances[False]  # 0.013 against 0.031 (seeds 1 and 2: 0.52 and 0.41 times)
+
+
+@pytest.mark.parametrize("policy_name", ["MlpPolicy", "ContextStdPolicy"])
+def test_mean_parameters_are_the_actors_without_its_spread(policy_name):
+    from sb3_genrl.genrl.policies import actor_parameters
+    from sb3_genrl.genrl.regression import mean_parameters
+
+    policy = GenRL(policy_name, FastReachEnv(), LinearGenerator(), seed=0).policy
+    names = {id(parameter): name for name, parameter in policy.named_parameters()}
+    chosen = {names[id(parameter)] for parameter in mean_parameters(policy)}
+    spread = {names[id(parameter)] for parameter in actor_parameters(policy)} - chosen
+    assert chosen and all(name.startswith(("mlp_extractor.policy_net.", "action_net.")) for name in chosen)
+    assert spread == ({"log_std"} if policy_name == "MlpPolicy" else {"log_std_net.weight", "log_std_net.bias"})
+    # the mean's gradient reaches every chosen parameter and nothing else of the actor
+    observations = th.rand(8, 2) * 1.6 - 0.8
+    policy.get_distribution(observations).distribution.mean.sum().backward()
+    assert {names[id(p)] for p in actor_parameters(policy) if p.grad is not None and p.grad.abs().sum() > 0} == chosen
+
+
+def test_regress_mean_fits_a_known_linear_map_and_leaves_the_rest():
+    from sb3_genrl.genrl.regression import mean_parameters, regress_mean
+
+    policy = GenRL(FastReachEnv(), LinearGenerator(), seed=0).policy
+    generator = th.Generator().manual_seed(0)
+    contexts = th.rand(512, 2, generator=generator) * 1.6 - 0.8
+    weights, bias = th.tensor([[1.5, -0.5], [0.3, 2.0]]), th.tensor([0.2, -0.4])
+    targets = contexts @ weights.T + bias  # the answer, computed here
+    untouched = {name: value.clone() for name, value in policy.state_dict().items()
+                 if name.startswith(("log_std", "value_net", "mlp_extractor.value_net"))}
+    optimizer = th.optim.Adam(mean_parameters(policy), lr=1e-3)
+    losses = regress_mean(policy, optimizer, contexts, targets, steps=1500, batch_size=64)
+    assert len(losses) == 1500 and np.mean(losses[-50:]) < 0.01 * np.mean(losses[:50])
+    test = th.rand(200, 2, generator=generator) * 1.6 - 0.8
+    with th.no_grad():
+        error = policy.get_distribution(test).distribution.mean - (test @ weights.T + bias)
+    assert error.abs().max() < 0.1
+    for name, value in untouched.items():
+        th.testing.assert_close(policy.state_dict()[name], value)
+
+
+def test_hindsight_regression_reaches_new_goals_sooner_on_the_toy():
+    distances = {}
+    for steps in (0, 256):
+        model = GenRL(LatentActionWrapper(HindsightReachEnv(), LinearGenerator()), seed=0, n_steps=16, hindsight=True,
+                      hindsight_history=8, hindsight_regression=steps)
+        model.learn(320)
+        after = np.array([model.predict(goal, deterministic=True)[0] for goal in GOALS])
+        distances[steps] = np.abs(after - np.array([optimal_latent(goal) for goal in GOALS])).max()
+    assert distances[256] < 0.5 * distances[0]  # 0.007 against 0.037 (seeds 1 and 2: 0.12 and 0.37 times)
+    assert model.logger.name_to_value["train/hindsight_regression_loss"] > 0
+
+
+def test_hindsight_regression_keeps_its_optimizer_across_save_and_load(tmp_path):
+    model = GenRL(LatentActionWrapper(HindsightReachEnv(), LinearGenerator()), seed=0, n_steps=16, hindsight=True,
+                  hindsight_regression=4, hindsight_regression_lr=3e-4, hindsight_regression_batch_size=32)
+    model.learn(32)
+    state = model.hindsight_optimizer.state_dict()
+    assert state["param_groups"][0]["lr"] == 3e-4 and all(v["step"] == 8 for v in state["state"].values())
+    model.save(tmp_path / "model")
+    loaded = GenRL.load(tmp_path / "model.zip", env=HindsightReachEnv(), generator=LinearGenerator())
+    assert (loaded.hindsight_regression, loaded.hindsight_regression_batch_size) == (4, 32)
+    for before, after in zip(state["state"].values(), loaded.hindsight_optimizer.state_dict()["state"].values(),
+                             strict=True):
+        th.testing.assert_close(after["exp_avg"], before["exp_avg"])
+    assert GenRL(FastReachEnv(), LinearGenerator()).hindsight_optimizer is None  # none without the regression
+
+
+def test_hindsight_regression_is_checked():
+    for kwargs, message in (({"hindsight_regression": -1}, "hindsight_regression must be a non-negative integer"),
+                            ({"hindsight_regression": 1.5}, "hindsight_regression must be a non-negative integer"),
+                            ({"hindsight_regression": True}, "hindsight_regression must be a non-negative integer"),
+                            ({"hindsight_regression_lr": 0.0}, "hindsight_regression_lr must be positive"),
+                            ({"hindsight_regression_batch_size": 0},
+                             "hindsight_regression_batch_size must be a positive integer")):
+        with pytest.raises(ValueError, match=message):
+            GenRL(FastReachEnv(), LinearGenerator(), hindsight=True, **kwargs)
+    from sb3_genrl.genrl.train import check_genrl_kwargs
+
+    with pytest.raises(ValueError, match="hindsight_regression=8 fits the policy to relabelled pulls, which needs "
+                                         "hindsight=True"):
+        check_genrl_kwargs({"hindsight_regression": 8})
 
 
 def test_hindsight_is_checked():

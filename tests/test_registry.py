@@ -182,7 +182,7 @@ def test_train_policy_takes_the_tasks_genrl_settings(reach_task, tmp_path, monke
     assert main(["train-generator", "--data", str(data), "--model", "vae", "--latent-dim", "2", "--beta", "0.01",
                  "--epochs", "1", "--batch-size", "16", "--eval-every", "1", "--device", "cpu", "--no-progress-bar",
                  "--out", str(generator)]) == 0
-    tuned = {"target_kl": 0.02, "value_history": 2, "policy": "ContextStdPolicy"}
+    tuned = {"target_kl": 0.02, "value_history": 2, "policy": "ContextStdPolicy", "policy_kwargs": {"net_arch": [16, 16]}}
     monkeypatch.setitem(TASKS, "reach", TaskSpec(**{**vars(REACH), "quickstart": {"genrl_kwargs": tuned,
                                                                                   "batch_episodes": 4}}))
     settings, iterations = {}, {}

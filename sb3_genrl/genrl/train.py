@@ -145,10 +145,12 @@ def _train(env: Any, generator: TrajectoryGenerator | str, episodes: int, out: p
     return model
 
 
-def check_genrl_kwargs(genrl_kwargs: dict[str, Any], name: str | None = "genrl_kwargs") -> dict[str, Any]:
-    """Refuse names that are not GenRL's settings, unknown policy names, and the values that GenRL would refuse
-    (:func:`~sb3_genrl.genrl.genrl.check_hyperparameters`, the others at their defaults), before any work starts.
-    ``name`` starts the error message (``None``: nothing)."""
+def check_genrl_kwargs(genrl_kwargs: dict[str, Any], name: str | None = "genrl_kwargs", *,
+                       values: bool = True) -> dict[str, Any]:
+    """Refuse names that are not GenRL's settings, unknown policy names and, with ``values``, the values that GenRL
+    would refuse (:func:`~sb3_genrl.genrl.genrl.check_hyperparameters`, the others at their defaults), before any
+    work starts. ``name`` starts the error message (``None``: nothing). ``values=False`` suits settings that will be
+    laid over others (a task's): check their values once they are joined."""
     import inspect
 
     prefix = f"{name}: " if name else ""
@@ -163,24 +165,32 @@ def check_genrl_kwargs(genrl_kwargs: dict[str, Any], name: str | None = "genrl_k
     policy = genrl_kwargs.get("policy", "MlpPolicy")
     if isinstance(policy, str) and policy not in GenRL.policy_aliases:
         raise ValueError(f"{prefix}unknown policy {policy!r} (known: {', '.join(GenRL.policy_aliases)})")
-    try:
-        check_hyperparameters(genrl_kwargs)
-    except ValueError as error:
-        raise ValueError(f"{prefix}{error}") from None
+    if values:
+        try:
+            check_hyperparameters(genrl_kwargs)
+        except ValueError as error:
+            raise ValueError(f"{prefix}{error}") from None
     return genrl_kwargs
 
 
-def genrl_kwargs_argument(text: str) -> dict[str, Any]:
-    """An argparse ``type`` for ``--genrl-kwargs``: a JSON object of GenRL settings, checked by name."""
+def genrl_kwargs_argument(text: str, *, values: bool = True) -> dict[str, Any]:
+    """An argparse ``type`` for ``--genrl-kwargs``: a JSON object of GenRL settings, checked by name and value."""
     import argparse
 
     from sb3_genrl.checks import json_argument
 
     value = json_argument(text)
     try:
-        return check_genrl_kwargs(value, None)
+        return check_genrl_kwargs(value, None, values=values)
     except (TypeError, ValueError) as error:
         raise argparse.ArgumentTypeError(str(error)) from None
+
+
+def genrl_kwargs_override_argument(text: str) -> dict[str, Any]:
+    """An argparse ``type`` for ``--genrl-kwargs`` laid over a task's settings: checked by name only, since a value
+    may need the task's (``hindsight_history`` needs the task's ``hindsight``); check the joined settings with
+    :func:`check_genrl_kwargs`."""
+    return genrl_kwargs_argument(text, values=False)
 
 
 def make_genrl(env: Any, generator: TrajectoryGenerator | str | None = None, **genrl_kwargs: Any) -> GenRL:
@@ -229,8 +239,28 @@ def _episode_env(spec: gym.envs.registration.EnvSpec, generator: TrajectoryGener
 
 
 def _json_settings(genrl_kwargs: dict[str, Any]) -> dict[str, Any]:
-    """The GenRL arguments that a JSON file can hold (numbers, strings, booleans, None)."""
-    return {key: value for key, value in genrl_kwargs.items() if isinstance(value, bool | int | float | str | type(None))}
+    """The GenRL arguments as a JSON file holds them: numbers, strings, booleans, None, and lists and string-keyed
+    dicts of them (``policy_kwargs``), a class by its qualified name; an argument that holds anything else is left
+    out."""
+    settings = {key: _json_value(value) for key, value in genrl_kwargs.items()}
+    return {key: value for key, value in settings.items() if value is not _UNREPRESENTABLE}
+
+
+_UNREPRESENTABLE = object()
+
+
+def _json_value(value: Any) -> Any:
+    if isinstance(value, bool | int | float | str | type(None)):
+        return value
+    if isinstance(value, type):
+        return f"{value.__module__}.{value.__qualname__}"
+    if isinstance(value, list | tuple):
+        items = [_json_value(item) for item in value]
+        return _UNREPRESENTABLE if any(item is _UNREPRESENTABLE for item in items) else items
+    if isinstance(value, dict) and all(isinstance(key, str) for key in value):
+        items = {key: _json_value(item) for key, item in value.items()}
+        return _UNREPRESENTABLE if any(item is _UNREPRESENTABLE for item in items.values()) else items
+    return _UNREPRESENTABLE
 
 
 # GenRL arguments that say where or how verbosely it runs, not what it computes

@@ -1,0 +1,43 @@
+"""GenRL's hindsight regression: the policy's mean fitted to the relabelled pulls, exact (context, latent action) pairs.
+
+A relabelled pull ``(context', alpha)`` (GenRL's ``hindsight=True``) is a latent action together with the context it
+solves best, so it is a sample of the answer itself: the map from contexts to the latent actions that solve them. A
+few Adam steps per iteration on ``|mu(context') - alpha|^2`` over the kept pulls teach the policy's mean that map
+directly, as supervised learning on relabelled goals does (Ghosh et al., 2021, "Learning to Reach Goals via
+Iterated Supervised Learning"), while the E-step keeps shaping it through the rewards.
+"""
+
+from __future__ import annotations
+
+import torch as th
+from stable_baselines3.common.policies import ActorCriticPolicy
+
+from sb3_genrl.genrl.policies import actor_parameters
+
+# Names of the parameters that set the spread alone: MlpPolicy's log_std, ContextStdPolicy's log_std_net.
+SPREAD_PREFIX = "log_std"
+
+
+def mean_parameters(policy: ActorCriticPolicy) -> list[th.nn.Parameter]:
+    """The parameters of the policy's mean: the actor's (:func:`actor_parameters`) but those of its spread."""
+    spread = {id(parameter) for name, parameter in policy.named_parameters() if name.startswith(SPREAD_PREFIX)}
+    return [parameter for parameter in actor_parameters(policy) if id(parameter) not in spread]
+
+
+def regress_mean(policy: ActorCriticPolicy, optimizer: th.optim.Optimizer, contexts: th.Tensor, actions: th.Tensor, *,
+                 steps: int, batch_size: int) -> list[float]:
+    """Fit the policy's mean to ``actions`` at ``contexts`` by ``steps`` steps of ``optimizer`` (over
+    :func:`mean_parameters`) on minibatches of ``batch_size`` pairs drawn with replacement.
+
+    :return: the loss (mean squared error over the latent dimensions) of every minibatch
+    """
+    losses = []
+    for _ in range(steps):
+        indices = th.randint(len(actions), (min(batch_size, len(actions)),), device=actions.device)
+        mean = policy.get_distribution(contexts[indices]).distribution.mean  # type: ignore[attr-defined]
+        loss = (mean - actions[indices]).pow(2).mean()
+        optimizer.zero_grad()
+        loss.backward()
+        optimizer.step()
+        losses.append(loss.item())
+    return losses
