@@ -33,6 +33,10 @@ def test_quickstart_example_runs_the_whole_workflow(tmp_path):
         assert (out / path).exists(), path
     summary = json.loads((out / "policy" / "summary.json").read_text())  # hockey's own settings, as the quickstart's
     assert (summary["iterations"], summary["genrl_settings"]["hindsight"]) == (64 // 16, True)
+    from sb3_genrl.envs import get_task
+
+    entry = get_task("hockey").quickstart["genrl_kwargs"]  # every one of the entry's settings, its network included
+    assert {name: summary["genrl_settings"][name] for name in entry} == entry
     match = re.search(r"mean final distance to 100 new goals: ([0-9.]+) cm \(median ([0-9.]+) cm", stdout)
     assert match is not None, stdout
     # What the example prints is the saved policy's distance to the 100 goals of seed 0 + 1, replayed here.
