@@ -925,6 +925,8 @@ def test_hindsight_regression_is_checked():
                             ({"hindsight_regression": True}, "hindsight_regression must be a non-negative integer"),
                             ({"hindsight_regression_lr": 0.0}, "hindsight_regression_lr must be positive"),
                             ({"hindsight_regression_batch_size": 0},
+                             "hindsight_regression_batch_size must be a positive integer"),
+                            ({"hindsight_regression_batch_size": True},
                              "hindsight_regression_batch_size must be a positive integer")):
         with pytest.raises(ValueError, match=message):
             GenRL(FastReachEnv(), LinearGenerator(), hindsight=True, **kwargs)

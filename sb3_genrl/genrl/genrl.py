@@ -534,7 +534,8 @@ def _check_hyperparameters(*, e_step: str, n_em_iterations: int, max_log_std_cha
         raise ValueError(f"hindsight_history={hindsight_history!r} keeps relabelled pulls, which needs hindsight=True")
     if isinstance(hindsight_regression, bool) or int(hindsight_regression) != hindsight_regression or hindsight_regression < 0:
         raise ValueError(f"hindsight_regression must be a non-negative integer (Adam steps), got {hindsight_regression!r}")
-    if int(hindsight_regression_batch_size) != hindsight_regression_batch_size or hindsight_regression_batch_size < 1:
+    batch_size = hindsight_regression_batch_size
+    if isinstance(batch_size, bool) or int(batch_size) != batch_size or batch_size < 1:
         raise ValueError(f"hindsight_regression_batch_size must be a positive integer, got "
                          f"{hindsight_regression_batch_size!r}")
     if not hindsight_regression_lr > 0:
