@@ -517,8 +517,9 @@ def _check_hyperparameters(*, e_step: str, n_em_iterations: int, max_log_std_cha
     if e_step not in ("trpo", "kl_penalty"):
         raise ValueError(f"e_step must be 'trpo' or 'kl_penalty', got {e_step!r}")
     for name, value in (("n_em_iterations", n_em_iterations), ("value_history", value_history),
-                        ("hindsight_history", hindsight_history)):
-        if int(value) != value or value < 1:
+                        ("hindsight_history", hindsight_history),
+                        ("hindsight_regression_batch_size", hindsight_regression_batch_size)):
+        if isinstance(value, bool) or int(value) != value or value < 1:
             raise ValueError(f"{name} must be a positive integer, got {value!r}")
     if max_log_std_change is not None and not max_log_std_change > 0:
         raise ValueError(f"max_log_std_change must be positive or None, got {max_log_std_change!r}")
@@ -534,10 +535,6 @@ def _check_hyperparameters(*, e_step: str, n_em_iterations: int, max_log_std_cha
         raise ValueError(f"hindsight_history={hindsight_history!r} keeps relabelled pulls, which needs hindsight=True")
     if isinstance(hindsight_regression, bool) or int(hindsight_regression) != hindsight_regression or hindsight_regression < 0:
         raise ValueError(f"hindsight_regression must be a non-negative integer (Adam steps), got {hindsight_regression!r}")
-    batch_size = hindsight_regression_batch_size
-    if isinstance(batch_size, bool) or int(batch_size) != batch_size or batch_size < 1:
-        raise ValueError(f"hindsight_regression_batch_size must be a positive integer, got "
-                         f"{hindsight_regression_batch_size!r}")
     if not hindsight_regression_lr > 0:
         raise ValueError(f"hindsight_regression_lr must be positive, got {hindsight_regression_lr!r}")
     if hindsight_regression and not hindsight:
