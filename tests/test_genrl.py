@@ -871,6 +871,21 @@ def test_mean_parameters_are_the_actors_without_its_spread(policy_name):
     assert {names[id(p)] for p in actor_parameters(policy) if p.grad is not None and p.grad.abs().sum() > 0} == chosen
 
 
+@pytest.mark.parametrize("policy_name", ["MlpPolicy", "ContextStdPolicy"])
+def test_policy_mean_is_the_distributions_mean(policy_name):
+    from sb3_genrl.genrl.regression import policy_mean
+
+    policy = GenRL(policy_name, FastReachEnv(), LinearGenerator(), seed=0,
+                   policy_kwargs={"net_arch": {"pi": [16, 16, 16], "vf": [8]}}).policy
+    with th.no_grad():  # move the mean off its near-zero start, so that a wrong path would show
+        for parameter in policy.action_net.parameters():
+            parameter.add_(th.randn(parameter.shape, generator=th.Generator().manual_seed(1)))
+    observations = th.rand(32, 2, generator=th.Generator().manual_seed(0)) * 1.6 - 0.8
+    expected = policy.get_distribution(observations).distribution.mean
+    assert expected.abs().max() > 0.1
+    th.testing.assert_close(policy_mean(policy, observations), expected, rtol=0, atol=0)
+
+
 def test_regress_mean_fits_a_known_linear_map_and_leaves_the_rest():
     from sb3_genrl.genrl.regression import mean_parameters, regress_mean
 
