@@ -934,6 +934,44 @@ def test_hindsight_regression_keeps_its_optimizer_across_save_and_load(tmp_path)
     assert GenRL(FastReachEnv(), LinearGenerator()).hindsight_optimizer is None  # none without the regression
 
 
+def test_load_switches_the_optional_states_on_and_off(tmp_path):
+    """policy_averaging and hindsight_regression changed at load: the saved state of a setting now off is dropped,
+    one now on starts afresh from the loaded policy, and the regression's learning rate is the one given."""
+    def trained(**kwargs):
+        model = GenRL(LatentActionWrapper(HindsightReachEnv(), LinearGenerator()), seed=0, n_steps=16, hindsight=True,
+                      **kwargs)
+        model.learn(32)
+        model.save(tmp_path / "model")
+        return model
+
+    def load(**kwargs):
+        loaded = GenRL.load(tmp_path / "model.zip", env=HindsightReachEnv(), generator=LinearGenerator(), **kwargs)
+        loaded.learn(16)  # and it trains on
+        return loaded
+
+    contexts = np.array([[0.3, -0.2], [-0.5, 0.4]], dtype=np.float32)
+    with_both = trained(policy_averaging=0.9, hindsight_regression=4)
+    plain = GenRL.load(tmp_path / "model.zip", env=HindsightReachEnv(), generator=LinearGenerator(),
+                       policy_averaging=None)  # the policy, not its saved average, acts
+    np.testing.assert_allclose(plain.predict(contexts, deterministic=True)[0],
+                               with_both.policy.predict(contexts, deterministic=True)[0], rtol=0, atol=0)
+    switched_off = load(policy_averaging=None, hindsight_regression=0)
+    assert switched_off.policy_average is None and switched_off.hindsight_optimizer is None
+    faster = load(hindsight_regression_lr=1e-2)
+    assert faster.hindsight_optimizer.param_groups[0]["lr"] == 1e-2
+    assert all(value["step"] == 8 + 4 for value in faster.hindsight_optimizer.state_dict()["state"].values())
+
+    without = trained()
+    switched_on = GenRL.load(tmp_path / "model.zip", env=HindsightReachEnv(), generator=LinearGenerator(),
+                             policy_averaging=0.9, hindsight_regression=4)
+    # the new average starts as the loaded policy, not as the policy the model was built with
+    np.testing.assert_allclose(switched_on.predict(contexts, deterministic=True)[0],
+                               without.predict(contexts, deterministic=True)[0], rtol=0, atol=0)
+    assert switched_on.hindsight_optimizer.state_dict()["state"] == {}
+    switched_on.learn(16)
+    assert all(value["step"] == 4 for value in switched_on.hindsight_optimizer.state_dict()["state"].values())
+
+
 def test_hindsight_regression_is_checked():
     for kwargs, message in (({"hindsight_regression": -1}, "hindsight_regression must be a non-negative integer"),
                             ({"hindsight_regression": 1.5}, "hindsight_regression must be a non-negative integer"),

@@ -408,10 +408,38 @@ class GenRL(OnPolicyAlgorithm):
         """Like SB3's ``predict``; with ``policy_averaging``, the averaged policy acts."""
         return (self.policy_average or self.policy).predict(observation, state, episode_start, deterministic)
 
+    # States saved only when their setting is on (see _get_torch_save_params and set_parameters)
+    OPTIONAL_STATES: ClassVar[tuple[str, ...]] = ("policy_average", "hindsight_optimizer")
+
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
         state_dicts, variables = super()._get_torch_save_params()
         return (state_dicts + ["policy_average"] * (self.policy_averaging is not None)
                 + ["hindsight_optimizer"] * (self.hindsight_regression > 0), variables)
+
+    def set_parameters(self, load_path_or_dict: str | dict[str, Any], exact_match: bool = True,
+                       device: th.device | str = "auto") -> None:
+        """Like SB3's ``set_parameters``, for a model whose ``policy_averaging`` or ``hindsight_regression`` was
+        switched on or off at load (``GenRL.load(..., policy_averaging=None)``): the saved state of a setting that is
+        now off is dropped, and one that is now on but was not saved starts afresh (the average from the loaded
+        policy, the regression's Adam without moments). The regression's learning rate is this model's
+        ``hindsight_regression_lr``, not the saved optimizer's."""
+        from stable_baselines3.common.save_util import load_from_zip_file
+
+        params = dict(load_path_or_dict if isinstance(load_path_or_dict, dict)
+                      else load_from_zip_file(load_path_or_dict, device=device, load_data=False)[1])
+        fresh = []
+        for name in self.OPTIONAL_STATES:
+            if getattr(self, name) is None:
+                params.pop(name, None)
+            elif name not in params:
+                fresh.append(name)
+                params[name] = getattr(self, name).state_dict()
+        super().set_parameters(params, exact_match=exact_match, device=device)
+        if "policy_average" in fresh:  # average from the policy just loaded, not the one this model was built with
+            self.policy_average = averaged_copy(self.policy)
+        if self.hindsight_optimizer is not None:
+            for group in self.hindsight_optimizer.param_groups:
+                group["lr"] = self.hindsight_regression_lr
 
     def _fit_value_function(self) -> list[float]:
         """Fit ``V`` to the returns of the last ``value_history`` batches; the minibatch losses."""
