@@ -170,6 +170,10 @@ def _add_train_policy(sub: argparse._SubParsersAction) -> None:
                         metavar="STEPS",
                         help="with --hindsight: Adam steps per iteration fitting the policy's mean to the kept "
                              "relabelled episodes (GenRL's hindsight_regression; default: the task's, else 0: none)")
+    policy.add_argument("--hindsight-regression-weighted", action="store_true", default=None,
+                        help="with --hindsight-regression: weight each episode by the policy's density at it, so that "
+                             "the fit keeps to one of several ways to reach a goal (GenRL's "
+                             "hindsight_regression_weighted; default: the task's, else off)")
     _device_option(policy)
     _progress_option(policy)
     policy.set_defaults(func=_train_policy_command)
@@ -340,6 +344,11 @@ def _train_policy_command(args: argparse.Namespace) -> int:
         genrl_kwargs["hindsight_history"] = args.hindsight_history
     if args.hindsight_regression is not None:
         genrl_kwargs["hindsight_regression"] = args.hindsight_regression
+    if args.hindsight_regression_weighted:
+        if not genrl_kwargs.get("hindsight_regression"):
+            raise ValueError("argument --hindsight-regression-weighted: needs --hindsight-regression (the settings "
+                             "in use have no hindsight regression)")
+        genrl_kwargs["hindsight_regression_weighted"] = True
     result = train_policy(args.task, str(args.generator), episodes=args.episodes, seed=args.seed, out_dir=args.out,
                           e_step=args.e_step, batch_episodes=batch_episodes, n_envs=args.n_envs,
                           device=args.device, progress_bar=not args.no_progress_bar, **genrl_kwargs)

@@ -61,6 +61,9 @@ def test_help_lists_the_commands_in_workflow_order_and_version(cli):
       "--out", "D"), "argument --hindsight-history: needs --hindsight"),
     (("train-policy", "--task", "hockey", "--generator", "GEN", "--episodes", "8", "--hindsight-regression", "4",
       "--out", "D"), "argument --hindsight-regression: needs --hindsight"),
+    (("train-policy", "--task", "basketball", "--generator", "GEN", "--episodes", "8", "--hindsight",
+      "--hindsight-regression-weighted", "--out", "D"),
+     "argument --hindsight-regression-weighted: needs --hindsight-regression"),
     (("train-policy", "--task", "hockey", "--generator", "GEN", "--episodes", "8", "--hindsight",
       "--hindsight-regression", "-2", "--out", "D"), "argument --hindsight-regression: must be an integer >= 0, got -2"),
     (("train-policy", "--task", "hockey", "--generator", "GEN", "--episodes", "8", "--hindsight",
@@ -230,14 +233,14 @@ def test_play_renders_the_scripted_motion_it_reports(tmp_path, cli):
 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory, hockey_generator):
-    """A GenRL run (relabelling with the goal reached, kept for two iterations, the mean fitted to them by 3 steps per
-    iteration) and a latent-space PPO run on hockey, both through the command line."""
+    """A GenRL run (relabelling with the goal reached, kept for two iterations, the mean fitted to them by 3 weighted
+    steps per iteration) and a latent-space PPO run on hockey, both through the command line."""
     from sb3_genrl.cli import main
 
     root = tmp_path_factory.mktemp("runs")
     assert main(["train-policy", "--task", "hockey", "--generator", hockey_generator, "--episodes", "32",
                  "--batch-episodes", "16", "--hindsight", "--hindsight-history", "2", "--hindsight-regression", "3",
-                 "--device", "cpu", "--no-progress-bar",
+                 "--hindsight-regression-weighted", "--device", "cpu", "--no-progress-bar",
                  "--out", str(root / "genrl")]) == 0
     assert main(["baseline", "latent-ppo", "--task", "hockey", "--generator", hockey_generator, "--episodes", "16",
                  "--algorithm-kwargs", '{"gamma": 0.9}', "--device", "cpu", "--no-progress-bar",
@@ -272,6 +275,7 @@ def test_baseline_and_compare(runs, tmp_path, cli, hockey_generator):
     settings = json.loads((runs / "genrl" / "summary.json").read_text())["genrl_settings"]
     assert genrl.hindsight and settings["hindsight"] and genrl.hindsight_history == settings["hindsight_history"] == 2
     assert genrl.hindsight_regression == settings["hindsight_regression"] == 3
+    assert genrl.hindsight_regression_weighted and settings["hindsight_regression_weighted"]
     _, genrl_rewards, _ = evaluate_on_goals(genrl, "hockey", goals=100, seed=EVAL_GOAL_SEED)
     final = evaluate_trained("genrl", genrl, "hockey", generator=generator)
     assert final["mean_distance"] == pytest.approx(-genrl_rewards.mean(), rel=1e-6)

@@ -907,6 +907,33 @@ def test_regress_mean_fits_a_known_linear_map_and_leaves_the_rest():
         th.testing.assert_close(policy.state_dict()[name], value)
 
 
+def test_weighted_regress_mean_keeps_to_the_branch_the_policy_is_on():
+    """Two latent actions solve every context, f(c) + b and f(c) - b: the plain fit lands on their average f(c), the
+    weighted one, started on the first branch with a narrow spread, on that branch."""
+    from sb3_genrl.genrl.regression import mean_parameters, policy_mean, regress_mean
+
+    generator = th.Generator().manual_seed(0)
+    contexts = th.rand(1024, 2, generator=generator) * 1.6 - 0.8
+    weights, shift = th.tensor([[0.5, -0.2], [0.1, 0.4]]), th.tensor([1.0, -0.5])
+    answer = contexts @ weights.T  # f(c), computed here
+    branch = th.rand(1024, generator=generator) < 0.5
+    targets = th.where(branch[:, None], answer + shift, answer - shift)
+    test = th.rand(200, 2, generator=generator) * 1.6 - 0.8
+    errors = {}
+    for weighted in (False, True):
+        policy = GenRL(FastReachEnv(), LinearGenerator(), seed=0, policy_kwargs={"log_std_init": np.log(0.2)}).policy
+        with th.no_grad():
+            policy.action_net.bias.copy_(shift)  # the policy starts near the first branch
+        optimizer = th.optim.Adam(mean_parameters(policy), lr=1e-3)
+        regress_mean(policy, optimizer, contexts, targets, steps=1500, batch_size=64, weighted=weighted)
+        with th.no_grad():
+            mean = policy_mean(policy, test)
+        expected = test @ weights.T
+        errors[weighted] = ((mean - expected).abs().max().item(), (mean - expected - shift).abs().max().item())
+    assert errors[False][0] < 0.25 and errors[False][1] > 0.75  # the average of the branches, on neither
+    assert errors[True][1] < 0.1 and errors[True][0] > 0.9  # the first branch
+
+
 def test_hindsight_regression_reaches_new_goals_sooner_on_the_toy():
     distances = {}
     for steps in (0, 256):
@@ -980,7 +1007,12 @@ def test_hindsight_regression_is_checked():
                             ({"hindsight_regression_batch_size": 0},
                              "hindsight_regression_batch_size must be a positive integer"),
                             ({"hindsight_regression_batch_size": True},
-                             "hindsight_regression_batch_size must be a positive integer")):
+                             "hindsight_regression_batch_size must be a positive integer"),
+                            ({"hindsight_regression": 4, "hindsight_regression_weighted": 1},
+                             "hindsight_regression_weighted must be True or False"),
+                            ({"hindsight_regression_weighted": True},
+                             "hindsight_regression_weighted=True weights the hindsight regression's pulls, which needs "
+                             "hindsight_regression > 0")):
         with pytest.raises(ValueError, match=message):
             GenRL(FastReachEnv(), LinearGenerator(), hindsight=True, **kwargs)
     from sb3_genrl.genrl.train import check_genrl_kwargs

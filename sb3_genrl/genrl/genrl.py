@@ -155,6 +155,12 @@ class GenRL(OnPolicyAlgorithm):
     :param hindsight_regression_lr: Adam learning rate of the hindsight regression (default 1e-3)
     :param hindsight_regression_batch_size: relabelled pulls per step of the hindsight regression, drawn with
         replacement from the kept ones (default 256)
+    :param hindsight_regression_weighted: weight each pull's error in the hindsight regression by the current
+        policy's density at it relative to its mode (default False; see
+        :func:`~sb3_genrl.genrl.regression.regress_mean`), for tasks where distant latent actions reach the same
+        context: a basketball throw that bounces comes down through the rim's height twice, and the unweighted fit
+        averages the two ways to a basket (basketball, 20000 episodes, seeds 0 and 1: 0.043 and 0.042 m against
+        0.086 and 0.047 m unweighted and 0.057 and 0.052 m without the regression; see ``docs/basketball.md``)
     :param latent_clip: action box half-width (prior stds) when wrapping a raw env with a normal-prior generator
     :param stats_window_size: episodes averaged in the ``rollout/`` logs
     :param tensorboard_log: TensorBoard log folder (None: no TensorBoard)
@@ -198,6 +204,7 @@ class GenRL(OnPolicyAlgorithm):
         hindsight_regression: int = 0,
         hindsight_regression_lr: float = 1e-3,
         hindsight_regression_batch_size: int = 256,
+        hindsight_regression_weighted: bool = False,
         latent_clip: float = 3.0,
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,
@@ -215,7 +222,8 @@ class GenRL(OnPolicyAlgorithm):
                                value_history=value_history, policy_averaging=policy_averaging, hindsight=hindsight,
                                hindsight_history=hindsight_history, hindsight_regression=hindsight_regression,
                                hindsight_regression_lr=hindsight_regression_lr,
-                               hindsight_regression_batch_size=hindsight_regression_batch_size)
+                               hindsight_regression_batch_size=hindsight_regression_batch_size,
+                               hindsight_regression_weighted=hindsight_regression_weighted)
         env, policy_kwargs = self._latent_env(env, generator, latent_clip, policy_kwargs, device)
         super().__init__(
             policy, env,  # type: ignore[arg-type]
@@ -238,6 +246,7 @@ class GenRL(OnPolicyAlgorithm):
         self.hindsight, self.hindsight_history = hindsight, int(hindsight_history)
         self.hindsight_regression, self.hindsight_regression_lr = int(hindsight_regression), hindsight_regression_lr
         self.hindsight_regression_batch_size = int(hindsight_regression_batch_size)
+        self.hindsight_regression_weighted = bool(hindsight_regression_weighted)
         self._pull_infos: list[list[dict[str, Any]]] = []  # the infos of the rollout's pulls, step by step (hindsight)
         if _init_setup_model:
             self._setup_model()
@@ -306,7 +315,8 @@ class GenRL(OnPolicyAlgorithm):
         self.policy.set_training_mode(True)
         if self.hindsight_regression and len(relabelled[0]):  # the mean fitted to the kept relabelled pulls
             losses = regress_mean(self.policy, self.hindsight_optimizer, relabelled[0], relabelled[1],
-                                  steps=self.hindsight_regression, batch_size=self.hindsight_regression_batch_size)
+                                  steps=self.hindsight_regression, batch_size=self.hindsight_regression_batch_size,
+                                  weighted=self.hindsight_regression_weighted)
             stats["hindsight_regression_loss"] = float(np.mean(losses))
         # Value function (Algorithm 1, last line): V = argmin_V' sum_i (V'(s_i) - r_i)^2, by Adam on minibatches.
         value_losses = self._fit_value_function()
@@ -540,7 +550,7 @@ def check_hyperparameters(settings: dict[str, Any]) -> None:
 def _check_hyperparameters(*, e_step: str, n_em_iterations: int, max_log_std_change: float | None,
                            value_history: int, policy_averaging: float | None, hindsight: bool,
                            hindsight_history: int, hindsight_regression: int, hindsight_regression_lr: float,
-                           hindsight_regression_batch_size: int) -> None:
+                           hindsight_regression_batch_size: int, hindsight_regression_weighted: bool) -> None:
     """Refuse GenRL settings that SB3 does not check itself, with the setting's name."""
     if e_step not in ("trpo", "kl_penalty"):
         raise ValueError(f"e_step must be 'trpo' or 'kl_penalty', got {e_step!r}")
@@ -568,6 +578,11 @@ def _check_hyperparameters(*, e_step: str, n_em_iterations: int, max_log_std_cha
     if hindsight_regression and not hindsight:
         raise ValueError(f"hindsight_regression={hindsight_regression!r} fits the policy to relabelled pulls, which "
                          "needs hindsight=True")
+    if not isinstance(hindsight_regression_weighted, bool | np.bool_):
+        raise ValueError(f"hindsight_regression_weighted must be True or False, got {hindsight_regression_weighted!r}")
+    if hindsight_regression_weighted and not hindsight_regression:
+        raise ValueError("hindsight_regression_weighted=True weights the hindsight regression's pulls, which needs "
+                         "hindsight_regression > 0")
 
 
 def _generator_file(path: str | pathlib.Path) -> pathlib.Path:

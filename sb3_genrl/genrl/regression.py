@@ -32,16 +32,28 @@ def policy_mean(policy: ActorCriticPolicy, contexts: th.Tensor) -> th.Tensor:
 
 
 def regress_mean(policy: ActorCriticPolicy, optimizer: th.optim.Optimizer, contexts: th.Tensor, actions: th.Tensor, *,
-                 steps: int, batch_size: int) -> list[float]:
+                 steps: int, batch_size: int, weighted: bool = False) -> list[float]:
     """Fit the policy's mean to ``actions`` at ``contexts`` by ``steps`` steps of ``optimizer`` (over
     :func:`mean_parameters`) on minibatches of ``batch_size`` pairs drawn with replacement.
 
-    :return: the loss (mean squared error over the latent dimensions) of every minibatch
+    With ``weighted``, each pair's squared error is weighted by ``exp(-|(action - mean) / std|^2 / 2)``, the current
+    policy's density at the action relative to its mode (no gradient through the weight). Where two distant actions
+    solve one context (two branches of the map), the plain fit lands between them; the weighted one keeps to the
+    branch the policy is on.
+
+    :return: the loss (the mean squared error over the latent dimensions, weighted) of every minibatch
     """
     losses = []
     for _ in range(steps):
         indices = th.randint(len(actions), (min(batch_size, len(actions)),), device=actions.device)
-        loss = (policy_mean(policy, contexts[indices]) - actions[indices]).pow(2).mean()
+        mean, target = policy_mean(policy, contexts[indices]), actions[indices]
+        if weighted:
+            with th.no_grad():
+                std = policy.get_distribution(contexts[indices]).distribution.stddev  # type: ignore[attr-defined]
+                weights = th.exp(-0.5 * ((target - mean) / std).pow(2).sum(1))
+            loss = (weights * (mean - target).pow(2).mean(1)).sum() / weights.sum().clamp_min(1e-8)
+        else:
+            loss = (mean - target).pow(2).mean()
         optimizer.zero_grad()
         loss.backward()
         optimizer.step()
