@@ -143,7 +143,10 @@ def train_baseline(
                                  common | {"settings": changes}))
         # demonstrations, behaviour cloning and its evaluation: wall-clock and this process' CPU seconds
         summary |= {"setup_seconds": time.perf_counter() - began, "setup_cpu_seconds": time.process_time() - began_cpu}
-    summary["learn_seconds"] = _learn(model, steps, out, state, checkpoint_every, summary, progress_bar, verbose)
+    try:
+        summary["learn_seconds"] = _learn(model, steps, out, state, checkpoint_every, summary, progress_bar, verbose)
+    finally:  # the training env: its Monitor file (complete after this) and any env processes
+        model.get_env().close()
     summary |= _episode_results(algorithm, spec.name, out, window, summary["settings"])
     summary["final_eval"] = evaluate_trained(algorithm, model, spec.name, generator=generator, goals=eval_goals)
     summary["training_health"] = training_health(out)

@@ -232,6 +232,12 @@ class _Killed(Exception):
     """Stands for the process being killed."""
 
 
+def _open_in_this_process(path) -> bool:
+    """Whether this process holds ``path`` open (Linux: its /proc/self/fd links)."""
+    target = os.path.realpath(path)
+    return any(os.path.realpath(f"/proc/self/fd/{fd}") == target for fd in os.listdir("/proc/self/fd"))
+
+
 @pytest.mark.parametrize("algorithm", ["sac", "sac-her"])
 def test_a_stopped_off_policy_run_resumes_from_its_checkpoint(algorithm, demos, tmp_path, monkeypatch):
     from sb3_genrl.baselines import checkpoint
@@ -248,6 +254,7 @@ def test_a_stopped_off_policy_run_resumes_from_its_checkpoint(algorithm, demos, 
            "device": "cpu", "seed": 1, "window": 5}
     with pytest.raises(_Killed):
         train_baseline(algorithm, "hockey", **run)
+    assert not _open_in_this_process(tmp_path / MONITOR_FILE)  # the stopped run's env was closed
     state = json.loads((tmp_path / "checkpoint" / "state.json").read_text())
     assert state["episodes"] == 2 and state["steps"] == 2 * 69  # the last checkpoint: every 2 episodes
     before = read_monitor(tmp_path / MONITOR_FILE)
@@ -257,6 +264,7 @@ def test_a_stopped_off_policy_run_resumes_from_its_checkpoint(algorithm, demos, 
     monkeypatch.undo()
 
     summary = train_baseline(algorithm, "hockey", **run)
+    assert not _open_in_this_process(tmp_path / MONITOR_FILE)
     after = read_monitor(tmp_path / MONITOR_FILE)
     # The rows up to the checkpoint are kept, the third episode is played again, and the budget is met exactly.
     assert len(after["return"]) == 5 == summary["episodes_played"]
