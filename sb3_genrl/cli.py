@@ -170,7 +170,7 @@ def _add_train_policy(sub: argparse._SubParsersAction) -> None:
                         metavar="STEPS",
                         help="with --hindsight: Adam steps per iteration fitting the policy's mean to the kept "
                              "relabelled episodes (GenRL's hindsight_regression; default: the task's, else 0: none)")
-    policy.add_argument("--hindsight-regression-weighted", action="store_true", default=None,
+    policy.add_argument("--hindsight-regression-weighted", action="store_true",
                         help="with --hindsight-regression: weight each episode by the policy's density at it, so that "
                              "the fit keeps to one of several ways to reach a goal (GenRL's "
                              "hindsight_regression_weighted; default: the task's, else off)")

@@ -46,14 +46,15 @@ def regress_mean(policy: ActorCriticPolicy, optimizer: th.optim.Optimizer, conte
     losses = []
     for _ in range(steps):
         indices = th.randint(len(actions), (min(batch_size, len(actions)),), device=actions.device)
-        mean, target = policy_mean(policy, contexts[indices]), actions[indices]
-        if weighted:
+        target = actions[indices]
+        if weighted:  # one forward pass gives the mean and the spread
+            distribution = policy.get_distribution(contexts[indices]).distribution  # type: ignore[attr-defined]
+            mean = distribution.mean
             with th.no_grad():
-                std = policy.get_distribution(contexts[indices]).distribution.stddev  # type: ignore[attr-defined]
-                weights = th.exp(-0.5 * ((target - mean) / std).pow(2).sum(1))
+                weights = th.exp(-0.5 * ((target - mean) / distribution.stddev).pow(2).sum(1))
             loss = (weights * (mean - target).pow(2).mean(1)).sum() / weights.sum().clamp_min(1e-8)
         else:
-            loss = (mean - target).pow(2).mean()
+            loss = (policy_mean(policy, contexts[indices]) - target).pow(2).mean()
         optimizer.zero_grad()
         loss.backward()
         optimizer.step()
