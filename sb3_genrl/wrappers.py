@@ -202,6 +202,10 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         else:
             info = self._play_steps(tau)
         info["latent_clipped"] = latent_clipped
+        if not np.isfinite(info["reward"]):  # refused here: a NaN would silently stall any learner downstream
+            raise ValueError(f"{type(self.env.unwrapped).__name__} returned the non-finite reward {info['reward']!r} for "
+                             f"the latent action {alpha.tolist()} (context {np.asarray(self._context).tolist()}); a reward "
+                             "must be a finite number")
         relabel = getattr(self.env.unwrapped, "hindsight", None)
         if self._context_source == "task" and callable(relabel):  # for GenRL's hindsight=True
             info["hindsight"] = relabel(info)

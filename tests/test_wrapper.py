@@ -263,3 +263,52 @@ def test_subproc_vec_env_reaches_the_task_through_the_wrapper():
         assert dones.all() and all(info["fast_path"] for info in infos) and np.all(np.isfinite(rewards))
     finally:
         env.close()
+
+
+class NanRewardEnv(ReachEnv):
+    """A reaching task whose terminal reward is NaN on every ``every``-th episode."""
+
+    every = 5
+
+    def reset(self, *, seed=None, options=None):
+        self.episodes = getattr(self, "episodes", 0) + 1
+        return super().reset(seed=seed, options=options)
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = super().step(action)
+        if terminated and self.episodes % self.every == 0:
+            reward = float("nan")
+        return obs, reward, terminated, truncated, info
+
+
+class FastNanRewardEnv(FastReachEnv):
+    """The fast-path reaching task with an infinite reward for the third trajectory it plays."""
+
+    def play_trajectories(self, trajectories, goals, *, n_threads=1):
+        self.played = getattr(self, "played", 0) + len(trajectories)
+        rewards, infos = super().play_trajectories(trajectories, goals, n_threads=n_threads)
+        if self.played == 3:
+            rewards = np.full_like(rewards, -np.inf)
+        return rewards, infos
+
+
+def test_non_finite_reward_refused_at_the_pull_that_returns_it():
+    from sb3_genrl import GenRL
+
+    env = LatentActionWrapper(NanRewardEnv(), LinearGenerator())
+    for _ in range(4):
+        env.reset(seed=0)
+        assert np.isfinite(env.step(np.zeros(2, dtype=np.float32))[1])
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match=r"NanRewardEnv returned the non-finite reward nan for the latent action \[0.0, 0.0\]"):
+        env.step(np.zeros(2, dtype=np.float32))
+    fast = LatentActionWrapper(FastNanRewardEnv(), LinearGenerator())
+    for _ in range(2):
+        fast.reset(seed=0)
+        fast.step(np.zeros(2, dtype=np.float32))
+    fast.reset(seed=0)
+    with pytest.raises(ValueError, match="FastNanRewardEnv returned the non-finite reward -inf"):
+        fast.step(np.zeros(2, dtype=np.float32))
+    # GenRL stops at that pull instead of training on it (it used to learn nothing and return normally)
+    with pytest.raises(ValueError, match="non-finite reward nan"):
+        GenRL(NanRewardEnv(), LinearGenerator(), n_steps=8, seed=0).learn(64)
