@@ -300,7 +300,8 @@ def test_non_finite_reward_refused_at_the_pull_that_returns_it():
         env.reset(seed=0)
         assert np.isfinite(env.step(np.zeros(2, dtype=np.float32))[1])
     env.reset(seed=0)
-    with pytest.raises(ValueError, match=r"NanRewardEnv returned the non-finite reward nan for the latent action \[0.0, 0.0\]"):
+    expected = r"NanRewardEnv returned the non-finite reward nan for the latent action \[0.0, 0.0\]"
+    with pytest.raises(ValueError, match=expected):
         env.step(np.zeros(2, dtype=np.float32))
     fast = LatentActionWrapper(FastNanRewardEnv(), LinearGenerator())
     for _ in range(2):
