@@ -275,11 +275,21 @@ class ArmTaskEnv(gym.Env, EzPickle):
             # The region's float32 bounds (the context space's) count too, so that goals passed as float32 pass.
             low = np.minimum(self.goal_low, self.goal_low.astype(np.float32))
             high = np.maximum(self.goal_high, self.goal_high.astype(np.float32))
-            outside = np.any((goals < low) | (goals > high), axis=-1)
+            outside = np.any((goals < low) | (goals > high), axis=-1) | ~self._in_region(goals.reshape(-1, 2)).reshape(
+                goals.shape[:-1])
             if np.any(outside):
                 raise ValueError(f"{name} {goals[outside] if goals.ndim == 2 else goals} lies outside the goal region "
-                                 f"x in [{low[0]}, {high[0]}], y in [{low[1]}, {high[1]}] of {type(self).__name__}")
+                                 f"({self.goal_region_text(low, high)}) of {type(self).__name__}")
         return goals if n is None else np.broadcast_to(goals, (n, 2))
+
+    def _in_region(self, goals: np.ndarray) -> np.ndarray:
+        """Per goal ``(N, 2)``: whether it lies in the region beyond its bounding box (a task whose region is not a
+        box overrides this; the bounding box itself is checked by :meth:`_check_goals`)."""
+        return np.ones(len(goals), dtype=bool)
+
+    def goal_region_text(self, low: np.ndarray, high: np.ndarray) -> str:
+        """The goal region in words, for error messages."""
+        return f"x in [{low[0]}, {high[0]}], y in [{low[1]}, {high[1]}]"
 
     def _check_trajectories(self, trajectories: np.ndarray) -> np.ndarray:
         trajectories = np.asarray(trajectories, dtype=np.float64)

@@ -102,6 +102,14 @@ class BasketballEnv(ArmTaskEnv):
         self.settle_steps = int(settle_steps)
         super().__init__(settle_steps=settle_steps, **kwargs)
 
+    def _in_region(self, goals: np.ndarray) -> np.ndarray:
+        # The half-annulus, with the slack of a float32 round trip (goals passed as the float32 context pass).
+        return in_goal_region(goals, tolerance=1e-5)
+
+    def goal_region_text(self, low: np.ndarray, high: np.ndarray) -> str:
+        return (f"radius in [{BASKET_RADIUS_RANGE[0]}, {BASKET_RADIUS_RANGE[1]}] m, angle in [{BASKET_ANGLE_RANGE[0]:.4f}, "
+                f"{BASKET_ANGLE_RANGE[1]:.4f}] rad")
+
     def _mjcf(self) -> str:
         return task_mjcf(name="basketball", tool=_TOOL, world=_WORLD, sensors=_SENSORS, camera=_CAMERA)
 
@@ -172,14 +180,14 @@ class BasketballGoalEnv(GoalConditionedMixin, BasketballEnv):
         return max(-float(np.min(np.linalg.norm(points - desired, axis=1))), float(self.worst_reward))
 
 
-def in_goal_region(points: np.ndarray) -> np.ndarray:
+def in_goal_region(points: np.ndarray, tolerance: float = 0.0) -> np.ndarray:
     """Per point ``(x, y)``: whether it lies in the goal region, the half-annulus of :data:`BASKET_RADIUS_RANGE`
-    and :data:`BASKET_ANGLE_RANGE`."""
+    and :data:`BASKET_ANGLE_RANGE` (widened by ``tolerance``, in metres and radians)."""
     points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
     radius = np.linalg.norm(points, axis=1)
     angle = np.arctan2(points[:, 1], points[:, 0])
-    return ((radius >= BASKET_RADIUS_RANGE[0]) & (radius <= BASKET_RADIUS_RANGE[1])
-            & (angle >= BASKET_ANGLE_RANGE[0]) & (angle <= BASKET_ANGLE_RANGE[1]))
+    return ((radius >= BASKET_RADIUS_RANGE[0] - tolerance) & (radius <= BASKET_RADIUS_RANGE[1] + tolerance)
+            & (angle >= BASKET_ANGLE_RANGE[0] - tolerance) & (angle <= BASKET_ANGLE_RANGE[1] + tolerance))
 
 
 def region_patch() -> Any:

@@ -207,7 +207,7 @@ def test_throw_family_spans_the_basket_region_smoothly(basketball):
     strengths = np.linspace(*BASKETBALL_STRENGTH, 12)
     for yaw in (-BASKETBALL_YAW, 0.0, BASKETBALL_YAW):
         _, infos = basketball.play_trajectories(np.stack([scripted_throw(strength=s, yaw=yaw) for s in strengths]),
-                                                np.zeros(2))
+                                                np.zeros(2), allow_outside_region=True)  # (the goal plays no role)
         reached = np.array([info["reached"] for info in infos])
         assert all(info["crossings"] >= 1 and not info["joint_limit_clipped"] for info in infos)
         radius, bearing = np.linalg.norm(reached, axis=1), np.arctan2(reached[:, 1], reached[:, 0])
@@ -271,3 +271,20 @@ def test_no_hindsight_goal_without_a_crossing_or_for_an_unstable_simulation(bask
     env.model.opt.timestep = 0.2  # unstable, as above
     _, info = env.play_trajectory(scripted_hit(), np.array([1.0, 0.0]))
     assert info["unstable"] and env.hindsight(info) is None
+
+
+def test_basketball_refuses_goals_inside_its_bounding_box_but_outside_its_half_annulus(basketball):
+    from sb3_genrl.envs.basketball import in_goal_region
+
+    for outside in ([0.0, 0.0], [0.5, 0.0], [7.9, 7.9], [0.6, -0.6]):  # too near, too far, behind the robot's reach
+        assert not in_goal_region(np.array(outside))[0]
+        with pytest.raises(ValueError, match=r"outside the goal region \(radius in \[1.0, 8.0\] m"):
+            basketball.reset(options={"goal": outside})
+        with pytest.raises(ValueError, match="outside the goal region"):
+            basketball.play_trajectory(np.zeros((basketball.horizon, 7)), np.array(outside))
+    edge = np.array([8 * np.cos(np.pi / 4), 8 * np.sin(np.pi / 4)], dtype=np.float32)  # float32 goals on the rim pass
+    for inside in (edge, [1.0, 0.0], [0.0, 8.0], [0.0, -1.0]):
+        assert basketball.reset(options={"goal": inside})[1]["goal"].tolist() == np.asarray(inside, np.float64).tolist()
+    reward, _ = basketball.play_trajectory(np.zeros((basketball.horizon, 7)), np.array([0.0, 0.0]),
+                                           allow_outside_region=True)
+    assert np.isfinite(reward)
