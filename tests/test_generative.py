@@ -308,6 +308,23 @@ def test_train_generator_checks_arguments_before_training(tmp_path):
             train_generator(data, **kwargs)
 
 
+def test_train_generator_refuses_an_output_that_is_one_of_its_inputs(tmp_path, cli):
+    npy = tmp_path / "demos.npy"
+    np.save(npy, np.ones((10, 4, 2), dtype=np.float32))
+    dataset = tmp_path / "dataset"
+    dataset.mkdir()
+    (dataset / "genrl_episodes.npz").write_bytes(b"the dataset's own copy")
+    for data, out, message in ((npy, npy, "is the data file"), (str(npy), tmp_path / "." / "demos.npy", "is the data file"),
+                               (dataset, dataset / "genrl_episodes.npz", "is inside the dataset"),
+                               (dataset, dataset / "new.pt", "is inside the dataset")):
+        with pytest.raises(ValueError, match=message):
+            train_generator(data, epochs=1, out=out)
+    code, _, err = cli("train-generator", "--data", str(npy), "--epochs", "1", "--out", str(npy))
+    assert code == 2 and "would overwrite its training data" in err
+    np.testing.assert_array_equal(np.load(npy), np.ones((10, 4, 2)))  # the inputs are untouched
+    assert (dataset / "genrl_episodes.npz").read_bytes() == b"the dataset's own copy" and len(list(dataset.iterdir())) == 1
+
+
 def test_infogan_noise_is_fixed_at_decode(tmp_path):
     data, _ = sine_ramp_trajectories(80, 6, 2, rng=0)
     model = InfoGAN(6, 2, 2, info_weight=1.0, noise_dim=3, device="cpu").fit(data, epochs=1, batch_size=32, seed=0,
