@@ -1,0 +1,159 @@
+"""Per-env settings of GenRL and the baselines, read from ``hyperparams/<algo>.yml`` in rl-zoo3's format.
+
+Each file maps env ids (``GenRL/Hockey-v0``) to an entry of algorithm arguments plus rl-zoo3's own keys
+(``n_timesteps``, ``policy``, ``n_envs``, ``normalize``, ...). The files are installed with the package
+(``sb3_genrl.hyperparams_files``, mapped to the repository's ``hyperparams/`` folder). Also the goal seeds that keep
+tuning apart from evaluation: :data:`EVAL_GOAL_SEED` and :data:`TUNING_GOAL_SEED`.
+"""
+
+from __future__ import annotations
+
+import ast
+import copy
+import functools
+import pathlib
+from importlib import resources
+from typing import Any
+
+__all__ = ["EVAL_GOAL_SEED", "TUNING_GOAL_SEED", "hyperparams_file", "known_algos", "load_genrl_settings",
+           "load_hyperparams", "parse_kwargs"]
+
+EVAL_GOAL_SEED = 12345  # the held-out goals of every final evaluation (never used for tuning)
+TUNING_GOAL_SEED = 777  # the goals settings are chosen on (never used for evaluation)
+
+_PACKAGE = "sb3_genrl.hyperparams_files"
+_KWARGS = ("policy_kwargs", "replay_buffer_kwargs")  # the entries' keys that may be rl-zoo3's "dict(...)" strings
+# rl-zoo3's keys that its ExperimentManager takes out of an entry before the algorithm is built
+ZOO_KEYS = frozenset({"n_timesteps", "n_envs", "normalize", "env_wrapper", "vec_env_wrapper", "frame_stack",
+                      "callback", "normalize_kwargs"})
+
+
+def known_algos() -> list[str]:
+    """The algorithms with a settings file (``genrl``, ``ppo``, ``sac``, ...)."""
+    return sorted(path.name.removesuffix(".yml") for path in resources.files(_PACKAGE).iterdir()
+                  if path.name.endswith(".yml"))
+
+
+def hyperparams_file(algo: str) -> pathlib.Path:
+    """The installed ``<algo>.yml``; raises ``ValueError`` naming the known algorithms."""
+    path = resources.files(_PACKAGE) / f"{algo}.yml"
+    if not path.is_file():
+        raise ValueError(f"no settings file {algo}.yml for {algo!r}; known: {', '.join(known_algos())}")
+    return pathlib.Path(str(path))
+
+
+@functools.cache
+def _entries(algo: str) -> dict[str, Any]:
+    import yaml
+
+    path = hyperparams_file(algo)
+    entries = yaml.safe_load(path.read_text())
+    if not isinstance(entries, dict) or not all(isinstance(entry, dict) for entry in entries.values()):
+        raise ValueError(f"{path}: expected a mapping of env ids to mappings of settings")
+    return entries
+
+
+def load_hyperparams(algo: str, env_id: str) -> dict[str, Any]:
+    """The entry of ``env_id`` in ``<algo>.yml`` (a fresh copy), its ``policy_kwargs`` and ``replay_buffer_kwargs``
+    as dicts (see :func:`parse_kwargs`).
+
+    :param algo: ``genrl``, ``ppo``, ``sac``, ``latent_ppo``, ``latent_sac``, ``latent_trpo`` (:func:`known_algos`)
+    :param env_id: a Gymnasium id, e.g. ``GenRL/Hockey-v0``
+    :return: the entry's settings, rl-zoo3's own keys (``n_timesteps``, ``policy``, ...) included
+    """
+    entries = _entries(algo)
+    if env_id not in entries:
+        raise ValueError(f"{hyperparams_file(algo)} has no entry for {env_id!r}; known env ids: "
+                         f"{', '.join(sorted(entries))}")
+    entry = copy.deepcopy(entries[env_id])
+    for key in _KWARGS:
+        if key in entry:
+            entry[key] = parse_kwargs(entry[key], f"{algo}.yml {env_id}: {key}")
+    return entry
+
+
+def load_genrl_settings(env_id: str) -> tuple[int, int, dict[str, Any]]:
+    """A task's GenRL settings from ``genrl.yml``: the budget of episodes, the episodes per EM iteration and the
+    further GenRL arguments, checked by :func:`sb3_genrl.genrl.check_genrl_settings`.
+
+    One GenRL step is one episode: ``n_timesteps`` is the budget of episodes and ``n_envs`` (default 1) x
+    ``n_steps`` the episodes of an iteration, ``N``; a run in another number of env processes keeps ``N``.
+
+    :param env_id: the task's Gymnasium id, e.g. ``GenRL/Hockey-v0``
+    :return: ``(episodes, batch_episodes, genrl_kwargs)``; ``genrl_kwargs`` may name the ``policy``
+    """
+    from sb3_genrl.genrl import check_genrl_settings
+
+    entry = load_hyperparams("genrl", env_id)
+    name = f"{hyperparams_file('genrl')} {env_id}"
+    for key in ("n_timesteps", "n_steps"):
+        if key not in entry:
+            raise ValueError(f"{name}: needs {key}")
+    episodes, n_envs, n_steps = entry.pop("n_timesteps"), entry.pop("n_envs", 1), entry.pop("n_steps")
+    for key, value, minimum in (("n_timesteps", episodes, 1), ("n_envs", n_envs, 1), ("n_steps", n_steps, 1)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+            raise ValueError(f"{name}: {key} must be an integer of at least {minimum}, got {value!r}")
+    if n_envs * n_steps < 2:
+        raise ValueError(f"{name}: n_envs x n_steps, the episodes per iteration, must be at least 2")
+    return episodes, n_envs * n_steps, check_genrl_settings(entry, name)
+
+
+def parse_kwargs(value: Any, name: str = "kwargs") -> dict[str, Any]:
+    """A mapping of keyword arguments, as a YAML mapping or as rl-zoo3's string ``"dict(net_arch=[64, 64],
+    activation_fn=nn.ReLU)"``.
+
+    rl-zoo3 runs ``eval`` on such strings; a settings file is data, and ``eval`` would run whatever code a file
+    holds, so the string is read by a parser that accepts only literals (numbers, strings, booleans, ``None``), lists,
+    tuples, ``{...}`` and ``dict(...)`` of them, and ``nn.Name`` (``th.nn.Name``, ``torch.nn.Name``) for a class of
+    ``torch.nn``.
+
+    :param value: the mapping or the string
+    :param name: where it comes from, for the error message
+    """
+    if isinstance(value, dict):
+        return copy.deepcopy(value)
+    if not isinstance(value, str):
+        raise ValueError(f"{name}: expected a mapping or a 'dict(...)' string, got {value!r}")
+    try:
+        parsed = _literal(ast.parse(value.strip(), mode="eval").body)
+    except (SyntaxError, ValueError) as error:
+        raise ValueError(f"{name}: cannot read {value!r}: {error}") from None
+    if not isinstance(parsed, dict):
+        raise ValueError(f"{name}: expected 'dict(...)', got {value!r}")
+    return parsed
+
+
+def _literal(node: ast.AST) -> Any:
+    if isinstance(node, ast.Constant):
+        return node.value
+    if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub | ast.UAdd) and isinstance(node.operand, ast.Constant):
+        number = node.operand.value
+        if isinstance(number, bool) or not isinstance(number, int | float):
+            raise ValueError(f"a sign before {number!r}")
+        return -number if isinstance(node.op, ast.USub) else number
+    if isinstance(node, ast.List | ast.Tuple):
+        items = [_literal(item) for item in node.elts]
+        return items if isinstance(node, ast.List) else tuple(items)
+    if isinstance(node, ast.Dict):
+        if None in node.keys:
+            raise ValueError("{**...} is not accepted")
+        return {_literal(key): _literal(item) for key, item in zip(node.keys, node.values, strict=True)}
+    if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "dict" and not node.args:
+        if any(keyword.arg is None for keyword in node.keywords):
+            raise ValueError("dict(**...) is not accepted")
+        return {keyword.arg: _literal(keyword.value) for keyword in node.keywords}
+    if isinstance(node, ast.Attribute):
+        return _torch_nn_class(node)
+    raise ValueError(f"{ast.unparse(node)!r} is not a literal, a dict(...) or a torch.nn class")
+
+
+def _torch_nn_class(node: ast.Attribute) -> type:
+    """``nn.ReLU``, ``th.nn.ReLU`` or ``torch.nn.ReLU``: the class of ``torch.nn``."""
+    from torch import nn
+
+    path = ast.unparse(node)
+    module, _, name = path.rpartition(".")
+    cls = getattr(nn, name, None) if module in ("nn", "th.nn", "torch.nn") else None
+    if not (isinstance(cls, type) and issubclass(cls, nn.Module)):
+        raise ValueError(f"{path!r} is not a class of torch.nn")
+    return cls
