@@ -1,0 +1,46 @@
+"""The documentation: the Sphinx site builds offline with warnings as errors, and benchmarks/results holds exactly
+the results that the README and the docs cite."""
+
+import pathlib
+import re
+import subprocess
+import sys
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "benchmarks" / "results"
+COMPANION_SUFFIXES = (".md", ".png", "_episodes.png", "_env_steps.png", "_contacts.png")
+CITED = re.compile(r"benchmarks/results/([A-Za-z0-9_.\-]+\.(?:json|png|md))")
+
+
+def test_docs_build_without_warnings(tmp_path):
+    command = [sys.executable, "-m", "sphinx", "-E", "-W", "--keep-going", "-q", "-b", "html", str(ROOT / "docs"),
+               str(tmp_path / "html")]
+    done = subprocess.run(command, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert (tmp_path / "html" / "modules" / "genrl.html").exists()
+
+
+def _cited() -> set[str]:
+    pages = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md")), *sorted((ROOT / "docs").rglob("*.rst"))]
+    return {name for page in pages for name in CITED.findall(page.read_text(encoding="utf-8"))}
+
+
+def _companions(cited: set[str]) -> set[str]:
+    """What a benchmark writes beside a cited JSON: its Markdown table and its plots."""
+    stems = [name.removesuffix(".json") for name in cited if name.endswith(".json")]
+    return {stem + suffix for stem in stems for suffix in COMPANION_SUFFIXES}
+
+
+def test_every_cited_result_exists_and_every_result_is_cited():
+    cited = _cited()
+    assert cited, "no benchmarks/results file is cited"
+    missing = sorted(name for name in cited if not (RESULTS / name).is_file())
+    assert missing == [], f"cited but not in benchmarks/results: {missing}"
+    uncited = sorted(path.name for path in RESULTS.iterdir() if path.name not in cited | _companions(cited))
+    assert uncited == [], f"in benchmarks/results but cited by neither the README nor the docs: {uncited}"
+
+
+def test_docs_page_layout():
+    page = (ROOT / "docs" / "modules" / "genrl.rst").read_text(encoding="utf-8")
+    for section in ("Notes", "Can I use?", "Example", "Results", "How to replicate the results?", "Parameters"):
+        assert f"\n{section}\n" in page, section
