@@ -25,7 +25,8 @@ import torch as th
 from stable_baselines3.common.torch_layers import CombinedExtractor, FlattenExtractor
 
 from sb3_genrl.generative.base import TrajectoryGenerator
-from sb3_genrl.genrl.genrl import GenRL, _generator_file, _load_generator
+from sb3_genrl.genrl.generator_files import generator_file, load_generator
+from sb3_genrl.genrl.genrl import GenRL
 from sb3_genrl.genrl.policies import BoxScaler, ContextStdPolicy, MlpPolicy, MultiInputPolicy
 from sb3_genrl.wrappers import LatentActionWrapper
 
@@ -94,10 +95,10 @@ def _resolve_generator(path: str, data: dict[str, Any], generator: TrajectoryGen
     """The given generator, else the file the zip names, else ``<name>.generator.pt`` beside the zip, onto ``device``."""
     if isinstance(generator, TrajectoryGenerator):
         return generator
-    candidates = [generator] if generator is not None else [data.get("generator_path"), _generator_file(path)]
+    candidates = [generator] if generator is not None else [data.get("generator_path"), generator_file(path)]
     for candidate in candidates:
         if isinstance(candidate, str | os.PathLike) and os.path.isfile(candidate):
-            return _load_generator(os.fspath(candidate), device)
+            return load_generator(os.fspath(candidate), device)
     raise ValueError(f"no generator for {path}: none of {[str(c) for c in candidates if c is not None]} exists; "
                      "pass the generator file")
 

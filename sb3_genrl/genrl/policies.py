@@ -5,8 +5,8 @@ GenRL uses SB3's actor-critic policies: an MLP maps the context ``s0`` to the me
 :class:`ContextStdPolicy` (alias ``"ContextStdPolicy"``) lets the log standard deviation depend on the context.
 :class:`~sb3_genrl.GenRL` sets ``log_std_init`` from the generator's prior unless the user gives it (see
 :func:`default_log_std_init`), so that the initial policy explores about as widely as the prior, and, for a Box
-context, the features extractor :class:`BoxScaler`, which maps the context's bounded box onto ``[-1, 1]`` (a goal
-region of 0.65 m by 0.8 m would otherwise need large first-layer weights, which trust-region steps grow slowly).
+context, the features extractor :class:`BoxScaler`, which maps the context's bounded box onto ``[-1, 1]`` (a small
+goal region would otherwise need large first-layer weights, which trust-region steps grow slowly).
 """
 
 from __future__ import annotations
@@ -134,9 +134,8 @@ def limit_log_std_change(policy: ActorCriticPolicy, before: dict[str, th.Tensor]
     dimension ``k`` at features ``phi`` is ``dW_k . phi + db_k``; over features in ``[-1, 1]^d`` its largest size is
     exactly ``|db_k| + sum_j |dW_kj|`` (at the corner ``phi_j = sign(dW_kj) sign(db_k)``). When the largest over the
     dimensions exceeds ``bound``, the whole change ``(dW, db)`` is scaled by ``bound / largest``: the step keeps its
-    direction, as in TRPO's line search. (Scaling each dimension's row on its own, which would reduce to the clamp,
-    ended 30% further from the baskets on basketball's tuning surrogate, docs/basketball.md.) The features must lie
-    in ``[-1, 1]`` (:class:`BoxScaler` on a bounded box; :class:`~sb3_genrl.GenRL` checks this).
+    direction, as in TRPO's line search. The features must lie in ``[-1, 1]`` (:class:`BoxScaler` on a bounded box;
+    :class:`~sb3_genrl.GenRL` checks this).
     """
     with th.no_grad():
         if not isinstance(policy, ContextStdPolicy):

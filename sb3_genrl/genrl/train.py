@@ -26,8 +26,9 @@ from sb3_genrl.curves import (
     write_learning_curve,
 )
 from sb3_genrl.generative.base import TrajectoryGenerator
-from sb3_genrl.genrl.genrl import EStep, GenRL, check_hyperparameters
+from sb3_genrl.genrl.genrl import EStep, GenRL
 from sb3_genrl.genrl.policies import MlpPolicy
+from sb3_genrl.genrl.settings import NOT_SETTINGS, check_genrl_settings
 from sb3_genrl.utils import atomic_write_json
 from sb3_genrl.wrappers import LatentActionWrapper
 
@@ -106,11 +107,7 @@ def train_policy(
         ``best_mean_reward``, ``genrl_settings``: every GenRL hyperparameter in effect, see :func:`genrl_settings`)
     """
     env_id, task_name = _resolve_env_id(task)
-    _check_arguments(episodes, batch_episodes, n_envs, seed, device)
-    if "n_steps" in genrl_kwargs:  # the learning curve's window and the summary's iterations follow batch_episodes
-        raise ValueError(f"n_steps={genrl_kwargs['n_steps']!r}: give the episodes per iteration as batch_episodes "
-                         "(n_steps is batch_episodes / n_envs)")
-    check_genrl_kwargs({"e_step": e_step, **genrl_kwargs}, None)
+    _check_arguments(episodes, batch_episodes, n_envs, seed, device, {"e_step": e_step, **genrl_kwargs})
     out = check_output_dir(out_dir)
     # Built first: a generator that does not fit the task is refused before anything is written.
     env = LatentActionWrapper(gym.make(env_id), _as_generator(generator))
@@ -145,52 +142,21 @@ def _train(env: Any, generator: TrajectoryGenerator | str, episodes: int, out: p
     return model
 
 
-def check_genrl_kwargs(genrl_kwargs: dict[str, Any], name: str | None = "genrl_kwargs", *,
-                       values: bool = True) -> dict[str, Any]:
-    """Refuse names that are not GenRL's settings, unknown policy names and, with ``values``, the values that GenRL
-    would refuse (:func:`~sb3_genrl.genrl.genrl.check_hyperparameters`, the others at their defaults), before any
-    work starts. ``name`` starts the error message (``None``: nothing). ``values=False`` suits settings that will be
-    laid over others (a task's): check their values once they are joined."""
-    import inspect
-
-    prefix = f"{name}: " if name else ""
-    if not isinstance(genrl_kwargs, dict):
-        raise TypeError(f"{prefix}expected a dict of GenRL arguments, got {type(genrl_kwargs).__name__}")
-    known = set(inspect.signature(GenRL.__init__).parameters) - {"self", *_NOT_SETTINGS}
-    unknown = sorted(set(genrl_kwargs) - known)
-    if unknown:
-        raise ValueError(f"{prefix}{', '.join(map(repr, unknown))} "
-                         f"{'is not a GenRL setting' if len(unknown) == 1 else 'are not GenRL settings'} "
-                         f"(known: {', '.join(sorted(known))})")
-    policy = genrl_kwargs.get("policy", "MlpPolicy")
-    if isinstance(policy, str) and policy not in GenRL.policy_aliases:
-        raise ValueError(f"{prefix}unknown policy {policy!r} (known: {', '.join(GenRL.policy_aliases)})")
-    if values:
-        try:
-            check_hyperparameters(genrl_kwargs)
-        except ValueError as error:
-            raise ValueError(f"{prefix}{error}") from None
-    return genrl_kwargs
-
-
-def genrl_kwargs_argument(text: str, *, values: bool = True) -> dict[str, Any]:
-    """An argparse ``type`` for ``--genrl-kwargs``: a JSON object of GenRL settings, checked by name and value."""
+def genrl_kwargs_argument(text: str) -> dict[str, Any]:
+    """An argparse ``type`` for ``--genrl-kwargs``: a JSON object of GenRL settings, checked by
+    :func:`~sb3_genrl.genrl.check_genrl_settings`."""
     import argparse
 
     from sb3_genrl.checks import json_argument
 
-    value = json_argument(text)
     try:
-        return check_genrl_kwargs(value, None, values=values)
+        return check_genrl_settings(json_argument(text))
     except (TypeError, ValueError) as error:
         raise argparse.ArgumentTypeError(str(error)) from None
 
 
-def genrl_kwargs_override_argument(text: str) -> dict[str, Any]:
-    """An argparse ``type`` for ``--genrl-kwargs`` laid over a task's settings: checked by name only, since a value
-    may need the task's (``hindsight_history`` needs the task's ``hindsight``); check the joined settings with
-    :func:`check_genrl_kwargs`."""
-    return genrl_kwargs_argument(text, values=False)
+# Settings laid over a task's are checked alone as any others (check the joined settings too).
+genrl_kwargs_override_argument = genrl_kwargs_argument
 
 
 def make_genrl(env: Any, generator: TrajectoryGenerator | str | None = None, **genrl_kwargs: Any) -> GenRL:
@@ -203,7 +169,8 @@ MAIN_GUARD = ("n_envs > 1 plays the envs in their own processes, which import th
               "must run its work under `if __name__ == \"__main__\":`, as any script with SB3's SubprocVecEnv")
 
 
-def _check_arguments(episodes: int, batch_episodes: int, n_envs: int, seed: int, device: str) -> None:
+def _check_arguments(episodes: int, batch_episodes: int, n_envs: int, seed: int, device: str,
+                     genrl_kwargs: dict[str, Any]) -> None:
     check_positive_int(episodes, "episodes")
     check_int(batch_episodes, "batch_episodes", minimum=2)
     check_positive_int(n_envs, "n_envs")
@@ -213,6 +180,10 @@ def _check_arguments(episodes: int, batch_episodes: int, n_envs: int, seed: int,
         raise ValueError(f"batch_episodes ({batch_episodes}) must be a multiple of n_envs ({n_envs})")
     check_seed(seed)
     check_device(device)
+    if "n_steps" in genrl_kwargs:  # the learning curve's window and the summary's iterations follow batch_episodes
+        raise ValueError(f"n_steps={genrl_kwargs['n_steps']!r}: give the episodes per iteration as batch_episodes "
+                         "(n_steps is batch_episodes / n_envs)")
+    check_genrl_settings(genrl_kwargs)
 
 
 def _training_env(env: LatentActionWrapper, n_envs: int, out: pathlib.Path) -> Any:
@@ -263,11 +234,6 @@ def _json_value(value: Any) -> Any:
     return _UNREPRESENTABLE
 
 
-# GenRL arguments that say where or how verbosely it runs, not what it computes
-_NOT_SETTINGS = ("env", "generator", "seed", "device", "verbose", "tensorboard_log", "stats_window_size",
-                 "_init_setup_model")
-
-
 def genrl_settings(genrl_kwargs: dict[str, Any] | None = None) -> dict[str, Any]:
     """Every GenRL hyperparameter in effect with ``genrl_kwargs``: GenRL's defaults, updated with them (those a JSON
     file can hold). Recorded by the runs and the stages that train GenRL, so that a change of a default is seen when
@@ -281,7 +247,7 @@ def genrl_settings(genrl_kwargs: dict[str, Any] | None = None) -> dict[str, Any]
     policy = settings.pop("policy", "MlpPolicy")
     if policy not in ("MlpPolicy", MlpPolicy):
         settings["policy"] = policy if isinstance(policy, str) else f"{policy.__module__}.{policy.__qualname__}"
-    return _json_settings({name: value for name, value in settings.items() if name not in _NOT_SETTINGS})
+    return _json_settings({name: value for name, value in settings.items() if name not in NOT_SETTINGS})
 
 
 def _output_paths(out: pathlib.Path) -> dict[str, str]:

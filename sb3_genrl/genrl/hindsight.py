@@ -1,0 +1,164 @@
+"""Hindsight relabelling for GenRL: each pull joins the E-step a second time, relabelled with the context it solved.
+
+The latent-space counterpart of hindsight experience replay (Andrychowicz et al., 2017), switched on by GenRL's
+``hindsight_kwargs`` as SB3 switches on its ``HerReplayBuffer`` with ``replay_buffer_kwargs``. A pull whose info holds
+``info["hindsight"] = (context', r')`` (the context for which its trajectory earns the best reward, and that reward;
+:class:`~sb3_genrl.LatentActionWrapper` asks the task's ``hindsight(info)`` for it) is treated as if
+``pi(.|context')`` had drawn it: its ratio ``q/pi`` is taken at ``context'`` and its advantage is ``r' - V(context')``,
+so it stays inside the E-step's KL bound. Relabelled pulls remain true after the policy has moved on (the trajectory
+of ``alpha`` still reaches ``context'``), so those of the last ``history`` batches are kept and reweighed with the
+current policy and value function at every iteration. Optionally the policy's mean is also fitted to the kept pulls
+(:mod:`sb3_genrl.genrl.regression`). Under the KL-penalty E-step the ratio of a pull that ``pi`` makes unlikely at
+its new context grows faster than the penalty, so relabelling needs the TRPO E-step.
+"""
+
+from __future__ import annotations
+
+import collections
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+import torch as th
+from gymnasium import spaces
+from stable_baselines3.common.buffers import RolloutBuffer
+from stable_baselines3.common.policies import ActorCriticPolicy
+
+from sb3_genrl.genrl.regression import mean_parameters, regress_mean
+
+Batch = tuple[th.Tensor, th.Tensor, th.Tensor, th.Tensor]  # observations, actions, log pi(actions), advantages
+DEFAULTS: dict[str, Any] = {"history": 1, "regression_steps": 0, "regression_lr": 1e-3, "regression_batch_size": 256,
+                            "regression_weighted": False}
+NO_HINDSIGHT_INFO = ("hindsight_kwargs needs every pull's info['hindsight']: (context, reward) or None. "
+                     "LatentActionWrapper reports it when the task defines hindsight(info) and the context is the task's "
+                     "get_context(); this env's info has no such key")
+
+
+def check_hindsight_kwargs(hindsight_kwargs: Mapping[str, Any]) -> dict[str, Any]:
+    """Refuse hindsight settings that :class:`HindsightRelabelling` would not take, naming the setting.
+
+    :param hindsight_kwargs: some of ``history``, ``regression_steps``, ``regression_lr``, ``regression_batch_size``,
+        ``regression_weighted``
+    :return: a plain dict copy
+    """
+    if not isinstance(hindsight_kwargs, Mapping):
+        raise ValueError(f"hindsight_kwargs must be a dict or None, got {hindsight_kwargs!r}")
+    unknown = sorted(set(hindsight_kwargs) - set(DEFAULTS))
+    if unknown:
+        raise ValueError(f"hindsight_kwargs: {', '.join(map(repr, unknown))} not among its settings "
+                         f"({', '.join(DEFAULTS)})")
+    settings = DEFAULTS | dict(hindsight_kwargs)
+    for key, minimum in (("history", 1), ("regression_steps", 0), ("regression_batch_size", 1)):
+        value = settings[key]
+        if isinstance(value, bool) or int(value) != value or value < minimum:
+            raise ValueError(f"hindsight_kwargs['{key}'] must be an integer >= {minimum}, got {value!r}")
+    if not settings["regression_lr"] > 0:
+        raise ValueError(f"hindsight_kwargs['regression_lr'] must be positive, got {settings['regression_lr']!r}")
+    if not isinstance(settings["regression_weighted"], bool | np.bool_):
+        raise ValueError(f"hindsight_kwargs['regression_weighted'] must be True or False, got "
+                         f"{settings['regression_weighted']!r}")
+    if settings["regression_weighted"] and not settings["regression_steps"]:
+        raise ValueError("hindsight_kwargs['regression_weighted'] weights the regression's pulls, which needs "
+                         "regression_steps > 0")
+    return dict(hindsight_kwargs)
+
+
+class HindsightRelabelling:
+    """The relabelled pulls of GenRL's last batches, and the fit of the policy's mean to them (see the module doc).
+
+    :param policy: the policy (a Box context); its current distribution and value function weigh the kept pulls
+    :param history: batches whose relabelled pulls join the E-step: the current one and those before it (default 1)
+    :param regression_steps: Adam steps per iteration fitting the policy's mean to the kept pulls (default 0: none)
+    :param regression_lr: Adam learning rate of that fit (default 1e-3)
+    :param regression_batch_size: pulls per step of the fit, drawn with replacement from the kept ones (default 256)
+    :param regression_weighted: weight each pull's error by the policy's density at it relative to its mode
+        (default False; see :func:`~sb3_genrl.genrl.regression.regress_mean`)
+    """
+
+    def __init__(self, policy: ActorCriticPolicy, *, history: int = 1, regression_steps: int = 0,
+                 regression_lr: float = 1e-3, regression_batch_size: int = 256, regression_weighted: bool = False) -> None:
+        check_hindsight_kwargs({"history": history, "regression_steps": regression_steps, "regression_lr": regression_lr,
+                                "regression_batch_size": regression_batch_size,
+                                "regression_weighted": regression_weighted})
+        if not isinstance(policy.observation_space, spaces.Box):
+            raise ValueError(f"hindsight_kwargs relabels Box contexts; this env's context space is "
+                             f"{policy.observation_space}")
+        self.policy, self.history = policy, int(history)
+        self.regression_steps, self.regression_lr = int(regression_steps), regression_lr
+        self.regression_batch_size, self.regression_weighted = int(regression_batch_size), bool(regression_weighted)
+        self.pull_infos: list[list[dict[str, Any]]] = []  # the infos of the rollout's pulls, step by step
+        # (contexts, latent actions, rewards) relabelled in the last `history` batches
+        self.memory: collections.deque[tuple[th.Tensor, th.Tensor, th.Tensor]] = collections.deque(maxlen=self.history)
+        # Adam over the policy's mean; it keeps its moments from iteration to iteration (and is saved with the model)
+        self.optimizer = th.optim.Adam(mean_parameters(policy), lr=regression_lr) if self.regression_steps else None
+
+    def reset(self) -> None:
+        """Forget the pull infos of the rollout before (a rollout starts)."""
+        self.pull_infos = []
+
+    def add_infos(self, infos: list[dict[str, Any]]) -> None:
+        """Keep one step's infos of the rollout (one per env); refused at once when they cannot be relabelled."""
+        if not all("hindsight" in info for info in infos):
+            raise ValueError(NO_HINDSIGHT_INFO)
+        self.pull_infos.append(infos)
+
+    def extend_batch(self, batch: Batch, rollout_buffer: RolloutBuffer, advantage_mean: th.Tensor | float,
+                     advantage_std: th.Tensor | float) -> tuple[Batch, float]:
+        """The E-step's batch with the relabelled pulls of this rollout and of the ``history - 1`` before it joined.
+
+        Each joins as (context', latent action, log-probability under the current policy at context',
+        ``(r' - V(context') - advantage_mean) / advantage_std``). Relabelled contexts outside the observation box,
+        and pulls whose info holds ``None``, are left out.
+
+        :param batch: the rollout's pulls as played (observations, actions, log-probabilities, advantages)
+        :param rollout_buffer: the rollout buffer that holds them (after ``get()``)
+        :return: the joined batch, and the relabelled pulls per pull played
+        """
+        self.memory.append(self._relabel(rollout_buffer))
+        contexts, actions, rewards = self._kept()
+        with th.no_grad():  # the current policy and value function, also for the pulls of earlier batches
+            log_prob = self.policy.get_distribution(contexts).log_prob(actions)
+            values = self.policy.predict_values(contexts).flatten()
+        advantages = (rewards.to(values.dtype) - values - advantage_mean) / advantage_std
+        relabelled = (contexts, actions, log_prob, advantages)
+        joined = tuple(th.cat([played, extra]) for played, extra in zip(batch, relabelled, strict=True))
+        return joined, len(contexts) / len(batch[0])  # type: ignore[return-value]
+
+    def regress(self) -> list[float]:
+        """Fit the policy's mean to the kept relabelled pulls (``regression_steps`` Adam steps); the minibatch losses
+        (none without the regression or without kept pulls)."""
+        contexts, actions, _ = self._kept()
+        if not self.regression_steps or not len(contexts):
+            return []
+        return regress_mean(self.policy, self.optimizer, contexts, actions, steps=self.regression_steps,  # type: ignore[arg-type]
+                            batch_size=self.regression_batch_size, weighted=self.regression_weighted)
+
+    def set_learning_rate(self) -> None:
+        """Give the regression's Adam this component's ``regression_lr`` (after loading a saved optimizer state)."""
+        for group in self.optimizer.param_groups if self.optimizer is not None else ():
+            group["lr"] = self.regression_lr
+
+    def _kept(self) -> tuple[th.Tensor, th.Tensor, th.Tensor]:
+        """The kept relabelled pulls, oldest batch first: contexts, latent actions, rewards."""
+        return tuple(th.cat(part) for part in zip(*self.memory, strict=True))  # type: ignore[return-value]
+
+    def _relabel(self, buffer: RolloutBuffer) -> tuple[th.Tensor, th.Tensor, th.Tensor]:
+        """This rollout's relabelled pulls: contexts, latent actions, rewards."""
+        space, device = self.policy.observation_space, self.policy.device
+        if len(self.pull_infos) != buffer.buffer_size or not buffer.generator_ready:  # (train() has called get())
+            raise RuntimeError(f"hindsight: {len(self.pull_infos)} steps of infos for a rollout of {buffer.buffer_size}")
+        contexts, actions, rewards = [], [], []
+        for step, infos in enumerate(self.pull_infos):
+            for env_index, info in enumerate(infos):
+                if info["hindsight"] is None:
+                    continue
+                context, reward = info["hindsight"]
+                context = np.asarray(context, dtype=space.dtype).reshape(space.shape)
+                if np.all(np.isfinite(context)) and np.all(context >= space.low) and np.all(context <= space.high):
+                    contexts.append(context)
+                    actions.append(buffer.actions[env_index * buffer.buffer_size + step])  # as get() flattened it
+                    rewards.append(float(reward))
+        action_shape = (len(actions), *self.policy.action_space.shape)  # also when no pull was relabelled
+        return (th.as_tensor(np.array(contexts, dtype=space.dtype).reshape(-1, *space.shape), device=device),
+                th.as_tensor(np.array(actions, dtype=np.float32).reshape(action_shape), device=device),
+                th.as_tensor(np.array(rewards, dtype=np.float32), device=device))
