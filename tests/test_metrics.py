@@ -240,6 +240,7 @@ def test_evaluate_generators_writes_table_and_plots(tmp_path) -> None:
     assert [row["model"] for row in rows] == ["A", "B"]
     assert float(rows[0]["precision"]) == evaluations[0].precision_recall.precision
     assert float(rows[1]["mean_delta"]) == evaluations[1].dwpr.mean_delta
+    assert float(rows[1]["coverage"]) == evaluations[1].density_coverage.coverage
     assert evaluations[0].precision_recall.precision > 0.8  # same distribution as the real set
     with pytest.raises(ValueError, match="horizon"):
         evaluate_generators([LinearGenerator(np.ones((1, 3)), 3, 1)], real, n=50, dwpr_n=10, out_dir=out)
@@ -312,6 +313,10 @@ def test_evaluate_generator_is_the_one_evaluation_and_independent_of_list_order(
     generated = generators["B"].decode(generators["B"].sample_prior(90, prior_rng))
     precision, recall, _, _ = brute_force(real, generated, 3)
     assert (alone.precision_recall.precision, alone.precision_recall.recall) == (precision, recall)
+    from test_density_coverage import brute_force as density_coverage_brute_force
+
+    density, coverage = density_coverage_brute_force(real, generated, 3)
+    assert (alone.density_coverage.density, alone.density_coverage.coverage) == (density, coverage)
     assert alone.name == "B" and alone.details()["num_generated"] == 90
 
 

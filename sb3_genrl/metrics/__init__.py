@@ -1,6 +1,8 @@
-"""Evaluation of generative models (paper section 5.2): precision and recall, DwPR, correlation with policy scores."""
+"""Evaluation of generative models (paper section 5.2): precision and recall, DwPR, correlation with policy scores;
+beyond the paper, density and coverage (Naeem et al., 2020)."""
 
 from sb3_genrl.metrics.correlation import MEASURES, CorrelationRow, CorrelationTable, correlation_table, pearson
+from sb3_genrl.metrics.density_coverage import DensityCoverage, density_coverage
 from sb3_genrl.metrics.dwpr import DwPR, default_intervention_values, dwpr
 from sb3_genrl.metrics.evaluate import GeneratorEvaluation, evaluate_generator, evaluate_generators, real_subset
 from sb3_genrl.metrics.plots import labelled_scatter
@@ -10,11 +12,13 @@ __all__ = [
     "MEASURES",
     "CorrelationRow",
     "CorrelationTable",
+    "DensityCoverage",
     "DwPR",
     "GeneratorEvaluation",
     "PrecisionRecall",
     "correlation_table",
     "default_intervention_values",
+    "density_coverage",
     "dwpr",
     "evaluate_generator",
     "evaluate_generators",

@@ -1,4 +1,5 @@
-"""Evaluation of trained generators (paper section 6.1.2): precision/recall against demonstrations and DwPR.
+"""Evaluation of trained generators (paper section 6.1.2): precision/recall against demonstrations and DwPR, and
+beyond the paper density and coverage (Naeem et al., 2020) from the same samples.
 
 Results are written after each model, so an interrupted evaluation keeps every model it finished.
 """
@@ -21,6 +22,7 @@ from sb3_genrl.data import load_trajectories
 from sb3_genrl.generative.base import TrajectoryGenerator
 from sb3_genrl.markdown import markdown_table
 from sb3_genrl.metrics.correlation import MEASURES
+from sb3_genrl.metrics.density_coverage import DensityCoverage, density_coverage
 from sb3_genrl.metrics.dwpr import DEFAULT_DWPR_SAMPLES, DEFAULT_INTERVENTIONS, DwPR, decode_batched, dwpr
 from sb3_genrl.metrics.plots import labelled_scatter
 from sb3_genrl.metrics.precision_recall import PrecisionRecall, precision_recall
@@ -28,7 +30,8 @@ from sb3_genrl.utils import atomic_write_json, atomic_write_text
 
 # Paper section 6.1.2: 15000 generated against 15000 fixed, randomly chosen training trajectories, k = 3.
 DEFAULT_SAMPLES = 15000
-TABLE_COLUMNS = ("model", *MEASURES)
+# The paper's measures, then density and coverage (not part of the paper's correlation analysis).
+TABLE_COLUMNS = ("model", *MEASURES, "density", "coverage")
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -38,17 +41,20 @@ class GeneratorEvaluation:
     :param name: model name (file stem or given name)
     :param precision_recall: precision and recall against the real trajectories
     :param dwpr: disentanglement with precision and recall
+    :param density_coverage: density and coverage of the same generated samples against the same real ones
     """
 
     name: str
     precision_recall: PrecisionRecall
     dwpr: DwPR
+    density_coverage: DensityCoverage
 
     def row(self) -> dict[str, float | str]:
-        """The table row: the model's name and its :data:`~sb3_genrl.metrics.MEASURES`."""
+        """The table row: the model's name, its :data:`~sb3_genrl.metrics.MEASURES`, density and coverage."""
         values = (self.precision_recall.precision, self.precision_recall.recall, self.dwpr.delta_1, self.dwpr.delta_2,
                   self.dwpr.mean_delta)
-        return {"model": self.name, **dict(zip(MEASURES, values, strict=True))}
+        return {"model": self.name, **dict(zip(MEASURES, values, strict=True)),
+                "density": self.density_coverage.density, "coverage": self.density_coverage.coverage}
 
     def details(self) -> dict[str, Any]:
         """The row plus the per-dimension DwPR values and the sample sizes (JSON-ready)."""
@@ -94,7 +100,7 @@ def write_results(evaluations: Sequence[GeneratorEvaluation], out_dir: str | os.
                      for row in rows)
     atomic_write_text(out / "results.csv", table.getvalue(), newline="")
     markdown = markdown_table(TABLE_COLUMNS, [[row[column] for column in TABLE_COLUMNS] for row in rows],
-                              align="l" + "r" * len(MEASURES))
+                              align="l" + "r" * (len(TABLE_COLUMNS) - 1))
     atomic_write_text(out / "results.md", markdown + "\n")
     labels = [str(row["model"]) for row in rows]
     labelled_scatter([row["precision"] for row in rows], [row["recall"] for row in rows], labels,
@@ -126,7 +132,7 @@ def evaluate_generator(generator: TrajectoryGenerator, real: np.ndarray, *, n: i
                        dwpr_n: int = DEFAULT_DWPR_SAMPLES, interventions: int = DEFAULT_INTERVENTIONS, seed: int = 0,
                        name: str = "model", device: torch.device | str = "auto",
                        batch_size: int | None = None) -> GeneratorEvaluation:
-    """Precision/recall of ``n`` prior samples of one generator against ``real``, and its DwPR.
+    """Precision/recall, density and coverage of ``n`` prior samples of one generator against ``real``, and its DwPR.
 
     This is the one evaluation of a generator: :func:`evaluate_generators` (``genrl evaluate``, the quickstart)
     and the study call it. The prior samples and the DwPR draws come from ``seed`` alone (not from the model's
@@ -151,8 +157,9 @@ def evaluate_generator(generator: TrajectoryGenerator, real: np.ndarray, *, n: i
     prior_rng, dwpr_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
     generated = decode_batched(generator, generator.sample_prior(n, prior_rng))
     pr = precision_recall(real, generated, k, batch_size=batch_size, device=device)
+    dc = density_coverage(real, generated, k, batch_size=batch_size, device=device)
     disentanglement = dwpr(generator, dwpr_n, interventions, k, seed=dwpr_rng, batch_size=batch_size, device=device)
-    return GeneratorEvaluation(name, pr, disentanglement)
+    return GeneratorEvaluation(name, pr, disentanglement, dc)
 
 
 def evaluate_generators(models: Sequence[str | os.PathLike | TrajectoryGenerator] | Mapping[str, str | os.PathLike
@@ -160,13 +167,14 @@ def evaluate_generators(models: Sequence[str | os.PathLike | TrajectoryGenerator
                         k: int = 3, dwpr_n: int = DEFAULT_DWPR_SAMPLES, interventions: int = DEFAULT_INTERVENTIONS,
                         seed: int = 0, out_dir: str | os.PathLike, device: torch.device | str = "auto",
                         batch_size: int | None = None) -> list[GeneratorEvaluation]:
-    """Precision/recall against real trajectories and DwPR of each generator, written as each model completes.
+    """Precision/recall, density/coverage against real trajectories and DwPR of each generator, written as each
+    model completes.
 
     The real set is ``n`` trajectories drawn once with ``seed`` (:func:`real_subset`; there must be at least
     ``n``) and shared by every model; each model is evaluated by :func:`evaluate_generator` with the same ``seed``.
-    Files in ``out_dir``: ``results.csv`` and ``results.md`` (precision, recall, delta_1, delta_2, mean_delta per
-    model), ``results.json`` (also the per-dimension deltas), ``precision_recall.png`` and ``disentanglement.png``
-    (the paper's scatter plots).
+    Files in ``out_dir``: ``results.csv`` and ``results.md`` (precision, recall, delta_1, delta_2, mean_delta,
+    density and coverage per model), ``results.json`` (also the per-dimension deltas), ``precision_recall.png``
+    and ``disentanglement.png`` (the paper's scatter plots).
 
     :param models: generator files (loaded with ``sb3_genrl.generative.load``) or generator objects, or a mapping
         name -> either; names default to file stems
