@@ -1,7 +1,8 @@
 """Train a baseline on a task with the same outputs as ``genrl train-policy`` (paper sections 6.1.5, 6.2, 6.3).
 
 Feedback baselines (per-step actions on the task's observation plus the time feature, see
-:mod:`sb3_genrl.baselines.feedback`; settings in :mod:`sb3_genrl.baselines.hyperparameters`):
+:mod:`sb3_genrl.baselines.feedback`; settings in ``hyperparams/ppo.yml`` and ``sac.yml``, read by
+:mod:`sb3_genrl.baselines.hyperparameters`):
 
 - ``ppo``: PPO whose actor is first cloned from the demonstrations (:mod:`sb3_genrl.baselines.bc`: held-out
   episodes, early stopping, exploration std = held-out residual std), then trained on the sparse terminal reward.
@@ -15,7 +16,8 @@ Feedback baselines (per-step actions on the task's observation plus the time fea
 
 Latent-space baselines (the same generator as GenRL, on :class:`~sb3_genrl.LatentActionWrapper`, one-step
 episodes): ``latent-ppo``, ``latent-sac``, ``latent-trpo`` - stock SB3 / sb3-contrib algorithms with their
-defaults except 64 episodes per update (GenRL's batch), so they show what the EM update adds.
+defaults except 64 episodes per update (GenRL's batch; ``hyperparams/latent_*.yml``), so they show what the EM update
+adds.
 
 Every run writes ``episodes.monitor.csv`` (SB3's Monitor: one row per episode with its return, length, table
 contacts, distance and the process' CPU seconds so far, written as training goes), ``learning_curve.csv`` /
@@ -39,7 +41,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from sb3_genrl.baselines import BASELINES, FEEDBACK_BASELINES, LATENT_BASELINES, OFF_POLICY_BASELINES
+from sb3_genrl.baselines import BASELINES, LATENT_BASELINES, OFF_POLICY_BASELINES
 from sb3_genrl.baselines.checkpoint import (
     BUFFER,
     CHECKPOINT_DIR,
@@ -50,29 +52,30 @@ from sb3_genrl.baselines.checkpoint import (
     remove_checkpoint,
     resume_state,
 )
+from sb3_genrl.baselines.evaluation import EVAL_GOALS, evaluate_trained, training_health
 from sb3_genrl.baselines.feedback import (
     add_time_feature,
     evaluate_feedback_policy,
-    held_out_goals,
     make_feedback_env,
 )
 from sb3_genrl.baselines.her import goal_episodes
-from sb3_genrl.baselines.hyperparameters import algorithm_class, check_algorithm_kwargs, settings_record
+from sb3_genrl.baselines.hyperparameters import (
+    algorithm_class,
+    baseline_settings,
+    check_algorithm_kwargs,
+    settings_record,
+    zoo_hyperparams,
+)
 from sb3_genrl.baselines.models import ppo_with_behaviour_cloning, sac_her_with_demonstrations, sac_with_demonstrations
 from sb3_genrl.envs import get_task
 from stable_baselines3 import PPO, SAC
 
 from sb3_genrl.checks import check_device, check_input_path, check_output_dir, check_positive_int, check_seed
 from sb3_genrl.curves import MONITOR_FILE, monitor_episodes, read_monitor, training_logger, write_learning_curve
+from sb3_genrl.hyperparams import EVAL_GOAL_SEED
 from sb3_genrl.utils import atomic_path, atomic_write_json
 
-LATENT_BATCH = 64  # episodes per update of the latent-space baselines (GenRL's default N)
-# The latent-space baselines' settings: SB3's (sb3-contrib's) defaults but for GenRL's batch of episodes per update.
-LATENT_SETTINGS: dict[str, dict[str, Any]] = {"latent-ppo": {"n_steps": LATENT_BATCH, "batch_size": LATENT_BATCH},
-                                              "latent-sac": {"learning_starts": LATENT_BATCH},
-                                              "latent-trpo": {"n_steps": LATENT_BATCH, "batch_size": LATENT_BATCH}}
 CHECKPOINT_EVERY = 250  # episodes between checkpoints of an off-policy baseline (about 5 minutes of one core)
-EVAL_GOALS, EVAL_GOAL_SEED = 100, 12345  # held-out goals of the cloned policy's evaluation (never used for tuning)
 
 
 def train_baseline(
@@ -116,160 +119,63 @@ def train_baseline(
     :param window: episodes per point of the learning curve
     """
     _check_arguments(algorithm, episodes, seed, demos, demo_episodes, generator, eval_goals, checkpoint_every, device)
-    changes = check_algorithm_kwargs(algorithm, algorithm_kwargs)
-    spec = get_task(task)
-    out = check_output_dir(out_dir)
-    summary: dict[str, Any] = {"algorithm": algorithm, "task": spec.name, "episodes": int(episodes), "seed": seed}
-    began, began_cpu = time.perf_counter(), time.process_time()
-    transitions = None if algorithm in LATENT_BASELINES else _demonstrations(demos, demo_episodes, spec.name)
-    if algorithm in LATENT_BASELINES and isinstance(generator, str | os.PathLike):
-        from sb3_genrl.generative import load
-
-        generator = load(generator)
+    changes, spec, out = check_algorithm_kwargs(algorithm, algorithm_kwargs), get_task(task), check_output_dir(out_dir)
+    began = time.perf_counter(), time.process_time()
+    transitions, generator = _inputs(algorithm, spec.name, demos, demo_episodes, generator)
     steps = int(episodes) if transitions is None else int(episodes) * spec.horizon
-    summary |= ({"settings": LATENT_SETTINGS.get(algorithm, {}) | changes} if transitions is None
-                else _demonstration_record(algorithm, transitions, bc_kwargs, changes))
+    summary = {"algorithm": algorithm, "task": spec.name, "episodes": int(episodes), "seed": seed} | (
+        {"settings": baseline_settings(algorithm, spec.name)[0] | changes} if transitions is None
+        else _demonstration_record(algorithm, spec.name, transitions, bc_kwargs, changes))
     checkpoint_every = checkpoint_every if algorithm in OFF_POLICY_BASELINES else None  # the others: short runs
     # A checkpoint of this run is resumed; another run's is refused, before anything is written.
     state = None if checkpoint_every is None else resume_state(out, _identity(summary))
     out.mkdir(parents=True, exist_ok=True)
-    if state is not None:
-        model, summary = _resumed_model(algorithm, spec.name, out, state, device)
-    else:
-        common = {"seed": seed, "device": device, "verbose": verbose}
-        model = (_latent_model(algorithm, spec.env_id, generator, summary["settings"], common, out)
-                 if transitions is None else
-                 _feedback_model(algorithm, spec.name, transitions, steps, out, summary, eval_goals, bc_kwargs,
-                                 common | {"settings": changes}))
-        # demonstrations, behaviour cloning and its evaluation: wall-clock and this process' CPU seconds
-        summary |= {"setup_seconds": time.perf_counter() - began, "setup_cpu_seconds": time.process_time() - began_cpu}
+    model, summary = _model(algorithm, spec.name, out, state, transitions, generator, steps, summary, eval_goals,
+                            bc_kwargs, changes, began, {"seed": seed, "device": device, "verbose": verbose})
     try:
         summary["learn_seconds"] = _learn(model, steps, out, state, checkpoint_every, summary, progress_bar, verbose)
     finally:  # the training env: its Monitor file (complete after this) and any env processes
         model.get_env().close()
-    summary |= _episode_results(algorithm, spec.name, out, window, summary["settings"])
-    summary["final_eval"] = evaluate_trained(algorithm, model, spec.name, generator=generator, goals=eval_goals)
+    return _finish(algorithm, spec.name, model, out, summary, generator, eval_goals, window)
+
+
+def _inputs(algorithm: str, task: str, demos: Any, demo_episodes: int | None, generator: Any) -> tuple[Any, Any]:
+    """The demonstration transitions of a feedback baseline (else ``None``) and the generator of a latent-space one
+    (loaded from its file)."""
+    if algorithm not in LATENT_BASELINES:
+        return _demonstrations(demos, demo_episodes, task), generator
+    if isinstance(generator, str | os.PathLike):
+        from sb3_genrl.generative import load
+
+        generator = load(generator)
+    return None, generator
+
+
+def _model(algorithm: str, task: str, out: pathlib.Path, state: dict[str, Any] | None, transitions: Any, generator: Any,
+           steps: int, summary: dict[str, Any], eval_goals: int, bc_kwargs: dict[str, Any] | None,
+           changes: dict[str, Any], began: tuple[float, float], common: dict[str, Any]) -> tuple[Any, dict[str, Any]]:
+    """The model to train and the summary so far: resumed from ``state``, or new (its setup's seconds recorded)."""
+    if state is not None:
+        return _resumed_model(algorithm, task, out, state, common["device"])
+    model = (_latent_model(algorithm, task, generator, summary["settings"], common, out) if transitions is None else
+             _feedback_model(algorithm, task, transitions, steps, out, summary, eval_goals, bc_kwargs,
+                             common | {"settings": changes}))
+    # demonstrations, behaviour cloning and its evaluation: wall-clock and this process' CPU seconds
+    return model, summary | {"setup_seconds": time.perf_counter() - began[0],
+                             "setup_cpu_seconds": time.process_time() - began[1]}
+
+
+def _finish(algorithm: str, task: str, model: Any, out: pathlib.Path, summary: dict[str, Any], generator: Any,
+            eval_goals: int, window: int) -> dict[str, Any]:
+    """The trained run's results, final evaluation and health in ``summary.json``; its checkpoint removed."""
+    summary |= _episode_results(algorithm, task, out, window, summary["settings"])
+    summary["final_eval"] = evaluate_trained(algorithm, model, task, generator=generator, goals=eval_goals)
     summary["training_health"] = training_health(out)
     for warning in summary["training_health"]["warnings"]:
-        warnings.warn(f"{algorithm} on {spec.name}: {warning}", stacklevel=2)
+        warnings.warn(f"{algorithm} on {task}: {warning}", stacklevel=3)
     atomic_write_json(out / "summary.json", summary)
     remove_checkpoint(out)
     return summary
-
-
-UNMOVED = 0.01  # m: an object whose (x, y) ends this close to its start was not moved
-
-
-def evaluate_trained(algorithm: str, model: Any, task: str, *, generator: Any = None, goals: int = EVAL_GOALS,
-                     seed: int = EVAL_GOAL_SEED) -> dict[str, Any]:
-    """A trained policy's deterministic result on held-out goals, the same goals for every method.
-
-    The feedback baselines play closed loop (:func:`~sb3_genrl.baselines.feedback.evaluate_feedback_policy`; SAC + HER
-    on the goal-conditioned task); GenRL and the latent-space baselines play the trajectory decoded from their
-    deterministic latent action for each goal, clipped to the model's latent action box as in training.
-
-    :param algorithm: ``genrl`` or one of :data:`BASELINES`
-    :param model: the trained model (e.g. :func:`load_trained`'s)
-    :param task: the task it was trained on
-    :param generator: the generator of GenRL and the latent-space baselines
-    :param goals: number of held-out goals (see :func:`~sb3_genrl.baselines.feedback.held_out_goals`)
-    :param seed: seed of the goals
-    :return: the mean, median and 90th percentile of the final distance (minus the reward, m), the table contacts
-        per episode (``None`` on a task without a table), how many of the episodes' simulations went unstable
-        (those score the task's worst reward) and ``object_unmoved``: how many episodes left the puck or ball's
-        (x, y) within :data:`UNMOVED` of where it rests at the start (its ``reached`` point; a policy that never
-        hits the puck scores the distance of the arm holding still)
-    """
-    check_positive_int(goals, "goals")
-    check_seed(seed)
-    if algorithm not in FEEDBACK_BASELINES and algorithm != "genrl" and algorithm not in LATENT_BASELINES:
-        raise ValueError(f"unknown method {algorithm!r}; expected 'genrl' or one of {BASELINES}")
-    if algorithm not in FEEDBACK_BASELINES and generator is None:
-        raise ValueError(f"{algorithm} needs its generator (generator=...)")
-    env = gym.make(get_task(task).env_id).unwrapped  # the task's open-loop fast path, and its object's start
-    try:
-        start = env.initial_state_object_xy()
-        if algorithm in FEEDBACK_BASELINES:
-            played = evaluate_feedback_policy(model, task, goals=goals, seed=seed,
-                                              goal_conditioned=algorithm == "sac-her")
-            rewards, infos = played["rewards"], played["infos"]
-        else:
-            goal_array = held_out_goals(task, goals, seed)
-            latents, _ = model.predict(goal_array, deterministic=True)
-            latents = np.clip(latents, model.action_space.low, model.action_space.high)  # the box it was trained in
-            rewards, infos = env.play_trajectories(np.asarray(generator.decode(latents)), goal_array)
-    finally:
-        env.close()
-    distances = -np.asarray(rewards, dtype=float)
-    unmoved = sum(bool(np.linalg.norm(np.asarray(info["reached"]) - start) < UNMOVED) for info in infos
-                  if "reached" in info)
-    contacts = [info["table_contacts"] for info in infos if "table_contacts" in info]
-    return {"goals": goals, "goal_seed": seed, "mean_distance": float(distances.mean()),
-            "median_distance": float(np.median(distances)), "p90_distance": float(np.percentile(distances, 90)),
-            "table_contacts": float(np.mean(contacts)) if len(contacts) == len(infos) else None,
-            "unstable": sum(bool(info.get("unstable", False)) for info in infos), "object_unmoved": unmoved}
-
-
-def load_trained(algorithm: str, path: str | os.PathLike, task: str, *, generator: Any = None,
-                 device: str = "cpu") -> Any:
-    """Load the model a run of ``algorithm`` on ``task`` saved (``{algorithm}_policy.zip``; GenRL's
-    ``genrl_policy.zip`` needs its generator, SAC + HER's the goal-conditioned task, as SB3 loads its buffer class)."""
-    check_input_path(path, "path")
-    if algorithm == "genrl":
-        from sb3_genrl.genrl import GenRL
-
-        return GenRL.load(path, device=device, generator=generator)
-    if algorithm == "sac-her":
-        return SAC.load(path, env=gym.make(get_task(task).goal_env_id), device=device)
-    return algorithm_class(algorithm).load(path, device=device)
-
-
-DIVERGED = 1000.0  # a critic loss this many times its early median counts as diverged
-PPO_KL_LIMIT = 1.0  # a median approximate KL per PPO update above this: far outside the trust region clipping assumes
-
-
-def training_health(out_dir: str | os.PathLike) -> dict[str, Any]:
-    """What SB3's logger recorded of a run's stability (``logs/progress.csv`` and, for a resumed run, the
-    ``progress.until_episode_K.csv`` before it): the critic's loss early (median of the first 10 records) and at its
-    worst, the entropy coefficient (SAC), PPO's approximate KL per update and its clip fraction, and ``warnings``:
-    a critic loss above :data:`DIVERGED` times its early median (the critic diverged) or a median approximate KL
-    above :data:`PPO_KL_LIMIT` (each update moves the policy far beyond the trust region).
-
-    :param out_dir: the run folder
-    """
-    import csv
-    import re
-
-    logs = pathlib.Path(out_dir) / "logs"
-    earlier = sorted(logs.glob("progress.until_episode_*.csv"),
-                     key=lambda path: int(re.search(r"_(\d+)\.csv$", path.name).group(1)))
-    columns: dict[str, list[float]] = {key: [] for key in ("train/critic_loss", "train/ent_coef", "train/approx_kl",
-                                                             "train/clip_fraction")}
-    for path in [*earlier, logs / "progress.csv"]:
-        if not path.is_file():
-            continue
-        with open(path, newline="") as file:
-            for row in csv.DictReader(file):
-                for key, values in columns.items():
-                    if row.get(key):
-                        values.append(float(row[key]))
-    health: dict[str, Any] = {"warnings": []}
-    critic, ent_coef = columns["train/critic_loss"], columns["train/ent_coef"]
-    kl, clip = columns["train/approx_kl"], columns["train/clip_fraction"]
-    if critic:
-        early, worst = float(np.median(critic[:10])), float(np.max(critic))
-        health |= {"critic_loss_early": early, "critic_loss_max": worst}
-        if worst > DIVERGED * max(early, 1e-12):
-            health["warnings"].append(f"the critic's loss rose from {early:.3g} to {worst:.3g}: the critic diverged")
-    if ent_coef:
-        health |= {"ent_coef_first": ent_coef[0], "ent_coef_max": float(np.max(ent_coef)), "ent_coef_last": ent_coef[-1]}
-    if kl:
-        health |= {"approx_kl_median": float(np.median(kl)), "approx_kl_max": float(np.max(kl)),
-                   "clip_fraction_median": float(np.median(clip)) if clip else None}
-        if health["approx_kl_median"] > PPO_KL_LIMIT:
-            health["warnings"].append(f"PPO's median approximate KL per update is {health['approx_kl_median']:.3g}: "
-                                      "each update moves the policy far beyond its trust region (see target_kl)")
-    return health
 
 
 def _learn(model: Any, steps: int, out: pathlib.Path, state: dict[str, Any] | None, checkpoint_every: int | None,
@@ -291,11 +197,11 @@ def _learn(model: Any, steps: int, out: pathlib.Path, state: dict[str, Any] | No
     return float(start["learn_seconds"]) + seconds
 
 
-def _demonstration_record(algorithm: str, transitions: dict[str, np.ndarray], bc_kwargs: dict[str, Any] | None,
-                          changes: dict[str, Any]) -> dict[str, Any]:
+def _demonstration_record(algorithm: str, task: str, transitions: dict[str, np.ndarray],
+                          bc_kwargs: dict[str, Any] | None, changes: dict[str, Any]) -> dict[str, Any]:
     """The summary's entries on the demonstrations and the settings of a feedback baseline (``changes``: the user's
     changes to them)."""
-    settings = settings_record({algorithm: changes})[algorithm]
+    settings = settings_record(task, {algorithm: changes})[algorithm]
     if algorithm == "ppo":
         settings["behaviour_cloning"] |= bc_kwargs or {}
     return {"demo_transitions": len(transitions["observations"]), "demo_sha256": _fingerprint(transitions),
@@ -380,11 +286,11 @@ def _feedback_model(algorithm: str, task: str, transitions: dict[str, np.ndarray
     goes to ``summary``."""
     env = _monitored_env(algorithm, task, out)
     if algorithm == "sac-her":
-        return sac_her_with_demonstrations(env, goal_episodes(task, transitions), steps=steps, **common)
+        return sac_her_with_demonstrations(env, goal_episodes(task, transitions), task=task, steps=steps, **common)
     transitions = add_time_feature(transitions, get_task(task).horizon)
     if algorithm != "ppo":
-        return sac_with_demonstrations(env, transitions, steps=steps, prefill=algorithm == "sac", **common)
-    model, record = ppo_with_behaviour_cloning(env, transitions, bc_kwargs=bc_kwargs, **common)
+        return sac_with_demonstrations(env, transitions, task=task, steps=steps, prefill=algorithm == "sac", **common)
+    model, record = ppo_with_behaviour_cloning(env, transitions, task=task, bc_kwargs=bc_kwargs, **common)
     with atomic_path(out / "bc_policy.zip") as tmp:  # before PPO changes it
         model.save(tmp)
     distances = {}
@@ -428,9 +334,10 @@ def _demonstrations(demos: Any, demo_episodes: int | None, task: str) -> dict[st
     return {key: np.asarray(value)[:n] for key, value in transitions.items()}
 
 
-def _latent_model(algorithm: str, env_id: str, generator: Any, settings: dict[str, Any], common: dict,
+def _latent_model(algorithm: str, task: str, generator: Any, settings: dict[str, Any], common: dict,
                   out: pathlib.Path) -> Any:
+    """A latent-space baseline on the task's :class:`~sb3_genrl.LatentActionWrapper`, under the run's Monitor."""
     from sb3_genrl import LatentActionWrapper
 
-    env = monitor_episodes(LatentActionWrapper(gym.make(env_id), generator), out)
-    return algorithm_class(algorithm)("MlpPolicy", env, **settings, **common)
+    env = monitor_episodes(LatentActionWrapper(gym.make(get_task(task).env_id), generator), out)
+    return algorithm_class(algorithm)(zoo_hyperparams(algorithm, task)["policy"], env, **settings, **common)

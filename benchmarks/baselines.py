@@ -5,11 +5,9 @@ latent space (see :mod:`sb3_genrl.baselines.train` and :mod:`sb3_genrl.baselines
 plays the same number of episodes; a feedback episode is the task's horizon in environment steps, a GenRL or
 latent-space episode is one trajectory of that many steps, so both axes (episodes, environment steps) hold.
 
-GenRL runs with its defaults (``--genrl-kwargs`` changes them), the baselines with rl-zoo3's settings
-(``--baseline-kwargs`` changes them, recorded with each run). At this benchmark's 3000 episodes they do best on
-both tasks' tuning surrogates (``benchmarks/genrl_tuning.py``, tuning goals): basketball's own settings, made to
-anneal the policy's spread over 20000 episodes, end at 0.83 m there after 3000 against 0.50 m with the defaults
-(``benchmarks/results/genrl_tuning_basketball.json``); hockey's settings are the defaults.
+GenRL runs with its defaults (``--genrl-kwargs`` changes them; a task's own settings in ``hyperparams/genrl.yml`` are
+made for its own budget of episodes), the baselines with rl-zoo3's settings (``hyperparams/ppo.yml``, ``sac.yml``,
+``latent_*.yml``; ``--baseline-kwargs`` changes them, recorded with each run).
 
 Each run has its own folder under ``--work`` (``METHOD/seedS``) where it writes its per-episode records (SB3's
 Monitor file) as it goes; a run whose ``run.json`` exists is skipped when the settings recorded there match, and the
@@ -48,18 +46,14 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any
 
 import gymnasium as gym
-import numpy as np
 from sb3_genrl.baselines.hyperparameters import baseline_kwargs_argument
+from sb3_genrl.benchmarks.baselines_results import METHODS, WINDOW, core_hours, merge_results, method_result, write_outputs
 from sb3_genrl.envs import TASKS
 
-from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, OUT_DIR, SEED
-from sb3_genrl.genrl.train import genrl_kwargs_argument
+from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, OUT_DIR, SEED, json_object_argument
 from sb3_genrl.utils import atomic_write_json
 
 HERE = pathlib.Path(__file__).resolve().parent
-METHODS = ("genrl", "ppo", "sac", "sac-no-prefill", "sac-her", "latent-ppo", "latent-sac", "latent-trpo")
-MILESTONES = (100, 300, 1000, 3000)  # episodes at which the table reports the mean distance
-WINDOW = 64  # episodes averaged per point (GenRL's batch)
 # what final_evaluation keeps of evaluate_trained's result
 FINAL_RESULTS = {"mean_distance", "median_distance", "p90_distance", "table_contacts", "unstable", "object_unmoved"}
 GENERATOR_PRESET, GENERATOR_EPOCHS = "VAE1", 300  # the quickstart's generator
@@ -117,7 +111,7 @@ def run_settings(method: str, args: argparse.Namespace, seed: int, demos: str, g
             settings["genrl"] = genrl_settings(settings["genrl_kwargs"])
     else:
         settings |= {"demos": os.path.abspath(demos), "demo_episodes": info["episodes"], "demo_seed": info.get("seed"),
-                     "hyperparameters": settings_record({method: changes} if changes else None)[method]}
+                     "hyperparameters": settings_record(args.task, {method: changes} if changes else None)[method]}
     return json.loads(json.dumps(settings))  # as it reads back from JSON
 
 
@@ -194,12 +188,13 @@ def prepare(args: argparse.Namespace, work: pathlib.Path) -> tuple[str, str]:
 
 def final_evaluation(run: pathlib.Path, method: str, task: str, generator: str | None) -> dict[str, Any]:
     """The run's trained policy, deterministic, on the held-out goals every method is evaluated on (the cloned
-    policy's, ``sb3_genrl.baselines.train.EVAL_GOALS``); kept in the run's ``final_eval.json`` under the digests of
+    policy's, ``sb3_genrl.baselines.evaluation.EVAL_GOALS``); kept in the run's ``final_eval.json`` under the digests of
     the policy and generator files and the package's version, so a rerun reads it and a retrained policy, another
     generator or another version is evaluated again."""
-    from sb3_genrl.baselines.train import EVAL_GOAL_SEED, EVAL_GOALS, evaluate_trained, load_trained
+    from sb3_genrl.baselines.evaluation import EVAL_GOALS, evaluate_trained, load_trained
 
     import sb3_genrl
+    from sb3_genrl.hyperparams import EVAL_GOAL_SEED
 
     policy = run / f"{method}_policy.zip"
     key = {"policy_sha256": _file_digest(str(policy)) if policy.exists() else None, "task": task, "goals": EVAL_GOALS,
@@ -232,164 +227,10 @@ def final_evaluation(run: pathlib.Path, method: str, task: str, generator: str |
     return record
 
 
-def method_result(runs: list[pathlib.Path], horizon: int, finals: list[dict[str, Any]],
-                  worst_reward: float) -> dict[str, Any]:
-    """Distances, table contacts and timings of one method's runs (one per seed); ``finals``: their
-    :func:`final_evaluation`; ``worst_reward``: the task's (the reward's floor)."""
-    from sb3_genrl.baselines.train import training_health
+def arguments(argv: list[str] | None = None) -> argparse.Namespace:
+    """The benchmark's checked arguments (``--genrl-kwargs`` by :func:`sb3_genrl.genrl.check_genrl_settings`)."""
+    from sb3_genrl.genrl import check_genrl_settings
 
-    from sb3_genrl.curves import MONITOR_FILE, read_monitor, windowed_curve
-
-    per_seed = [read_monitor(run / MONITOR_FILE) for run in runs]
-    records = [json.loads((run / "run.json").read_text()) for run in runs]
-    n = min(len(columns["return"]) for columns in per_seed)
-    distances = np.stack([-columns["return"][:n] for columns in per_seed])
-    contacts = np.stack([columns.get("table_contacts", np.full(n, np.nan))[:n] for columns in per_seed])
-    grid, _ = windowed_curve(distances[0], WINDOW)
-    curves = np.stack([windowed_curve(d, WINDOW)[1] for d in distances])
-    has_contacts = bool(np.isfinite(contacts).any())  # a task without a table (basketball) reports none
-    contact_curves = np.stack([windowed_curve(c, WINDOW)[1] for c in contacts]) if has_contacts else None
-    milestones = {}
-    for episodes in MILESTONES:
-        if n >= episodes:
-            values = distances[:, episodes - min(WINDOW, episodes):episodes].mean(axis=1)
-            milestones[str(episodes)] = {"mean": float(values.mean()), "std": float(values.std()),
-                                         "per_seed": values.tolist()}
-    # Steady-state cost: CPU seconds per episode over the second half of each run (the process' own CPU time, so
-    # what else runs on the machine does not count).
-    half = n // 2
-    cpu_rates = [(n - half) / (columns["cpu_seconds"][n - 1] - (columns["cpu_seconds"][half - 1] if half else 0.0))
-                 for columns in per_seed]
-    final_distances = np.array([final["mean_distance"] for final in finals])
-    final_contacts = [final["table_contacts"] for final in finals]
-    final = {"goals": finals[0]["goals"], "goal_seed": finals[0]["goal_seed"], "mean": float(final_distances.mean()),
-             "std": float(final_distances.std()), "per_seed": final_distances.tolist(),
-             "median_per_seed": [f["median_distance"] for f in finals], "p90_per_seed": [f["p90_distance"] for f in finals],
-             "table_contacts": None if None in final_contacts else float(np.mean(final_contacts)),
-             "unstable_per_seed": [f["unstable"] for f in finals],
-             "object_unmoved_per_seed": [f["object_unmoved"] for f in finals]}
-    return {"seeds": len(runs), "episodes": int(n), "env_steps_per_episode": horizon, "milestones": milestones,
-            "final_deterministic": final,
-            "training_health": [training_health(run) for run in runs],
-            "curve": {"episodes": grid.tolist(), "mean_distance": curves.mean(0).tolist(),
-                      "std_distance": curves.std(0).tolist(),
-                      "table_contacts": np.nanmean(contact_curves, 0).tolist() if has_contacts else None},
-            "table_contacts_per_episode": float(np.nanmean(contacts)) if has_contacts else None,
-            # training episodes at the task's worst reward, the reward's floor: that far from the goal or further,
-            # a ball that never came down through the rim's height (basketball), or an unstable simulation
-            "worst_reward_share": float(np.isclose(-distances, worst_reward).mean()),
-            "setup_seconds": float(np.mean([r["setup_seconds"] for r in records])),
-            "setup_cpu_seconds": float(np.mean([r["setup_cpu_seconds"] for r in records])),
-            "episodes_per_second": float(np.mean([r["episodes_played"] / r["learn_seconds"] for r in records])),
-            "episodes_per_cpu_second": float(np.mean(cpu_rates)),
-            "bc": [r["bc"] for r in records if r.get("bc")], "first_batch": [r["first_batch"] for r in records
-                                                                              if r.get("first_batch")]}
-
-
-# what must agree between a result and the methods merged into it (see ``merge_results``)
-MERGE_KEYS = ("benchmark", "task", "horizon", "episodes", "seeds", "window", "sb3_genrl", "worst_reward", "demos",
-              "demo_dataset", "generator_sha256")
-
-
-def merge_results(previous: dict[str, Any], current: dict[str, Any]) -> dict[str, Any]:
-    """``current`` with the methods of ``previous`` that it did not run, in the benchmark's order of methods.
-
-    Raises ``ValueError`` naming what differs when the two are not results of the same benchmark settings; a key that
-    ``previous`` does not hold (a result written before it was recorded) is not compared, except ``demos``, the
-    dataset's path, which every result holds; one that only ``previous`` holds (the generator's digest, when
-    ``current`` ran no method that uses it) is kept. ``merged_methods`` lists the methods taken from ``previous``."""
-    differ = [key for key in MERGE_KEYS
-              if (key in previous or key == "demos") and key in current and previous.get(key) != current[key]]
-    if differ:
-        shown = "; ".join(f"{key}: {previous.get(key)!r} there, {current[key]!r} now" for key in differ)
-        raise ValueError(f"the result to merge into was made with other settings ({shown})")
-    kept = [method for method in previous["methods"] if method not in current["methods"]]
-    methods = previous["methods"] | current["methods"]
-    order = [m for m in METHODS if m in methods] + [m for m in methods if m not in METHODS]
-    carried = {key: previous[key] for key in MERGE_KEYS if key in previous and key not in current}
-    return carried | current | {"methods": {method: methods[method] for method in order}, "merged_methods": kept}
-
-
-def write_outputs(result: dict[str, Any], out: pathlib.Path) -> None:
-    """The JSON, the Markdown table and the three plots."""
-    from sb3_genrl.baselines.compare import LABELS
-    from sb3_genrl.baselines.train import UNMOVED
-
-    from sb3_genrl.curves import plot_curves
-    from sb3_genrl.markdown import markdown_table
-    from sb3_genrl.utils import atomic_write_text
-
-    out.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_json(out, result)
-    stem, task = out.with_suffix(""), result["task"]
-    series = {}
-    for method, row in result["methods"].items():
-        curve = row["curve"]
-        series[LABELS.get(method, method)] = (np.array(curve["episodes"]), -np.array(curve["mean_distance"]),
-                                              np.array(curve["std_distance"]))
-    plot_curves(series, f"{stem}_episodes.png", ylabel="mean reward (-distance, m)", title=f"{task}: mean +- std over seeds")
-    steps = {label: (x * result["horizon"], y, s) for label, (x, y, s) in series.items()}
-    plot_curves(steps, f"{stem}_env_steps.png", ylabel="mean reward (-distance, m)", xlabel="environment steps",
-                title=f"{task}: mean +- std over seeds")
-    contacts = {LABELS.get(m, m): (np.array(r["curve"]["episodes"]), np.array(r["curve"]["table_contacts"]), None)
-                for m, r in result["methods"].items() if r["curve"]["table_contacts"] is not None}
-    if contacts:
-        plot_curves(contacts, f"{stem}_contacts.png", ylabel="table contacts per episode (control steps)",
-                    title=f"{task}: table contacts")
-    goals = next(iter(result["methods"].values()))["final_deterministic"]["goals"]
-    header = ["method", "seeds", *(f"{m} episodes" for m in MILESTONES), "final policy, deterministic",
-              f"final policy: goals of {goals} with the object not moved, per seed", "table contacts / episode",
-              "episodes at the worst reward", "setup (CPU s)", "episodes / CPU s"]
-    rows = []
-    for method, row in result["methods"].items():
-        cells = [f"{row['milestones'][str(m)]['mean']:.3f} +- {row['milestones'][str(m)]['std']:.3f}"
-                 if str(m) in row["milestones"] else "n/a" for m in MILESTONES]
-        contacts_cell = "n/a" if row["table_contacts_per_episode"] is None else f"{row['table_contacts_per_episode']:.2f}"
-        final = row["final_deterministic"]
-        rows.append([LABELS.get(method, method), row["seeds"], *cells, f"{final['mean']:.3f} +- {final['std']:.3f}",
-                     " / ".join(str(n) for n in final["object_unmoved_per_seed"]), contacts_cell,
-                     f"{100 * row['worst_reward_share']:.1f}%", f"{row['setup_cpu_seconds']:.0f}",
-                     f"{row['episodes_per_cpu_second']:.2f}"])
-    lines = [f"# {task}: mean distance to the goal (m), mean +- std over seeds", "",
-             f"Mean over the {WINDOW} episodes before each budget (training episodes, as played), and the final "
-             f"policy's deterministic mean distance to {goals} held-out goals (the same goals for every method). "
-             f"Episodes at the worst reward ({result['worst_reward']:g} m), the reward's floor, are training episodes "
-             "that ended that far from the goal or further (hockey: a puck sent off the table), whose ball never came "
-             "down through the rim's height (basketball), or whose simulation went unstable. An object not moved ends within "
-             f"{UNMOVED * 100:g} cm of where it rests at the start: the final policy never hit the puck (or threw the "
-             "ball), and scores what the arm holding still does.", "",
-             markdown_table(header, rows)]
-    warned = [f"- {LABELS.get(method, method)}, seed {seed}: {warning}" for method, row in result["methods"].items()
-              for seed, health in zip(result["seeds"], row["training_health"], strict=True)
-              for warning in health["warnings"]]
-    if warned:
-        lines += ["", "Training that did not stay stable (SB3's logs, `training_health`):", "", *warned]
-    lines += ["", f"![episodes]({stem.name}_episodes.png)", "", f"![environment steps]({stem.name}_env_steps.png)", ""]
-    if contacts:
-        lines += [f"![table contacts]({stem.name}_contacts.png)", ""]
-    atomic_write_text(out.with_suffix(".md"), "\n".join(lines))
-
-
-def core_hours(result: dict[str, Any], episodes: int, seeds: int) -> float:
-    """Single-core hours of the whole benchmark at ``episodes`` x ``seeds``, from the measured CPU costs (setup and
-    steady-state episodes). SAC without prefill plays random actions until ``learning_starts``; a run too short to
-    pass it is charged SAC (prefilled)'s rate, its cost once learning, beyond that point."""
-    from sb3_genrl.baselines.hyperparameters import SAC_SETTINGS
-
-    methods, seconds = result["methods"], 0.0
-    for method, row in methods.items():
-        rate = row["episodes_per_cpu_second"]
-        warm_up = SAC_SETTINGS["learning_starts"] / result["horizon"]
-        if method == "sac-no-prefill" and row["episodes"] <= warm_up and "sac" in methods:
-            learning = max(episodes - warm_up, 0)
-            cost = (episodes - learning) / rate + learning / methods["sac"]["episodes_per_cpu_second"]
-        else:
-            cost = episodes / rate
-        seconds += seeds * (row["setup_cpu_seconds"] + cost)
-    return seconds / 3600
-
-
-def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--task", default="hockey", choices=sorted(TASKS), help="a registered task (default: hockey)")
     parser.add_argument("--episodes", type=COUNT, default=3000, help="episode budget of every run")
@@ -401,7 +242,7 @@ def main() -> None:
     parser.add_argument("--generator", type=EXISTING, default=None,
                         help=f"generator for GenRL and the latent baselines (default: {GENERATOR_PRESET}, "
                              f"{GENERATOR_EPOCHS} epochs, on the demonstrations)")
-    parser.add_argument("--genrl-kwargs", type=genrl_kwargs_argument, default={},
+    parser.add_argument("--genrl-kwargs", type=json_object_argument, default={},
                         help="GenRL's arguments, as JSON (default: GenRL's defaults; see the module doc)")
     parser.add_argument("--baseline-kwargs", type=baseline_kwargs_argument, default={},
                         help="changes to the baselines' rl-zoo3 settings, as JSON: {baseline: {argument: value}}, e.g. "
@@ -413,59 +254,93 @@ def main() -> None:
                         help="JSON result (default: benchmarks/results/baselines[_TASK].json); .md and PNGs beside it")
     parser.add_argument("--merge", action="store_true",
                         help="keep the methods of an existing --out that this call does not run (same settings only)")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     if set(args.baseline_kwargs) - set(args.methods):
         parser.error(f"--baseline-kwargs changes {', '.join(sorted(set(args.baseline_kwargs) - set(args.methods)))}, "
                      "which --methods does not run")
+    try:
+        check_genrl_settings(args.genrl_kwargs)
+    except (TypeError, ValueError) as error:
+        parser.error(f"argument --genrl-kwargs: {error}")
+    return args
+
+
+class MergeCheck:
+    """With ``--merge``, refuses ``--out``'s result when it was made with other settings than the benchmark's so far
+    (checked before the demonstrations or the generator are made, then before any run)."""
+
+    def __init__(self, out: pathlib.Path, merge: bool) -> None:
+        self.out, self.active, self.previous = out, merge and out.exists(), None
+
+    def __call__(self, benchmark: dict[str, Any]) -> None:
+        if not self.active:
+            return
+        try:
+            self.previous = json.loads(self.out.read_text()) if self.previous is None else self.previous
+            merge_results(self.previous, benchmark)
+        except (ValueError, KeyError, TypeError) as error:  # (a JSON error is a ValueError)
+            raise SystemExit(f"baselines.py: --merge: cannot merge into {self.out}: {error}") from None
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Run the benchmark from the command line."""
     from sb3_genrl.envs import get_task
 
+    args = arguments(argv)
     spec = get_task(args.task)
     args.task = spec.name
     work = pathlib.Path(args.work or HERE / "runs" / f"baselines_{spec.name}")
     out = pathlib.Path(args.out or HERE / "results" / ("baselines.json" if spec.name == "hockey"
                                                        else f"baselines_{spec.name}.json"))
     # what the result is a result of, built up as it becomes known; with --merge, compared with --out's at each step
-    # (before the demonstrations or the generator are made, then before any run)
     benchmark = {"benchmark": "baselines", "task": spec.name, "horizon": spec.horizon, "episodes": args.episodes,
                  "seeds": args.seeds, "window": WINDOW, "sb3_genrl": _version(), "methods": {}}
-    previous = None
-
-    def check_merge() -> None:
-        """Refuse --out's result when it was made with other settings than those in ``benchmark`` so far."""
-        nonlocal previous
-        try:
-            previous = json.loads(out.read_text()) if previous is None else previous
-            merge_results(previous, benchmark)
-        except (ValueError, KeyError, TypeError) as error:  # (a JSON error is a ValueError)
-            raise SystemExit(f"baselines.py: --merge: cannot merge into {out}: {error}") from None
-
-    merge = args.merge and out.exists()
-    if merge:
-        check_merge()
+    check_merge = MergeCheck(out, args.merge)
+    check_merge(benchmark)
     work.mkdir(parents=True, exist_ok=True)
     demos, generator = prepare(args, work)
     benchmark |= {"demos": _shown(demos), "demo_dataset": _dataset(demos)}
     if generator:
         benchmark["generator_sha256"] = _file_digest(generator)
-    if merge:
-        check_merge()
+    check_merge(benchmark)
     jobs = [(method, run_settings(method, args, seed, demos, generator), demos, generator,
              str(work / method / f"seed{seed}")) for method in args.methods for seed in args.seeds]
-    jobs_settings = {job[0]: job[1] for job in jobs}  # (the settings shared by a method's seeds are the same)
-    try:  # refuse before running anything if a finished run of other settings is in the way
+    run_jobs(jobs, args.jobs)
+    result = benchmark | {"machine": platform.machine(), "cpus": os.cpu_count(), "jobs": args.jobs}
+    result = collect(result, args, work, generator, {job[0]: job[1] for job in jobs})
+    if check_merge.previous is not None:
+        result = merge_results(check_merge.previous, result)
+    result["core_hours_3000_episodes_3_seeds"] = core_hours(result, 3000, 3)
+    write_outputs(result, out)
+    print(out.with_suffix(".md").read_text())
+    print(f"estimated single-core hours for 3 seeds x 3000 episodes: {result['core_hours_3000_episodes_3_seeds']:.1f}")
+
+
+def run_jobs(jobs: list[tuple[Any, ...]], processes: int) -> None:
+    """Run the jobs not done yet (:func:`run_one`), ``processes`` at a time; refuse before running anything if a
+    finished run of other settings is in the way."""
+    try:
         todo = [job for job in jobs if not finished(pathlib.Path(job[-1]), job[1])]
     except ValueError as error:
         raise SystemExit(f"baselines.py: {error}") from None
     print(f"{len(jobs) - len(todo)} of {len(jobs)} runs already done", flush=True)
     began = time.perf_counter()
-    if args.jobs <= 1:
+    if processes <= 1:
         for job in todo:
             print(f"done {run_one(*job)} ({time.perf_counter() - began:.0f} s)", flush=True)
-    else:
-        with ProcessPoolExecutor(args.jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
-            for future in as_completed([pool.submit(run_one, *job) for job in todo]):
-                print(f"done {future.result()} ({time.perf_counter() - began:.0f} s)", flush=True)
-    result = benchmark | {"machine": platform.machine(), "cpus": os.cpu_count(), "jobs": args.jobs}
+        return
+    with ProcessPoolExecutor(processes, mp_context=multiprocessing.get_context("spawn")) as pool:
+        for future in as_completed([pool.submit(run_one, *job) for job in todo]):
+            print(f"done {future.result()} ({time.perf_counter() - began:.0f} s)", flush=True)
+
+
+def collect(result: dict[str, Any], args: argparse.Namespace, work: pathlib.Path, generator: str | None,
+            settings: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """``result`` with each method's :func:`method_result` (its runs' final evaluations made or read first);
+    ``settings``: each method's run settings (the same for all its seeds)."""
+    from sb3_genrl.envs import get_task
+
+    spec = get_task(args.task)
     worst_reward = result["worst_reward"] = float(gym.make(spec.env_id).unwrapped.worst_reward)
     for method in args.methods:
         runs = [work / method / f"seed{seed}" for seed in args.seeds]
@@ -475,13 +350,8 @@ def main() -> None:
             raise SystemExit(f"baselines.py: {error}") from None
         result["methods"][method] = method_result(runs, spec.horizon, finals, worst_reward)
         if method == "genrl":  # what GenRL ran with (e.g. hindsight), as each run's settings record it
-            result["methods"][method] |= {key: jobs_settings[method][key] for key in ("genrl_kwargs", "genrl")}
-    if previous is not None:
-        result = merge_results(previous, result)
-    result["core_hours_3000_episodes_3_seeds"] = core_hours(result, 3000, 3)
-    write_outputs(result, out)
-    print(out.with_suffix(".md").read_text())
-    print(f"estimated single-core hours for 3 seeds x 3000 episodes: {result['core_hours_3000_episodes_3_seeds']:.1f}")
+            result["methods"][method] |= {key: settings[method][key] for key in ("genrl_kwargs", "genrl")}
+    return result
 
 
 if __name__ == "__main__":

@@ -65,12 +65,13 @@ def seed_result(run: pathlib.Path, task: str, transitions: dict[str, np.ndarray]
 
 
 def main(argv: list[str] | None = None) -> int:
+    from sb3_genrl.baselines.evaluation import EVAL_GOALS
     from sb3_genrl.baselines.feedback import add_time_feature, evaluate_feedback_policy
-    from sb3_genrl.baselines.train import EVAL_GOAL_SEED, EVAL_GOALS
     from sb3_genrl.envs import TASKS, get_task
 
     from sb3_genrl.checks import EXISTING, JSON_OUT, SEED
     from sb3_genrl.data import load_transitions
+    from sb3_genrl.hyperparams import EVAL_GOAL_SEED
     from sb3_genrl.utils import atomic_write_json
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])

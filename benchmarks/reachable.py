@@ -1,7 +1,7 @@
 """What a generator allows on a task: a dense set of its latent actions decoded and played, and each goal's best.
 
-Shared by ``benchmarks/genrl_hockey.py``, ``benchmarks/genrl_basketball.py`` and
-``benchmarks/basketball_diagnosis.py``.
+Used by the GenRL benchmark (:mod:`sb3_genrl.benchmarks.genrl`) for the generator's limit; run alone, it writes
+one generator's limit on the held-out goals.
 
 A played trajectory's reward for a goal is minus the distance from the goal to the best of the trajectory's
 *candidate points*, which do not depend on the goal: hockey has one (where the puck rests), basketball one per
@@ -171,13 +171,14 @@ def main() -> None:
     import json
 
     from sb3_genrl.generative import load
+    from sb3_genrl.hyperparams import EVAL_GOAL_SEED
     from sb3_genrl.utils import atomic_write_json
 
     parser = argparse.ArgumentParser(description=main.__doc__)
     parser.add_argument("--task", required=True, choices=("hockey", "basketball"))
     parser.add_argument("--generator", required=True, help="a generator file")
     parser.add_argument("--goals", type=int, default=300, help="held-out goals (default 300, as the GenRL benchmarks)")
-    parser.add_argument("--goal-seed", type=int, default=12345)
+    parser.add_argument("--goal-seed", type=int, default=EVAL_GOAL_SEED)
     parser.add_argument("--grid", type=int, default=0, help="grid points per axis (2-D latents; default 0: no grid)")
     parser.add_argument("--prior-samples", type=int, default=10_000, help="draws from the prior (0: none)")
     parser.add_argument("--out", required=True, help="JSON file")

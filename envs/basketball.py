@@ -264,25 +264,9 @@ def is_valid(info: dict[str, Any]) -> bool:
     return info.get("crossings", 0) > 0
 
 
-# GenRL needs more episodes here than on hockey: a basket 8 m away moves about 9 m per unit of the latent action's
-# angle, so the policy's mean must settle to about 0.01 of a unit; its spread must anneal slowly to let it, and may
-# differ between near and far baskets (ContextStdPolicy, its change bounded over the whole basket region), the value
-# function is fitted on the last 20 batches, the natural gradient is solved more exactly (30 conjugate-gradient
-# steps), and the policy acts with the moving average of its weights over about the last 67 iterations. Each throw
-# is also relabelled with the point where the ball came down (hindsight), those of the last 60 batches are kept,
-# and the batches are small (32 throws) so that the search takes more steps; the settings that count per iteration
-# (the spread's bound, the value history, the average's decay) are scaled from those tuned for 64 throws per
-# iteration so that their pace per throw stays the same (docs/basketball.md, tuned on baskets other than the
-# evaluation's).
-QUICKSTART = {"policy_episodes": 20000, "batch_episodes": 32,
-              "genrl_kwargs": {"policy": "ContextStdPolicy", "target_kl": 0.03, "max_log_std_change": 0.015,
-                               "value_history": 20, "n_critic_updates": 10, "cg_max_steps": 30,
-                               "policy_averaging": 0.985, "hindsight": True, "hindsight_history": 60,
-                               "batch_size": 32}}
 
 TASK = TaskSpec(name="basketball", env_id="GenRL/Basketball-v0", env_class=BasketballEnv, horizon=BASKETBALL_HORIZON,
                 goal_low=BasketballEnv.goal_low, goal_high=BasketballEnv.goal_high, in_goal_region=in_goal_region,
                 cell_size=0.25, sample_expert=sample_throw, perturbation_scales=BASKETBALL_PERTURBATION,
                 is_valid=is_valid, region_patch=region_patch, figure_size=(6.0, 8.0),
-                goal_env_id="GenRL/BasketballGoal-v0", goal_env_class=BasketballGoalEnv,
-                quickstart=QUICKSTART)
+                goal_env_id="GenRL/BasketballGoal-v0", goal_env_class=BasketballGoalEnv)

@@ -226,18 +226,8 @@ def is_valid(info: dict[str, Any]) -> bool:
     return info.get("table_contacts", 1) == 0
 
 
-# GenRL's defaults otherwise, and the paper's 3000 episodes; each hit is also relabelled with where the puck came
-# to rest (hindsight), those of the last 120 batches are kept, the batches are small (16 hits) so that the search
-# takes more steps, and after each iteration 512 Adam steps fit the policy's mean to the kept relabelled hits
-# (hindsight_regression), with a third hidden layer in the policy's mean, which a fit to the answer needs (a 64 x 64
-# mean lands 0.85 cm from held-out goals even when fitted to the answer, 64 x 64 x 64 0.55 cm). See
-# docs/basketball.md; chosen on the tuning surrogate's goals, not the evaluation's.
-QUICKSTART = {"policy_episodes": 3000, "batch_episodes": 16,
-              "genrl_kwargs": {"hindsight": True, "hindsight_history": 120, "batch_size": 16,
-                               "hindsight_regression": 512,
-                               "policy_kwargs": {"net_arch": {"pi": [64, 64, 64], "vf": [64, 64]}}}}
 
 TASK = TaskSpec(name="hockey", env_id="GenRL/Hockey-v0", env_class=HockeyEnv, horizon=HOCKEY_HORIZON,
                 goal_low=HOCKEY_GOAL_LOW, goal_high=HOCKEY_GOAL_HIGH, in_goal_region=in_goal_region, cell_size=0.05,
                 sample_expert=sample_hit, perturbation_scales=HOCKEY_PERTURBATION, is_valid=is_valid,
-                goal_env_id="GenRL/HockeyGoal-v0", goal_env_class=HockeyGoalEnv, quickstart=QUICKSTART)
+                goal_env_id="GenRL/HockeyGoal-v0", goal_env_class=HockeyGoalEnv)

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -37,11 +37,6 @@ class TaskSpec:
     :param goal_env_id: the Gymnasium id of the task's goal-conditioned variant (dict observations and
         ``compute_reward``, for hindsight experience replay; see :mod:`sb3_genrl.envs.goal`), if it has one
     :param goal_env_class: that variant's class
-    :param quickstart: the task's GenRL settings, used by ``genrl quickstart``, ``genrl train-policy``, the study
-        and the task's benchmark: ``policy_episodes`` (GenRL episodes, default 3000), ``batch_episodes`` (episodes
-        per EM iteration, default 64; the study's scales set their own) and ``genrl_kwargs`` (further
-        :class:`~sb3_genrl.GenRL` arguments, without ``n_steps``, which ``batch_episodes`` sets); a task needing
-        other settings than the defaults says so here
     """
 
     name: str
@@ -59,7 +54,6 @@ class TaskSpec:
     figure_size: tuple[float, float] = (6.0, 6.0)
     goal_env_id: str | None = None
     goal_env_class: type[ArmTaskEnv] | None = None
-    quickstart: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not self.name or "/" in self.name:
@@ -79,26 +73,8 @@ class TaskSpec:
                              f"{self.env_class.horizon}")
         if (self.goal_env_id is None) != (self.goal_env_class is None):
             raise ValueError(f"task {self.name!r}: give both goal_env_id and goal_env_class, or neither")
-        self._check_quickstart()
         if not self.cell_size > 0:
             raise ValueError(f"task {self.name!r}: cell_size must be positive, got {self.cell_size!r}")
-
-    def _check_quickstart(self) -> None:
-        unknown = set(self.quickstart) - {"policy_episodes", "batch_episodes", "genrl_kwargs"}
-        if unknown:
-            raise ValueError(f"task {self.name!r}: unknown quickstart settings {sorted(unknown)}; expected "
-                             "'policy_episodes', 'batch_episodes' and 'genrl_kwargs'")
-        for key, minimum in (("policy_episodes", 1), ("batch_episodes", 2)):
-            value = self.quickstart.get(key, minimum)
-            if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < minimum:
-                raise ValueError(f"task {self.name!r}: quickstart {key} must be an integer of at least {minimum}, "
-                                 f"got {value!r}")
-        genrl_kwargs = self.quickstart.get("genrl_kwargs", {})
-        if not isinstance(genrl_kwargs, Mapping):
-            raise ValueError(f"task {self.name!r}: quickstart genrl_kwargs must be a mapping, got {genrl_kwargs!r}")
-        if "n_steps" in genrl_kwargs:
-            raise ValueError(f"task {self.name!r}: give the episodes per iteration as quickstart batch_episodes, not "
-                             "as genrl_kwargs n_steps")
 
     def make_env(self, **kwargs: Any) -> ArmTaskEnv:
         """The task's env (unwrapped, without Gymnasium's wrappers), made with ``kwargs``."""

@@ -17,12 +17,12 @@ from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
-from sb3_genrl.envs import get_task
 from sb3_genrl.envs.demonstrations import make_demonstrations
 
 from sb3_genrl import GenRL  # importing sb3_genrl registers GenRL/Hockey-v0 with Gymnasium
 from sb3_genrl.generative import train_generator
 from sb3_genrl.genrl import train_policy
+from sb3_genrl.hyperparams import load_genrl_settings
 
 
 def main() -> None:
@@ -49,13 +49,13 @@ def main() -> None:
     # 3. GenRL: a policy from the goal to a latent action, trained with the paper's EM algorithm. train_policy wraps
     #    the task in LatentActionWrapper, logs to TensorBoard and writes the learning curve as training goes; the
     #    lower-level equivalent is GenRL(gym.make("GenRL/Hockey-v0"), vae, n_steps=16, ...).learn(args.episodes).
-    #    Hockey's own settings, as genrl quickstart uses them: 16 episodes per iteration, and each hit also relabelled
-    #    with where the puck came to rest (hindsight=True), those of the last 120 iterations kept, and the policy's
-    #    mean (64 x 64 x 64) fitted to them by 512 Adam steps after each iteration (hindsight_regression=512).
-    settings = get_task("hockey").quickstart
+    #    Hockey's own settings, as genrl quickstart uses them (hyperparams/genrl.yml, GenRL/Hockey-v0): 16 episodes per
+    #    iteration, and each hit also relabelled with where the puck came to rest, those of the last 120 iterations
+    #    kept, and the policy's mean (64 x 64 x 64) fitted to them by 512 Adam steps after each iteration
+    #    (hindsight_kwargs={"history": 120, "regression_steps": 512}).
+    _, batch_episodes, genrl_kwargs = load_genrl_settings("GenRL/Hockey-v0")
     result = train_policy("hockey", str(out / "vae.pt"), episodes=args.episodes, seed=args.seed,
-                          out_dir=out / "policy", batch_episodes=settings["batch_episodes"], progress_bar=True,
-                          **settings["genrl_kwargs"])
+                          out_dir=out / "policy", batch_episodes=batch_episodes, progress_bar=True, **genrl_kwargs)
     print(f"GenRL: {result['episodes']} episodes, learning curve in {result['png_path']}")
 
     # 4. The trained policy, deterministic, on 100 goals it has not seen: play the decoded trajectories.

@@ -198,3 +198,12 @@ def json_argument(text: str) -> Any:
         return json.loads(text)
     except json.JSONDecodeError as error:
         raise argparse.ArgumentTypeError(f"not JSON: {error}") from None
+
+
+def json_object_argument(text: str) -> dict[str, Any]:
+    """An argparse ``type``: a JSON object (``--genrl-kwargs``, ``--algorithm-kwargs``), checked by name and value by
+    its caller once the settings it changes are known."""
+    value = json_argument(text)
+    if not isinstance(value, dict):
+        raise argparse.ArgumentTypeError(f"expected a JSON object, got {text!r}")
+    return value

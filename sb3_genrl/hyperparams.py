@@ -15,8 +15,8 @@ import pathlib
 from importlib import resources
 from typing import Any
 
-__all__ = ["EVAL_GOAL_SEED", "TUNING_GOAL_SEED", "hyperparams_file", "known_algos", "load_genrl_settings",
-           "load_hyperparams", "parse_kwargs"]
+__all__ = ["EVAL_GOAL_SEED", "TUNING_GOAL_SEED", "hyperparams_file", "known_algos", "known_env_ids", "lay_over",
+           "load_genrl_settings", "load_hyperparams", "parse_kwargs"]
 
 EVAL_GOAL_SEED = 12345  # the held-out goals of every final evaluation (never used for tuning)
 TUNING_GOAL_SEED = 777  # the goals settings are chosen on (never used for evaluation)
@@ -32,6 +32,11 @@ def known_algos() -> list[str]:
     """The algorithms with a settings file (``genrl``, ``ppo``, ``sac``, ...)."""
     return sorted(path.name.removesuffix(".yml") for path in resources.files(_PACKAGE).iterdir()
                   if path.name.endswith(".yml"))
+
+
+def known_env_ids(algo: str) -> list[str]:
+    """The env ids with an entry in ``<algo>.yml``."""
+    return sorted(_entries(algo))
 
 
 def hyperparams_file(algo: str) -> pathlib.Path:
@@ -64,7 +69,7 @@ def load_hyperparams(algo: str, env_id: str) -> dict[str, Any]:
     entries = _entries(algo)
     if env_id not in entries:
         raise ValueError(f"{hyperparams_file(algo)} has no entry for {env_id!r}; known env ids: "
-                         f"{', '.join(sorted(entries))}")
+                         f"{', '.join(known_env_ids(algo))}")
     entry = copy.deepcopy(entries[env_id])
     for key in _KWARGS:
         if key in entry:
@@ -157,3 +162,20 @@ def _torch_nn_class(node: ast.Attribute) -> type:
     if not (isinstance(cls, type) and issubclass(cls, nn.Module)):
         raise ValueError(f"{path!r} is not a class of torch.nn")
     return cls
+
+
+def lay_over(settings: dict[str, Any], changes: dict[str, Any]) -> dict[str, Any]:
+    """``settings`` with ``changes`` laid over them (a new dict): a mapping laid over a mapping is merged into it,
+    key by key; any other value replaces what was there (``None`` too: ``{"hindsight_kwargs": None}`` switches
+    GenRL's hindsight off).
+
+    :param settings: e.g. a task's entry (:func:`load_hyperparams`)
+    :param changes: e.g. ``{"hindsight_kwargs": {"history": 30}}``
+    """
+    laid = copy.deepcopy(settings)
+    for key, value in changes.items():
+        if isinstance(value, dict) and isinstance(laid.get(key), dict):
+            laid[key] = lay_over(laid[key], value)
+        else:
+            laid[key] = copy.deepcopy(value)
+    return laid

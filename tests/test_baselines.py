@@ -9,6 +9,7 @@ import pytest
 import torch as th
 from sb3_genrl.baselines import FEEDBACK_BASELINES
 from sb3_genrl.baselines.bc import STD_RANGE, actor_mean, fit_actor, split_episodes
+from sb3_genrl.baselines.evaluation import evaluate_trained, load_trained
 from sb3_genrl.baselines.feedback import (
     add_time_feature,
     evaluate_feedback_policy,
@@ -17,11 +18,11 @@ from sb3_genrl.baselines.feedback import (
     open_loop_rewards,
 )
 from sb3_genrl.baselines.her import goal_episodes
-from sb3_genrl.baselines.hyperparameters import PPO_POLICY
+from sb3_genrl.baselines.hyperparameters import baseline_settings
 from sb3_genrl.baselines.models import normalized_policy, ppo_with_behaviour_cloning, sac_her_with_demonstrations
 from sb3_genrl.baselines.normalization import STD_FLOOR, NormalizedFlatten
 from sb3_genrl.baselines.prefill import prefill_replay_buffer
-from sb3_genrl.baselines.train import EVAL_GOAL_SEED, evaluate_trained, load_trained, train_baseline
+from sb3_genrl.baselines.train import train_baseline
 from sb3_genrl.envs.demonstrations import make_demonstrations
 from sb3_genrl.envs.hockey import HOCKEY_HORIZON, HockeyEnv, scripted_hit
 from stable_baselines3 import PPO, SAC
@@ -29,6 +30,7 @@ from stable_baselines3.common.policies import ActorCriticPolicy
 
 from sb3_genrl.cli import main
 from sb3_genrl.curves import MONITOR_FILE, read_monitor
+from sb3_genrl.hyperparams import EVAL_GOAL_SEED
 
 
 def demo_transitions(n_episodes: int, seed: int = 0) -> dict[str, np.ndarray]:
@@ -58,7 +60,7 @@ def demos():
 def test_normalisation_statistics_are_saved_and_reloaded_with_the_model(demos, tmp_path):
     transitions = add_time_feature(demos, HOCKEY_HORIZON)
     model = PPO("MlpPolicy", make_feedback_env("hockey"), seed=0, device="cpu",
-                policy_kwargs=normalized_policy(PPO_POLICY, transitions["observations"]))
+                policy_kwargs=normalized_policy(baseline_settings("ppo", "hockey")[1], transitions["observations"]))
     model.save(tmp_path / "model.zip")
     loaded = PPO.load(tmp_path / "model.zip", device="cpu")
     # Statistics computed here, independently: float64 mean and std, std floored.
@@ -100,7 +102,7 @@ def test_early_stopping_stops_on_a_rising_heldout_loss():
 @pytest.mark.slow
 def test_behaviour_cloning_reproduces_heldout_demonstrations_open_loop():
     transitions = add_time_feature(demo_transitions(40, seed=1), HOCKEY_HORIZON)
-    model, record = ppo_with_behaviour_cloning(make_feedback_env("hockey"), transitions, seed=0, device="cpu",
+    model, record = ppo_with_behaviour_cloning(make_feedback_env("hockey"), transitions, task="hockey", seed=0, device="cpu",
                                                bc_kwargs={"holdout": 0.1, "batch_size": 64, "patience": 20})
     assert record["heldout_episodes"] == 4 and record["best_epoch"] > 1
     _, heldout = split_episodes(transitions["dones"], 0.1, seed=0)
@@ -282,7 +284,8 @@ def test_demonstrations_enter_the_her_buffer_as_episodes(demos):
     assert episodes["observation"].shape == (12, 70, 15) and episodes["achieved_goal"].shape == (12, 70, 2)
     # Each demonstration reached its own goal: the terminal achieved goal is the goal, the reward 0.
     np.testing.assert_allclose(episodes["achieved_goal"][:, -1], episodes["desired_goal"][:, -1], atol=1e-6)
-    model = sac_her_with_demonstrations(gym.make("GenRL/HockeyGoal-v0"), episodes, steps=100, seed=0, device="cpu")
+    model = sac_her_with_demonstrations(gym.make("GenRL/HockeyGoal-v0"), episodes, task="hockey", steps=100, seed=0,
+                                        device="cpu")
     buffer = model.replay_buffer
     assert buffer.size() == 12 * 69 and np.all(buffer.ep_length[: 12 * 69, 0] == 69)
     np.testing.assert_array_equal(buffer.observations["observation"][:69, 0], episodes["observation"][0, :-1])
@@ -354,10 +357,34 @@ def test_baselines_refuse_another_tasks_demonstrations(demos, tmp_path, capsys):
     assert summary["demo_transitions"] == len(demos["observations"])
 
 
+def test_the_baselines_run_with_the_zoo_entries_of_their_yml_files():
+    from torch import nn
+
+    # rl-zoo3's ppo.yml HalfCheetah-v4, sac.yml HalfCheetah-v3 (&mujoco-defaults) and FetchReach-v1, as published
+    # (hyperparams/*.yml say where each entry comes from and what changed); both tasks the same.
+    for task in ("hockey", "basketball"):
+        ppo, ppo_policy = baseline_settings("ppo", task)
+        assert ppo == {"n_steps": 512, "batch_size": 64, "gamma": 0.98, "learning_rate": 2.0633e-05,
+                       "ent_coef": 0.000401762, "clip_range": 0.1, "n_epochs": 20, "gae_lambda": 0.92,
+                       "max_grad_norm": 0.8, "vf_coef": 0.58096}
+        assert ppo_policy == {"log_std_init": -2, "ortho_init": False, "activation_fn": nn.ReLU,
+                              "net_arch": {"pi": [256, 256], "vf": [256, 256]}}
+        zoo_sac = {"learning_rate": 3e-4, "batch_size": 256, "tau": 0.005, "gamma": 0.99, "train_freq": 1,
+                   "gradient_steps": 1, "ent_coef": "auto", "learning_starts": 10_000}
+        assert baseline_settings("sac-no-prefill", task) == (zoo_sac, {"net_arch": [256, 256]})
+        assert baseline_settings("sac", task) == (zoo_sac | {"learning_starts": 0}, {"net_arch": [256, 256]})
+        assert baseline_settings("sac-her", task) == ({"learning_rate": 1e-3, "batch_size": 256, "gamma": 0.99,
+                                                       "ent_coef": "auto", "learning_starts": 0}, {"net_arch": [64, 64]})
+        assert baseline_settings("latent-ppo", task)[0] == baseline_settings("latent-trpo", task)[0] == {
+            "n_steps": 64, "batch_size": 64}
+        assert baseline_settings("latent-sac", task)[0] == {"learning_starts": 64}
+
+
 def test_changes_to_the_zoo_settings_are_checked_and_recorded():
     from sb3_genrl.baselines.hyperparameters import check_algorithm_kwargs, settings_record
 
-    defaults, changed = settings_record(), settings_record({"ppo": {"target_kl": 0.02}, "sac": {"gamma": 1}})
+    defaults = settings_record("hockey")
+    changed = settings_record("hockey", {"ppo": {"target_kl": 0.02}, "sac": {"gamma": 1}})
     assert changed["ppo"] == defaults["ppo"] | {"target_kl": 0.02} and "target_kl" not in defaults["ppo"]
     assert changed["sac"] == defaults["sac"] | {"gamma": 1} and changed["sac-her"] == defaults["sac-her"]
     assert check_algorithm_kwargs("latent-trpo", {"target_kl": 0.02}) == {"target_kl": 0.02}
@@ -369,11 +396,11 @@ def test_changes_to_the_zoo_settings_are_checked_and_recorded():
     with pytest.raises(ValueError, match="JSON values"):
         check_algorithm_kwargs("ppo", {"target_kl": object()})
     with pytest.raises(ValueError, match="unknown baseline 'genrl'"):
-        settings_record({"genrl": {"gamma": 1}})
+        settings_record("hockey", {"genrl": {"gamma": 1}})
 
 
 def test_training_health_reads_every_progress_file_and_flags_divergence(tmp_path):
-    from sb3_genrl.baselines.train import DIVERGED, training_health
+    from sb3_genrl.baselines.evaluation import DIVERGED, training_health
 
     assert training_health(tmp_path) == {"warnings": []}  # no logs: nothing to say
     logs = tmp_path / "logs"

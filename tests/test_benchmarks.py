@@ -13,27 +13,27 @@ BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 
 
 @pytest.mark.parametrize(("script", "argv", "message"), [
-    ("genrl_hockey.py", ["--episodes", "0"], "argument --episodes: must be an integer >= 1, got 0"),
-    ("genrl_basketball.py", ["--out", "FILE/result.json"], "argument --out: 'FILE/result.json' cannot be created"),
-    ("genrl_hockey.py", ["--genrl-kwargs", '{"hindsight": true}'], "--genrl-kwargs needs --out"),
-    ("genrl_hockey.py", ["--library-defaults"], "--library-defaults needs --out"),
-    ("genrl_basketball.py", ["--genrl-kwargs", '{"hindsight": false}', "--out", "r.json"],
-     "argument --genrl-kwargs: hindsight_history"),
-    ("genrl_hockey.py", ["--genrl-kwargs", '{"hindsigt": true}', "--out", "r.json"], "hindsigt"),
-    ("genrl_hockey.py", ["--library-defaults", "--genrl-kwargs", '{"hindsight_regression": 8}', "--out", "r.json"],
-     "argument --genrl-kwargs: hindsight_regression=8 fits the policy to relabelled pulls, which needs hindsight=True"),
+    ("genrl.py", ["--episodes", "0"], "argument --episodes: must be an integer >= 1, got 0"),
+    ("genrl.py", ["--task", "golf"], "argument --task: invalid choice: 'golf'"),
+    ("genrl.py", ["--task", "basketball", "--out", "FILE/result.json"],
+     "argument --out: 'FILE/result.json' cannot be created"),
+    ("genrl.py", ["--genrl-kwargs", '{"target_kl": 0.02}'], "--genrl-kwargs needs --out"),
+    ("genrl.py", ["--library-defaults"], "--library-defaults needs --out"),
+    ("genrl.py", ["--task", "basketball", "--genrl-kwargs", '{"hindsight_kwargs": {"history": 0}}', "--out", "r.json"],
+     "argument --genrl-kwargs: hindsight_kwargs['history'] must be an integer >= 1, got 0"),
+    ("genrl.py", ["--genrl-kwargs", '{"hindsigt": true}', "--out", "r.json"], "hindsigt"),
+    ("genrl.py", ["--library-defaults", "--genrl-kwargs", '{"hindsight_kwargs": {"regression_weighted": true}}',
+                  "--out", "r.json"], "argument --genrl-kwargs: hindsight_kwargs['regression_weighted']"),
+    ("genrl.py", ["--task", "basketball", "--genrl-kwargs", '{"e_step": "kl_penalty"}', "--out", "r.json"],
+     "argument --genrl-kwargs: hindsight_kwargs needs e_step='trpo'"),  # basketball's hindsight, laid over
     ("baselines.py", ["--task", "golf"], "argument --task: invalid choice: 'golf'"),
     ("baselines.py", ["--work", "FILE"], "argument --work: 'FILE' is a file; expected a folder"),
+    ("baselines.py", ["--genrl-kwargs", '{"gama": 1}'], "argument --genrl-kwargs: 'gama' is not a GenRL setting"),
     ("behaviour_cloning.py", ["--out", "result.txt"], "argument --out: 'result.txt' must end in .json"),
     ("generator_training.py", ["--device", "bogus", "--out", "out.json"],
      "argument --device: must be 'auto' or a torch device"),
     ("precision_recall.py", ["--out", "FOLDER"], "argument --out: 'FOLDER' is a folder; expected a file name"),
     ("sim_throughput.py", ["--repeats", "0"], "argument --repeats: must be an integer >= 1, got 0"),
-    ("genrl_tuning.py", ["--generator", "missing.pt"], "argument --generator: 'missing.pt' does not exist"),
-    ("network_fit.py", ["--task", "hockey", "--generator", "missing.pt"], "argument --generator: 'missing.pt' does not exist"),
-    ("network_fit.py", ["--task", "hockey", "--generator", "FILE", "--out", "FOLDER"], "argument --out: 'FOLDER' is a folder"),
-    ("network_fit.py", ["--task", "golf", "--generator", "FILE"], "argument --task: invalid choice: 'golf'"),
-    ("basketball_diagnosis.py", ["--data", "FOLDER", "--generator", "FILE", "--name", "../x"], "argument --name: '../x'"),
     ("reachable.py", ["--task", "hockey", "--generator", "missing.pt", "--out", "out.json"], "missing.pt is not a file"),
 ])
 def test_benchmarks_refuse_bad_arguments_before_any_work(tmp_path, script, argv, message):
@@ -46,13 +46,28 @@ def test_benchmarks_refuse_bad_arguments_before_any_work(tmp_path, script, argv,
     assert sorted(path.name for path in tmp_path.iterdir()) == ["FILE", "FOLDER"]  # nothing was written
 
 
-def _baselines_module():
-    import importlib.util
+def test_the_benchmarks_are_a_package_without_path_edits():
+    for path in sorted(BENCHMARKS.glob("*.py")):
+        assert "sys.path" not in path.read_text() and "noqa: E402" not in path.read_text(), path.name
+    done = subprocess.run([sys.executable, "-m", "sb3_genrl.benchmarks.genrl", "--task", "hockey", "--episodes", "0"],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2 and "argument --episodes: must be an integer >= 1, got 0" in done.stderr
 
-    spec = importlib.util.spec_from_file_location("baselines_benchmark", BENCHMARKS / "baselines.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+
+def test_the_genrl_benchmark_takes_the_tasks_entry_and_writes_its_default_output():
+    from sb3_genrl.benchmarks.genrl import RESULTS, arguments
+
+    from sb3_genrl.hyperparams import load_genrl_settings
+
+    for task, env_id in (("hockey", "GenRL/Hockey-v0"), ("basketball", "GenRL/Basketball-v0")):
+        setting, args = arguments(["--task", task])
+        episodes, batch_episodes, kwargs = load_genrl_settings(env_id)
+        assert (setting.task, args.episodes, args.genrl_kwargs) == (task, episodes, kwargs | {"n_steps": batch_episodes})
+        assert args.out == str(Path(RESULTS) / f"genrl_{task}.json")  # genrl_hockey.json, genrl_basketball.json
+    _, args = arguments(["--task", "hockey", "--genrl-kwargs", '{"hindsight_kwargs": {"history": 30}}', "--out", "r.json"])
+    assert args.genrl_kwargs["hindsight_kwargs"] == {"history": 30, "regression_steps": 512}  # laid over the entry
+    _, args = arguments(["--task", "hockey", "--library-defaults", "--out", "r.json"])
+    assert args.genrl_kwargs == {}
 
 
 def _result(methods, **changes):
@@ -63,7 +78,8 @@ def _result(methods, **changes):
 
 
 def test_baselines_merge_keeps_the_other_methods_in_order_and_refuses_other_settings():
-    merge = _baselines_module().merge_results
+    from sb3_genrl.benchmarks.baselines_results import merge_results as merge
+
     previous = _result(["genrl", "ppo", "sac", "latent-trpo"], generator_sha256="abc")
     current = _result(["sac", "sac-her"], demo_dataset={"task": "basketball", "seed": 0, "episodes": 4000}, jobs=2)
     merged = merge(previous, current)
@@ -95,11 +111,12 @@ def test_baselines_merge_refuses_a_result_of_other_settings_before_any_work(tmp_
 
 
 def test_baselines_reuses_an_archived_runs_evaluation_and_refuses_a_stale_one(tmp_path):
-    from sb3_genrl.baselines.train import EVAL_GOAL_SEED, EVAL_GOALS
+    from sb3_genrl.baselines.evaluation import EVAL_GOALS
+    from sb3_genrl.benchmarks import baselines as module
 
     import sb3_genrl
+    from sb3_genrl.hyperparams import EVAL_GOAL_SEED
 
-    module = _baselines_module()
     run = tmp_path / "sac" / "seed0"
     run.mkdir(parents=True)
     with pytest.raises(ValueError, match="has neither sac_policy.zip nor its final evaluation"):

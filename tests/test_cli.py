@@ -57,19 +57,23 @@ def test_help_lists_the_commands_in_workflow_order_and_version(cli):
      "argument --batch-episodes: must be an integer >= 2, got 1"),
     (("train-policy", "--task", "hockey", "--generator", "missing.pt", "--episodes", "8", "--out", "D"),
      "argument --generator: 'missing.pt' does not exist"),
-    (("train-policy", "--task", "hockey", "--generator", "GEN", "--episodes", "8", "--hindsight-history", "4",
-      "--out", "D"), "argument --hindsight-history: needs --hindsight"),
-    (("train-policy", "--task", "hockey", "--generator", "GEN", "--episodes", "8", "--hindsight-regression", "4",
-      "--out", "D"), "argument --hindsight-regression: needs --hindsight"),
-    (("train-policy", "--task", "basketball", "--generator", "GEN", "--episodes", "8", "--hindsight",
-      "--hindsight-regression-weighted", "--out", "D"),
-     "argument --hindsight-regression-weighted: needs --hindsight-regression"),
-    (("train-policy", "--task", "hockey", "--generator", "GEN", "--episodes", "8", "--hindsight",
-      "--hindsight-regression", "-2", "--out", "D"), "argument --hindsight-regression: must be an integer >= 0, got -2"),
-    (("train-policy", "--task", "hockey", "--generator", "GEN", "--episodes", "8", "--hindsight",
-      "--hindsight-history", "0", "--out", "D"), "argument --hindsight-history: must be an integer >= 1, got 0"),
+    (("train-policy", "--task", "hockey", "--generator", "GEN", "--episodes", "8", "--genrl-kwargs", "[1]",
+      "--out", "D"), "argument --genrl-kwargs: expected a JSON object, got '[1]'"),
+    (("train-policy", "--task", "hockey", "--generator", "GEN", "--episodes", "8", "--genrl-kwargs", "{",
+      "--out", "D"), "argument --genrl-kwargs: not JSON"),
+    (("train-policy", "--task", "hockey", "--generator", "GEN", "--episodes", "8", "--genrl-kwargs",
+      '{"hindsight_kwargs": {"history": 0}}', "--out", "D"),
+     "argument --e-step/--genrl-kwargs: hockey's entry in hyperparams/genrl.yml, --e-step trpo, --genrl-kwargs: "
+     "hindsight_kwargs['history'] must be an integer >= 1, got 0"),
+    (("train-policy", "--task", "hockey", "--generator", "GEN", "--episodes", "8", "--genrl-kwargs",
+      '{"hindsight_kwargs": {"regression_weighted": true}}', "--library-defaults", "--out", "D"),
+     "argument --e-step/--genrl-kwargs: GenRL's defaults, --e-step trpo, --genrl-kwargs: "
+     "hindsight_kwargs['regression_weighted'] weights the regression's pulls, which needs regression_steps > 0"),
+    (("train-policy", "--task", "hockey", "--generator", "GEN", "--episodes", "8", "--genrl-kwargs", '{"gama": 1}',
+      "--out", "D"), "'gama' is not a GenRL setting"),
     (("train-policy", "--task", "basketball", "--generator", "GEN", "--episodes", "8", "--e-step", "kl_penalty",
-      "--out", "D"), "argument --e-step: basketball's GenRL settings relabel episodes in hindsight"),
+      "--out", "D"), "argument --e-step/--genrl-kwargs: basketball's entry in hyperparams/genrl.yml, --e-step kl_penalty: "
+     "hindsight_kwargs needs e_step='trpo'"),
     (("baseline", "ppo", "--task", "hockey", "--demos", "D0", "--episodes", "8", "--bc-max-epochs", "-1", "--out", "D"),
      "argument --bc-max-epochs: must be an integer >= 1, got -1"),
     (("baseline", "ppo", "--task", "hockey", "--demos", "D0", "--episodes", "8", "--device", "cuda:7", "--out", "D"),
@@ -167,8 +171,9 @@ def test_library_functions_check_before_any_work(tmp_path):
         quickstart(tmp_path / "quick", task="hockey", device="bogus")
     from sb3_genrl.genrl import train_policy
 
-    with pytest.raises(ValueError, match="hindsight=True needs e_step='trpo'"):  # GenRL's settings, before its Monitor
-        train_policy("hockey", "missing.pt", episodes=8, out_dir=tmp_path / "policy", e_step="kl_penalty", hindsight=True)
+    with pytest.raises(ValueError, match="hindsight_kwargs needs e_step='trpo'"):  # GenRL's settings, before its Monitor
+        train_policy("hockey", "missing.pt", episodes=8, out_dir=tmp_path / "policy", e_step="kl_penalty",
+                     hindsight_kwargs={})
     with pytest.raises(ValueError, match="n_steps=16: give the episodes per iteration as batch_episodes"):
         train_policy("hockey", "missing.pt", episodes=8, out_dir=tmp_path / "policy", n_steps=16)
     assert list(tmp_path.iterdir()) == []  # no demonstrations were made, no folder created
@@ -233,14 +238,16 @@ def test_play_renders_the_scripted_motion_it_reports(tmp_path, cli):
 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory, hockey_generator):
-    """A GenRL run (relabelling with the goal reached, kept for two iterations, the mean fitted to them by 3 weighted
-    steps per iteration) and a latent-space PPO run on hockey, both through the command line."""
+    """A GenRL run (hockey's settings with --genrl-kwargs laid over them: relabelled pulls kept for two iterations, the
+    mean fitted to them by 3 weighted steps per iteration) and a latent-space PPO run on hockey, both through the
+    command line."""
     from sb3_genrl.cli import main
 
     root = tmp_path_factory.mktemp("runs")
     assert main(["train-policy", "--task", "hockey", "--generator", hockey_generator, "--episodes", "32",
-                 "--batch-episodes", "16", "--hindsight", "--hindsight-history", "2", "--hindsight-regression", "3",
-                 "--hindsight-regression-weighted", "--device", "cpu", "--no-progress-bar",
+                 "--batch-episodes", "16", "--genrl-kwargs",
+                 '{"hindsight_kwargs": {"history": 2, "regression_steps": 3, "regression_weighted": true}}',
+                 "--device", "cpu", "--no-progress-bar",
                  "--out", str(root / "genrl")]) == 0
     assert main(["baseline", "latent-ppo", "--task", "hockey", "--generator", hockey_generator, "--episodes", "16",
                  "--algorithm-kwargs", '{"gamma": 0.9}', "--device", "cpu", "--no-progress-bar",
@@ -255,12 +262,13 @@ def test_baseline_and_compare(runs, tmp_path, cli, hockey_generator):
     assert summary["max_reward"] == pytest.approx(episodes["return"].max())
     # The final evaluation of a latent-space baseline: its deterministic latent action for each held-out goal,
     # played through the latent-action env one goal at a time; GenRL's through evaluate_on_goals.
+    from sb3_genrl.baselines.evaluation import evaluate_trained, load_trained
     from sb3_genrl.baselines.feedback import held_out_goals
-    from sb3_genrl.baselines.train import EVAL_GOAL_SEED, evaluate_trained, load_trained
 
     from sb3_genrl import LatentActionWrapper
     from sb3_genrl.generative import load
     from sb3_genrl.genrl import evaluate_on_goals
+    from sb3_genrl.hyperparams import EVAL_GOAL_SEED
 
     generator = load(hockey_generator)
     latent_ppo = load_trained("latent-ppo", runs / "ppo" / "latent-ppo_policy.zip", "hockey")
@@ -273,9 +281,11 @@ def test_baseline_and_compare(runs, tmp_path, cli, hockey_generator):
     assert summary["final_eval"]["mean_distance"] == pytest.approx(-np.mean(rewards), rel=1e-5)
     genrl = load_trained("genrl", runs / "genrl" / "genrl_policy.zip", "hockey", generator=generator)
     settings = json.loads((runs / "genrl" / "summary.json").read_text())["genrl_settings"]
-    assert genrl.hindsight and settings["hindsight"] and genrl.hindsight_history == settings["hindsight_history"] == 2
-    assert genrl.hindsight_regression == settings["hindsight_regression"] == 3
-    assert genrl.hindsight_regression_weighted and settings["hindsight_regression_weighted"]
+    # the task's entry with --genrl-kwargs merged into its hindsight_kwargs, as the model was built
+    assert settings["hindsight_kwargs"] == genrl.hindsight_kwargs == {"history": 2, "regression_steps": 3,
+                                                                       "regression_weighted": True}
+    assert (genrl.hindsight.history, genrl.hindsight.regression_steps, genrl.hindsight.regression_weighted) == (2, 3, True)
+    assert settings["policy_kwargs"] == {"net_arch": {"pi": [64, 64, 64], "vf": [64, 64]}}
     _, genrl_rewards, _ = evaluate_on_goals(genrl, "hockey", goals=100, seed=EVAL_GOAL_SEED)
     final = evaluate_trained("genrl", genrl, "hockey", generator=generator)
     assert final["mean_distance"] == pytest.approx(-genrl_rewards.mean(), rel=1e-6)

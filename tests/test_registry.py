@@ -142,37 +142,25 @@ def test_task_names_only_in_the_task_modules_and_the_registry():
     assert found == []
 
 
-def test_quickstart_settings_come_from_the_task_spec():
-    from sb3_genrl.study.quickstart import (
-        DEFAULT_BATCH_EPISODES,
-        DEFAULT_POLICY_EPISODES,
-        policy_batch_episodes,
-        policy_settings,
-    )
+def test_task_settings_come_from_genrl_yml(reach_task):
+    from sb3_genrl.hyperparams import load_hyperparams
+    from sb3_genrl.study.quickstart import DEFAULT_BATCH_EPISODES, DEFAULT_POLICY_EPISODES, task_settings
 
-    assert REACH.quickstart == {} and policy_settings(REACH) == (DEFAULT_POLICY_EPISODES, {})
-    assert policy_settings(REACH, 64) == (64, {}) and policy_batch_episodes(REACH) == DEFAULT_BATCH_EPISODES == 64
-    tuned = TaskSpec(**{**vars(REACH), "quickstart": {"policy_episodes": 500, "batch_episodes": 16,
-                                                      "genrl_kwargs": {"target_kl": 0.02}}})
-    assert policy_settings(tuned) == (500, {"target_kl": 0.02}) and policy_settings(tuned, 64) == (64, {"target_kl": 0.02})
-    assert policy_batch_episodes(tuned) == 16
-    basketball = get_task("basketball")
-    episodes, kwargs = policy_settings(basketball)
-    assert episodes == basketball.quickstart["policy_episodes"] > DEFAULT_POLICY_EPISODES and kwargs
+    entry = load_hyperparams("genrl", "GenRL/Basketball-v0")
+    episodes, batch_episodes, kwargs = task_settings("basketball")
+    assert (episodes, batch_episodes) == (entry["n_timesteps"], entry["n_steps"]) == (20000, 32)
+    assert kwargs == {key: value for key, value in entry.items() if key not in ("n_timesteps", "n_steps")}
+    assert task_settings("GenRL/Basketball-v0") == task_settings("basketball")  # by name or Gymnasium id
+    # a task of its own without an entry: GenRL's defaults (the paper's 3000 episodes, 64 per iteration)
+    assert task_settings("reach") == (DEFAULT_POLICY_EPISODES, DEFAULT_BATCH_EPISODES, {}) == (3000, 64, {})
 
 
-@pytest.mark.parametrize(("quickstart", "message"), [
-    ({"episodes": 500}, r"unknown quickstart settings \['episodes'\]"),
-    ({"policy_episodes": 0}, "policy_episodes must be an integer of at least 1, got 0"),
-    ({"policy_episodes": 500.0}, "policy_episodes must be an integer"),
-    ({"batch_episodes": 1}, "batch_episodes must be an integer of at least 2, got 1"),
-    ({"batch_episodes": True}, "batch_episodes must be an integer"),
-    ({"genrl_kwargs": [("target_kl", 0.02)]}, "genrl_kwargs must be a mapping"),
-    ({"genrl_kwargs": {"n_steps": 16}}, "as quickstart batch_episodes, not as genrl_kwargs n_steps"),
-])
-def test_task_spec_refuses_bad_quickstart_settings(quickstart, message):
-    with pytest.raises(ValueError, match=message):
-        TaskSpec(**{**vars(REACH), "quickstart": quickstart})
+def with_genrl_entry(monkeypatch: pytest.MonkeyPatch, env_id: str, entry: dict) -> None:
+    """``genrl.yml`` as if it also held ``entry`` for ``env_id``."""
+    from sb3_genrl import hyperparams
+
+    entries = hyperparams._entries("genrl") | {env_id: entry}
+    monkeypatch.setattr(hyperparams, "_entries", lambda algo: entries if algo == "genrl" else {})
 
 
 def test_train_policy_takes_the_tasks_genrl_settings(reach_task, tmp_path, monkeypatch):
@@ -183,8 +171,7 @@ def test_train_policy_takes_the_tasks_genrl_settings(reach_task, tmp_path, monke
                  "--epochs", "1", "--batch-size", "16", "--eval-every", "1", "--device", "cpu", "--no-progress-bar",
                  "--out", str(generator)]) == 0
     tuned = {"target_kl": 0.02, "value_history": 2, "policy": "ContextStdPolicy", "policy_kwargs": {"net_arch": [16, 16]}}
-    monkeypatch.setitem(TASKS, "reach", TaskSpec(**{**vars(REACH), "quickstart": {"genrl_kwargs": tuned,
-                                                                                  "batch_episodes": 4}}))
+    with_genrl_entry(monkeypatch, REACH.env_id, {"n_timesteps": 3000, "n_steps": 4, **tuned})
     settings, iterations = {}, {}
     for name, extra in (("task", ["--batch-episodes", "8"]), ("library", ["--batch-episodes", "8", "--library-defaults"]),
                         ("task_batch", [])):

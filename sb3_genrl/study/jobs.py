@@ -102,12 +102,12 @@ def _evaluation(generator: Any, name: str, fingerprint: str, scale: dict[str, An
 
 
 def task_genrl_kwargs(task: str) -> dict[str, Any]:
-    """The task's own GenRL settings (:func:`~sb3_genrl.study.quickstart.policy_settings`), used by every GenRL run
-    of the study; the scale sets the episodes."""
-    from sb3_genrl.envs import get_task
-    from sb3_genrl.study.quickstart import policy_settings
+    """The task's own GenRL settings (its entry in ``hyperparams/genrl.yml``, see
+    :func:`~sb3_genrl.study.quickstart.task_settings`), used by every GenRL run of the study; the scale sets the
+    episodes and the episodes per iteration."""
+    from sb3_genrl.study.quickstart import task_settings
 
-    return policy_settings(get_task(task))[1]
+    return task_settings(task)[2]
 
 
 def _policy_reward(task: str, model_path: pathlib.Path, seed: int, scale: dict[str, Any], run_dir: pathlib.Path,

@@ -10,6 +10,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from sb3_genrl.hyperparams import EVAL_GOAL_SEED
 from sb3_genrl.study.state import (
     check_and_record,
     dataset_fingerprint,
@@ -25,9 +26,8 @@ from sb3_genrl.utils import atomic_write_json, atomic_write_text
 # demonstrations out as one unfolded sheet (shot distance along one latent axis, direction along the other); with
 # beta = 0.001 (VAE3) the sheet often folds over itself, and GenRL's Gaussian policy then stalls at the fold.
 QUICKSTART_PRESET = "VAE1"
-DEFAULT_POLICY_EPISODES = 3000  # GenRL episodes of a task whose spec does not set its own
-
-DEFAULT_BATCH_EPISODES = 64  # GenRL episodes per EM iteration of a task whose spec does not set its own
+# A task without an entry in hyperparams/genrl.yml: the paper's 3000 episodes, GenRL's default 64 per iteration.
+DEFAULT_POLICY_EPISODES, DEFAULT_BATCH_EPISODES = 3000, 64
 # GenRL plays its episodes in two env processes, one per core of the 2-core machine the quickstart is sized for
 # (the simulation is most of the policy stage's time). Fixed, not the machine's core count: the result depends on it.
 QUICKSTART_ENVS = 2
@@ -51,8 +51,8 @@ def quickstart(out_dir: str | os.PathLike, *, task: str, demo_episodes: int = 40
     :param task: a task name from :data:`sb3_genrl.envs.TASKS`
     :param demo_episodes: demonstrations to generate
     :param epochs: beta-VAE training epochs (:data:`QUICKSTART_PRESET` of paper table 1)
-    :param policy_episodes: GenRL episodes (default: the task's, see :func:`policy_settings`); GenRL also takes the
-        task's ``quickstart["genrl_kwargs"]`` (see :class:`~sb3_genrl.envs.TaskSpec`)
+    :param policy_episodes: GenRL episodes (default: the task's); GenRL takes the task's settings and episodes per
+        iteration too (its entry in ``hyperparams/genrl.yml``, see :func:`task_settings`)
     :param pr_samples: samples per set for precision and recall
     :param dwpr_samples: samples per intervention for DwPR
     :param seed: seed of the demonstrations, the generator, the evaluation and the policy (the video uses seed + 1)
@@ -65,10 +65,9 @@ def quickstart(out_dir: str | os.PathLike, *, task: str, demo_episodes: int = 40
     import torch
 
     from sb3_genrl.checks import check_device, check_output_dir, check_positive_int, check_seed
-    from sb3_genrl.envs import get_task
 
-    policy_episodes, genrl_kwargs = policy_settings(get_task(task), policy_episodes)
-    batch_episodes = policy_batch_episodes(get_task(task))
+    episodes, batch_episodes, genrl_kwargs = task_settings(task)
+    policy_episodes = episodes if policy_episodes is None else policy_episodes
     for name, value in dict(demo_episodes=demo_episodes, epochs=epochs, policy_episodes=policy_episodes,
                             pr_samples=pr_samples, dwpr_samples=dwpr_samples).items():
         check_positive_int(value, name)
@@ -204,7 +203,7 @@ def _write_report(out: pathlib.Path, task: str, seed: int, video: bool, timings:
     measures = json.loads((out / "evaluation" / "results.json").read_text())
     generator_settings = read_settings(out / _RECORDS["generator"])
     _, rewards, _ = evaluate_on_goals(GenRL.load(out / "policy" / "genrl_policy.zip", device="cpu"), task, goals=100,
-                                      seed=seed + 12345)
+                                      seed=seed + EVAL_GOAL_SEED)
     final_distance = float(-rewards.mean())
     coverage_file = dataset / "coverage.json"
     coverage = json.loads(coverage_file.read_text()) if coverage_file.is_file() else {}
@@ -232,22 +231,22 @@ def _write_report(out: pathlib.Path, task: str, seed: int, video: bool, timings:
     return report
 
 
-def policy_settings(spec: Any, policy_episodes: int | None = None) -> tuple[int, dict[str, Any]]:
-    """The quickstart's GenRL episodes and further GenRL arguments for a task (its ``TaskSpec.quickstart``).
+def task_settings(task: str) -> tuple[int, int, dict[str, Any]]:
+    """A registered task's GenRL settings: its entry in ``hyperparams/genrl.yml``
+    (:func:`sb3_genrl.hyperparams.load_genrl_settings`), used by ``genrl quickstart``, ``genrl train-policy``, the
+    study and the GenRL benchmark; a task without an entry (one of a user's own) takes GenRL's defaults.
 
-    :param spec: the task's :class:`~sb3_genrl.envs.TaskSpec`
-    :param policy_episodes: episodes asked for (``None``: the task's, else :data:`DEFAULT_POLICY_EPISODES`)
-    :return: ``(episodes, genrl_kwargs)``
+    :param task: a task name from :data:`sb3_genrl.envs.TASKS` or its Gymnasium id
+    :return: ``(episodes, batch_episodes, genrl_kwargs)``: the budget of episodes, the episodes per EM iteration and
+        the further GenRL arguments (``policy`` among them)
     """
-    settings = spec.quickstart
-    episodes = int(settings.get("policy_episodes", DEFAULT_POLICY_EPISODES)) if policy_episodes is None else policy_episodes
-    return episodes, dict(settings.get("genrl_kwargs", {}))
+    from sb3_genrl.envs import get_task
+    from sb3_genrl.hyperparams import known_env_ids, load_genrl_settings
 
-
-def policy_batch_episodes(spec: Any) -> int:
-    """A task's GenRL episodes per EM iteration (its ``TaskSpec.quickstart["batch_episodes"]``, else
-    :data:`DEFAULT_BATCH_EPISODES`): the quickstart's, ``genrl train-policy``'s and the task benchmark's."""
-    return int(spec.quickstart.get("batch_episodes", DEFAULT_BATCH_EPISODES))
+    env_id = get_task(task).env_id
+    if env_id not in known_env_ids("genrl"):
+        return DEFAULT_POLICY_EPISODES, DEFAULT_BATCH_EPISODES, {}
+    return load_genrl_settings(env_id)
 
 
 def _measure_line(measures: list[dict[str, Any]]) -> str:

@@ -1,0 +1,50 @@
+"""The ``genrl`` command line. Each command parses its arguments, checks every value and output path before any work
+(:mod:`sb3_genrl.checks`), and calls one library function that a user could call too.
+
+One grammar for all commands: ``--task`` is a registered task (:data:`sb3_genrl.envs.TASKS`); ``--demos`` is a
+demonstration dataset and ``--episodes`` / ``--demo-episodes`` are counts; ``--out`` is where the results go;
+``--seed``, ``--device`` and ``--no-progress-bar`` mean the same wherever they appear.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Callable
+
+WORKFLOW = ("play", "demos", "train-generator", "evaluate", "train-policy", "baseline", "compare", "video", "quickstart",
+            "study")
+# Errors that a bad argument or path raises in the library: printed as one line, exit status 2 (as argparse does).
+KNOWN_ERRORS = (ValueError, FileNotFoundError, PermissionError, FileExistsError, IsADirectoryError, NotADirectoryError)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``genrl`` parser: one sub-parser per command, in workflow order (:data:`WORKFLOW`)."""
+    from sb3_genrl import __version__
+    from sb3_genrl.cli import parsers
+
+    parser = argparse.ArgumentParser(
+        prog="genrl", description="GenRL for Stable-Baselines3: tasks, demonstrations, generators, evaluation, policies, "
+        "baselines and the paper's study.", epilog="The commands are listed in workflow order: play the scripted "
+        "motions, make demonstrations, train a generator, evaluate it, train a GenRL policy, train baselines, compare "
+        "them, render a video; quickstart and study run the whole workflow. 'genrl COMMAND --help' for its options.")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", title="commands (in workflow order)")
+    for add in (parsers.add_play, parsers.add_demos, parsers.add_train_generator, parsers.add_evaluate,
+                parsers.add_train_policy, parsers.add_baseline, parsers.add_compare, parsers.add_video,
+                parsers.add_quickstart, parsers.add_study):
+        add(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run ``genrl`` with ``argv`` (default: the command line); a known error is printed as one line, exit status 2."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    command: Callable[[argparse.Namespace], int] = args.func
+    try:
+        return int(command(args) or 0)
+    except KNOWN_ERRORS as error:
+        print(f"genrl {args.command}: error: {error}", file=sys.stderr)
+        return 2
+

@@ -1,0 +1,151 @@
+"""The ``genrl`` commands: each takes the parsed arguments (:mod:`sb3_genrl.cli.parsers`), calls one library
+function that a user could call too, and prints what it made."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+
+def play_command(args: argparse.Namespace) -> int:
+    from sb3_genrl.showcase import play_scripted
+
+    print(f"wrote {play_scripted(args.out, tasks=tuple(args.task) if args.task else None, seed=args.seed)}")
+    return 0
+
+
+def demos_command(args: argparse.Namespace) -> int:
+    import time
+
+    from sb3_genrl.data import dataset_info
+    from sb3_genrl.envs.demonstrations import make_demonstrations
+
+    began = time.perf_counter()
+    path = make_demonstrations(args.task, args.episodes, args.out, seed=args.seed, n_threads=args.threads,
+                               progress_bar=not args.no_progress_bar)
+    info = dataset_info(path)
+    report = json.loads((path / "coverage.json").read_text())
+    print(f"{info['episodes']} {info['task']} demonstrations ({info['drawn']} drawn) in {time.perf_counter() - began:.1f} s"
+          f" -> {path}")
+    print(f"coverage: {100 * report['coverage']:.1f}% of {report['cells']} goal-region cells of {report['cell_size']} m"
+          f" ({100 * report['in_region']:.1f}% of reached points in the region) -> {report['png']}")
+    return 0
+
+
+def train_generator_command(args: argparse.Namespace) -> int:
+    from sb3_genrl.generative import train_generator
+
+    generator = train_generator(args.data, model=args.model, preset=args.preset, latent_dim=args.latent_dim,
+                                beta=args.beta, info_weight=args.info_weight, std_floor=args.std_floor, epochs=args.epochs,
+                                batch_size=args.batch_size, lr=args.lr, seed=args.seed, eval_every=args.eval_every,
+                                out=args.out, tensorboard_log=args.tensorboard_log and str(args.tensorboard_log),
+                                progress_bar=not args.no_progress_bar, device=args.device)
+    best = next((entry for entry in generator.history if entry["epoch"] == generator.best_epoch), {})
+    print(f"{type(generator).__name__} (T={generator.horizon}, M={generator.action_dim}, N_alpha={generator.latent_dim})"
+          f" best epoch {generator.best_epoch}, selection MSE {best.get('selection_mse', float('nan')):.6g}"
+          f" -> {args.out}")
+    return 0
+
+
+def evaluate_command(args: argparse.Namespace) -> int:
+    from sb3_genrl.metrics import evaluate_generators
+
+    evaluations = evaluate_generators(args.models, args.data, n=args.n, k=args.k, dwpr_n=args.dwpr_n,
+                                      interventions=args.interventions, seed=args.seed, out_dir=args.out,
+                                      device=args.device)
+    for evaluation in evaluations:
+        row = evaluation.row()
+        print(f"{row['model']}: precision {row['precision']:.3f}, recall {row['recall']:.3f}, "
+              f"delta_1 {row['delta_1']:.3f}, mean delta {row['mean_delta']:.3f}")
+    print(f"wrote {args.out}/results.md, results.csv, precision_recall.png, disentanglement.png")
+    return 0
+
+
+def train_policy_command(args: argparse.Namespace) -> int:
+    from sb3_genrl.genrl import train_policy
+
+    result = train_policy(args.task, str(args.generator), episodes=args.episodes, seed=args.seed, out_dir=args.out,
+                          n_envs=args.n_envs, device=args.device, progress_bar=not args.no_progress_bar,
+                          **policy_arguments(args))
+    print(f"GenRL on {args.task}: {result['episodes']} episodes, {result['iterations']} iterations, mean reward "
+          f"final {result['final_mean_reward']:.4g}, best {result['best_mean_reward']:.4g} -> {result['model_path']}")
+    return 0
+
+
+def policy_arguments(args: argparse.Namespace) -> dict:
+    """``genrl train-policy``'s GenRL settings: the task's entry in ``hyperparams/genrl.yml`` (or GenRL's defaults,
+    ``--library-defaults``) with ``--e-step``, ``--batch-episodes`` and ``--genrl-kwargs`` laid over it, checked by
+    :func:`sb3_genrl.genrl.check_genrl_settings` before any work."""
+    from sb3_genrl.genrl import check_genrl_settings
+    from sb3_genrl.hyperparams import lay_over
+    from sb3_genrl.study.quickstart import task_settings
+
+    if args.library_defaults:
+        batch_episodes, genrl_kwargs = None, {}
+    else:
+        _, batch_episodes, genrl_kwargs = task_settings(args.task)
+    genrl_kwargs = lay_over({**genrl_kwargs, "e_step": args.e_step}, args.genrl_kwargs)
+    source = "GenRL's defaults" if args.library_defaults else f"{args.task}'s entry in hyperparams/genrl.yml"
+    name = f"argument --e-step/--genrl-kwargs: {source}, --e-step {args.e_step}" + (
+        ", --genrl-kwargs" if args.genrl_kwargs else "")
+    genrl_kwargs = check_genrl_settings(genrl_kwargs, name)
+    batch_episodes = args.batch_episodes or batch_episodes
+    return genrl_kwargs | ({} if batch_episodes is None else {"batch_episodes": batch_episodes})
+
+
+def baseline_command(args: argparse.Namespace) -> int:
+    from sb3_genrl.baselines.train import train_baseline
+
+    summary = train_baseline(args.algorithm, args.task, episodes=args.episodes, out_dir=args.out, seed=args.seed,
+                             demos=args.demos, demo_episodes=args.demo_episodes, generator=args.generator,
+                             bc_kwargs={"max_epochs": args.bc_max_epochs}, algorithm_kwargs=args.algorithm_kwargs,
+                             checkpoint_every=args.checkpoint_every or None,
+                             device=args.device, progress_bar=not args.no_progress_bar)
+    if "bc" in summary:
+        bc, first = summary["bc"], summary["first_batch"]
+        print(f"behaviour cloning ({bc['epochs']} epochs, best {bc['best_epoch']}): mean distance to {bc['eval_goals']} "
+              f"held-out goals {bc['deterministic_distance']:.3f} m deterministic, {bc['sampled_distance']:.3f} m sampled;"
+              + (f" PPO's first batch ({first['episodes']} episodes) {first['mean_distance']:.3f} m"
+                 if first["episodes"] else ""))
+    final = summary["final_eval"]
+    print(f"{args.algorithm} on {args.task}: {summary['episodes_played']} episodes, final mean reward "
+          f"{summary['final_mean_reward']:.4g}, best {summary['best_mean_reward']:.4g}; the trained policy, "
+          f"deterministic: mean distance to {final['goals']} held-out goals {final['mean_distance']:.3f} m "
+          f"({final['object_unmoved']} of them with the object not moved) -> {args.out}")
+    return 0
+
+
+def compare_command(args: argparse.Namespace) -> int:
+    from sb3_genrl.baselines.compare import compare_runs
+
+    print(compare_runs(args.runs, args.out, task=args.task).read_text())
+    return 0
+
+
+def video_command(args: argparse.Namespace) -> int:
+    from sb3_genrl.video import record_video
+
+    result = record_video(args.task, args.out, policy=args.policy, generator=args.generator, goals=args.goals,
+                          seed=args.seed, trust_policy=args.trust_policy)
+    print(f"wrote {result['video']} (rewards {', '.join(f'{r:.3f}' for r in result['rewards'])})")
+    return 0
+
+
+def quickstart_command(args: argparse.Namespace) -> int:
+    from sb3_genrl.study.quickstart import quickstart
+
+    report = quickstart(args.out, task=args.task, demo_episodes=args.demo_episodes, epochs=args.epochs,
+                        policy_episodes=args.episodes, seed=args.seed, video=not args.no_video, device=args.device,
+                        progress_bar=not args.no_progress_bar, log=print)
+    print(f"wrote {report}")
+    return 0
+
+
+def study_command(args: argparse.Namespace) -> int:
+    from sb3_genrl.study import MODELS, run_study
+
+    report = run_study(args.task, args.scale, args.out, executor=args.executor, address=args.address,
+                       workers=args.workers, models=tuple(args.models) if args.models else MODELS, device=args.device,
+                       connect_timeout=args.ray_timeout, log=print)
+    print(f"wrote {report}")
+    return 0

@@ -1,0 +1,232 @@
+"""The ``genrl`` command line's sub-parsers, one per command (:data:`sb3_genrl.cli.WORKFLOW`): each checks every
+value and output path as it parses (:mod:`sb3_genrl.checks`) and names its command in :mod:`sb3_genrl.cli.commands`."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from sb3_genrl.checks import (
+    COUNT,
+    EXISTING,
+    OUT_DIR,
+    SEED,
+    check_device,
+    check_int,
+    check_non_negative_float,
+    check_output_dir,
+    check_output_file,
+    check_positive_float,
+    json_object_argument,
+    option,
+)
+from sb3_genrl.cli import commands
+
+
+def _task_option(parser: argparse.ArgumentParser, *, required: bool = True, default: str | None = None,
+                 extra: tuple[str, ...] = (), nargs: str | None = None) -> None:
+    from sb3_genrl.envs import TASKS
+
+    parser.add_argument("--task", required=required, default=default, choices=(*TASKS, *extra), nargs=nargs,
+                        help="a registered task" + (f" (default: {default})" if default else ""))
+
+
+def _seed_option(parser: argparse.ArgumentParser, text: str = "seed of every random draw") -> None:
+    parser.add_argument("--seed", type=SEED, default=0, help=f"{text} (default: 0)")
+
+
+def _device_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--device", type=option(check_device), default="auto",
+                        help="torch device: auto, cpu, cuda, cuda:N, mps (default: auto)")
+
+
+def _progress_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--no-progress-bar", action="store_true", help="hide the progress bar")
+
+
+def add_play(sub: argparse._SubParsersAction) -> None:
+    play = sub.add_parser("play", help="play each task's scripted expert, render it and write a short report")
+    play.add_argument("--out", required=True, type=OUT_DIR, help="output folder (report.md, GIFs, frame strips)")
+    _task_option(play, required=False, nargs="+")
+    _seed_option(play, "seed of the scripted motions")
+    play.set_defaults(func=commands.play_command)
+
+
+def add_demos(sub: argparse._SubParsersAction) -> None:
+    demos = sub.add_parser("demos", help="generate a task's demonstrations as a Minari dataset, with a coverage report")
+    _task_option(demos)
+    demos.add_argument("--episodes", type=COUNT, default=40000, help="valid demonstrations to keep (paper: 40000)")
+    demos.add_argument("--out", required=True, type=option(_check_dataset_out),
+                       help="dataset folder to create (must not exist or be empty)")
+    _seed_option(demos)
+    demos.add_argument("--threads", type=COUNT, default=None, help="simulation threads (default: available cores)")
+    _progress_option(demos)
+    demos.set_defaults(func=commands.demos_command)
+
+
+def _check_dataset_out(path: str, name: str = "") -> Path:
+    """A dataset folder to create: writable, and missing or empty (else the error says what is in the way).
+
+    :param path: the folder
+    :param name: the argument's name, for the error message
+    """
+    from sb3_genrl.envs.demonstrations import refuse_existing_output
+
+    out = check_output_dir(path, name)
+    refuse_existing_output(out.absolute())
+    return out
+
+
+def add_train_generator(sub: argparse._SubParsersAction) -> None:
+    from sb3_genrl.generative import PRESETS
+
+    gen = sub.add_parser("train-generator", help="train a beta-VAE or InfoGAN on demonstration trajectories")
+    gen.add_argument("--data", required=True, type=EXISTING, help="demonstration dataset or .npy/.npz (N, T, M) array")
+    gen.add_argument("--model", choices=("vae", "gan"), default=None, help="model kind (default: vae)")
+    gen.add_argument("--preset", type=str.upper, choices=tuple(PRESETS), default=None,
+                     help="paper table 1 model: VAE1..VAE9 or GAN1..GAN9")
+    gen.add_argument("--latent-dim", type=COUNT, default=None, help="latent dimension N_alpha")
+    gen.add_argument("--beta", type=option(check_non_negative_float, float), default=None, help="KL weight (beta-VAE)")
+    gen.add_argument("--info-weight", type=option(check_non_negative_float, float), default=None,
+                     help="information weight lambda (InfoGAN)")
+    gen.add_argument("--std-floor", type=option(check_positive_float, float), default=None,
+                     help="floor of each normalisation std as a fraction of the largest (default 0.05)")
+    gen.add_argument("--epochs", type=COUNT, default=5000, help="training epochs (paper: 5000)")
+    gen.add_argument("--batch-size", type=COUNT, default=256, help="minibatch size (paper: 256)")
+    gen.add_argument("--lr", type=option(check_positive_float, float), default=2e-4, help="Adam learning rate (2e-4)")
+    _seed_option(gen, "training seed")
+    gen.add_argument("--eval-every", type=COUNT, default=10, help="epochs between model-selection evaluations")
+    _device_option(gen)
+    gen.add_argument("--tensorboard-log", type=OUT_DIR, default=None, help="TensorBoard log folder")
+    _progress_option(gen)
+    gen.add_argument("--out", required=True, type=option(check_output_file), help="file to write the generator to")
+    gen.set_defaults(func=commands.train_generator_command)
+
+
+def add_evaluate(sub: argparse._SubParsersAction) -> None:
+    evaluate = sub.add_parser("evaluate", help="precision/recall and DwPR of trained generators (paper section 5.2)")
+    evaluate.add_argument("models", nargs="+", type=EXISTING, metavar="MODEL_FILE", help="trained generator files")
+    evaluate.add_argument("--data", required=True, type=EXISTING,
+                          help="real trajectories: demonstration dataset or .npy/.npz (N, T, M) array")
+    evaluate.add_argument("--out", required=True, type=OUT_DIR, help="output folder (results.csv/.md/.json, plots)")
+    evaluate.add_argument("--n", type=COUNT, default=15000, help="real and generated samples, at most the data's (15000)")
+    evaluate.add_argument("--dwpr-n", type=COUNT, default=10000, help="DwPR samples per intervention (paper: 10000)")
+    evaluate.add_argument("--interventions", type=COUNT, default=5, help="DwPR interventions per dimension (paper: 5)")
+    evaluate.add_argument("--k", type=COUNT, default=3, help="neighbourhood size (paper: 3)")
+    _seed_option(evaluate)
+    _device_option(evaluate)
+    evaluate.set_defaults(func=commands.evaluate_command)
+
+
+def add_train_policy(sub: argparse._SubParsersAction) -> None:
+    policy = sub.add_parser("train-policy", help="train a GenRL policy over a generator's latent space (Algorithm 1)")
+    _task_option(policy)
+    policy.add_argument("--generator", required=True, type=EXISTING, help="file of a trained generator")
+    policy.add_argument("--episodes", type=COUNT, required=True, help="episodes (trajectories played) in total")
+    _seed_option(policy)
+    policy.add_argument("--out", required=True, type=OUT_DIR, help="output folder (model, learning curve, logs)")
+    policy.add_argument("--e-step", choices=("trpo", "kl_penalty"), default="trpo", help="E-step variant")
+    policy.add_argument("--batch-episodes", type=option(check_int, int, minimum=2), default=None,
+                        help="episodes per EM iteration N, at least 2 (default: the task's, or 64 with "
+                             "--library-defaults)")
+    policy.add_argument("--n-envs", type=COUNT, default=1,
+                        help="envs played at a time, each in its own process (one per core); a divisor of "
+                             "--batch-episodes (default 1)")
+    policy.add_argument("--library-defaults", action="store_true",
+                        help="GenRL's own defaults instead of the task's settings and batch_episodes "
+                             "(its entry in hyperparams/genrl.yml)")
+    policy.add_argument("--genrl-kwargs", type=json_object_argument, default={}, metavar="JSON",
+                        help="GenRL settings laid over the task's (or, with --library-defaults, GenRL's defaults), "
+                             "a mapping merged into a mapping, e.g. '{\"hindsight_kwargs\": {\"history\": 30}}' or "
+                             "'{\"hindsight_kwargs\": null}' (hindsight off); checked before any work")
+    _device_option(policy)
+    _progress_option(policy)
+    policy.set_defaults(func=commands.train_policy_command)
+
+
+def add_baseline(sub: argparse._SubParsersAction) -> None:
+    from sb3_genrl.baselines import BASELINES
+
+    baseline = sub.add_parser("baseline", help="train PPO (BC), SAC (with or without prefilled buffer), SAC+HER, or a "
+                              "stock algorithm on the latent space")
+    baseline.add_argument("algorithm", choices=BASELINES)
+    _task_option(baseline)
+    baseline.add_argument("--demos", type=EXISTING, default=None,
+                          help="demonstration dataset (ppo, sac, sac-no-prefill, sac-her)")
+    baseline.add_argument("--demo-episodes", type=COUNT, default=None, help="use the first N demonstrations (default all)")
+    baseline.add_argument("--generator", type=EXISTING, default=None, help="generator file (latent-ppo/-sac/-trpo)")
+    baseline.add_argument("--episodes", type=COUNT, required=True, help="budget of episodes")
+    _seed_option(baseline)
+    baseline.add_argument("--algorithm-kwargs", type=json_object_argument, default=None, metavar="JSON",
+                          help="changes to the rl-zoo3 settings, as arguments of the SB3 class, e.g. "
+                               "'{\"target_kl\": 0.02}' for ppo (default: none)")
+    baseline.add_argument("--bc-max-epochs", type=COUNT, default=200,
+                          help="most behaviour cloning epochs; it stops earlier on its held-out loss (ppo)")
+    baseline.add_argument("--checkpoint-every", type=option(check_int, int, minimum=0), default=250,
+                          help="episodes between checkpoints of sac, sac-no-prefill and sac-her; a rerun into the same "
+                               "--out resumes from the last one (0: none; default 250)")
+    _device_option(baseline)
+    _progress_option(baseline)
+    baseline.add_argument("--out", required=True, type=OUT_DIR, help="output folder")
+    baseline.set_defaults(func=commands.baseline_command)
+
+
+def add_compare(sub: argparse._SubParsersAction) -> None:
+    compare = sub.add_parser("compare", help="GenRL vs baselines over seeds: reward curves and table contacts")
+    _task_option(compare, required=False)
+    compare.add_argument("--runs", nargs="+", required=True, type=EXISTING, help="run folders (several seeds per method)")
+    compare.add_argument("--out", required=True, type=OUT_DIR, help="output folder")
+    compare.set_defaults(func=commands.compare_command)
+
+
+def add_video(sub: argparse._SubParsersAction) -> None:
+    from sb3_genrl.video import VIDEO_SUFFIXES
+
+    video = sub.add_parser("video", help="render a GenRL policy (or a generator's random trajectories) to MP4 or GIF")
+    _task_option(video)
+    source = video.add_mutually_exclusive_group(required=True)
+    source.add_argument("--policy", type=EXISTING, help="a GenRL run folder or model zip")
+    source.add_argument("--generator", type=EXISTING, help="a generator file (random latent actions)")
+    video.add_argument("--trust-policy", action="store_true",
+                       help="unpickle the policy zip as SB3 does (runs code stored in it: only for trusted files)")
+    video.add_argument("--goals", type=COUNT, default=6, help="episodes (goals) to show")
+    _seed_option(video, "seed of the goals (and of the latent actions)")
+    video.add_argument("--out", required=True, type=option(check_output_file, suffixes=VIDEO_SUFFIXES),
+                       help="output file, .mp4 or .gif")
+    video.set_defaults(func=commands.video_command)
+
+
+def add_quickstart(sub: argparse._SubParsersAction) -> None:
+    from sb3_genrl.envs import DEFAULT_TASK, TASKS
+    from sb3_genrl.hyperparams import known_env_ids, load_hyperparams
+
+    quick = sub.add_parser("quickstart", help="demonstrations -> VAE -> evaluation -> GenRL policy -> report, in minutes")
+    quick.add_argument("--out", required=True, type=OUT_DIR, help="output folder (a rerun resumes it)")
+    _task_option(quick, required=False, default=DEFAULT_TASK)
+    quick.add_argument("--demo-episodes", type=COUNT, default=4000, help="demonstrations to generate (default 4000)")
+    quick.add_argument("--epochs", type=COUNT, default=300, help="beta-VAE training epochs (default 300)")
+    own = ", ".join(f"{name} {load_hyperparams('genrl', spec.env_id)['n_timesteps']}" for name, spec in TASKS.items()
+                    if spec.env_id in known_env_ids("genrl"))
+    quick.add_argument("--episodes", type=COUNT, default=None, help=f"GenRL episodes (default: the task's own: {own})")
+    _seed_option(quick)
+    quick.add_argument("--no-video", action="store_true", help="skip rendering the policy")
+    _device_option(quick)
+    _progress_option(quick)
+    quick.set_defaults(func=commands.quickstart_command)
+
+
+def add_study(sub: argparse._SubParsersAction) -> None:
+    from sb3_genrl.study import MODELS, SCALES
+
+    study = sub.add_parser("study", help="the paper's experiments at a scale, with tables, plots and report.md")
+    _task_option(study, required=False, default="all", extra=("all",))
+    study.add_argument("--scale", choices=tuple(SCALES), default="small", help="size of every stage (default: small)")
+    study.add_argument("--out", required=True, type=OUT_DIR, help="study folder (a rerun resumes it)")
+    study.add_argument("--executor", choices=("local", "ray"), default="local", help="worker processes or Ray tasks")
+    study.add_argument("--address", default=None, help="Ray cluster address (ray executor)")
+    study.add_argument("--ray-timeout", type=option(check_positive_float, float), default=30.0,
+                       help="seconds to connect to --address (default 30)")
+    study.add_argument("--workers", type=COUNT, default=None, help="local worker processes (default: the cores)")
+    study.add_argument("--models", nargs="+", choices=MODELS, default=None, help="a subset of VAE1..GAN9 (default all)")
+    _device_option(study)
+    study.set_defaults(func=commands.study_command)
