@@ -127,8 +127,10 @@ class HindsightRelabelling:
     def regress(self) -> list[float]:
         """Fit the policy's mean to the kept relabelled pulls (``regression_steps`` Adam steps); the minibatch losses
         (none without the regression or without kept pulls)."""
+        if not self.regression_steps or not self.memory:
+            return []
         contexts, actions, _ = self._kept()
-        if not self.regression_steps or not len(contexts):
+        if not len(contexts):
             return []
         return regress_mean(self.policy, self.optimizer, contexts, actions, steps=self.regression_steps,  # type: ignore[arg-type]
                             batch_size=self.regression_batch_size, weighted=self.regression_weighted)

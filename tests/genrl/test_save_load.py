@@ -1,0 +1,158 @@
+"""GenRL's save and load: round trips, the generator's file, devices, interrupted saves, states switched at load."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch as th
+from conftest import (
+    FastReachEnv,
+    LinearGenerator,
+    load_linear_generator,
+)
+from genrl_test_helpers import GOALS, HindsightReachEnv
+
+from sb3_genrl import GenRL, LatentActionWrapper
+from sb3_genrl.genrl import generator_files
+
+
+def test_save_load_predict_round_trip(tmp_path, monkeypatch):
+    generator = LinearGenerator()
+    model = GenRL(FastReachEnv(), generator, seed=0).learn(128)
+    expected = model.predict(GOALS, deterministic=True)[0]
+    model.save(tmp_path / "policy.zip")
+    # An in-memory generator is saved beside the model and restored with sb3_genrl.generative.load.
+    assert (tmp_path / "policy.generator.pt").exists()
+    monkeypatch.setattr(generator_files, "load_generator", load_linear_generator)
+    loaded = GenRL.load(tmp_path / "policy.zip")
+    np.testing.assert_array_equal(loaded.predict(GOALS, deterministic=True)[0], expected)
+    assert loaded.predict_trajectory(GOALS[0]).shape == (5, 2)
+    np.testing.assert_allclose(loaded.predict_trajectory(GOALS[0]), generator.decode(expected[0])[0], rtol=1e-6)
+    assert loaded.predict_trajectory(GOALS).shape == (4, 5, 2)
+    # generator= overrides, a raw env is wrapped, and training goes on.
+    override = GenRL.load(tmp_path / "policy.zip", env=FastReachEnv(), generator=generator)
+    assert override.generator is generator
+    np.testing.assert_array_equal(override.predict(GOALS, deterministic=True)[0], expected)
+    override.learn(64, reset_num_timesteps=False)
+    assert override.num_timesteps == 192
+
+
+def test_load_without_generator_still_predicts(tmp_path):
+    model = GenRL(FastReachEnv(), _UnsavableGenerator(), seed=0)
+    model.save(tmp_path / "policy")
+    loaded = GenRL.load(tmp_path / "policy")
+    assert loaded.predict(GOALS[0], deterministic=True)[0].shape == (2,)
+    with pytest.raises(ValueError, match="generator"):
+        loaded.predict_trajectory(GOALS[0])
+
+
+class _UnsavableGenerator(LinearGenerator):
+    def save(self, path: str) -> None:
+        raise NotImplementedError
+
+
+def test_generator_path_is_kept(tmp_path, monkeypatch):
+    generator_file = tmp_path / "gen.npz"
+    LinearGenerator().save(str(generator_file))
+    monkeypatch.setattr(generator_files, "load_generator", load_linear_generator)
+    model = GenRL(FastReachEnv(), str(generator_file), seed=0)
+    assert model.generator_path == str(generator_file)
+    model.save(tmp_path / "policy.zip")
+    assert not (tmp_path / "policy.generator.pt").exists()
+    assert GenRL.load(tmp_path / "policy.zip").generator_path == str(generator_file)
+
+
+def test_on_paper_task_with_saved_generator(tmp_path):
+    """A short run on the hockey task with an untrained beta-VAE saved to a file, then load -> predict_trajectory."""
+    from sb3_genrl.generative import make_generator
+
+    generator = make_generator("VAE1", horizon=69, action_dim=7, device="cpu")
+    generator.save(str(tmp_path / "vae.pt"))
+    model = GenRL("GenRL/Hockey-v0", str(tmp_path / "vae.pt"), n_steps=16, seed=0).learn(32)
+    assert model.generator_path == str(tmp_path / "vae.pt") and model.env.get_attr("use_fast_path")[0]
+    assert np.isfinite(model.logger.name_to_value["train/mean_reward"])
+    model.save(tmp_path / "policy.zip")
+    loaded = GenRL.load(tmp_path / "policy.zip", env=gym.make("GenRL/Hockey-v0"))
+    goal = np.array([1.0, 0.1], dtype=np.float32)
+    np.testing.assert_array_equal(loaded.predict(goal, deterministic=True)[0], model.predict(goal, deterministic=True)[0])
+    assert loaded.predict_trajectory(goal).shape == (69, 7)
+
+
+def test_a_generator_file_is_loaded_onto_the_models_device(tmp_path, monkeypatch):
+    """GenRL(..., "vae.pt", device=D), GenRL.load(..., device=D) and load_policy(..., device=D) place the generator
+    they load from a file on D."""
+    import sb3_genrl.generative as generative
+    from sb3_genrl.generative import make_generator
+    from sb3_genrl.genrl.loading import load_policy
+
+    make_generator("VAE1", horizon=69, action_dim=7, device="cpu").save(str(tmp_path / "vae.pt"))
+    devices, real_load = [], generative.load
+    monkeypatch.setattr(generative, "load", lambda path, device="auto": devices.append(str(device)) or real_load(path, device))
+    model = GenRL("GenRL/Hockey-v0", str(tmp_path / "vae.pt"), n_steps=8, device="cpu")
+    model.save(tmp_path / "policy.zip")
+    loaded = GenRL.load(tmp_path / "policy.zip", device="cpu")
+    safe = load_policy(tmp_path / "policy.zip", gym.make("GenRL/Hockey-v0"), device="cpu")
+    assert devices == ["cpu", "cpu", "cpu"] and safe.generator.device == th.device("cpu")
+    assert model.generator.device == model.device and loaded.generator.device == loaded.device == th.device("cpu")
+
+
+def test_interrupted_save_keeps_the_previous_policy_file(tmp_path, monkeypatch):
+    from stable_baselines3.common import base_class
+
+    model = GenRL(FastReachEnv(), LinearGenerator(), seed=0)
+    model.save(tmp_path / "policy")  # SB3 adds .zip
+    before = (tmp_path / "policy.zip").read_bytes()
+    real_save = base_class.save_to_zip_file
+
+    def killed_save(save_path, *args, **kwargs):
+        real_save(save_path, *args, **kwargs)
+        with open(save_path, "r+b") as file:
+            file.truncate(100)  # what a kill during the write leaves behind
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(base_class, "save_to_zip_file", killed_save)
+    with pytest.raises(KeyboardInterrupt):
+        model.save(tmp_path / "policy.zip")
+    assert (tmp_path / "policy.zip").read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["policy.generator.pt", "policy.zip"]
+
+
+def test_load_switches_the_optional_states_on_and_off(tmp_path):
+    """policy_averaging and the hindsight regression changed at load: the saved state of a setting now off is dropped,
+    one now on starts afresh from the loaded policy, and the regression's learning rate is the one given."""
+    def trained(**kwargs):
+        model = GenRL(LatentActionWrapper(HindsightReachEnv(), LinearGenerator()), seed=0, n_steps=16, **kwargs)
+        model.learn(32)
+        model.save(tmp_path / "model")
+        return model
+
+    def load(**kwargs):
+        loaded = GenRL.load(tmp_path / "model.zip", env=HindsightReachEnv(), generator=LinearGenerator(), **kwargs)
+        loaded.learn(16)  # and it trains on
+        return loaded
+
+    contexts = np.array([[0.3, -0.2], [-0.5, 0.4]], dtype=np.float32)
+    with_both = trained(policy_averaging=0.9, hindsight_kwargs={"regression_steps": 4})
+    plain = GenRL.load(tmp_path / "model.zip", env=HindsightReachEnv(), generator=LinearGenerator(),
+                       policy_averaging=None)  # the policy, not its saved average, acts
+    np.testing.assert_allclose(plain.predict(contexts, deterministic=True)[0],
+                               with_both.policy.predict(contexts, deterministic=True)[0], rtol=0, atol=0)
+    switched_off = load(policy_averaging=None, hindsight_kwargs={"regression_steps": 0})
+    assert switched_off.policy_average is None and switched_off.hindsight.optimizer is None
+    assert "hindsight.optimizer" not in switched_off._get_torch_save_params()[0]
+    no_hindsight = load(hindsight_kwargs=None)  # relabelling switched off altogether
+    assert no_hindsight.hindsight is None and no_hindsight.policy_average is not None
+    faster = load(hindsight_kwargs={"regression_steps": 4, "regression_lr": 1e-2})
+    assert faster.hindsight.optimizer.param_groups[0]["lr"] == 1e-2
+    assert all(value["step"] == 8 + 4 for value in faster.hindsight.optimizer.state_dict()["state"].values())
+
+    without = trained(hindsight_kwargs={})
+    switched_on = GenRL.load(tmp_path / "model.zip", env=HindsightReachEnv(), generator=LinearGenerator(),
+                             policy_averaging=0.9, hindsight_kwargs={"regression_steps": 4})
+    # the new average starts as the loaded policy, not as the policy the model was built with
+    np.testing.assert_allclose(switched_on.predict(contexts, deterministic=True)[0],
+                               without.predict(contexts, deterministic=True)[0], rtol=0, atol=0)
+    assert switched_on.hindsight.optimizer.state_dict()["state"] == {}
+    switched_on.learn(16)
+    assert all(value["step"] == 4 for value in switched_on.hindsight.optimizer.state_dict()["state"].values())

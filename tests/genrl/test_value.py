@@ -1,0 +1,83 @@
+"""GenRL's value function (sb3_genrl/genrl/value.py): the batches it remembers and its least-squares fit."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch as th
+from conftest import (
+    FastReachEnv,
+    LinearGenerator,
+)
+from stable_baselines3.common.callbacks import BaseCallback
+
+from sb3_genrl import GenRL
+
+
+class _BatchRecorder(BaseCallback):
+    """Each iteration's observations and returns, as collected."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.batches: list[tuple[np.ndarray, np.ndarray]] = []
+
+    def _on_rollout_end(self) -> None:
+        buffer = self.model.rollout_buffer
+        self.batches.append((buffer.observations.reshape(-1, buffer.observations.shape[-1]).copy(),
+                             buffer.returns.flatten().copy()))
+
+    def _on_step(self) -> bool:
+        return True
+
+
+def test_value_memory_holds_the_last_value_history_batches():
+    recorder = _BatchRecorder()
+    model = GenRL(FastReachEnv(), LinearGenerator(), seed=0, n_steps=16, value_history=3)
+    model.learn(5 * 16, callback=recorder)
+    assert len(recorder.batches) == 5 and len(model._value_memory) == 3
+    for (observations, returns), (expected_observations, expected_returns) in zip(
+            model._value_memory, recorder.batches[-3:], strict=True):  # the same rows, in another order
+        observations, returns = observations.cpu().numpy(), returns.cpu().numpy()
+        order, expected_order = np.argsort(returns), np.argsort(expected_returns)
+        np.testing.assert_allclose(observations[order], expected_observations[expected_order])
+        np.testing.assert_allclose(returns[order], expected_returns[expected_order])
+
+
+@pytest.mark.parametrize(("value_history", "expected"), [(1, 1.0), (2, 0.5)])
+def test_value_function_is_the_least_squares_fit_over_the_remembered_batches(value_history, expected):
+    # The same contexts with returns 0 in the remembered batch and 1 in the current one: the least-squares value is
+    # 1 when only the current batch counts, and the mean 0.5 over both batches.
+    model = GenRL(FastReachEnv(), LinearGenerator(), seed=0, n_steps=16, value_history=value_history,
+                  n_critic_updates=2000)
+    model.learn(16)
+    observations = next(model.rollout_buffer.get(batch_size=None)).observations
+    model._value_memory.clear()
+    model._value_memory.append((observations, th.zeros(16, device=model.device)))
+    model.rollout_buffer.returns[:] = 1.0
+    model._fit_value_function()
+    with th.no_grad():
+        values = model.policy.predict_values(observations).flatten().cpu().numpy()
+    assert abs(values.mean() - expected) < 0.02
+    np.testing.assert_allclose(values, expected, atol=0.1)
+
+
+def test_value_history_is_checked_and_not_saved(tmp_path):
+    with pytest.raises(ValueError, match="value_history must be a positive integer, got 0"):
+        GenRL(FastReachEnv(), LinearGenerator(), value_history=0)
+    model = GenRL(FastReachEnv(), LinearGenerator(), seed=0, n_steps=16, value_history=4)
+    model.learn(32)
+    model.save(tmp_path / "model")
+    loaded = GenRL.load(tmp_path / "model.zip", env=FastReachEnv(), generator=LinearGenerator())
+    assert loaded.value_history == 4 and len(loaded._value_memory) == 0 and loaded._value_memory.maxlen == 4
+
+
+def test_observation_batches_join_and_index_as_tensors_and_dicts():
+    from sb3_genrl.genrl.value import concatenate, take
+
+    first, second = th.arange(6.0).reshape(3, 2), th.arange(6.0, 10.0).reshape(2, 2)
+    joined = concatenate([first, second])
+    th.testing.assert_close(joined, th.arange(10.0).reshape(5, 2))
+    th.testing.assert_close(take(joined, th.tensor([4, 0])), th.tensor([[8.0, 9.0], [0.0, 1.0]]))
+    dicts = concatenate([{"goal": first, "t": th.zeros(3)}, {"goal": second, "t": th.ones(2)}])
+    th.testing.assert_close(dicts["goal"], joined)
+    th.testing.assert_close(take(dicts, th.tensor([3]))["t"], th.ones(1))
