@@ -19,8 +19,8 @@ from typing import Any
 import numpy as np
 from sb3_genrl.baselines.feedback import held_out_goals  # noqa: F401 (the benchmarks' goals, imported from here)
 from sb3_genrl.envs import get_task
-from sb3_genrl.envs.base import default_threads
 from sb3_genrl.envs.basketball import BASKET_HEIGHT
+from sb3_genrl.envs.control import default_threads
 from scipy.spatial import cKDTree
 
 from sb3_genrl.generative.base import TrajectoryGenerator

@@ -7,7 +7,6 @@ through :meth:`ArmTaskEnv.play_trajectories` gives the same reward and info.
 
 from __future__ import annotations
 
-import os
 from typing import Any
 
 import gymnasium as gym
@@ -17,12 +16,7 @@ from gymnasium import spaces
 from gymnasium.utils import EzPickle
 from mujoco import rollout
 from sb3_genrl.envs.arm import FRAME_SKIP, JOINT_NAMES, JOINT_RANGE
-
-# Limits beyond which a simulation counts as unstable (the arm's joints and the task object): far above what any
-# commanded motion produces (bang-bang commands at the action bounds stay below 80 rad/s), reached only when the
-# integration diverges.
-MAX_JOINT_SPEED = 200.0  # rad/s
-MAX_OBJECT_SPEED = 100.0  # m/s
+from sb3_genrl.envs.control import MAX_JOINT_SPEED, is_unstable, next_command, ramp, unstable_rows
 
 
 class ArmTaskEnv(gym.Env, EzPickle):
@@ -148,10 +142,10 @@ class ArmTaskEnv(gym.Env, EzPickle):
         if not np.all(np.isfinite(action)):
             raise ValueError(f"action contains non-finite values: {action}")
         previous = self._command
-        command, clipped = _next_command(self._command[None], action[None], self.max_joint_delta)
+        command, clipped = next_command(self._command[None], action[None], self.max_joint_delta)
         self._command = command[0]
         self._clipped_steps += int(clipped[0])
-        unstable = self._simulate(_ramp(previous[None], self._command[None], self.frame_skip)[0])
+        unstable = self._simulate(ramp(previous[None], self._command[None], self.frame_skip)[0])
         self._t += 1
         if not unstable and self._t == self.horizon:
             hold = np.repeat(self._command[None], self.frame_skip, axis=0)
@@ -178,11 +172,11 @@ class ArmTaskEnv(gym.Env, EzPickle):
         # Checked once per control step, not per physics step (the check costs twice the physics). The rows after a
         # divergence within this control step change nothing: ``_finish`` reads only the rows before the first bad
         # one, as for a rollout (:meth:`_episode_length`).
-        return _unstable(np.asarray(self._rows[first:]))
+        return is_unstable(np.asarray(self._rows[first:]))
 
     def _finish(self, rows: np.ndarray, goal: np.ndarray, clipped_steps: int) -> tuple[float, dict[str, Any]]:
         info: dict[str, Any] = {"joint_limit_clipped": clipped_steps > 0, "clipped_steps": clipped_steps}
-        bad = _unstable_rows(rows)
+        bad = unstable_rows(rows)
         if bad.any():
             first_bad = int(np.argmax(bad))
             if first_bad > 0:  # what happened before the simulation diverged (contacts, object position)
@@ -241,8 +235,8 @@ class ArmTaskEnv(gym.Env, EzPickle):
         frames = [self.render()]
         for t, action in enumerate(trajectory):
             previous = self._command
-            self._command = _next_command(self._command[None], action[None], self.max_joint_delta)[0][0]
-            if self._simulate(_ramp(previous[None], self._command[None], self.frame_skip)[0]):
+            self._command = next_command(self._command[None], action[None], self.max_joint_delta)[0][0]
+            if self._simulate(ramp(previous[None], self._command[None], self.frame_skip)[0]):
                 break
             if (t + 1) % every == 0:
                 frames.append(self.render())
@@ -339,11 +333,11 @@ class ArmTaskEnv(gym.Env, EzPickle):
             command = np.tile(self.home_qpos(), (len(batch), 1))
             clipped = np.zeros(len(batch), dtype=int)
             for t in range(self.horizon):
-                command, clip_t = _next_command(command, batch[:, t], self.max_joint_delta)
+                command, clip_t = next_command(command, batch[:, t], self.max_joint_delta)
                 commands[:, t] = command
                 clipped += clip_t
             previous = np.concatenate([np.tile(self.home_qpos(), (len(batch), 1, 1)), commands[:, :-1]], axis=1)
-            controls = _ramp(previous, commands, self.frame_skip).reshape(len(batch), -1, 7)
+            controls = ramp(previous, commands, self.frame_skip).reshape(len(batch), -1, 7)
             hold = np.repeat(commands[:, -1:], self.settle_steps * self.frame_skip, axis=1)
             controls = np.concatenate([controls, hold], axis=1)
             states, sensordata = rollout.rollout(self.model, datas, self.initial_state[None], controls,
@@ -370,7 +364,7 @@ class ArmTaskEnv(gym.Env, EzPickle):
 
     def _episode_length(self, rows: np.ndarray) -> int:
         """Number of physics steps the step path runs for these rows: it stops at instability or when settled."""
-        bad = _unstable_rows(rows)
+        bad = unstable_rows(rows)
         if bad.any():
             return int(np.argmax(bad)) + 1
         end = self.horizon * self.frame_skip
@@ -379,41 +373,3 @@ class ArmTaskEnv(gym.Env, EzPickle):
                 break
             end += self.frame_skip
         return end
-
-
-def _next_command(command: np.ndarray, delta: np.ndarray, max_delta: float) -> tuple[np.ndarray, np.ndarray]:
-    """Add per-step deltas (clipped to the action box) to the commanded joint positions, within the joint limits.
-
-    :return: the new commands ``(B, 7)`` and, per row, whether the action box or a joint limit clipped it
-    """
-    step = np.clip(delta, -max_delta, max_delta)
-    target = command + step
-    new = np.clip(target, JOINT_RANGE[:, 0], JOINT_RANGE[:, 1])
-    clipped = np.any(step != delta, axis=1) | np.any(new != target, axis=1)
-    return new, clipped
-
-
-def _ramp(previous: np.ndarray, new: np.ndarray, frame_skip: int) -> np.ndarray:
-    """Commanded positions of each physics step: a linear ramp from ``previous`` to ``new`` over a control step,
-    as a robot's joint interpolator does. ``(..., 7)`` inputs give ``(..., frame_skip, 7)``."""
-    fraction = np.arange(1, frame_skip + 1, dtype=np.float64) / frame_skip
-    return previous[..., None, :] + fraction[:, None] * (new - previous)[..., None, :]
-
-
-def _unstable_rows(rows: np.ndarray) -> np.ndarray:
-    """Per row: non-finite readings, the clock running backwards (MuJoCo reset a diverged state), or runaway speeds."""
-    rows = np.asarray(rows)
-    bad = ~np.all(np.isfinite(rows), axis=1)
-    clock = rows[:, 0]
-    bad[1:] |= np.diff(clock) <= 0
-    bad |= np.abs(rows[:, 7:14]).max(axis=1, initial=0.0) > MAX_JOINT_SPEED
-    bad |= np.linalg.norm(rows[:, 4:7], axis=1) > MAX_OBJECT_SPEED
-    return bad
-
-
-def _unstable(rows: np.ndarray) -> bool:
-    return bool(_unstable_rows(rows).any())
-
-
-def default_threads() -> int:
-    return max(1, len(os.sched_getaffinity(0)))

@@ -24,7 +24,8 @@ from typing import Any
 import numpy as np
 from sb3_genrl.envs import TaskSpec, get_task
 from sb3_genrl.envs.arm import JOINT_RANGE
-from sb3_genrl.envs.base import ArmTaskEnv, default_threads
+from sb3_genrl.envs.base import ArmTaskEnv
+from sb3_genrl.envs.control import default_threads
 from sb3_genrl.envs.motions import bump
 from tqdm.auto import tqdm
 

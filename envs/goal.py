@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 from gymnasium import spaces
-from sb3_genrl.envs.base import MAX_OBJECT_SPEED
+from sb3_genrl.envs.control import MAX_OBJECT_SPEED
 
 
 class GoalConditionedMixin:
