@@ -49,7 +49,7 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
     ``hold_steps``, ``ended`` (whether the wrapped episode ended), ``latent_clipped`` and ``fast_path``. When the
     context is the task's ``get_context()`` and the task has a method ``hindsight(info)``, also ``hindsight``: what it
     returns for the step's info, ``(context', reward')`` (a context this trajectory solves, and its reward there) or
-    ``None``; :class:`~sb3_genrl.GenRL` relabels pulls with it when ``hindsight=True``.
+    ``None``; :class:`~sb3_genrl.GenRL` relabels pulls with it when given ``hindsight_kwargs``.
 
     :param env: the episodic task; its per-step action shape must be ``(generator.action_dim,)``
     :param generator: the trajectory generator (see :class:`~sb3_genrl.generative.TrajectoryGenerator`)
@@ -207,7 +207,7 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
                              f"the latent action {alpha.tolist()} (context {np.asarray(self._context).tolist()}); a reward "
                              "must be a finite number")
         relabel = getattr(self.env.unwrapped, "hindsight", None)
-        if self._context_source == "task" and callable(relabel):  # for GenRL's hindsight=True
+        if self._context_source == "task" and callable(relabel):  # for GenRL's hindsight_kwargs
             info["hindsight"] = relabel(info)
         self._needs_reset = True
         return copy.deepcopy(self._context), info["reward"], True, False, info

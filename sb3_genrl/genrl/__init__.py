@@ -1,8 +1,10 @@
 """The GenRL algorithm (paper section 4): EM policy training over a generator's latent space."""
 
 from sb3_genrl.genrl.genrl import GenRL
+from sb3_genrl.genrl.hindsight import HindsightRelabelling
 from sb3_genrl.genrl.policies import MlpPolicy, MultiInputPolicy
 from sb3_genrl.genrl.settings import check_genrl_settings
 from sb3_genrl.genrl.train import evaluate_on_goals, train_policy
 
-__all__ = ["GenRL", "MlpPolicy", "MultiInputPolicy", "check_genrl_settings", "evaluate_on_goals", "train_policy"]
+__all__ = ["GenRL", "HindsightRelabelling", "MlpPolicy", "MultiInputPolicy", "check_genrl_settings", "evaluate_on_goals",
+           "train_policy"]

@@ -1,6 +1,6 @@
 """GenRL's hindsight regression: the policy's mean fitted to the relabelled pulls, exact (context, latent action) pairs.
 
-A relabelled pull ``(context', alpha)`` (GenRL's ``hindsight=True``) is a latent action together with the context it
+A relabelled pull ``(context', alpha)`` (:mod:`sb3_genrl.genrl.hindsight`) is a latent action together with the context it
 solves best, so it is a sample of the answer itself: the map from contexts to the latent actions that solve them. A
 few Adam steps per iteration on ``|mu(context') - alpha|^2`` over the kept pulls teach the policy's mean that map
 directly, as supervised learning on relabelled goals does (Ghosh et al., 2021, "Learning to Reach Goals via
