@@ -17,8 +17,7 @@ from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 CLIP = 10.0  # VecNormalize's default clip_obs
 # Floor of each standard deviation, in the features' units (m, rad, rad/s): the demonstrations barely move some
 # joints (0.003 rad of spread), and dividing by that spread would turn the small deviations of a closed-loop
-# rollout into large inputs (on hockey the cloned policy lands 30 cm from the goals with a floor of 0.001, 14 cm
-# with 0.05: measured on tuning goals, not the evaluation goals).
+# rollout into large inputs (the floor was chosen on tuning goals, not the evaluation goals).
 STD_FLOOR = 0.05
 
 

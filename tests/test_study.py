@@ -19,6 +19,8 @@ import numpy as np
 import pytest
 from conftest import policy_distances
 
+from sb3_genrl.genrl.train import genrl_settings
+from sb3_genrl.hyperparams import EVAL_GOAL_SEED, load_genrl_settings
 from sb3_genrl.study import run_study
 from sb3_genrl.study.scales import SCALES
 from sb3_genrl.study.state import SettingsConflictError
@@ -194,9 +196,10 @@ def test_quickstart_and_video(tmp_path, cli):
         assert (out / name).exists(), name
     assert "policy.gif" not in report and not (out / "policy.gif").exists()
     assert "**Demonstrations**: 200 valid episodes" in report and "3 epochs" in report
-    # The reported distance is the policy's: replayed here on the same 100 goals (seed 0 + 12345) through the task.
+    # The reported distance is the policy's: replayed here on the same 100 goals (seed 0 + EVAL_GOAL_SEED) through the
+    # task.
     reported = float(re.search(r"to 100 new goals \(deterministic\): \*\*([0-9.]+) m\*\*", report).group(1))
-    replayed = policy_distances(out / "policy" / "genrl_policy.zip", "GenRL/Hockey-v0", 100, 12345).mean()
+    replayed = policy_distances(out / "policy" / "genrl_policy.zip", "GenRL/Hockey-v0", 100, EVAL_GOAL_SEED).mean()
     assert reported == pytest.approx(replayed, abs=0.00051)
     assert f"mean distance to 100 new goals is {reported:.3f} m" in printed
     measures = json.loads((out / "evaluation" / "results.json").read_text())[0]
@@ -204,6 +207,9 @@ def test_quickstart_and_video(tmp_path, cli):
     summary = json.loads((out / "policy" / "summary.json").read_text())
     assert summary["episodes"] == 64 and f"{summary['episodes']} episodes" in report
     assert summary["n_envs"] == 2  # the quickstart plays GenRL's episodes in two env processes
+    # with hockey's entry in hyperparams/genrl.yml, its episodes per iteration kept (2 envs x 8 = 16)
+    _, batch_episodes, kwargs = load_genrl_settings("GenRL/Hockey-v0")
+    assert summary["genrl_settings"] == genrl_settings(kwargs | {"n_steps": batch_episodes // 2})
 
     video = tmp_path / "gen.gif"
     code, printed, _ = cli("video", "--task", "hockey", "--generator", out / "vae.pt", "--goals", 1, "--out", video)
