@@ -207,7 +207,8 @@ class ArmTaskEnv(gym.Env, EzPickle):
     def hindsight(self, info: dict[str, Any]) -> tuple[np.ndarray, float] | None:
         """The goal an episode with this terminal ``info`` solved, and its reward there: the point it reached
         (``info["reached"]``) and 0, its distance to itself; ``None`` when the simulation was unstable. The context
-        that GenRL's ``hindsight=True`` relabels the episode with (see :class:`~sb3_genrl.LatentActionWrapper`)."""
+        that GenRL's hindsight relabelling (``hindsight_kwargs``) gives the episode (see
+        :class:`~sb3_genrl.LatentActionWrapper`)."""
         if info.get("unstable", False) or "reached" not in info:
             return None
         return np.asarray(info["reached"], dtype=np.float32), 0.0
