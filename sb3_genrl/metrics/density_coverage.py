@@ -20,19 +20,15 @@ import dataclasses
 
 import numpy as np
 import torch
-from stable_baselines3.common.utils import get_device
 
 from sb3_genrl.metrics.precision_recall import (
     DEFAULT_MEMORY_BUDGET_MB,
-    _checked_sets,
     _direct_sq_pairs,
     _float32_floor,
     _float32_tolerance,
     _pair_factors,
     _PreparedSet,
-    block_size,
-    power_of_two_scale,
-    prepare,
+    prepared_sets,
     squared_radii,
 )
 
@@ -101,14 +97,8 @@ def density_coverage(real: np.ndarray, generated: np.ndarray, k: int = 3, *, bat
     :param memory_budget_mb: memory for the distance blocks in MiB, used when ``batch_size`` is ``None``
     :return: a :class:`DensityCoverage`
     """
-    real_points, gen_points, k = _checked_sets(real, generated, k)
-    torch_device = get_device(device)
-    block = block_size(max(len(real_points), len(gen_points)), batch_size, memory_budget_mb)
-    shift = real_points.mean(0, dtype=np.float64)
-    scale = power_of_two_scale((("real", real_points), ("generated", gen_points)), shift)
-    real_set = prepare(real_points, shift, scale, torch_device)
-    gen_set = prepare(gen_points, shift, scale, torch_device)
+    real_set, gen_set, k, block = prepared_sets(real, generated, k, batch_size, device, memory_budget_mb)
     with torch.no_grad():
         counts, covered = real_balls_holding(real_set, squared_radii(real_set, k, block), gen_set, block)
     return DensityCoverage(density=float(counts.double().mean()) / k, coverage=float(covered.double().mean()), k=k,
-                           num_real=len(real_points), num_generated=len(gen_points))
+                           num_real=len(real_set.original), num_generated=len(gen_set.original))

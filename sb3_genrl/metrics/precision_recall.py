@@ -318,6 +318,18 @@ def _checked_sets(real: np.ndarray, generated: np.ndarray, k: int) -> tuple[np.n
     return real_points, gen_points, k
 
 
+def prepared_sets(real: np.ndarray, generated: np.ndarray, k: int, batch_size: int | None, device: torch.device | str,
+                  memory_budget_mb: float) -> tuple[_PreparedSet, _PreparedSet, int, int]:
+    """Both sets checked (:func:`_checked_sets`), centred on the real mean and scaled by one power of two, on the
+    device; with ``k`` as an int and the edge length of the distance blocks."""
+    real_points, gen_points, k = _checked_sets(real, generated, k)
+    torch_device = get_device(device)
+    block = block_size(max(len(real_points), len(gen_points)), batch_size, memory_budget_mb)
+    shift = real_points.mean(0, dtype=np.float64)
+    scale = power_of_two_scale((("real", real_points), ("generated", gen_points)), shift)
+    return prepare(real_points, shift, scale, torch_device), prepare(gen_points, shift, scale, torch_device), k, block
+
+
 def precision_recall(real: np.ndarray, generated: np.ndarray, k: int = 3, *, batch_size: int | None = None,
                      device: torch.device | str = "auto", return_radii: bool = False,
                      memory_budget_mb: float = DEFAULT_MEMORY_BUDGET_MB) -> PrecisionRecall:
@@ -351,13 +363,7 @@ def precision_recall(real: np.ndarray, generated: np.ndarray, k: int = 3, *, bat
     :param memory_budget_mb: memory for the distance blocks in MiB, used when ``batch_size`` is ``None``
     :return: a :class:`PrecisionRecall`
     """
-    real_points, gen_points, k = _checked_sets(real, generated, k)
-    torch_device = get_device(device)
-    block = block_size(max(len(real_points), len(gen_points)), batch_size, memory_budget_mb)
-    shift = real_points.mean(0, dtype=np.float64)
-    scale = power_of_two_scale((("real", real_points), ("generated", gen_points)), shift)
-    real_set = prepare(real_points, shift, scale, torch_device)
-    gen_set = prepare(gen_points, shift, scale, torch_device)
+    real_set, gen_set, k, block = prepared_sets(real, generated, k, batch_size, device, memory_budget_mb)
     with torch.no_grad():
         real_radii = squared_radii(real_set, k, block)
         gen_radii = squared_radii(gen_set, k, block)
@@ -366,8 +372,8 @@ def precision_recall(real: np.ndarray, generated: np.ndarray, k: int = 3, *, bat
         precision=float(gen_inside.double().mean()),
         recall=float(real_inside.double().mean()),
         k=int(k),
-        num_real=len(real_points),
-        num_generated=len(gen_points),
+        num_real=len(real_set.original),
+        num_generated=len(gen_set.original),
         real_radii=real_radii.sqrt().cpu().numpy() if return_radii else None,
         generated_radii=gen_radii.sqrt().cpu().numpy() if return_radii else None,
     )
