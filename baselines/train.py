@@ -71,9 +71,11 @@ from sb3_genrl.envs import get_task
 from stable_baselines3 import PPO, SAC
 
 from sb3_genrl.checks import check_device, check_input_path, check_output_dir, check_positive_int, check_seed
-from sb3_genrl.curves import MONITOR_FILE, monitor_episodes, read_monitor, training_logger, write_learning_curve
+from sb3_genrl.curves import LOG_DIR, MONITOR_FILE, monitor_episodes, read_monitor, training_logger, write_learning_curve
+from sb3_genrl.genrl.generator_files import file_sha256
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED
-from sb3_genrl.utils import atomic_path, atomic_write_json
+from sb3_genrl.run_folder import open_run
+from sb3_genrl.utils import atomic_path, atomic_write_json, folder_lock
 
 CHECKPOINT_EVERY = 250  # episodes between checkpoints of an off-policy baseline (about 5 minutes of one core)
 
@@ -96,6 +98,7 @@ def train_baseline(
     progress_bar: bool = False,
     verbose: int = 0,
     window: int = 64,
+    overwrite: bool = False,
 ) -> dict[str, Any]:
     """Train one baseline for ``episodes`` episodes and write its outputs to ``out_dir``.
 
@@ -117,26 +120,36 @@ def train_baseline(
     :param checkpoint_every: episodes between checkpoints of the off-policy baselines (``None``: none); the same run
         into the same ``out_dir`` resumes from the last one (:mod:`sb3_genrl.baselines.checkpoint`)
     :param window: episodes per point of the learning curve
+    :param overwrite: replace a run already in ``out_dir`` (its files only) instead of refusing or resuming it; without
+        it, a rerun of the same run returns the finished run's summary or resumes the unfinished one, and another
+        run's folder is refused (see :mod:`sb3_genrl.run_folder`); ``out_dir`` is locked while the run works in it
     """
     _check_arguments(algorithm, episodes, seed, demos, demo_episodes, generator, eval_goals, checkpoint_every, device)
     changes, spec, out = check_algorithm_kwargs(algorithm, algorithm_kwargs), get_task(task), check_output_dir(out_dir)
     began = time.perf_counter(), time.process_time()
+    generator_sha256 = file_sha256(generator) if isinstance(generator, str | os.PathLike) else None
     transitions, generator = _inputs(algorithm, spec.name, demos, demo_episodes, generator)
     steps = int(episodes) if transitions is None else int(episodes) * spec.horizon
     summary = {"algorithm": algorithm, "task": spec.name, "episodes": int(episodes), "seed": seed} | (
         {"settings": baseline_settings(algorithm, spec.name)[0] | changes} if transitions is None
         else _demonstration_record(algorithm, spec.name, transitions, bc_kwargs, changes))
     checkpoint_every = checkpoint_every if algorithm in OFF_POLICY_BASELINES else None  # the others: short runs
-    # A checkpoint of this run is resumed; another run's is refused, before anything is written.
-    state = None if checkpoint_every is None else resume_state(out, _identity(summary))
-    out.mkdir(parents=True, exist_ok=True)
-    model, summary = _model(algorithm, spec.name, out, state, transitions, generator, steps, summary, eval_goals,
-                            bc_kwargs, changes, began, {"seed": seed, "device": device, "verbose": verbose})
-    try:
-        summary["learn_seconds"] = _learn(model, steps, out, state, checkpoint_every, summary, progress_bar, verbose)
-    finally:  # the training env: its Monitor file (complete after this) and any env processes
-        model.get_env().close()
-    return _finish(algorithm, spec.name, model, out, summary, generator, eval_goals, window)
+    identity = _identity(summary) | {"eval_goals": eval_goals, "generator_sha256": generator_sha256}
+    with folder_lock(out):  # one run at a time in out; another run's files are refused, never mixed in
+        finished = open_run(out, identity, (f"{algorithm}_policy.zip", "bc_policy.zip", *CURVE_FILES), overwrite=overwrite)
+        if finished is not None:  # this very run, finished: nothing to do
+            return finished
+        state = None if checkpoint_every is None else resume_state(out, _identity(summary))  # this run's checkpoint
+        model, summary = _model(algorithm, spec.name, out, state, transitions, generator, steps, summary, eval_goals,
+                                bc_kwargs, changes, began, {"seed": seed, "device": device, "verbose": verbose})
+        try:
+            summary["learn_seconds"] = _learn(model, steps, out, state, checkpoint_every, summary, progress_bar, verbose)
+        finally:  # the training env: its Monitor file (complete after this) and any env processes
+            model.get_env().close()
+        return _finish(algorithm, spec.name, model, out, summary, generator, eval_goals, window)
+
+
+CURVE_FILES = ("learning_curve.csv", "learning_curve.png", MONITOR_FILE, LOG_DIR)
 
 
 def _inputs(algorithm: str, task: str, demos: Any, demo_episodes: int | None, generator: Any) -> tuple[Any, Any]:
@@ -211,7 +224,7 @@ def _demonstration_record(algorithm: str, task: str, transitions: dict[str, np.n
 def _identity(summary: dict[str, Any]) -> dict[str, Any]:
     """What a checkpoint must match to be resumed: the run's algorithm, task, budget, seed, data and settings."""
     keys = ("algorithm", "task", "episodes", "seed", "demo_transitions", "demo_sha256", "settings")
-    return json.loads(json.dumps({key: summary[key] for key in keys}))  # as state.json holds it
+    return json.loads(json.dumps({key: summary[key] for key in keys if key in summary}))  # as state.json holds it
 
 
 def _fingerprint(transitions: dict[str, np.ndarray]) -> str:

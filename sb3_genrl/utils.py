@@ -1,4 +1,4 @@
-"""Atomic output files: every file sb3-genrl writes appears whole or not at all.
+"""Atomic output files (every file sb3-genrl writes appears whole or not at all) and folder locks.
 
 A file is written under a temporary name in its own folder (same file system), flushed to disk and renamed onto
 its final name with :func:`os.replace`, which is atomic. An interrupted write (an exception, ``kill -9``, a full
@@ -12,9 +12,15 @@ import contextlib
 import json
 import os
 import secrets
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
+
+LOCK_FILE = ".lock"
+
+
+class FolderInUseError(ValueError):
+    """Another process holds the lock of the folder (see :func:`folder_lock`)."""
 
 
 def temporary_sibling(path: str | os.PathLike[str]) -> Path:
@@ -99,3 +105,120 @@ def atomic_write_json(path: str | os.PathLike[str], value: Any, *, indent: int |
     :return: ``path``
     """
     return atomic_write_text(path, json.dumps(value, indent=indent, **kwargs) + "\n")
+
+
+@contextlib.contextmanager
+def folder_lock(folder: str | os.PathLike, lock_file: str | os.PathLike | None = None) -> Iterator[Path]:
+    """Hold an exclusive lock on ``folder`` for the ``with`` block, or raise :class:`FolderInUseError` at once.
+
+    The lock is an OS file lock (``flock``; ``msvcrt.locking`` on Windows) on ``folder/.lock``, which holds the
+    holder's PID while it runs and is removed at the end. The OS drops the lock when the holder exits, however it
+    exits (``kill -9`` included), so a lock file left by a killed process does not block the next run.
+
+    :param folder: the folder to lock (created)
+    :param lock_file: the lock file (default ``folder/.lock``), e.g. a sibling for a folder that must stay empty
+    :return: the lock file's path
+    """
+    folder = Path(folder)
+    path = Path(lock_file) if lock_file is not None else folder / LOCK_FILE
+    path.parent.mkdir(parents=True, exist_ok=True)
+    while True:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        if not _try_lock(fd):
+            holder = os.read(fd, 32).decode(errors="replace").strip() or "unknown"
+            os.close(fd)
+            raise FolderInUseError(f"{folder} is in use by another process (PID {holder}, lock file {path}): wait "
+                                   "for it to finish, or stop it, then rerun")
+        if _same_file(fd, path):
+            break
+        os.close(fd)  # the holder before removed this file as we opened it: lock the current one
+    try:
+        os.ftruncate(fd, 0)
+        os.write(fd, f"{os.getpid()}\n".encode())
+        yield path
+    finally:
+        if os.name != "nt":
+            path.unlink(missing_ok=True)  # still locked: a process that opened it will see it is gone
+        os.close(fd)  # releases the lock
+
+
+def _same_file(fd: int, path: Path) -> bool:
+    try:
+        on_disk = os.stat(path)
+    except FileNotFoundError:
+        return False
+    held = os.fstat(fd)
+    return (held.st_dev, held.st_ino) == (on_disk.st_dev, on_disk.st_ino)
+
+
+def _try_lock(fd: int) -> bool:
+    try:
+        import fcntl
+    except ImportError:  # Windows
+        import msvcrt
+
+        try:
+            msvcrt.locking(fd, msvcrt.LK_NBLCK, 1)
+        except OSError:
+            return False
+        return True
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return False
+    return True
+
+
+CHECKPOINT_STATE = "state.json"
+
+
+def write_checkpoint(folder: str | os.PathLike[str], files: Mapping[str, tuple[str, Callable[[Path], None]]],
+                     state: Mapping[str, Any]) -> dict[str, Any]:
+    """Write a checkpoint of several files as one unit into ``folder``.
+
+    Each file is written (atomically) under a name of its own, ``<stem>-<random><suffix>``; then ``state.json``,
+    holding ``state`` and ``"files"`` (each entry's file name), replaces the previous one atomically; then the files
+    of the previous checkpoint are removed. A run killed at any moment (or a full disk) leaves ``state.json``
+    naming a whole checkpoint, the new one or the one before, never a mix of them.
+
+    :param folder: the checkpoint folder (created)
+    :param files: entry -> (file name, a writer that writes the file at the path it is given)
+    :param state: the rest of ``state.json`` (JSON values)
+    :return: what ``state.json`` holds
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    token = secrets.token_hex(4)
+    names = {}
+    for entry, (name, write) in files.items():
+        path = Path(name)
+        names[entry] = f"{path.stem}-{token}{path.suffix}"
+        with atomic_path(folder / names[entry]) as tmp:
+            write(tmp)
+    record = {**state, "files": names}
+    atomic_write_json(folder / CHECKPOINT_STATE, record)
+    for stale in folder.iterdir():  # the previous checkpoint's files (and any left by a killed write)
+        if stale.name != CHECKPOINT_STATE and stale.name not in names.values():
+            stale.unlink(missing_ok=True)
+    return record
+
+
+def read_checkpoint(folder: str | os.PathLike[str]) -> dict[str, Any] | None:
+    """What ``folder/state.json`` holds (see :func:`write_checkpoint`), with ``"paths"``: each entry's file; ``None``
+    when there is no checkpoint.
+
+    :param folder: the checkpoint folder
+    """
+    folder = Path(folder)
+    path = folder / CHECKPOINT_STATE
+    if not path.is_file():
+        return None
+    try:
+        state = json.loads(path.read_text())
+        paths = {entry: folder / name for entry, name in state["files"].items()}
+    except (json.JSONDecodeError, KeyError, TypeError, AttributeError) as error:
+        raise ValueError(f"{path} is not a checkpoint state ({error}); delete {folder} to start afresh") from None
+    missing = [str(p) for p in paths.values() if not p.is_file()]
+    if missing:
+        raise ValueError(f"{path} names files that do not exist: {missing}; delete {folder} to start afresh")
+    return state | {"paths": paths}

@@ -261,7 +261,7 @@ def test_a_stopped_off_policy_run_resumes_from_its_checkpoint(algorithm, demos, 
     assert state["episodes"] == 2 and state["steps"] == 2 * 69  # the last checkpoint: every 2 episodes
     before = read_monitor(tmp_path / MONITOR_FILE)
     assert len(before["return"]) == 3 and not (tmp_path / "summary.json").exists()
-    with pytest.raises(ValueError, match=r"holds a checkpoint of another run \(it differs in seed\)"):
+    with pytest.raises(ValueError, match=r"holds another run \(it differs in seed\)"):
         train_baseline(algorithm, "hockey", **(run | {"seed": 2}))
     monkeypatch.undo()
 
@@ -277,6 +277,30 @@ def test_a_stopped_off_policy_run_resumes_from_its_checkpoint(algorithm, demos, 
     assert (tmp_path / "logs" / "progress.until_episode_2.csv").exists()
     env = gym.make("GenRL/HockeyGoal-v0") if algorithm == "sac-her" else None  # SB3 loads HER with its env
     assert SAC.load(tmp_path / f"{algorithm}_policy.zip", env=env, device="cpu").num_timesteps == 5 * 69
+
+
+def test_a_baseline_rerun_never_leaves_a_summary_beside_another_runs_cloned_policy(demos, tmp_path, monkeypatch):
+    from sb3_genrl.baselines import train as baseline_train
+
+    run = {"episodes": 2, "out_dir": tmp_path, "demos": demos, "demo_episodes": 10, "eval_goals": 2, "window": 2,
+           "algorithm_kwargs": {"n_steps": 128}, "device": "cpu"}
+    first = train_baseline("ppo", "hockey", bc_kwargs={"max_epochs": 2}, **run)
+    cloned = (tmp_path / "bc_policy.zip").read_bytes()
+    again = train_baseline("ppo", "hockey", bc_kwargs={"max_epochs": 2}, **run)  # finished: nothing done
+    assert again == json.loads(json.dumps(first))
+    assert (tmp_path / "bc_policy.zip").read_bytes() == cloned
+
+    def killed(*args, **kwargs):
+        raise _Killed
+
+    monkeypatch.setattr(baseline_train, "_learn", killed)  # stopped after behaviour cloning, before PPO
+    with pytest.raises(ValueError, match=r"holds another run \(it differs in settings\)"):
+        train_baseline("ppo", "hockey", bc_kwargs={"max_epochs": 3}, **run)
+    assert (tmp_path / "bc_policy.zip").read_bytes() == cloned and json.loads((tmp_path / "summary.json").read_text())
+    with pytest.raises(_Killed):
+        train_baseline("ppo", "hockey", bc_kwargs={"max_epochs": 3}, overwrite=True, **run)
+    assert (tmp_path / "bc_policy.zip").read_bytes() != cloned  # the new run's cloned policy, and no old summary
+    assert not (tmp_path / "summary.json").exists() and not (tmp_path / "ppo_policy.zip").exists()
 
 
 def test_demonstrations_enter_the_her_buffer_as_episodes(demos):

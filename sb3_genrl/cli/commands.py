@@ -66,7 +66,7 @@ def train_policy_command(args: argparse.Namespace) -> int:
 
     result = train_policy(args.task, str(args.generator), episodes=args.episodes, seed=args.seed, out_dir=args.out,
                           n_envs=args.n_envs, device=args.device, progress_bar=not args.no_progress_bar,
-                          **policy_arguments(args))
+                          overwrite=args.overwrite, **policy_arguments(args))
     print(f"GenRL on {args.task}: {result['episodes']} episodes, {result['iterations']} iterations, mean reward "
           f"final {result['final_mean_reward']:.4g}, best {result['best_mean_reward']:.4g} -> {result['model_path']}")
     return 0
@@ -99,7 +99,7 @@ def baseline_command(args: argparse.Namespace) -> int:
     summary = train_baseline(args.algorithm, args.task, episodes=args.episodes, out_dir=args.out, seed=args.seed,
                              demos=args.demos, demo_episodes=args.demo_episodes, generator=args.generator,
                              bc_kwargs={"max_epochs": args.bc_max_epochs}, algorithm_kwargs=args.algorithm_kwargs,
-                             checkpoint_every=args.checkpoint_every or None,
+                             checkpoint_every=args.checkpoint_every or None, overwrite=args.overwrite,
                              device=args.device, progress_bar=not args.no_progress_bar)
     if "bc" in summary:
         bc, first = summary["bc"], summary["first_batch"]

@@ -44,6 +44,12 @@ def _progress_option(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-progress-bar", action="store_true", help="hide the progress bar")
 
 
+def _overwrite_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace a run already in --out (its files only); without it, the same command finishes or "
+                             "resumes that run and another run's folder is refused")
+
+
 def add_play(sub: argparse._SubParsersAction) -> None:
     play = sub.add_parser("play", help="play each task's scripted expert, render it and write a short report")
     play.add_argument("--out", required=True, type=OUT_DIR, help="output folder (report.md, GIFs, frame strips)")
@@ -139,6 +145,7 @@ def add_train_policy(sub: argparse._SubParsersAction) -> None:
                         help="GenRL settings laid over the task's (or, with --library-defaults, GenRL's defaults), "
                              "a mapping merged into a mapping, e.g. '{\"hindsight_kwargs\": {\"history\": 30}}' or "
                              "'{\"hindsight_kwargs\": null}' (hindsight off); checked before any work")
+    _overwrite_option(policy)
     _device_option(policy)
     _progress_option(policy)
     policy.set_defaults(func=commands.train_policy_command)
@@ -165,6 +172,7 @@ def add_baseline(sub: argparse._SubParsersAction) -> None:
     baseline.add_argument("--checkpoint-every", type=option(check_int, int, minimum=0), default=250,
                           help="episodes between checkpoints of sac, sac-no-prefill and sac-her; a rerun into the same "
                                "--out resumes from the last one (0: none; default 250)")
+    _overwrite_option(baseline)
     _device_option(baseline)
     _progress_option(baseline)
     baseline.add_argument("--out", required=True, type=OUT_DIR, help="output folder")

@@ -3,6 +3,7 @@ model's zip (for a generator built in memory)."""
 
 from __future__ import annotations
 
+import hashlib
 import io
 import os
 import pathlib
@@ -51,3 +52,22 @@ def saved_generator(path: str | pathlib.Path | io.BufferedIOBase, data: dict[str
     if generator_path is not None:
         generator = load_generator(generator_path, device)
     return generator, generator_path  # type: ignore[return-value]
+
+
+def file_sha256(path: str | os.PathLike) -> str:
+    """The SHA-256 of a file's bytes (hex)."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as file:
+        for block in iter(lambda: file.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def check_generator_file(path: str | os.PathLike, recorded: str | None, model: Any) -> None:
+    """Refuse a generator file whose SHA-256 is not the one ``recorded`` by the model ``model`` (named in the error):
+    the file was replaced (e.g. by another ``train-generator`` run) since the policy was trained on it. A model saved
+    without a record (an older version) is not checked."""
+    if recorded is not None and (actual := file_sha256(path)) != recorded:
+        raise ValueError(f"the generator file {os.fspath(path)!r} is not the one {model} was trained with: its SHA-256 is "
+                         f"{actual[:16]}..., the policy recorded {recorded[:16]}... (the file was replaced since); pass the "
+                         "generator it was trained with")

@@ -26,10 +26,12 @@ from sb3_genrl.curves import (
     write_learning_curve,
 )
 from sb3_genrl.generative.base import TrajectoryGenerator
+from sb3_genrl.genrl.generator_files import file_sha256
 from sb3_genrl.genrl.genrl import EStep, GenRL
 from sb3_genrl.genrl.policies import MlpPolicy
 from sb3_genrl.genrl.settings import NOT_SETTINGS, check_genrl_settings
-from sb3_genrl.utils import atomic_write_json
+from sb3_genrl.run_folder import SUMMARY, open_run
+from sb3_genrl.utils import atomic_write_json, folder_lock
 from sb3_genrl.wrappers import LatentActionWrapper
 
 
@@ -79,6 +81,7 @@ def train_policy(
     device: str = "auto",
     progress_bar: bool = False,
     verbose: int = 0,
+    overwrite: bool = False,
     **genrl_kwargs: Any,
 ) -> dict[str, Any]:
     """Train a GenRL policy for ``episodes`` episodes on ``task`` and write everything to ``out_dir``.
@@ -92,7 +95,9 @@ def train_policy(
     :param generator: the trajectory generator or the path of a saved one
     :param episodes: total episodes (trajectories played); rounded up to whole iterations
     :param seed: random seed
-    :param out_dir: output folder (created)
+    :param out_dir: output folder (created), locked while the run works in it; a rerun of the same run into it
+        returns the finished run's summary, or resumes the unfinished one; another run's folder is refused (see
+        :mod:`sb3_genrl.run_folder`)
     :param e_step: ``"trpo"`` or ``"kl_penalty"`` (see :class:`~sb3_genrl.GenRL`)
     :param batch_episodes: episodes per EM iteration, ``N``
     :param n_envs: envs played at a time, above 1 each in its own process (SB3's ``SubprocVecEnv``: a script must
@@ -102,6 +107,7 @@ def train_policy(
     :param device: torch device
     :param progress_bar: show a progress bar
     :param verbose: GenRL verbosity
+    :param overwrite: replace a run already in ``out_dir`` (its files only) instead of refusing or resuming it
     :param genrl_kwargs: further :class:`~sb3_genrl.GenRL` arguments
     :return: paths of the outputs and a summary (``episodes``, ``iterations``, ``final_mean_reward``,
         ``best_mean_reward``, ``genrl_settings``: every GenRL hyperparameter in effect, see :func:`genrl_settings`)
@@ -111,20 +117,41 @@ def train_policy(
     out = check_output_dir(out_dir)
     # Built first: a generator that does not fit the task is refused before anything is written.
     env = LatentActionWrapper(gym.make(env_id), _as_generator(generator))
-    out.mkdir(parents=True, exist_ok=True)
     # The generator is given as it came (a path is kept as the model's generator_path, saved in the zip).
     batch_size = min(batch_episodes, genrl_kwargs.pop("batch_size", 64))
     arguments = {"e_step": e_step, "n_steps": batch_episodes // n_envs, "batch_size": batch_size, "seed": seed,
                  "device": device, "verbose": verbose, **genrl_kwargs}
-    model = _train(_training_env(env, n_envs, out), generator, int(episodes), out, progress_bar, arguments)
-    curve = write_learning_curve(out / MONITOR_FILE, out, window=batch_episodes,
-                                 title=f"GenRL on {env_id} (seed {seed})")
-    result = {"algorithm": "genrl", "task": task_name, "seed": seed, "n_envs": n_envs, **_output_paths(out),
-              "episodes": int(model.num_timesteps), "iterations": len(curve["episodes"]),
-              "final_mean_reward": float(curve["mean_reward"][-1]), "best_mean_reward": float(np.max(curve["mean_reward"])),
-              "genrl_settings": genrl_settings(arguments)}
-    atomic_write_json(out / "summary.json", result)
-    return result
+    identity = {"algorithm": "genrl", "task": task_name, "episodes": int(episodes), "seed": seed, "n_envs": n_envs,
+                "batch_episodes": batch_episodes, "generator_sha256": _generator_sha256(generator),
+                "genrl_settings": genrl_settings(arguments)}
+    with folder_lock(out):  # one run at a time in out; another run's files are refused, never mixed in
+        try:
+            finished = open_run(out, identity, OUTPUTS, overwrite=overwrite)
+        except BaseException:  # another run's folder: refused, nothing changed
+            env.close()
+            raise
+        if finished is not None:  # this very run, finished: nothing to do
+            env.close()
+            return finished
+        model = _train(_training_env(env, n_envs, out), generator, int(episodes), out, progress_bar, arguments)
+        curve = write_learning_curve(out / MONITOR_FILE, out, window=batch_episodes,
+                                     title=f"GenRL on {env_id} (seed {seed})")
+        result = {"algorithm": "genrl", "task": task_name, "seed": seed, "n_envs": n_envs, **_output_paths(out),
+                  "episodes": int(model.num_timesteps), "iterations": len(curve["episodes"]),
+                  "final_mean_reward": float(curve["mean_reward"][-1]),
+                  "best_mean_reward": float(np.max(curve["mean_reward"])), "genrl_settings": identity["genrl_settings"]}
+        atomic_write_json(out / SUMMARY, result)  # last: the run is finished once it exists
+        return result
+
+
+# What a run writes in its folder (besides summary.json, checkpoint/ and run_record.json; see sb3_genrl.run_folder)
+OUTPUTS = ("genrl_policy.zip", "genrl_policy.generator.pt", "learning_curve.csv", "learning_curve.png", MONITOR_FILE,
+           LOG_DIR)
+
+
+def _generator_sha256(generator: TrajectoryGenerator | str | os.PathLike) -> str | None:
+    """The generator file's SHA-256 (part of what a run is); ``None`` for a generator given in memory."""
+    return None if isinstance(generator, TrajectoryGenerator) else file_sha256(generator)
 
 
 def _train(env: Any, generator: TrajectoryGenerator | str, episodes: int, out: pathlib.Path, progress_bar: bool,

@@ -6,12 +6,11 @@
   version wrote it) counts as a conflict too, so no result of unknown settings is reused or reported.
 - **Fingerprints** (:func:`dataset_fingerprint`, :func:`file_fingerprint`) tie a stage to the exact inputs it
   used: a generator to its demonstrations, a policy to its generator.
-- **A lock** (:func:`folder_lock`) keeps a second process out of a folder while one works in it; the operating
-  system releases it when the holder exits, however it exits.
+- **A lock** (:func:`~sb3_genrl.utils.folder_lock`, shared with ``genrl train-policy`` and ``genrl baseline``)
+  keeps a second process out of a folder while one works in it; the operating system releases it when the holder
+  exits, however it exits.
 - **Worker exit** (:func:`exit_with_parent`): worker processes end when the process that started them dies.
 
-The lock and the parent watch stand alone, so that they can move to :mod:`sb3_genrl.utils` beside the atomic
-writers.
 """
 
 from __future__ import annotations
@@ -24,24 +23,19 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from sb3_genrl.utils import atomic_write_json
+from sb3_genrl.utils import LOCK_FILE, FolderInUseError, atomic_write_json, folder_lock  # noqa: F401 (the lock's home was here)
 
 STAGE_FILE = "stage.json"
-LOCK_FILE = ".lock"
 
 
 class SettingsConflictError(ValueError):
     """A rerun asks for other settings than those recorded in a folder it would resume."""
-
-
-class FolderInUseError(ValueError):
-    """Another process holds the lock of the folder (see :func:`folder_lock`)."""
 
 
 def read_settings(record: str | os.PathLike) -> dict[str, Any] | None:
@@ -145,68 +139,6 @@ def file_fingerprint(path: str | os.PathLike) -> str:
         for block in iter(lambda: file.read(1 << 20), b""):
             digest.update(block)
     return digest.hexdigest()[:16]
-
-
-@contextlib.contextmanager
-def folder_lock(folder: str | os.PathLike, lock_file: str | os.PathLike | None = None) -> Iterator[Path]:
-    """Hold an exclusive lock on ``folder`` for the ``with`` block, or raise :class:`FolderInUseError` at once.
-
-    The lock is an OS file lock (``flock``; ``msvcrt.locking`` on Windows) on ``folder/.lock``, which holds the
-    holder's PID while it runs and is removed at the end. The OS drops the lock when the holder exits, however it
-    exits (``kill -9`` included), so a lock file left by a killed process does not block the next run.
-
-    :param folder: the folder to lock (created)
-    :param lock_file: the lock file (default ``folder/.lock``), e.g. a sibling for a folder that must stay empty
-    :return: the lock file's path
-    """
-    folder = Path(folder)
-    path = Path(lock_file) if lock_file is not None else folder / LOCK_FILE
-    path.parent.mkdir(parents=True, exist_ok=True)
-    while True:
-        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
-        if not _try_lock(fd):
-            holder = os.read(fd, 32).decode(errors="replace").strip() or "unknown"
-            os.close(fd)
-            raise FolderInUseError(f"{folder} is in use by another process (PID {holder}, lock file {path}): wait "
-                                   "for it to finish, or stop it, then rerun")
-        if _same_file(fd, path):
-            break
-        os.close(fd)  # the holder before removed this file as we opened it: lock the current one
-    try:
-        os.ftruncate(fd, 0)
-        os.write(fd, f"{os.getpid()}\n".encode())
-        yield path
-    finally:
-        if os.name != "nt":
-            path.unlink(missing_ok=True)  # still locked: a process that opened it will see it is gone
-        os.close(fd)  # releases the lock
-
-
-def _same_file(fd: int, path: Path) -> bool:
-    try:
-        on_disk = os.stat(path)
-    except FileNotFoundError:
-        return False
-    held = os.fstat(fd)
-    return (held.st_dev, held.st_ino) == (on_disk.st_dev, on_disk.st_ino)
-
-
-def _try_lock(fd: int) -> bool:
-    try:
-        import fcntl
-    except ImportError:  # Windows
-        import msvcrt
-
-        try:
-            msvcrt.locking(fd, msvcrt.LK_NBLCK, 1)
-        except OSError:
-            return False
-        return True
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        return False
-    return True
 
 
 def exit_with_parent(parent_pid: int, poll_s: float = 1.0) -> None:

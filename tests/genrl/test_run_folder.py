@@ -1,0 +1,91 @@
+"""genrl train-policy's run folder (sb3_genrl/run_folder.py, sb3_genrl/utils.py's lock): a rerun returns the finished
+run, restarts or resumes the unfinished one, refuses another run, and never mixes two runs; one run at a time."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+from conftest import LinearGenerator
+from test_train_policy import fast_reach_task  # noqa: F401 (the fixture)
+
+from sb3_genrl import GenRL
+from sb3_genrl.curves import MONITOR_FILE, read_monitor
+from sb3_genrl.genrl import train_policy
+from sb3_genrl.run_folder import RunFolderError
+
+
+class _Killed(Exception):
+    """Stands for a kill partway through training."""
+
+
+def _killed_at_update(monkeypatch: pytest.MonkeyPatch, update: int) -> None:
+    train = GenRL.train
+
+    def killed(model: GenRL) -> None:
+        if model._n_updates == update:
+            raise _Killed
+        train(model)
+
+    monkeypatch.setattr(GenRL, "train", killed)
+
+
+def test_a_rerun_into_a_run_folder_never_mixes_two_runs(fast_reach_task, tmp_path, monkeypatch):  # noqa: F811
+    run = {"seed": 0, "out_dir": tmp_path, "batch_episodes": 32}
+    first = train_policy("fast-reach", LinearGenerator(), episodes=64, **run)
+    monitor = tmp_path / MONITOR_FILE
+    written = monitor.stat().st_mtime_ns
+    # The same run again: finished, so nothing is done and its summary is returned.
+    assert train_policy("fast-reach", LinearGenerator(), episodes=64, **run) == first
+    assert monitor.stat().st_mtime_ns == written
+    # Another run (another budget) is refused, naming what differs, and changes nothing.
+    with pytest.raises(RunFolderError, match=r"holds another run \(it differs in episodes\).*--overwrite"):
+        train_policy("fast-reach", LinearGenerator(), episodes=96, **run)
+    assert monitor.stat().st_mtime_ns == written and (tmp_path / "summary.json").is_file()
+    # Replacing it (overwrite), killed partway: the old run's summary, model and curve are gone with it.
+    _killed_at_update(monkeypatch, 1)
+    with pytest.raises(_Killed):
+        train_policy("fast-reach", LinearGenerator(), episodes=96, overwrite=True, **run)
+    for name in ("summary.json", "genrl_policy.zip", "learning_curve.csv", "learning_curve.png"):
+        assert not (tmp_path / name).exists(), name
+    assert len(read_monitor(monitor)["return"]) == 64  # only the new run's episodes (2 iterations played)
+    assert len(list((tmp_path / "logs").glob("events.out.tfevents.*"))) == 1
+    monkeypatch.undo()
+    # The same command again: the unfinished run (no checkpoint) starts again from its first episode.
+    second = train_policy("fast-reach", LinearGenerator(), episodes=96, **run)
+    assert second["episodes"] == 96 == len(read_monitor(monitor)["return"])
+    assert len(list((tmp_path / "logs").glob("events.out.tfevents.*"))) == 1
+    assert json.loads((tmp_path / "summary.json").read_text()) == second
+    # A folder with a run's files but no record of what run made them (an older version's) is refused too.
+    (tmp_path / "run_record.json").unlink()
+    with pytest.raises(RunFolderError, match="no run_record.json"):
+        train_policy("fast-reach", LinearGenerator(), episodes=96, **run)
+
+
+def test_a_second_run_into_a_locked_folder_stops_at_once_with_exit_2(hockey_generator, tmp_path, cli):
+    folder = tmp_path / "run"
+    holder = subprocess.Popen([sys.executable, "-c", textwrap.dedent("""
+        import sys, time
+        from sb3_genrl.study.state import folder_lock
+        with folder_lock(sys.argv[1]):
+            print("locked", flush=True)
+            time.sleep(120)
+    """), str(folder)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "locked"
+        code, _, err = cli("train-policy", "--task", "hockey", "--generator", hockey_generator, "--episodes", 4,
+                           "--batch-episodes", 2, "--out", folder)
+        assert code == 2 and f"{folder} is in use by another process (PID {holder.pid}" in err
+        code, _, err = cli("baseline", "latent-trpo", "--task", "hockey", "--generator", hockey_generator,
+                           "--episodes", 4, "--out", folder)
+        assert code == 2 and f"{folder} is in use by another process (PID {holder.pid}" in err
+        assert sorted(path.name for path in folder.iterdir()) == [".lock"]  # nothing written
+    finally:
+        holder.kill()
+        holder.wait()
+    assert np.isfinite(train_policy("hockey", hockey_generator, episodes=4, batch_episodes=2, out_dir=folder)[
+        "final_mean_reward"])
