@@ -38,7 +38,20 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
     A task that declares its ``horizon`` (an integer attribute of ``env.unwrapped``) must have the generator's.
 
     Observation: the task context. For envs with ``get_context()`` and ``context_space`` the goal; with a
-    ``context`` callable ``context(reset_obs)`` (and its ``context_space``); otherwise the reset observation.
+    ``context`` callable ``context(reset_obs)`` (and its ``context_space``); for a goal-conditioned env (see below)
+    the reset observation's ``desired_goal`` followed by its ``observation``, flattened, as one ``Box``; otherwise the
+    reset observation.
+
+    Goal-conditioned envs (Gymnasium-Robotics' ``GoalEnv`` convention: a ``Dict`` observation with ``observation``,
+    ``achieved_goal`` and ``desired_goal``, and ``env.unwrapped.compute_reward(achieved_goal, desired_goal, info)``)
+    need nothing else. Their context is ``Box`` so that GenRL's policy reads it as one vector (scaled by
+    :class:`~sb3_genrl.genrl.policies.BoxScaler` where bounded) and its hindsight relabelling can put another goal in
+    it; an open-loop trajectory depends on the whole reset state (e.g. where the object starts), not only on the goal.
+    The step's ``info["hindsight"]`` is derived from the API alone: the context with the last achieved goal as
+    desired goal (the reset observation unchanged), and the reward the episode would have earned for it, by
+    ``compute_reward`` of each step played (the last step's, or their sum with ``reward="sum"``). The episode's
+    success, ``info["is_success"]`` of its last step when the env reports it, is in the step's info, so SB3's
+    algorithms (GenRL included) log ``rollout/success_rate``.
 
     Action: the latent action, ``Box(-1, 1)`` for a uniform prior and ``Box(-latent_clip, latent_clip)`` for a
     normal prior (``+-3`` standard deviations by default). Actions outside the box are clipped, and the clip is
@@ -148,6 +161,8 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
             return "task", task.context_space
         if context_space is not None:
             raise ValueError("context_space is only used together with a context callable")
+        if is_goal_env(self.env):
+            return "goal", goal_context_space(self.env.observation_space)
         return "observation", self.env.observation_space
 
     def _observe(self, obs: Any) -> Any:
@@ -155,6 +170,8 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
             context = self.env.unwrapped.get_context()
         elif self._context_source == "observation":
             context = obs
+        elif self._context_source == "goal":
+            context = goal_context(obs)
         else:
             context = self._context_source(obs)  # type: ignore[operator]
         if isinstance(self.observation_space, spaces.Box):
@@ -209,6 +226,8 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         relabel = getattr(self.env.unwrapped, "hindsight", None)
         if self._context_source == "task" and callable(relabel):  # for GenRL's hindsight_kwargs
             info["hindsight"] = relabel(info)
+        elif self._context_source == "goal":
+            info["hindsight"] = self._goal_hindsight(info.pop("goal_steps", []))
         self._needs_reset = True
         return copy.deepcopy(self._context), info["reward"], True, False, info
 
@@ -224,24 +243,45 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
     def _play_steps(self, tau: np.ndarray) -> dict[str, Any]:
         rewards: list[float] = []
         info: dict[str, Any] = {}
+        goal_steps: list[tuple[Any, dict[str, Any]]] = []  # a goal env's achieved goal and info after each step
         ended = False
         steps_played = hold_steps = 0
         for u in tau:
-            _, r, terminated, truncated, info = self.env.step(u.astype(self.env.action_space.dtype))
+            obs, r, terminated, truncated, info = self.env.step(u.astype(self.env.action_space.dtype))
+            self._keep_goal_step(goal_steps, obs, info)
             rewards.append(float(r))
             steps_played += 1
             if terminated or truncated:
                 ended = True
                 break
         while not ended and hold_steps < self.max_hold_steps:  # hold still until the task ends
-            _, r, terminated, truncated, info = self.env.step(self.hold_action.copy())
+            obs, r, terminated, truncated, info = self.env.step(self.hold_action.copy())
+            self._keep_goal_step(goal_steps, obs, info)
             rewards.append(float(r))
             hold_steps += 1
             ended = bool(terminated or truncated)
         reward = rewards[-1] if self.reward_mode == "last" else float(np.sum(rewards))
         info = dict(info)
         info.update(reward=float(reward), steps_played=steps_played, hold_steps=hold_steps, ended=ended, fast_path=False)
+        if self._context_source == "goal":
+            info["goal_steps"] = goal_steps
         return info
+
+    def _keep_goal_step(self, goal_steps: list[tuple[Any, dict[str, Any]]], obs: Any, info: dict[str, Any]) -> None:
+        if self._context_source == "goal":
+            goal_steps.append((copy.deepcopy(obs["achieved_goal"]), info))
+
+    def _goal_hindsight(self, goal_steps: list[tuple[Any, dict[str, Any]]]) -> tuple[np.ndarray, float] | None:
+        """A goal env's relabelled pull: the context with the last achieved goal as desired goal, and the reward of
+        the steps played for that goal by ``compute_reward`` (the last step's, or the sum with ``reward="sum"``)."""
+        if not goal_steps:
+            return None
+        new_goal = goal_steps[-1][0]
+        compute_reward = self.env.unwrapped.compute_reward
+        rewards = [float(np.asarray(compute_reward(achieved, new_goal, info)).item()) for achieved, info in
+                   (goal_steps[-1:] if self.reward_mode == "last" else goal_steps)]
+        desired = np.ravel(new_goal).astype(np.float32)
+        return np.concatenate([desired, np.asarray(self._context, np.float32)[desired.size:]]), float(np.sum(rewards))
 
     def play_batch(self, alphas: np.ndarray, goals: np.ndarray, *, n_threads: int = 1) -> tuple[np.ndarray, list[dict]]:
         """Play many latent actions ``(B, latent_dim)`` for goals ``(B, goal_dim)`` through the task's fast path.
@@ -259,6 +299,30 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         alphas = np.clip(alphas, self.action_space.low, self.action_space.high)
         rewards, infos = task.play_trajectories(self._decode(alphas), goals, n_threads=n_threads)
         return np.asarray(rewards, dtype=np.float64), list(infos)
+
+
+GOAL_KEYS = ("observation", "achieved_goal", "desired_goal")
+
+
+def is_goal_env(env: gym.Env) -> bool:
+    """Whether ``env`` follows Gymnasium-Robotics' ``GoalEnv`` convention: a ``Dict`` observation space with
+    ``observation``, ``achieved_goal`` and ``desired_goal``, and ``env.unwrapped.compute_reward``."""
+    space = env.observation_space
+    return (isinstance(space, spaces.Dict) and all(isinstance(space.spaces.get(key), spaces.Box) for key in GOAL_KEYS)
+            and callable(getattr(env.unwrapped, "compute_reward", None)))
+
+
+def goal_context_space(space: spaces.Dict) -> spaces.Box:
+    """The ``Box`` of a goal env's context: ``desired_goal`` then ``observation``, flattened, with their bounds."""
+    parts = [space[key] for key in ("desired_goal", "observation")]
+    low = np.concatenate([np.ravel(part.low) for part in parts]).astype(np.float32)
+    high = np.concatenate([np.ravel(part.high) for part in parts]).astype(np.float32)
+    return spaces.Box(low, high, dtype=np.float32)
+
+
+def goal_context(observation: dict[str, Any]) -> np.ndarray:
+    """A goal env's context from its reset observation: ``desired_goal`` then ``observation``, flattened (float32)."""
+    return np.concatenate([np.ravel(observation[key]) for key in ("desired_goal", "observation")]).astype(np.float32)
 
 
 def find_latent_wrapper(env: gym.Env) -> LatentActionWrapper | None:

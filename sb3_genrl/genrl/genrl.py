@@ -56,9 +56,9 @@ class GenRL(OnPolicyAlgorithm):
     ``line_search_success``, ``accepted_fraction``, ``step_size``; with hindsight ``hindsight_pulls`` and
     ``hindsight_regression_loss``.
 
-    :param policy: ``"MlpPolicy"`` (default), ``"MultiInputPolicy"``, ``"ContextStdPolicy"`` (a spread that depends
-        on the context, :class:`~sb3_genrl.genrl.policies.ContextStdPolicy`) or an ``ActorCriticPolicy`` class; or
-        the env
+    :param policy: ``"MlpPolicy"`` (default; taken as ``"MultiInputPolicy"`` for a ``Dict`` context),
+        ``"MultiInputPolicy"``, ``"ContextStdPolicy"`` (a spread that depends on the context,
+        :class:`~sb3_genrl.genrl.policies.ContextStdPolicy`) or an ``ActorCriticPolicy`` class; or the env
     :param env: the env (raw, wrapped, a VecEnv of wrapped envs, or a Gymnasium id); or the generator
     :param generator: the trajectory generator, or the path of a saved one (default: the wrapped env's)
     :param e_step: ``"trpo"`` (default: a natural-gradient step on eq. 5 within ``KL(q || pi) < target_kl``, with a
@@ -147,6 +147,8 @@ class GenRL(OnPolicyAlgorithm):
             e_step=e_step, n_em_iterations=n_em_iterations, value_history=value_history, policy_averaging=policy_averaging,
             max_log_std_change=max_log_std_change, hindsight_kwargs=hindsight_kwargs))["hindsight_kwargs"]
         env, policy_kwargs = self._latent_env(env, generator, latent_clip, policy_kwargs, device)
+        if policy == "MlpPolicy" and isinstance(getattr(env, "observation_space", None), spaces.Dict):
+            policy = "MultiInputPolicy"  # the policy that fits a Dict context
         super().__init__(
             policy, env, learning_rate=learning_rate, n_steps=n_steps,  # type: ignore[arg-type]
             gamma=1.0, gae_lambda=1.0,  # one-step episodes: no discounting, A = r - V(s0)

@@ -3,7 +3,8 @@
 The latent-space counterpart of hindsight experience replay (Andrychowicz et al., 2017), switched on by GenRL's
 ``hindsight_kwargs`` as SB3 switches on its ``HerReplayBuffer`` with ``replay_buffer_kwargs``. A pull whose info holds
 ``info["hindsight"] = (context', r')`` (the context for which its trajectory earns the best reward, and that reward;
-:class:`~sb3_genrl.LatentActionWrapper` asks the task's ``hindsight(info)`` for it) is treated as if
+:class:`~sb3_genrl.LatentActionWrapper` asks the task's ``hindsight(info)`` for it, or derives it from a goal-conditioned
+env's own API: the last achieved goal as desired goal, the reward by ``compute_reward``) is treated as if
 ``pi(.|context')`` had drawn it: its ratio ``q/pi`` is taken at ``context'`` and its advantage is ``r' - V(context')``,
 so it stays inside the E-step's KL bound. Relabelled pulls remain true after the policy has moved on (the trajectory
 of ``alpha`` still reaches ``context'``), so those of the last ``history`` batches are kept and reweighed with the
@@ -31,7 +32,8 @@ DEFAULTS: dict[str, Any] = {"history": 1, "regression_steps": 0, "regression_lr"
                             "regression_weighted": False}
 NO_HINDSIGHT_INFO = ("hindsight_kwargs needs every pull's info['hindsight']: (context, reward) or None. "
                      "LatentActionWrapper reports it when the task defines hindsight(info) and the context is the task's "
-                     "get_context(); this env's info has no such key")
+                     "get_context(), and for any goal-conditioned env (a Dict observation with observation, achieved_goal "
+                     "and desired_goal, and compute_reward); this env's info has no such key")
 
 
 def check_hindsight_kwargs(hindsight_kwargs: Mapping[str, Any]) -> dict[str, Any]:
