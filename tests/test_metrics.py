@@ -259,6 +259,7 @@ def test_cli_evaluate(tmp_path, cli) -> None:
     with open(tmp_path / "out" / "results.csv") as file:
         row = next(csv.DictReader(file))
     assert f"vae: precision {float(row['precision']):.3f}, recall {float(row['recall']):.3f}" in printed
+    assert f"density {float(row['density']):.3f}, coverage {float(row['coverage']):.3f}" in printed
     assert (tmp_path / "out" / "results.md").read_text().splitlines()[2].startswith("| vae | ")
     assert (tmp_path / "out" / "disentanglement.png").exists()
     # More samples than the data holds, or none: refused before any model is loaded or evaluated.

@@ -56,7 +56,8 @@ def evaluate_command(args: argparse.Namespace) -> int:
     for evaluation in evaluations:
         row = evaluation.row()
         print(f"{row['model']}: precision {row['precision']:.3f}, recall {row['recall']:.3f}, "
-              f"delta_1 {row['delta_1']:.3f}, mean delta {row['mean_delta']:.3f}")
+              f"delta_1 {row['delta_1']:.3f}, mean delta {row['mean_delta']:.3f}, density {row['density']:.3f}, "
+              f"coverage {row['coverage']:.3f}")
     print(f"wrote {args.out}/results.md, results.csv, precision_recall.png, disentanglement.png")
     return 0
 
