@@ -3,9 +3,11 @@
 A run of 3000 episodes takes about an hour of one core (one gradient step per environment step). Every
 ``checkpoint_every`` episodes, at the end of an episode and after its last gradient step, :class:`EpisodeCheckpoint`
 writes into ``OUT/checkpoint/`` the model (SB3's zip: weights, optimisers, entropy coefficient, step counters), its
-replay buffer (SB3's ``save_replay_buffer``) and ``state.json``: the run's identity, the episodes and steps done, and
-the Monitor file's clock and CPU seconds at that point. Each file is written to a temporary name and renamed, the
-state last, so a run killed at any moment leaves the previous checkpoint whole.
+replay buffer (SB3's ``save_replay_buffer``) and ``state.json``: the run's identity, the episodes and steps done, the
+Monitor file's clock and CPU seconds at that point, and the names of this checkpoint's own model and buffer files.
+The checkpoint is one unit (:func:`sb3_genrl.utils.write_checkpoint`): its files are written under new names and
+``state.json`` replaces the previous one last, so a run killed at any moment (or a full disk) leaves the previous
+checkpoint whole, never a new model beside an old buffer and state.
 
 Training the same run into the same folder again resumes from it (:func:`resume_state`): the Monitor file keeps its
 first rows up to the checkpoint (later ones are played again), the model and buffer are loaded, and training goes on
@@ -16,7 +18,6 @@ finished run removes its checkpoint. A checkpoint of another run (other settings
 
 from __future__ import annotations
 
-import json
 import os
 import pathlib
 import shutil
@@ -27,10 +28,10 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.monitor import Monitor
 
 from sb3_genrl.curves import LOG_DIR, MONITOR_FILE
-from sb3_genrl.utils import atomic_path, atomic_write_json, atomic_write_text
+from sb3_genrl.utils import atomic_write_text, read_checkpoint, write_checkpoint
 
 CHECKPOINT_DIR = "checkpoint"
-STATE, MODEL, BUFFER = "state.json", "model.zip", "replay_buffer.pkl"
+MODEL, BUFFER = "model.zip", "replay_buffer.pkl"
 
 
 class EpisodeCheckpoint(BaseCallback):
@@ -67,25 +68,20 @@ class EpisodeCheckpoint(BaseCallback):
             self._last = episodes
 
     def save(self, episodes: int) -> None:
-        """Write the model, its replay buffer and then the state (each atomically)."""
+        """Write the model, its replay buffer and then the state naming them, as one unit (see the module doc)."""
         monitor = _monitor(self.model)
-        self.folder.mkdir(parents=True, exist_ok=True)
-        with atomic_path(self.folder / MODEL) as tmp:
-            self.model.save(tmp)
-        with atomic_path(self.folder / BUFFER) as tmp:
-            self.model.save_replay_buffer(tmp)
-        atomic_write_json(self.folder / STATE, {
+        write_checkpoint(self.folder, {"model": (MODEL, self.model.save), "buffer": (BUFFER, self.model.save_replay_buffer)}, {
             "identity": self.identity, "episodes": episodes, "steps": int(self.model.num_timesteps),
             "monitor_seconds": time.time() - monitor.t_start, "cpu_seconds": _episode_info(monitor).cpu_seconds(),
             "learn_seconds": float(self.start["learn_seconds"]) + time.perf_counter() - self._began, **self.extra})
 
 
 def resume_state(out: pathlib.Path, identity: dict[str, Any]) -> dict[str, Any] | None:
-    """The checkpoint's state if ``out`` holds one of this run, else ``None``; raises ``ValueError`` for another run's."""
-    path = out / CHECKPOINT_DIR / STATE
-    if not path.is_file():
+    """The checkpoint's state if ``out`` holds one of this run, else ``None``; raises ``ValueError`` for another run's.
+    Its ``"paths"`` entry names the checkpoint's ``"model"`` and ``"buffer"`` files."""
+    state = read_checkpoint(out / CHECKPOINT_DIR)
+    if state is None:
         return None
-    state = json.loads(path.read_text())
     recorded = state["identity"]
     if recorded != identity:
         differ = sorted(k for k in set(recorded) | set(identity) if recorded.get(k) != identity.get(k))
@@ -95,7 +91,8 @@ def resume_state(out: pathlib.Path, identity: dict[str, Any]) -> dict[str, Any] 
 
 
 def prepare_resume(out: pathlib.Path, state: dict[str, Any]) -> None:
-    """Keep the Monitor file's rows up to the checkpoint and set the earlier training log aside."""
+    """Keep the Monitor file's rows up to the checkpoint and set the earlier training log aside (once per checkpoint: a
+    second resume from the same checkpoint keeps the log set aside by the first)."""
     monitor_file = out / MONITOR_FILE
     lines = monitor_file.read_text().splitlines(keepends=True)
     kept = 2 + int(state["episodes"])  # the JSON header, the column names, one row per episode
@@ -103,8 +100,11 @@ def prepare_resume(out: pathlib.Path, state: dict[str, Any]) -> None:
         raise ValueError(f"{monitor_file} holds {len(lines) - 2} episodes, fewer than its checkpoint's {state['episodes']}")
     atomic_write_text(monitor_file, "".join(lines[:kept]), newline="")
     progress = out / LOG_DIR / "progress.csv"
-    if progress.is_file():
-        os.replace(progress, progress.with_name(f"progress.until_episode_{state['episodes']}.csv"))
+    earlier = progress.with_name(f"progress.until_episode_{state['episodes']}.csv")
+    if earlier.is_file():  # resumed from this checkpoint before: the log since then is of episodes played again
+        progress.unlink(missing_ok=True)
+    elif progress.is_file():
+        os.replace(progress, earlier)
 
 
 def continue_clocks(monitor: Monitor, state: dict[str, Any]) -> None:

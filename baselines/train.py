@@ -43,9 +43,7 @@ import gymnasium as gym
 import numpy as np
 from sb3_genrl.baselines import BASELINES, LATENT_BASELINES, OFF_POLICY_BASELINES
 from sb3_genrl.baselines.checkpoint import (
-    BUFFER,
     CHECKPOINT_DIR,
-    MODEL,
     EpisodeCheckpoint,
     continue_clocks,
     prepare_resume,
@@ -242,8 +240,8 @@ def _resumed_model(algorithm: str, task: str, out: pathlib.Path, state: dict[str
     prepare_resume(out, state)
     monitor = _monitored_env(algorithm, task, out, append=True)
     continue_clocks(monitor, state)
-    model = SAC.load(out / CHECKPOINT_DIR / MODEL, env=monitor, device=device)
-    model.load_replay_buffer(out / CHECKPOINT_DIR / BUFFER)
+    model = SAC.load(state["paths"]["model"], env=monitor, device=device)
+    model.load_replay_buffer(state["paths"]["buffer"])
     model._last_obs = None  # the new env starts with a reset (the saved observation belongs to the old one)
     model.set_random_seed(state["identity"]["seed"] + state["episodes"])  # a resumed run is reproducible
     resumed = [*state["summary"].get("resumed_at_episodes", []), state["episodes"]]

@@ -189,14 +189,17 @@ def write_checkpoint(folder: str | os.PathLike[str], files: Mapping[str, tuple[s
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     token = secrets.token_hex(4)
-    names = {}
-    for entry, (name, write) in files.items():
-        path = Path(name)
-        names[entry] = f"{path.stem}-{token}{path.suffix}"
-        with atomic_path(folder / names[entry]) as tmp:
-            write(tmp)
+    names = {entry: f"{Path(name).stem}-{token}{Path(name).suffix}" for entry, (name, _) in files.items()}
     record = {**state, "files": names}
-    atomic_write_json(folder / CHECKPOINT_STATE, record)
+    try:
+        for entry, (_, write) in files.items():
+            with atomic_path(folder / names[entry]) as tmp:
+                write(tmp)
+        atomic_write_json(folder / CHECKPOINT_STATE, record)
+    except BaseException:  # the previous checkpoint stays; this one's files go
+        for name in names.values():
+            (folder / name).unlink(missing_ok=True)
+        raise
     for stale in folder.iterdir():  # the previous checkpoint's files (and any left by a killed write)
         if stale.name != CHECKPOINT_STATE and stale.name not in names.values():
             stale.unlink(missing_ok=True)

@@ -279,6 +279,53 @@ def test_a_stopped_off_policy_run_resumes_from_its_checkpoint(algorithm, demos, 
     assert SAC.load(tmp_path / f"{algorithm}_policy.zip", env=env, device="cpu").num_timesteps == 5 * 69
 
 
+def test_a_checkpoint_interrupted_while_written_leaves_the_previous_one_whole(demos, tmp_path, monkeypatch):
+    save_buffer = SAC.save_replay_buffer
+
+    def disk_full_at_the_second_checkpoint(model, path):
+        if model.num_timesteps == 4 * 69:  # the model of the checkpoint at episode 4 is written, its buffer not
+            raise OSError(28, "No space left on device")
+        save_buffer(model, path)
+
+    monkeypatch.setattr(SAC, "save_replay_buffer", disk_full_at_the_second_checkpoint)
+    run = {"episodes": 5, "out_dir": tmp_path, "demos": demos, "demo_episodes": 10, "checkpoint_every": 2,
+           "device": "cpu", "seed": 1, "window": 5, "eval_goals": 2}
+    with pytest.raises(OSError, match="No space left"):
+        train_baseline("sac", "hockey", **run)
+    state = json.loads((tmp_path / "checkpoint" / "state.json").read_text())
+    assert state["episodes"] == 2 and sorted(state["files"]) == ["buffer", "model"]
+    assert sorted(path.name for path in (tmp_path / "checkpoint").iterdir()) == sorted(["state.json",
+                                                                                         *state["files"].values()])
+    assert SAC.load(tmp_path / "checkpoint" / state["files"]["model"], device="cpu").num_timesteps == 2 * 69
+    monkeypatch.undo()
+    summary = train_baseline("sac", "hockey", **run)  # resumed from episode 2: the budget is met exactly
+    assert summary["resumed_at_episodes"] == [2] and summary["episodes_played"] == 5
+    assert SAC.load(tmp_path / "sac_policy.zip", device="cpu").num_timesteps == 5 * 69
+
+
+def test_a_run_resumed_twice_from_one_checkpoint_keeps_its_early_log(demos, tmp_path, monkeypatch):
+    from sb3_genrl.baselines import checkpoint
+
+    watch = checkpoint.EpisodeCheckpoint._on_rollout_start
+
+    def killed_in_the_sixth_episode(callback):
+        watch(callback)
+        if callback.model.num_timesteps == 5 * 69 + 10:
+            raise _Killed
+
+    monkeypatch.setattr(checkpoint.EpisodeCheckpoint, "_on_rollout_start", killed_in_the_sixth_episode)
+    run = {"episodes": 6, "out_dir": tmp_path, "demos": demos, "demo_episodes": 10, "checkpoint_every": 5,
+           "device": "cpu", "seed": 1, "window": 3, "eval_goals": 2}
+    with pytest.raises(_Killed):
+        train_baseline("sac-no-prefill", "hockey", **run)
+    early = (tmp_path / "logs" / "progress.csv").read_text()
+    assert "rollout/ep_rew_mean" in early  # SAC logs every 4 episodes
+    for _ in range(2):  # resumed from episode 5 and killed again at once, twice
+        with pytest.raises(_Killed):
+            train_baseline("sac-no-prefill", "hockey", **run)
+        assert (tmp_path / "logs" / "progress.until_episode_5.csv").read_text() == early
+
+
 def test_a_baseline_rerun_never_leaves_a_summary_beside_another_runs_cloned_policy(demos, tmp_path, monkeypatch):
     from sb3_genrl.baselines import train as baseline_train
 
