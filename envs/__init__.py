@@ -5,20 +5,27 @@ The paper's MuJoCo tasks (section 6.1.1) are ``hockey`` (``GenRL/Hockey-v0``) an
 that declares its :class:`TaskSpec`; a new task is one more such module and one :func:`register_task` call (for the
 package's own tasks, one more entry in :data:`_BUILT_IN`). A task may also declare a goal-conditioned variant for
 hindsight experience replay (``GenRL/HockeyGoal-v0``, ``GenRL/BasketballGoal-v0``: ``get_task(name).goal_env_id``).
+With the optional extra ``robotics``, Gymnasium-Robotics' Fetch tasks join them (:mod:`sb3_genrl.envs.fetch`:
+``fetch-reach``, ``fetch-push``, ``fetch-slide``, ``fetch-pick-and-place``, under Gymnasium-Robotics' own ids).
 """
 
 from __future__ import annotations
 
+import importlib.util
+import sys
 from typing import Any
 
 from gymnasium.envs.registration import register, registry
-from sb3_genrl.envs import basketball, hockey
+from sb3_genrl.envs import basketball, fetch, hockey
 from sb3_genrl.envs.spec import TaskSpec
 
 __all__ = ["DEFAULT_TASK", "TASKS", "TaskSpec", "get_task", "make_task", "register_envs", "register_task"]
 
 TASKS: dict[str, TaskSpec] = {}
-_BUILT_IN = (hockey.TASK, basketball.TASK)
+# Gymnasium-Robotics' Fetch tasks, when its optional extra is installed (``pip install "sb3-genrl[robotics]"``; looked up
+# without importing it)
+ROBOTICS = importlib.util.find_spec("gymnasium_robotics") is not None
+_BUILT_IN = (hockey.TASK, basketball.TASK, *(fetch.TASKS if ROBOTICS else ()))
 DEFAULT_TASK = hockey.TASK.name  # the quickstart's task
 
 
@@ -71,6 +78,10 @@ def register_envs() -> None:
     """Register the package's tasks (idempotent). Called through the ``gymnasium.envs`` entry point."""
     for spec in _BUILT_IN:
         register_task(spec)
+    if ROBOTICS and "gymnasium_robotics" in sys.modules:  # imported first: its own Fetch ids stay, fixed here
+        from sb3_genrl.envs.fetch_mujoco import fix_joint_helpers
+
+        fix_joint_helpers()
 
 
 register_envs()

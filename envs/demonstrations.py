@@ -39,16 +39,16 @@ def perturbation(horizon: int, rng: np.random.Generator, scales: np.ndarray, *, 
 
     :param horizon: control steps T
     :param rng: the random generator
-    :param scales: ``(7,)`` largest joint travel (rad) of one bump per joint
+    :param scales: ``(M,)`` largest travel of one bump per action dimension (rad for the arm's 7 joints)
     :param max_bumps: bumps drawn per trajectory, uniformly in ``1..max_bumps``
     :param durations: smallest and largest bump width (control steps)
-    :return: ``(T, 7)`` deltas; each bump has a random joint, start, width and a travel uniform in
+    :return: ``(T, M)`` deltas; each bump has a random joint, start, width and a travel uniform in
         ``[-level, level] * scales[joint]`` with one ``level ~ U(0, 1)`` per trajectory
     """
-    out = np.zeros((horizon, 7))
+    out = np.zeros((horizon, len(scales)))
     level = rng.uniform(0.0, 1.0)
     for _ in range(int(rng.integers(1, max_bumps + 1))):
-        joint = int(rng.integers(7))
+        joint = int(rng.integers(len(scales)))
         duration = int(rng.integers(durations[0], durations[1] + 1))
         start = int(rng.integers(0, horizon - durations[0]))
         out[:, joint] += bump(horizon, start, duration, level * scales[joint] * rng.uniform(-1.0, 1.0))
@@ -178,20 +178,27 @@ def _make_demonstrations(spec: TaskSpec, episodes: int, out_dir: Path, seed: int
     from sb3_genrl.data import write_dataset
 
     task = spec.name
-    env = spec.make_env()
     began = time.perf_counter()
-    kept, drawn = _valid_episodes(spec, env, episodes, seed, default_threads() if n_threads is None else int(n_threads),
-                                  chunk, progress_bar)
-    arrays = _episode_arrays(env, kept)
-    genrl = {"task": task, "env_id": spec.env_id, "horizon": env.horizon, "seed": int(seed),
+    n_threads = default_threads() if n_threads is None else int(n_threads)
+    if spec.demonstrations is not None:  # a task with its own (not an ArmTaskEnv)
+        arrays, drawn, described = spec.demonstrations(spec, episodes, seed, n_threads, progress_bar)
+        observation_space, action_space, details = described["observation_space"], described["action_space"], {
+            "observation": described["observation"]}
+    else:
+        env = spec.make_env()
+        kept, drawn = _valid_episodes(spec, env, episodes, seed, n_threads, chunk, progress_bar)
+        arrays = _episode_arrays(env, kept)
+        observation_space, action_space = env.observation_space, env.action_space
+        details = {"observation": "goal xy, 7 joint positions, 7 joint velocities",
+                   "max_joint_delta": env.max_joint_delta}
+    genrl = {"task": task, "env_id": spec.env_id, "horizon": spec.horizon, "seed": int(seed),
              "version": sb3_genrl.__version__, "episodes": int(episodes), "drawn": int(drawn),
-             "goal": "reached (hindsight: each demonstration's goal is the point it reached)",
-             "observation": "goal xy, 7 joint positions, 7 joint velocities", "max_joint_delta": env.max_joint_delta,
+             "goal": "reached (hindsight: each demonstration's goal is the point it reached)", **details,
              "seconds": round(time.perf_counter() - began, 1)}
-    return write_dataset(out_dir, arrays, dataset_id=f"genrl/{task}-v0", observation_space=env.observation_space,
-                         action_space=env.action_space, genrl=genrl,
+    return write_dataset(out_dir, arrays, dataset_id=f"genrl/{task}-v0", observation_space=observation_space,
+                         action_space=action_space, genrl=genrl,
                          description=f"{episodes} perturbed scripted demonstrations of {spec.env_id} (sb3-genrl)",
-                         extra_files=lambda tmp: coverage_report(arrays["reached"], spec, tmp, final_dir=out_dir))
+                         extra_files=lambda tmp: coverage_report(arrays["reached"][:, :2], spec, tmp, final_dir=out_dir))
 
 
 def _valid_episodes(spec: TaskSpec, env: ArmTaskEnv, episodes: int, seed: int, n_threads: int, chunk: int,

@@ -65,9 +65,11 @@ def quickstart(out_dir: str | os.PathLike, *, task: str, demo_episodes: int = 40
     import torch
 
     from sb3_genrl.checks import check_device, check_output_dir, check_positive_int, check_seed
+    from sb3_genrl.envs import get_task
 
     episodes, batch_episodes, genrl_kwargs = task_settings(task)
     policy_episodes = episodes if policy_episodes is None else policy_episodes
+    video = video and get_task(task).video  # a task without the arm tasks' renderer is not filmed
     for name, value in dict(demo_episodes=demo_episodes, epochs=epochs, policy_episodes=policy_episodes,
                             pr_samples=pr_samples, dwpr_samples=dwpr_samples).items():
         check_positive_int(value, name)
@@ -100,7 +102,7 @@ def _stage_settings(task: str, demo_episodes: int, epochs: int, policy_episodes:
 
     return {
         "demonstrations": {"task": task, "episodes": demo_episodes, "seed": seed, "version": sb3_genrl.__version__},
-        "generator": {"preset": QUICKSTART_PRESET, "epochs": epochs, "eval_every": 10, "seed": seed},
+        "generator": {"preset": quickstart_preset(task), "epochs": epochs, "eval_every": 10, "seed": seed},
         # precision/recall compares at most as many samples as there are demonstrations
         "evaluation": {"n": min(pr_samples, demo_episodes), "dwpr_n": dwpr_samples, "k": 3, "interventions": 5, "seed": seed},
         "policy": {"task": task, "episodes": policy_episodes, "batch_episodes": batch_episodes,
@@ -174,7 +176,7 @@ def _run_stages(out: pathlib.Path, settings: dict[str, dict[str, Any]], device: 
     stage("generator", {"dataset": dataset_fingerprint(dataset)}, train)
     made_from = {"dataset": dataset_fingerprint(dataset), "generator": file_fingerprint(model_path)}
     stage("evaluation", made_from, lambda: evaluate_generators(
-        {QUICKSTART_PRESET: model_path}, dataset, n=evaluation["n"], k=evaluation["k"], dwpr_n=evaluation["dwpr_n"],
+        {generator["preset"]: model_path}, dataset, n=evaluation["n"], k=evaluation["k"], dwpr_n=evaluation["dwpr_n"],
         interventions=evaluation["interventions"], seed=evaluation["seed"], out_dir=out / "evaluation", device=device))
     stage("policy", {"generator": made_from["generator"]}, lambda: train_policy(
         policy_stage["task"], str(model_path), episodes=policy_stage["episodes"],
@@ -196,15 +198,12 @@ def _write_report(out: pathlib.Path, task: str, seed: int, video: bool, timings:
     """``report.md``, with every number read from what the stages recorded."""
     from sb3_genrl.data import dataset_info
     from sb3_genrl.generative import load
-    from sb3_genrl.genrl import GenRL, evaluate_on_goals
 
     dataset = out / "demonstrations"
     summary = json.loads((out / "policy" / "summary.json").read_text())
     measures = json.loads((out / "evaluation" / "results.json").read_text())
     generator_settings = read_settings(out / _RECORDS["generator"])
-    _, rewards, _ = evaluate_on_goals(GenRL.load(out / "policy" / "genrl_policy.zip", device="cpu"), task, goals=100,
-                                      seed=seed + EVAL_GOAL_SEED)
-    final_distance = float(-rewards.mean())
+    score, score_line = _policy_score(out, task, seed)
     coverage_file = dataset / "coverage.json"
     coverage = json.loads(coverage_file.read_text()) if coverage_file.is_file() else {}
     generator = load(out / "vae.pt", device="cpu")
@@ -217,8 +216,7 @@ def _write_report(out: pathlib.Path, task: str, seed: int, video: bool, timings:
              f"best checkpoint at epoch {generator.best_epoch}.",
              f"3. **Evaluation**: {_measure_line(measures)}.",
              f"4. **GenRL**: {summary['episodes']} episodes; best iteration mean reward {summary['best_mean_reward']:.3f},"
-             f" final {summary['final_mean_reward']:.3f}; the trained policy's own mean distance to 100 new goals "
-             f"(deterministic): **{final_distance:.3f} m** ({final_distance * 100:.1f} cm).", "",
+             f" final {summary['final_mean_reward']:.3f}; {score}.", "",
              "![learning curve](policy/learning_curve.png)", "",
              "![precision and recall](evaluation/precision_recall.png)", ""]
     if video:
@@ -227,8 +225,34 @@ def _write_report(out: pathlib.Path, task: str, seed: int, video: bool, timings:
               + ", ".join(f"{k} {v:.0f}" if math.isfinite(v) else f"{k} not recorded" for k, v in timings.items()), ""]
     report = out / "report.md"
     atomic_write_text(report, "\n".join(lines))
-    log(f"GenRL on {task}: the deterministic policy's mean distance to 100 new goals is {final_distance:.3f} m")
+    log(f"GenRL on {task}: {score_line}")
     return report
+
+
+def _policy_score(out: pathlib.Path, task: str, seed: int) -> tuple[str, str]:
+    """The trained policy played deterministically from 100 held-out goals (or initial states): the report's words
+    and the log's line (the success rate for a task scored by success, else the mean distance to the goal)."""
+    from sb3_genrl.envs import get_task
+    from sb3_genrl.genrl import GenRL, evaluate_on_goals
+
+    model = GenRL.load(out / "policy" / "genrl_policy.zip", device="cpu")
+    spec = get_task(task)
+    if spec.evaluate is not None:
+        success = spec.evaluate(model, task, episodes=100, seed=seed + EVAL_GOAL_SEED)["success_rate"]
+        return (f"the trained policy's own success rate from 100 new initial states (deterministic): **{success:.0%}**",
+                f"the deterministic policy's success rate from 100 new initial states is {success:.0%}")
+    _, rewards, _ = evaluate_on_goals(model, task, goals=100, seed=seed + EVAL_GOAL_SEED)
+    distance = float(-rewards.mean())
+    return (f"the trained policy's own mean distance to 100 new goals (deterministic): **{distance:.3f} m** "
+            f"({distance * 100:.1f} cm)", f"the deterministic policy's mean distance to 100 new goals is {distance:.3f} m")
+
+
+def quickstart_preset(task: str) -> str:
+    """The generator preset the quickstart trains for ``task``: the task's own (its ``TaskSpec.generator_preset``, a
+    latent space as large as its expert's family of motions) or :data:`QUICKSTART_PRESET`."""
+    from sb3_genrl.envs import get_task
+
+    return get_task(task).generator_preset or QUICKSTART_PRESET
 
 
 def task_settings(task: str) -> tuple[int, int, dict[str, Any]]:

@@ -1,0 +1,168 @@
+"""The Fetch tasks' demonstrations, the open-loop success of their scripted experts, and a policy's success rate.
+
+Gymnasium-Robotics' Fetch envs have no open-loop fast path (the mocap weld follows the gripper's own position), so
+each episode is stepped through the env; the demonstrations are played in worker processes (``n_threads``), each on
+its own env. Demonstration ``k`` (its reset state, aim and perturbation) is drawn from ``np.random.default_rng([seed,
+k])``, so the set depends on ``seed`` only, as the arm tasks' (:func:`sb3_genrl.envs.demonstrations.make_demonstrations`).
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import contextlib
+import multiprocessing
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from sb3_genrl.envs import get_task
+from sb3_genrl.envs.demonstrations import perturbation
+from sb3_genrl.envs.fetch import FAMILIES, FETCH_HORIZON, GRIPPER_GAIN, PERTURBATION, STEP_METRES, is_valid
+from sb3_genrl.envs.spec import TaskSpec
+from tqdm.auto import tqdm
+
+_ENVS: dict[str, gym.Env] = {}  # one env per task in each worker process
+
+
+def _env(env_id: str) -> gym.Env:
+    if env_id not in _ENVS:
+        _ENVS[env_id] = gym.make(env_id)
+    return _ENVS[env_id]
+
+
+def play_expert(env_id: str, actions: np.ndarray | None, reset_seed: int, aim: np.ndarray | None,
+                rng: np.random.Generator | None = None) -> dict[str, Any]:
+    """Reset the env with ``reset_seed`` and play the expert's trajectory (or ``actions``) open-loop.
+
+    :param env_id: a Fetch id
+    :param actions: the ``(50, 4)`` actions to play, or None: the expert's for ``aim`` (None: the env's own goal)
+        with a perturbation drawn from ``rng`` when given
+    :param reset_seed: the reset's seed
+    :param aim: where the expert aims; None: the env's desired goal
+    :param rng: draws the perturbation (None: none)
+    :return: ``actions``, ``observations (51, 3 + obs_dim)`` (achieved goal at the end, then the observation),
+        ``achieved (51, 3)``, ``infos``, ``aim``, ``aim_distance``, ``on_table``, ``is_success`` (for the env's goal)
+    """
+    env = _env(env_id)
+    family = next(family for family in FAMILIES.values() if family.env_id == env_id)
+    obs, _ = env.reset(seed=int(reset_seed))
+    task = env.unwrapped
+    aim = np.asarray(obs["desired_goal"] if aim is None else aim, dtype=np.float64)
+    if actions is None:
+        actions = family.expert(obs["observation"], aim)
+        if rng is not None:
+            actions = actions + perturbation(FETCH_HORIZON, rng, PERTURBATION / (STEP_METRES * GRIPPER_GAIN))
+        actions = np.clip(actions, -1.0, 1.0).astype(np.float32)  # what is stored is exactly what is played
+    observations, achieved, infos = [obs["observation"]], [obs["achieved_goal"]], []
+    for action in actions:
+        obs, _, _, _, info = env.step(action)
+        observations.append(obs["observation"])
+        achieved.append(obs["achieved_goal"])
+        infos.append(info)
+    achieved_array = np.array(achieved, dtype=np.float64)
+    on_table = not task.has_object or bool(achieved_array[-1, 2] > task.height_offset - 0.02)
+    return {"actions": np.asarray(actions, dtype=np.float32), "observations": np.array(observations),
+            "achieved": achieved_array, "infos": infos, "aim": aim, "on_table": on_table,
+            "aim_distance": float(np.linalg.norm(achieved_array[-1] - aim)),
+            "is_success": bool(infos[-1]["is_success"])}
+
+
+def _demonstration(env_id: str, seed: int, k: int) -> dict[str, Any]:
+    """Demonstration ``k``: a random reset state, a random aim over the goal region, the perturbed expert's play."""
+    rng = np.random.default_rng([seed, k])
+    reset_seed = int(rng.integers(2**31))
+    family = next(family for family in FAMILIES.values() if family.env_id == env_id)
+    aim = family.sample_aim(rng, _env(env_id).unwrapped)  # the env's constants: the gripper's start, the table
+    return play_expert(env_id, None, reset_seed, aim, rng)
+
+
+def _play_chunk(env_id: str, seed: int, start: int, stop: int) -> list[dict[str, Any] | None]:
+    """Demonstrations ``start..stop - 1``, each the episode's arrays when valid, else None."""
+    out: list[dict[str, Any] | None] = []
+    for k in range(start, stop):
+        played = _demonstration(env_id, seed, k)
+        if not is_valid(played):
+            out.append(None)
+            continue
+        reached = played["achieved"][-1]
+        rewards = [float(_env(env_id).unwrapped.compute_reward(a, reached, info))
+                   for a, info in zip(played["achieved"][1:], played["infos"], strict=True)]
+        goal = np.repeat(reached[None], FETCH_HORIZON + 1, axis=0)
+        out.append({"observations": np.concatenate([goal, played["observations"]], axis=1).astype(np.float32),
+                    "actions": played["actions"], "rewards": np.array(rewards), "reached": reached,
+                    "sampled_goals": played["aim"]})
+    return out
+
+
+def make_arrays(spec: TaskSpec, episodes: int, seed: int, n_threads: int, progress_bar: bool,
+                chunk: int = 64) -> tuple[dict[str, np.ndarray], int, dict[str, Any]]:
+    """``episodes`` valid demonstrations of a Fetch task (see the module docstring), as the dataset's arrays.
+
+    :return: the arrays of :mod:`sb3_genrl.data.minari_io` (``reached`` and ``sampled_goals`` ``(N, 3)``), the number
+        of trajectories drawn, and the dataset's spaces and description (``observation_space``, ``action_space``,
+        ``observation``)
+    """
+    kept: list[dict[str, Any]] = []
+    drawn = 0
+    chunk = min(chunk, episodes + 4)
+    pool = (concurrent.futures.ProcessPoolExecutor(n_threads, mp_context=multiprocessing.get_context("spawn"))
+            if n_threads > 1 else None)
+    play = map if pool is None else pool.map
+    with pool or contextlib.nullcontext(), tqdm(total=episodes, disable=not progress_bar, unit="episode",
+                                                 desc=f"{spec.name} demonstrations") as bar:
+        while len(kept) < episodes:
+            if drawn >= 2000 and not kept:
+                raise RuntimeError(f"none of the first {drawn} {spec.name} trajectories was valid")
+            starts = range(drawn, drawn + chunk * n_threads, chunk)
+            for played in play(_play_chunk, *zip(*[(spec.env_id, seed, s, s + chunk) for s in starts], strict=True)):
+                valid = [episode for episode in played if episode is not None][: episodes - len(kept)]
+                kept += valid
+                bar.update(len(valid))
+            drawn += chunk * n_threads
+    arrays = {key: np.stack([episode[key] for episode in kept]) for key in kept[0]}
+    n = len(kept)
+    terminations = np.zeros((n, FETCH_HORIZON), dtype=bool)
+    terminations[:, -1] = True
+    arrays.update(terminations=terminations, truncations=np.zeros((n, FETCH_HORIZON), dtype=bool))
+    dim = arrays["observations"].shape[-1]
+    return arrays, drawn, {
+        "observation_space": spaces.Box(-np.inf, np.inf, shape=(dim,), dtype=np.float32),
+        "action_space": spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32),
+        "observation": "reached goal (the achieved goal at the end), then the env's observation"}
+
+
+def expert_success(task: str | TaskSpec, episodes: int, seed: int) -> dict[str, float]:
+    """The scripted expert, aimed at the env's own goal and unperturbed, played open-loop from ``episodes`` random
+    reset states (seeds ``seed, seed + 1, ...``): its success rate and median final distance (m)."""
+    spec = get_task(task)
+    played = [play_expert(spec.env_id, None, seed + i, None) for i in range(episodes)]
+    return {"episodes": episodes, "success_rate": float(np.mean([p["is_success"] for p in played])),
+            "median_distance": float(np.median([p["aim_distance"] for p in played]))}
+
+
+def evaluate_success(model: Any, task: str | TaskSpec, episodes: int = 100, seed: int = 0) -> dict[str, Any]:
+    """A GenRL policy's deterministic latent actions played from ``episodes`` reset states (seeds ``seed, seed + 1,
+    ...``) of a goal-conditioned task: the success rate (``info["is_success"]`` at the last step) and the final
+    distances to the goals (m).
+
+    :param model: a GenRL model with its generator
+    :param task: a task name or Gymnasium id
+    :param episodes: reset states
+    :param seed: the first reset's seed
+    """
+    from sb3_genrl.wrappers import LatentActionWrapper
+
+    if model.generator is None:
+        raise ValueError("this GenRL model has no generator: pass generator= to GenRL.load()")
+    env = LatentActionWrapper(gym.make(get_task(task).env_id), model.generator)
+    successes, distances = [], []
+    for i in range(episodes):
+        context, _ = env.reset(seed=seed + i)
+        _, _, _, _, info = env.step(model.predict(context, deterministic=True)[0])
+        task_env = env.unwrapped
+        successes.append(float(info["is_success"]))
+        distances.append(float(np.linalg.norm(task_env._get_obs()["achieved_goal"] - task_env.goal)))
+    env.close()
+    return {"episodes": episodes, "seed": seed, "success_rate": float(np.mean(successes)),
+            "successes": successes, "distances": distances}

@@ -1,0 +1,96 @@
+"""Gymnasium-Robotics' Fetch tasks: the MuJoCo 4.0 fix of their joint helpers, the scripted experts open-loop, and
+the workflow (demonstrations, a generator, GenRL, the success rate) on tiny sizes."""
+
+import importlib
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+import pytest
+
+pytest.importorskip("gymnasium_robotics")
+
+from sb3_genrl.envs import TASKS, get_task  # noqa: E402
+from sb3_genrl.envs.fetch import FETCH_IDS, GOAL_BOXES  # noqa: E402
+from sb3_genrl.envs.fetch_demonstrations import expert_success  # noqa: E402
+from sb3_genrl.envs.fetch_mujoco import fix_joint_helpers, import_robotics, upstream_test_fails  # noqa: E402
+
+FETCH_TASKS = ("fetch-reach", "fetch-push", "fetch-slide", "fetch-pick-and-place")
+
+
+def test_joint_helpers_fail_under_this_mujoco_without_the_fix_and_work_with_it():
+    import_robotics()
+    from gymnasium_robotics.utils import mujoco_utils
+
+    env = gym.make("FetchPush-v4").unwrapped
+    model, data = env.model, env.data
+    hinge = "robot0:shoulder_pan_joint"
+    slide = "robot0:r_gripper_finger_joint"
+    free = "object0:joint"
+    try:
+        importlib.reload(mujoco_utils)  # Gymnasium-Robotics' own helpers
+        if upstream_test_fails():
+            for helper in (mujoco_utils.get_joint_qpos, mujoco_utils.get_joint_qvel):
+                with pytest.raises(AssertionError):
+                    helper(model, data, hinge)
+            with pytest.raises(AssertionError):
+                env.reset(seed=0)
+    finally:
+        assert fix_joint_helpers() == upstream_test_fails()
+    for joint, size in ((hinge, 1), (slide, 1), (free, 7)):
+        joint_id = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, joint)
+        start = model.jnt_qposadr[joint_id]
+        np.testing.assert_array_equal(mujoco_utils.get_joint_qpos(model, data, joint), data.qpos[start:start + size])
+        mujoco_utils.set_joint_qpos(model, data, joint, data.qpos[start:start + size] + 0.01)
+        np.testing.assert_array_equal(mujoco_utils.get_joint_qpos(model, data, joint),
+                                      mujoco_utils.get_joint_qpos(model, data, joint))
+    qvel_start = model.jnt_dofadr[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, free)]
+    mujoco_utils.set_joint_qvel(model, data, free, np.arange(6.0))
+    np.testing.assert_array_equal(data.qvel[qvel_start:qvel_start + 6], np.arange(6.0))
+
+
+@pytest.mark.parametrize("task", FETCH_TASKS)
+def test_every_fetch_task_resets_and_steps_through_its_own_id(task):
+    spec = get_task(task)
+    assert spec.env_id in FETCH_IDS and spec in TASKS.values() and gym.spec(spec.env_id).max_episode_steps == 50
+    env = gym.make(spec.env_id)
+    assert type(env.unwrapped).__module__.startswith("gymnasium_robotics.envs.fetch")  # Gymnasium-Robotics' own env
+    obs, _ = env.reset(seed=0)
+    for _ in range(50):
+        obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+    assert truncated and not terminated and reward in (0.0, -1.0) and "is_success" in info
+    low, high = GOAL_BOXES[task.removeprefix("fetch-").title().replace("-", "").replace("Pickandplace", "PickAndPlace")]
+    goals = np.array([env.reset(seed=seed)[0]["desired_goal"][:2] for seed in range(20)])
+    assert np.all(spec.in_goal_region(goals))
+
+
+@pytest.mark.parametrize(("task", "least"), [("fetch-reach", 1.0), ("fetch-push", 0.8), ("fetch-pick-and-place", 1.0)])
+def test_the_scripted_experts_solve_random_initial_states_open_loop(task, least):
+    assert expert_success(task, 10, seed=777)["success_rate"] >= least
+
+
+def test_demonstrations_generator_and_genrl_on_fetch_push(tmp_path):
+    from sb3_genrl.data import dataset_info, load_arrays
+    from sb3_genrl.envs.demonstrations import make_demonstrations
+    from sb3_genrl.generative import train_generator
+    from sb3_genrl.genrl import GenRL, train_policy
+
+    dataset = make_demonstrations("fetch-push", 12, tmp_path / "demos", seed=3, n_threads=1, progress_bar=False)
+    arrays = load_arrays(dataset)
+    assert dataset_info(dataset)["episodes"] == 12 and arrays["actions"].shape == (12, 50, 4)
+    assert np.all(np.linalg.norm(arrays["reached"] - arrays["sampled_goals"], axis=1) < 0.05)  # each reached its aim
+    # the stored goal is the reached point, and the last step's reward for it is 0
+    np.testing.assert_allclose(arrays["observations"][:, 0, :3], arrays["reached"], rtol=1e-6)
+    assert np.all(arrays["rewards"][:, -1] == 0.0)
+    # the same seed gives the same set, however many worker processes play it
+    again = load_arrays(make_demonstrations("fetch-push", 12, tmp_path / "again", seed=3, n_threads=2,
+                                            progress_bar=False))
+    np.testing.assert_array_equal(again["actions"], arrays["actions"])
+
+    generator = train_generator(dataset, preset="VAE7", epochs=2, seed=0, out=tmp_path / "vae.pt", progress_bar=False)
+    result = train_policy("fetch-push", generator, episodes=32, batch_episodes=16, out_dir=tmp_path / "policy",
+                          hindsight_kwargs={"history": 2, "regression_steps": 4}, device="cpu")
+    model = GenRL.load(result["model_path"], generator=generator, device="cpu")
+    evaluation = get_task("fetch-push").evaluate(model, "fetch-push", episodes=3, seed=5)
+    assert evaluation["success_rate"] == np.mean(evaluation["successes"]) and len(evaluation["distances"]) == 3
+    assert all((d < 0.05) == s for d, s in zip(evaluation["distances"], evaluation["successes"], strict=True))
