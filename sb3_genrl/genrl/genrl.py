@@ -147,10 +147,8 @@ class GenRL(OnPolicyAlgorithm):
             e_step=e_step, n_em_iterations=n_em_iterations, value_history=value_history, policy_averaging=policy_averaging,
             max_log_std_change=max_log_std_change, hindsight_kwargs=hindsight_kwargs))["hindsight_kwargs"]
         env, policy_kwargs = self._latent_env(env, generator, latent_clip, policy_kwargs, device)
-        if policy == "MlpPolicy" and isinstance(getattr(env, "observation_space", None), spaces.Dict):
-            policy = "MultiInputPolicy"  # the policy that fits a Dict context
         super().__init__(
-            policy, env, learning_rate=learning_rate, n_steps=n_steps,  # type: ignore[arg-type]
+            self._fitting_policy(policy, env), env, learning_rate=learning_rate, n_steps=n_steps,  # type: ignore[arg-type]
             gamma=1.0, gae_lambda=1.0,  # one-step episodes: no discounting, A = r - V(s0)
             ent_coef=0.0, vf_coef=0.0,  # the value function is fitted separately (Algorithm 1, last line)
             max_grad_norm=0.0, use_sde=False, sde_sample_freq=-1, stats_window_size=stats_window_size,
@@ -387,6 +385,12 @@ class GenRL(OnPolicyAlgorithm):
         if isinstance(getattr(env, "observation_space", None), spaces.Box):
             policy_kwargs.setdefault("features_extractor_class", BoxScaler)  # bounded contexts onto [-1, 1]
         return env, policy_kwargs
+
+    @staticmethod
+    def _fitting_policy(policy: Any, env: Any) -> Any:
+        """``policy``, the default ``"MlpPolicy"`` taken as ``"MultiInputPolicy"`` for a ``Dict`` context."""
+        dict_context = isinstance(getattr(env, "observation_space", None), spaces.Dict)
+        return "MultiInputPolicy" if policy == "MlpPolicy" and dict_context else policy
 
     @classmethod
     def _is_policy(cls, policy: Any) -> bool:
