@@ -70,7 +70,7 @@ from stable_baselines3 import PPO, SAC
 
 from sb3_genrl.checks import check_device, check_input_path, check_output_dir, check_positive_int, check_seed
 from sb3_genrl.curves import LOG_DIR, MONITOR_FILE, monitor_episodes, read_monitor, training_logger, write_learning_curve
-from sb3_genrl.genrl.generator_files import file_sha256
+from sb3_genrl.genrl.generator_files import generator_digest
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED
 from sb3_genrl.run_folder import open_run
 from sb3_genrl.utils import atomic_path, atomic_write_json, folder_lock
@@ -125,14 +125,13 @@ def train_baseline(
     _check_arguments(algorithm, episodes, seed, demos, demo_episodes, generator, eval_goals, checkpoint_every, device)
     changes, spec, out = check_algorithm_kwargs(algorithm, algorithm_kwargs), get_task(task), check_output_dir(out_dir)
     began = time.perf_counter(), time.process_time()
-    generator_sha256 = file_sha256(generator) if isinstance(generator, str | os.PathLike) else None
     transitions, generator = _inputs(algorithm, spec.name, demos, demo_episodes, generator)
     steps = int(episodes) if transitions is None else int(episodes) * spec.horizon
     summary = {"algorithm": algorithm, "task": spec.name, "episodes": int(episodes), "seed": seed} | (
         {"settings": baseline_settings(algorithm, spec.name)[0] | changes} if transitions is None
         else _demonstration_record(algorithm, spec.name, transitions, bc_kwargs, changes))
     checkpoint_every = checkpoint_every if algorithm in OFF_POLICY_BASELINES else None  # the others: short runs
-    identity = _identity(summary) | {"eval_goals": eval_goals, "generator_sha256": generator_sha256}
+    identity = _identity(summary) | {"eval_goals": eval_goals, "generator_sha256": generator_digest(generator)}
     with folder_lock(out):  # one run at a time in out; another run's files are refused, never mixed in
         finished = open_run(out, identity, (f"{algorithm}_policy.zip", "bc_policy.zip", *CURVE_FILES), overwrite=overwrite)
         if finished is not None:  # this very run, finished: nothing to do

@@ -3,8 +3,8 @@ model's zip (for a generator built in memory)."""
 
 from __future__ import annotations
 
-import hashlib
 import io
+import json
 import os
 import pathlib
 from typing import Any
@@ -54,20 +54,72 @@ def saved_generator(path: str | pathlib.Path | io.BufferedIOBase, data: dict[str
     return generator, generator_path  # type: ignore[return-value]
 
 
-def file_sha256(path: str | os.PathLike) -> str:
-    """The SHA-256 of a file's bytes (hex)."""
-    digest = hashlib.sha256()
-    with open(path, "rb") as file:
-        for block in iter(lambda: file.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
+
+def generator_digest(generator: TrajectoryGenerator | None) -> str | None:
+    """The SHA-256 (hex) of a generator's content: its class, configuration, weights and normalisation statistics,
+    what decoding depends on (not its training history or the file it came from, so a generator and its file, or two
+    saves of it, agree). ``None`` for a generator that is not a :class:`~sb3_genrl.generative.TorchTrajectoryGenerator`
+    (its content is unknown), or none."""
+    if generator is None or not (hasattr(generator, "state_tensors") and hasattr(generator, "config")):
+        return None
+    from sb3_genrl.generative.serialization import payload_digest
+
+    return payload_digest({"format_version": "content", "format": "", "class": type(generator).__name__,
+                           "sb3_genrl_version": "", "config": json.dumps(generator.config()), "history": "",
+                           "state": generator.state_tensors()})
 
 
-def check_generator_file(path: str | os.PathLike, recorded: str | None, model: Any) -> None:
-    """Refuse a generator file whose SHA-256 is not the one ``recorded`` by the model ``model`` (named in the error):
-    the file was replaced (e.g. by another ``train-generator`` run) since the policy was trained on it. A model saved
-    without a record (an older version) is not checked."""
-    if recorded is not None and (actual := file_sha256(path)) != recorded:
-        raise ValueError(f"the generator file {os.fspath(path)!r} is not the one {model} was trained with: its SHA-256 is "
-                         f"{actual[:16]}..., the policy recorded {recorded[:16]}... (the file was replaced since); pass the "
-                         "generator it was trained with")
+def describe_generator(generator: TrajectoryGenerator, path: str | os.PathLike | None = None) -> str:
+    """``BetaVAE from 'vae.pt' (SHA-256 1a2b3c4d...)``: a generator as the errors name it."""
+    digest = generator_digest(generator)
+    return (f"{type(generator).__name__}" + (f" from {os.fspath(path)!r}" if path is not None else "")
+            + (f" (SHA-256 {digest[:16]}...)" if digest else f" (object {id(generator):#x})"))
+
+
+def check_recorded_generator(generator: TrajectoryGenerator | None, recorded: str | None,
+                             path: str | os.PathLike | None, model: Any) -> None:
+    """Refuse a generator whose content is not the one a saved model ``model`` recorded (``recorded``: its
+    :func:`generator_digest`) - e.g. a generator file replaced by another ``train-generator`` run since the policy was
+    trained on it. A model saved without a record (an older version, a generator of unknown content) is not checked.
+
+    :param path: the file the generator was loaded from (named in the error), if any
+    """
+    digest = generator_digest(generator)
+    if recorded is not None and digest is not None and digest != recorded:
+        raise ValueError(f"the generator {describe_generator(generator, path)} is not the one {model} was trained with "
+                         f"(SHA-256 {recorded[:16]}...): a policy decodes its latent actions with its own generator; "
+                         "pass the generator it was trained with")
+
+
+def check_same_generator(given: TrajectoryGenerator | None, wrapped: TrajectoryGenerator | None,
+                         given_path: str | None, *, copied: bool = False) -> None:
+    """Refuse a generator given beside an env that already wraps another one (GenRL would train on the env's and save
+    the given one). Generators of the same content (:func:`generator_digest`) pass; of unknown content, only the same
+    object, or one of the same class when ``wrapped`` is a copy from an env process (``copied``)."""
+    if given is None or wrapped is None or given is wrapped:
+        return
+    digests = generator_digest(given), generator_digest(wrapped)
+    if digests[0] is None and digests[1] is None:
+        same = copied and type(given) is type(wrapped)
+    else:
+        same = digests[0] == digests[1]
+    if not same:
+        raise ValueError(f"the generator given, {describe_generator(given, given_path)}, is not the one wrapping the "
+                         f"env, {describe_generator(wrapped)}: GenRL plays the env's; pass that one, or no generator "
+                         "(the env's is used)")
+
+
+def wrapped_generator(env: Any) -> tuple[TrajectoryGenerator | None, bool]:
+    """The generator of the :class:`~sb3_genrl.LatentActionWrapper` that ``env`` (or a VecEnv's first env) already is
+    or holds (``None`` for a raw env, a Gymnasium id or none), and whether it is a copy (from an env process)."""
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
+
+    from sb3_genrl.wrappers import find_latent_wrapper
+
+    if isinstance(env, VecEnv):
+        try:
+            return env.get_attr("generator", indices=[0])[0], not isinstance(env.unwrapped, DummyVecEnv)
+        except AttributeError:
+            return None, False
+    wrapper = find_latent_wrapper(env) if hasattr(env, "unwrapped") else None
+    return None if wrapper is None else wrapper.generator, False

@@ -350,7 +350,9 @@ class GenRL(OnPolicyAlgorithm):
     def load(cls: type[SelfGenRL], path: str | pathlib.Path | io.BufferedIOBase, env: GymEnv | None = None,  # type: ignore[override]
              device: th.device | str = "auto", custom_objects: dict[str, Any] | None = None, print_system_info: bool = False,
              force_reset: bool = True, *, generator: TrajectoryGenerator | str | None = None, **kwargs: Any) -> SelfGenRL:
-        """Load like SB3. The generator is ``generator`` when given, else the saved path or ``<name>.generator.pt``.
+        """Load like SB3. The generator is ``generator`` when given, else the saved path or ``<name>.generator.pt``;
+        one whose content is not the generator the model was trained with (its SHA-256, ``generator_sha256``) is
+        refused.
 
         Without any generator the model still predicts latent actions; ``predict_trajectory`` then raises.
         """
@@ -360,6 +362,7 @@ class GenRL(OnPolicyAlgorithm):
         if isinstance(path, io.BufferedIOBase):
             path.seek(0)
         generator, generator_path = generator_files.saved_generator(path, data or {}, generator, device)  # model's device
+        generator_files.check_recorded_generator(generator, (data or {}).get("generator_sha256"), generator_path, path)
         if env is not None:  # a raw env is wrapped as at training time
             latent_clip = kwargs.get("latent_clip", (data or {}).get("latent_clip", 3.0))
             env, generator = latent_action_env(env, generator, latent_clip=latent_clip)  # type: ignore[arg-type]
@@ -371,14 +374,18 @@ class GenRL(OnPolicyAlgorithm):
 
     def _latent_env(self, env: Any, generator: TrajectoryGenerator | str | None, latent_clip: float,
                     policy_kwargs: dict[str, Any] | None, device: th.device | str) -> tuple[Any, dict[str, Any]]:
-        """Set ``generator`` and ``generator_path``; the env in its latent-action wrapper, and the policy arguments
-        completed with the prior's spread and, for Box contexts, :class:`BoxScaler`. A generator given as a file is
-        loaded onto ``device``."""
+        """Set ``generator``, ``generator_path`` and ``generator_sha256``; the env in its latent-action wrapper, and the
+        policy arguments completed with the prior's spread and, for Box contexts, :class:`BoxScaler`. A generator given
+        as a file is loaded onto ``device``; one given beside an env that wraps another is refused."""
         self.generator_path: str | None = None
         if isinstance(generator, str | os.PathLike):
             self.generator_path = os.path.abspath(generator)
             generator = generator_files.load_generator(self.generator_path, device)
+        wrapped, copied = generator_files.wrapped_generator(env)
         env, self.generator = latent_action_env(env, generator, latent_clip=latent_clip)  # type: ignore[arg-type]
+        generator_files.check_same_generator(generator, wrapped, self.generator_path, copied=copied)  # type: ignore[arg-type]
+        # What the policy's latent actions mean: saved with the model, and checked against the generator at load
+        self.generator_sha256 = generator_files.generator_digest(self.generator)
         policy_kwargs = dict(policy_kwargs or {})
         if self.generator is not None:
             policy_kwargs.setdefault("log_std_init", default_log_std_init(self.generator.prior))

@@ -25,7 +25,7 @@ import torch as th
 from stable_baselines3.common.torch_layers import CombinedExtractor, FlattenExtractor
 
 from sb3_genrl.generative.base import TrajectoryGenerator
-from sb3_genrl.genrl.generator_files import generator_file, load_generator
+from sb3_genrl.genrl.generator_files import check_recorded_generator, generator_file, load_generator
 from sb3_genrl.genrl.genrl import GenRL
 from sb3_genrl.genrl.policies import BoxScaler, ContextStdPolicy, MlpPolicy, MultiInputPolicy
 from sb3_genrl.wrappers import LatentActionWrapper
@@ -92,13 +92,16 @@ def _read_data(path: str) -> dict[str, Any]:
 
 def _resolve_generator(path: str, data: dict[str, Any], generator: TrajectoryGenerator | str | None,
                        device: th.device | str) -> TrajectoryGenerator:
-    """The given generator, else the file the zip names, else ``<name>.generator.pt`` beside the zip, onto ``device``."""
+    """The given generator, else the file the zip names, else ``<name>.generator.pt`` beside the zip, onto ``device``;
+    refused when it is not the one the policy was trained with."""
     if isinstance(generator, TrajectoryGenerator):
         return generator
     candidates = [generator] if generator is not None else [data.get("generator_path"), generator_file(path)]
     for candidate in candidates:
         if isinstance(candidate, str | os.PathLike) and os.path.isfile(candidate):
-            return load_generator(os.fspath(candidate), device)
+            generator = load_generator(os.fspath(candidate), device)
+            check_recorded_generator(generator, data.get("generator_sha256"), candidate, path)  # the file named here
+            return generator
     raise ValueError(f"no generator for {path}: none of {[str(c) for c in candidates if c is not None]} exists; "
                      "pass the generator file")
 

@@ -26,7 +26,7 @@ from sb3_genrl.curves import (
     write_learning_curve,
 )
 from sb3_genrl.generative.base import TrajectoryGenerator
-from sb3_genrl.genrl.generator_files import file_sha256
+from sb3_genrl.genrl.generator_files import generator_digest
 from sb3_genrl.genrl.genrl import EStep, GenRL
 from sb3_genrl.genrl.policies import MlpPolicy
 from sb3_genrl.genrl.settings import NOT_SETTINGS, check_genrl_settings
@@ -122,7 +122,7 @@ def train_policy(
     arguments = {"e_step": e_step, "n_steps": batch_episodes // n_envs, "batch_size": batch_size, "seed": seed,
                  "device": device, "verbose": verbose, **genrl_kwargs}
     identity = {"algorithm": "genrl", "task": task_name, "episodes": int(episodes), "seed": seed, "n_envs": n_envs,
-                "batch_episodes": batch_episodes, "generator_sha256": _generator_sha256(generator),
+                "batch_episodes": batch_episodes, "generator_sha256": generator_digest(env.generator),
                 "genrl_settings": genrl_settings(arguments)}
     with folder_lock(out):  # one run at a time in out; another run's files are refused, never mixed in
         try:
@@ -147,11 +147,6 @@ def train_policy(
 # What a run writes in its folder (besides summary.json, checkpoint/ and run_record.json; see sb3_genrl.run_folder)
 OUTPUTS = ("genrl_policy.zip", "genrl_policy.generator.pt", "learning_curve.csv", "learning_curve.png", MONITOR_FILE,
            LOG_DIR)
-
-
-def _generator_sha256(generator: TrajectoryGenerator | str | os.PathLike) -> str | None:
-    """The generator file's SHA-256 (part of what a run is); ``None`` for a generator given in memory."""
-    return None if isinstance(generator, TrajectoryGenerator) else file_sha256(generator)
 
 
 def _train(env: Any, generator: TrajectoryGenerator | str, episodes: int, out: pathlib.Path, progress_bar: bool,

@@ -156,3 +156,52 @@ def test_load_switches_the_optional_states_on_and_off(tmp_path):
     assert switched_on.hindsight.optimizer.state_dict()["state"] == {}
     switched_on.learn(16)
     assert all(value["step"] == 4 for value in switched_on.hindsight.optimizer.state_dict()["state"].values())
+
+
+def _vae(seed: int):
+    from sb3_genrl.generative import make_generator
+
+    generator = make_generator("VAE1", horizon=69, action_dim=7, device="cpu")
+    generator._reset(seed, "cpu")  # untrained weights drawn from seed
+    return generator
+
+
+def test_a_policy_refuses_a_generator_other_than_the_one_it_was_trained_with(tmp_path, cli):
+    from sb3_genrl.genrl.loading import load_policy
+
+    trained_with, other = _vae(0), _vae(1)
+    trained_with.save(str(tmp_path / "vae.pt"))
+    GenRL("GenRL/Hockey-v0", str(tmp_path / "vae.pt"), n_steps=8, device="cpu").save(tmp_path / "policy.zip")
+    assert GenRL.load(tmp_path / "policy.zip", device="cpu").generator_sha256 == generator_files.generator_digest(
+        trained_with)
+    GenRL.load(tmp_path / "policy.zip", device="cpu", generator=trained_with)  # in memory, the same content: accepted
+    other.save(str(tmp_path / "vae.pt"))  # a new generator written to the same path
+    refused = r"the generator BetaVAE from '.*vae.pt' \(SHA-256 [0-9a-f]{16}\.\.\.\) is not the one .*policy.zip was trained"
+    with pytest.raises(ValueError, match=refused):
+        GenRL.load(tmp_path / "policy.zip", device="cpu")
+    with pytest.raises(ValueError, match=refused):
+        load_policy(tmp_path / "policy.zip", gym.make("GenRL/Hockey-v0"))
+    with pytest.raises(ValueError, match="is not the one"):
+        GenRL.load(tmp_path / "policy.zip", device="cpu", generator=other)  # in memory
+    code, _, err = cli("video", "--task", "hockey", "--policy", tmp_path / "policy.zip", "--out", tmp_path / "v.gif")
+    assert code == 2 and "is not the one" in err and not (tmp_path / "v.gif").exists()
+    # A generator made in memory is saved beside the policy, and that file is checked the same way.
+    GenRL("GenRL/Hockey-v0", trained_with, n_steps=8, device="cpu").save(tmp_path / "memory.zip")
+    GenRL.load(tmp_path / "memory.zip", device="cpu")
+    other.save(str(tmp_path / "memory.generator.pt"))
+    with pytest.raises(ValueError, match="memory.generator.pt.* is not the one"):
+        GenRL.load(tmp_path / "memory.zip", device="cpu")
+
+
+def test_a_generator_given_beside_an_env_that_wraps_another_is_refused(tmp_path):
+    wrapping, other = _vae(0), _vae(1)
+    wrapping.save(str(tmp_path / "vae.pt"))
+    env = LatentActionWrapper(gym.make("GenRL/Hockey-v0"), wrapping)
+    with pytest.raises(ValueError, match=r"the generator given, BetaVAE \(SHA-256 [0-9a-f]{16}\.\.\.\), is not the one "
+                                         r"wrapping the env, BetaVAE \(SHA-256 [0-9a-f]{16}\.\.\.\)"):
+        GenRL(env, other, n_steps=8)
+    # The env's own generator, or one of the same content (its file), is accepted.
+    assert GenRL(env, wrapping, n_steps=8).generator is wrapping
+    assert GenRL(env, str(tmp_path / "vae.pt"), n_steps=8).generator_path == str(tmp_path / "vae.pt")
+    with pytest.raises(ValueError, match=r"LinearGenerator \(object 0x[0-9a-f]+\), is not the one wrapping the env"):
+        GenRL(LatentActionWrapper(FastReachEnv(), LinearGenerator()), LinearGenerator())  # of unknown content
