@@ -255,3 +255,12 @@ def test_windowed_curve_and_mean_std_over_seeds():
     grid, mean, std = mean_std_over_seeds(curves, grid=np.array([0.0, 5.0, 10.0]))
     np.testing.assert_allclose(mean, [0.0, 1.0, 2.0])
     np.testing.assert_allclose(std, [0.0, 0.5, 1.0])
+
+
+def test_the_quickstart_video_stage_is_done_only_when_its_gif_and_its_strip_exist(tmp_path):
+    from sb3_genrl.study.quickstart import _done
+
+    (tmp_path / "policy.gif").write_bytes(b"GIF89a")  # killed between the GIF and the strip
+    assert not _done(tmp_path, "video")
+    (tmp_path / "policy_strip.png").write_bytes(b"\x89PNG")
+    assert _done(tmp_path, "video")

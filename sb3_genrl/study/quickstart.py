@@ -112,8 +112,8 @@ def _stage_settings(task: str, demo_episodes: int, epochs: int, policy_episodes:
 
 
 # Where each stage writes (checked for "done") and where it records its settings.
-_OUTPUTS = {"demonstrations": "demonstrations", "generator": "vae.pt", "evaluation": "evaluation/results.json",
-            "policy": "policy/summary.json", "video": "policy.gif"}
+_OUTPUTS = {"demonstrations": ("demonstrations",), "generator": ("vae.pt",), "evaluation": ("evaluation/results.json",),
+            "policy": ("policy/summary.json",), "video": ("policy.gif", "policy_strip.png")}  # a stage is done when all exist
 STAGE_TIMES = "stage_times.json"  # seconds each stage took when it was made, kept for the report of a resumed run
 _RECORDS = {"generator": "vae.stage.json", "evaluation": "evaluation/stage.json", "policy": "policy/stage.json",
             "video": "video.stage.json"}
@@ -126,8 +126,11 @@ def _read_stage_times(out: pathlib.Path) -> dict[str, float]:
 
 
 def _done(out: pathlib.Path, stage: str) -> bool:
-    path = out / _OUTPUTS[stage]
-    return path.is_dir() and any(path.iterdir()) if stage == "demonstrations" else path.exists()
+    """Whether every file the stage writes exists (a stage killed between two of them is not done)."""
+    if stage == "demonstrations":
+        path = out / _OUTPUTS[stage][0]
+        return path.is_dir() and any(path.iterdir())
+    return all((out / name).exists() for name in _OUTPUTS[stage])
 
 
 def _recorded(out: pathlib.Path, stage: str) -> tuple[pathlib.Path, dict[str, Any] | None]:
