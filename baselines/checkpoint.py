@@ -18,19 +18,16 @@ finished run removes its checkpoint. A checkpoint of another run (other settings
 
 from __future__ import annotations
 
-import os
 import pathlib
-import shutil
 import time
 from typing import Any
 
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.monitor import Monitor
 
-from sb3_genrl.curves import LOG_DIR, MONITOR_FILE
-from sb3_genrl.utils import atomic_write_text, read_checkpoint, write_checkpoint
+from sb3_genrl.run_folder import CHECKPOINT_DIR, keep_episodes, remove_checkpoint  # noqa: F401 (re-exported)
+from sb3_genrl.utils import read_checkpoint, write_checkpoint
 
-CHECKPOINT_DIR = "checkpoint"
 MODEL, BUFFER = "model.zip", "replay_buffer.pkl"
 
 
@@ -92,29 +89,15 @@ def resume_state(out: pathlib.Path, identity: dict[str, Any]) -> dict[str, Any] 
 
 def prepare_resume(out: pathlib.Path, state: dict[str, Any]) -> None:
     """Keep the Monitor file's rows up to the checkpoint and set the earlier training log aside (once per checkpoint: a
-    second resume from the same checkpoint keeps the log set aside by the first)."""
-    monitor_file = out / MONITOR_FILE
-    lines = monitor_file.read_text().splitlines(keepends=True)
-    kept = 2 + int(state["episodes"])  # the JSON header, the column names, one row per episode
-    if len(lines) < kept:
-        raise ValueError(f"{monitor_file} holds {len(lines) - 2} episodes, fewer than its checkpoint's {state['episodes']}")
-    atomic_write_text(monitor_file, "".join(lines[:kept]), newline="")
-    progress = out / LOG_DIR / "progress.csv"
-    earlier = progress.with_name(f"progress.until_episode_{state['episodes']}.csv")
-    if earlier.is_file():  # resumed from this checkpoint before: the log since then is of episodes played again
-        progress.unlink(missing_ok=True)
-    elif progress.is_file():
-        os.replace(progress, earlier)
+    second resume from the same checkpoint keeps the log set aside by the first; see
+    :func:`sb3_genrl.run_folder.keep_episodes`)."""
+    keep_episodes(out, int(state["episodes"]))
 
 
 def continue_clocks(monitor: Monitor, state: dict[str, Any]) -> None:
     """Make the resumed Monitor's ``t`` and ``cpu_seconds`` columns go on from the checkpoint's."""
     monitor.t_start = time.time() - float(state["monitor_seconds"])
     _episode_info(monitor).continue_from(float(state["cpu_seconds"]))
-
-
-def remove_checkpoint(out: pathlib.Path) -> None:
-    shutil.rmtree(out / CHECKPOINT_DIR, ignore_errors=True)
 
 
 def _monitor(model: Any) -> Monitor:

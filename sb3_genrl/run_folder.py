@@ -89,3 +89,36 @@ def _remove(out: Path, names: Sequence[str]) -> None:
 
 def _normal(value: Mapping[str, Any]) -> dict[str, Any]:
     return json.loads(json.dumps(dict(value)))  # as the record reads back: tuples as lists, keys as strings
+
+
+def keep_episodes(out: str | os.PathLike[str], episodes: int) -> None:
+    """Before a run resumes from its checkpoint at ``episodes``: keep the Monitor file's rows up to it (the later ones
+    are played again) and set the training log aside as ``logs/progress.until_episode_<episodes>.csv`` (SB3's logger
+    starts a new one). A second resume from the same checkpoint keeps the log the first set aside (the one since
+    then is of episodes played again).
+
+    :param out: the run folder
+    :param episodes: the episodes the checkpoint had played
+    """
+    from sb3_genrl.curves import LOG_DIR, MONITOR_FILE
+    from sb3_genrl.utils import atomic_write_text
+
+    out = Path(out)
+    monitor_file = out / MONITOR_FILE
+    lines = monitor_file.read_text().splitlines(keepends=True)
+    kept = 2 + int(episodes)  # the JSON header, the column names, one row per episode
+    if len(lines) < kept:
+        raise ValueError(f"{monitor_file} holds {len(lines) - 2} episodes, fewer than its checkpoint's {episodes}; "
+                         "pass --overwrite to start the run afresh")
+    atomic_write_text(monitor_file, "".join(lines[:kept]), newline="")
+    progress = out / LOG_DIR / "progress.csv"
+    earlier = progress.with_name(f"progress.until_episode_{episodes}.csv")
+    if earlier.is_file():
+        progress.unlink(missing_ok=True)
+    elif progress.is_file():
+        os.replace(progress, earlier)
+
+
+def remove_checkpoint(out: str | os.PathLike[str]) -> None:
+    """Remove the run's checkpoint (a finished run)."""
+    shutil.rmtree(Path(out) / CHECKPOINT_DIR, ignore_errors=True)

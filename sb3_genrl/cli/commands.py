@@ -67,7 +67,8 @@ def train_policy_command(args: argparse.Namespace) -> int:
 
     result = train_policy(args.task, str(args.generator), episodes=args.episodes, seed=args.seed, out_dir=args.out,
                           n_envs=args.n_envs, device=args.device, progress_bar=not args.no_progress_bar,
-                          overwrite=args.overwrite, **policy_arguments(args))
+                          checkpoint_every=args.checkpoint_every or None, overwrite=args.overwrite,
+                          **policy_arguments(args))
     print(f"GenRL on {args.task}: {result['episodes']} episodes, {result['iterations']} iterations, mean reward "
           f"final {result['final_mean_reward']:.4g}, best {result['best_mean_reward']:.4g} -> {result['model_path']}")
     return 0

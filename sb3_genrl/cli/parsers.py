@@ -125,6 +125,8 @@ def add_evaluate(sub: argparse._SubParsersAction) -> None:
 
 
 def add_train_policy(sub: argparse._SubParsersAction) -> None:
+    from sb3_genrl.genrl.checkpoint import CHECKPOINT_EVERY
+
     policy = sub.add_parser("train-policy", help="train a GenRL policy over a generator's latent space (Algorithm 1)")
     _task_option(policy)
     policy.add_argument("--generator", required=True, type=EXISTING, help="file of a trained generator")
@@ -145,6 +147,9 @@ def add_train_policy(sub: argparse._SubParsersAction) -> None:
                         help="GenRL settings laid over the task's (or, with --library-defaults, GenRL's defaults), "
                              "a mapping merged into a mapping, e.g. '{\"hindsight_kwargs\": {\"history\": 30}}' or "
                              "'{\"hindsight_kwargs\": null}' (hindsight off); checked before any work")
+    policy.add_argument("--checkpoint-every", type=option(check_int, int, minimum=0), default=CHECKPOINT_EVERY,
+                        help="episodes between checkpoints; a rerun of the same command into the same --out resumes "
+                             f"from the last one (0: none; default {CHECKPOINT_EVERY})")
     _overwrite_option(policy)
     _device_option(policy)
     _progress_option(policy)

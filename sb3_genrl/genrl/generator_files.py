@@ -43,7 +43,8 @@ def saved_generator(path: str | pathlib.Path | io.BufferedIOBase, data: dict[str
                     ) -> tuple[TrajectoryGenerator | None, str | None]:
     """The generator of a model loaded from ``path`` whose saved ``data`` is given, and its file: ``generator`` when
     given (a file is loaded onto ``device``), else the file ``data`` names, else :func:`generator_file` of ``path``;
-    ``(None, None)`` when there is none."""
+    ``(None, None)`` when there is none. One that is not the generator the model recorded is refused
+    (:func:`check_recorded_generator`)."""
     generator_path = os.path.abspath(generator) if isinstance(generator, str | os.PathLike) else None
     if generator is None:
         candidates = [data.get("generator_path")]
@@ -51,6 +52,7 @@ def saved_generator(path: str | pathlib.Path | io.BufferedIOBase, data: dict[str
         generator_path = next((str(p) for p in candidates if p is not None and os.path.isfile(p)), None)
     if generator_path is not None:
         generator = load_generator(generator_path, device)
+    check_recorded_generator(generator, data.get("generator_sha256"), generator_path, path)  # type: ignore[arg-type]
     return generator, generator_path  # type: ignore[return-value]
 
 
@@ -70,10 +72,12 @@ def generator_digest(generator: TrajectoryGenerator | None) -> str | None:
 
 
 def describe_generator(generator: TrajectoryGenerator, path: str | os.PathLike | None = None) -> str:
-    """``BetaVAE from 'vae.pt' (SHA-256 1a2b3c4d...)``: a generator as the errors name it."""
-    digest = generator_digest(generator)
+    """``BetaVAE from 'vae.pt' ((latent_dim, T, M) = (2, 69, 7), SHA-256 1a2b3c4d...)``: a generator as the errors
+    name it."""
+    digest, shape = generator_digest(generator), (generator.latent_dim, generator.horizon, generator.action_dim)
+    content = f"SHA-256 {digest[:16]}..." if digest else f"object {id(generator):#x}"
     return (f"{type(generator).__name__}" + (f" from {os.fspath(path)!r}" if path is not None else "")
-            + (f" (SHA-256 {digest[:16]}...)" if digest else f" (object {id(generator):#x})"))
+            + f" ((latent_dim, T, M) = {shape}, {content})")
 
 
 def check_recorded_generator(generator: TrajectoryGenerator | None, recorded: str | None,
@@ -91,11 +95,11 @@ def check_recorded_generator(generator: TrajectoryGenerator | None, recorded: st
                          "pass the generator it was trained with")
 
 
-def check_same_generator(given: TrajectoryGenerator | None, wrapped: TrajectoryGenerator | None,
-                         given_path: str | None, *, copied: bool = False) -> None:
+def check_same_generator(given: TrajectoryGenerator | None, env: Any, given_path: str | None) -> None:
     """Refuse a generator given beside an env that already wraps another one (GenRL would train on the env's and save
     the given one). Generators of the same content (:func:`generator_digest`) pass; of unknown content, only the same
-    object, or one of the same class when ``wrapped`` is a copy from an env process (``copied``)."""
+    object, or one of the same class when the env's is a copy from an env process."""
+    wrapped, copied = wrapped_generator(env)
     if given is None or wrapped is None or given is wrapped:
         return
     digests = generator_digest(given), generator_digest(wrapped)

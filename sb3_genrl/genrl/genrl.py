@@ -310,10 +310,9 @@ class GenRL(OnPolicyAlgorithm):
 
     def set_parameters(self, load_path_or_dict: str | dict[str, Any], exact_match: bool = True,
                        device: th.device | str = "auto") -> None:
-        """Like SB3's ``set_parameters``, for a model whose ``policy_averaging`` or hindsight regression was switched
-        on or off at load (``GenRL.load(..., policy_averaging=None)``): the saved state of a setting that is now off
-        is dropped, and one that is now on but was not saved starts afresh (the average from the loaded policy, the
-        regression's Adam without moments). The regression's learning rate is this model's, not the saved one."""
+        """Like SB3's, for a model whose ``policy_averaging`` or hindsight regression was switched on or off at load:
+        the saved state of a setting now off is dropped, one now on but not saved starts afresh (the average from the
+        loaded policy, the regression's Adam without moments). The regression's learning rate is this model's."""
         from stable_baselines3.common.save_util import load_from_zip_file
 
         params = dict(load_path_or_dict if isinstance(load_path_or_dict, dict)
@@ -332,10 +331,8 @@ class GenRL(OnPolicyAlgorithm):
             self.hindsight.set_learning_rate()
 
     def save(self, path: str | pathlib.Path | io.BufferedIOBase, exclude: Any = None, include: Any = None) -> None:
-        """Save like SB3, atomically for a file path (a ``.zip`` suffix is added when there is none, as SB3 does).
-
-        An in-memory generator (no known path) is also saved as ``<name>.generator.pt`` beside it.
-        """
+        """Save like SB3, atomically for a file path (a ``.zip`` suffix is added when there is none, as SB3 does); an
+        in-memory generator (no known path) is also saved as ``<name>.generator.pt`` beside it."""
         if not isinstance(path, str | pathlib.Path):
             super().save(path, exclude=exclude, include=include)
             return
@@ -350,9 +347,8 @@ class GenRL(OnPolicyAlgorithm):
     def load(cls: type[SelfGenRL], path: str | pathlib.Path | io.BufferedIOBase, env: GymEnv | None = None,  # type: ignore[override]
              device: th.device | str = "auto", custom_objects: dict[str, Any] | None = None, print_system_info: bool = False,
              force_reset: bool = True, *, generator: TrajectoryGenerator | str | None = None, **kwargs: Any) -> SelfGenRL:
-        """Load like SB3. The generator is ``generator`` when given, else the saved path or ``<name>.generator.pt``;
-        one whose content is not the generator the model was trained with (its SHA-256, ``generator_sha256``) is
-        refused.
+        """Load like SB3. The generator is ``generator`` when given, else the saved path or ``<name>.generator.pt``
+        (refused when its SHA-256 is not the model's ``generator_sha256``).
 
         Without any generator the model still predicts latent actions; ``predict_trajectory`` then raises.
         """
@@ -362,7 +358,6 @@ class GenRL(OnPolicyAlgorithm):
         if isinstance(path, io.BufferedIOBase):
             path.seek(0)
         generator, generator_path = generator_files.saved_generator(path, data or {}, generator, device)  # model's device
-        generator_files.check_recorded_generator(generator, (data or {}).get("generator_sha256"), generator_path, path)
         if env is not None:  # a raw env is wrapped as at training time
             latent_clip = kwargs.get("latent_clip", (data or {}).get("latent_clip", 3.0))
             env, generator = latent_action_env(env, generator, latent_clip=latent_clip)  # type: ignore[arg-type]
@@ -381,11 +376,9 @@ class GenRL(OnPolicyAlgorithm):
         if isinstance(generator, str | os.PathLike):
             self.generator_path = os.path.abspath(generator)
             generator = generator_files.load_generator(self.generator_path, device)
-        wrapped, copied = generator_files.wrapped_generator(env)
+        generator_files.check_same_generator(generator, env, self.generator_path)  # type: ignore[arg-type]
         env, self.generator = latent_action_env(env, generator, latent_clip=latent_clip)  # type: ignore[arg-type]
-        generator_files.check_same_generator(generator, wrapped, self.generator_path, copied=copied)  # type: ignore[arg-type]
-        # What the policy's latent actions mean: saved with the model, and checked against the generator at load
-        self.generator_sha256 = generator_files.generator_digest(self.generator)
+        self.generator_sha256 = generator_files.generator_digest(self.generator)  # saved, and checked by load()
         policy_kwargs = dict(policy_kwargs or {})
         if self.generator is not None:
             policy_kwargs.setdefault("log_std_init", default_log_std_init(self.generator.prior))

@@ -26,11 +26,12 @@ from sb3_genrl.curves import (
     write_learning_curve,
 )
 from sb3_genrl.generative.base import TrajectoryGenerator
+from sb3_genrl.genrl.checkpoint import CHECKPOINT_EVERY, GenRLCheckpoint, RandomStateRecorder, resume_genrl, resume_state
 from sb3_genrl.genrl.generator_files import generator_digest
 from sb3_genrl.genrl.genrl import EStep, GenRL
 from sb3_genrl.genrl.policies import MlpPolicy
 from sb3_genrl.genrl.settings import NOT_SETTINGS, check_genrl_settings
-from sb3_genrl.run_folder import SUMMARY, open_run
+from sb3_genrl.run_folder import CHECKPOINT_DIR, SUMMARY, keep_episodes, open_run, remove_checkpoint
 from sb3_genrl.utils import atomic_write_json, folder_lock
 from sb3_genrl.wrappers import LatentActionWrapper
 
@@ -68,22 +69,11 @@ def _resolve_env_id(task: str) -> tuple[str, str]:
     return spec.env_id, spec.name
 
 
-def train_policy(
-    task: str,
-    generator: TrajectoryGenerator | str,
-    *,
-    episodes: int,
-    seed: int = 0,
-    out_dir: str | os.PathLike,
-    e_step: EStep = "trpo",
-    batch_episodes: int = 64,
-    n_envs: int = 1,
-    device: str = "auto",
-    progress_bar: bool = False,
-    verbose: int = 0,
-    overwrite: bool = False,
-    **genrl_kwargs: Any,
-) -> dict[str, Any]:
+def train_policy(task: str, generator: TrajectoryGenerator | str, *, episodes: int, seed: int = 0,
+                 out_dir: str | os.PathLike, e_step: EStep = "trpo", batch_episodes: int = 64, n_envs: int = 1,
+                 device: str = "auto", progress_bar: bool = False, verbose: int = 0,
+                 checkpoint_every: int | None = CHECKPOINT_EVERY, overwrite: bool = False,
+                 **genrl_kwargs: Any) -> dict[str, Any]:
     """Train a GenRL policy for ``episodes`` episodes on ``task`` and write everything to ``out_dir``.
 
     Writes ``genrl_policy.zip`` (the model), ``summary.json``, ``episodes.monitor.csv`` (SB3's Monitor: one row per
@@ -107,13 +97,16 @@ def train_policy(
     :param device: torch device
     :param progress_bar: show a progress bar
     :param verbose: GenRL verbosity
+    :param checkpoint_every: episodes between checkpoints (``None``: none), at the start of an iteration; the same
+        run into the same ``out_dir`` resumes from the last one and ends as the run would have ended without the stop,
+        bit for bit (:mod:`sb3_genrl.genrl.checkpoint`)
     :param overwrite: replace a run already in ``out_dir`` (its files only) instead of refusing or resuming it
     :param genrl_kwargs: further :class:`~sb3_genrl.GenRL` arguments
     :return: paths of the outputs and a summary (``episodes``, ``iterations``, ``final_mean_reward``,
         ``best_mean_reward``, ``genrl_settings``: every GenRL hyperparameter in effect, see :func:`genrl_settings`)
     """
     env_id, task_name = _resolve_env_id(task)
-    _check_arguments(episodes, batch_episodes, n_envs, seed, device, {"e_step": e_step, **genrl_kwargs})
+    _check_arguments(episodes, batch_episodes, n_envs, seed, device, checkpoint_every, {"e_step": e_step, **genrl_kwargs})
     out = check_output_dir(out_dir)
     # Built first: a generator that does not fit the task is refused before anything is written.
     env = LatentActionWrapper(gym.make(env_id), _as_generator(generator))
@@ -133,15 +126,29 @@ def train_policy(
         if finished is not None:  # this very run, finished: nothing to do
             env.close()
             return finished
-        model = _train(_training_env(env, n_envs, out), generator, int(episodes), out, progress_bar, arguments)
-        curve = write_learning_curve(out / MONITOR_FILE, out, window=batch_episodes,
-                                     title=f"GenRL on {env_id} (seed {seed})")
-        result = {"algorithm": "genrl", "task": task_name, "seed": seed, "n_envs": n_envs, **_output_paths(out),
-                  "episodes": int(model.num_timesteps), "iterations": len(curve["episodes"]),
-                  "final_mean_reward": float(curve["mean_reward"][-1]),
-                  "best_mean_reward": float(np.max(curve["mean_reward"])), "genrl_settings": identity["genrl_settings"]}
-        atomic_write_json(out / SUMMARY, result)  # last: the run is finished once it exists
-        return result
+        return _run(env, generator, out, identity, arguments, checkpoint_every, progress_bar, env_id)
+
+
+def _run(env: LatentActionWrapper, generator: TrajectoryGenerator | str, out: pathlib.Path, identity: dict[str, Any],
+         arguments: dict[str, Any], checkpoint_every: int | None, progress_bar: bool, env_id: str) -> dict[str, Any]:
+    """Train the run ``identity`` in ``out`` (from its checkpoint when it has one); its summary, written last."""
+    state = resume_state(out / CHECKPOINT_DIR, identity)  # this unfinished run's checkpoint, if any
+    if state is not None:
+        keep_episodes(out, state["episodes"])
+    checkpointing = None if checkpoint_every is None else (int(checkpoint_every), identity)
+    model = _train(_training_env(env, identity["n_envs"], out, append=state is not None), generator,
+                   identity["episodes"], out, progress_bar, arguments, state, checkpointing)
+    curve = write_learning_curve(out / MONITOR_FILE, out, window=identity["batch_episodes"],
+                                 title=f"GenRL on {env_id} (seed {identity['seed']})")
+    result = {key: identity[key] for key in ("algorithm", "task", "seed", "n_envs")} | _output_paths(out) | {
+        "episodes": int(model.num_timesteps), "iterations": len(curve["episodes"]),
+        "final_mean_reward": float(curve["mean_reward"][-1]), "best_mean_reward": float(np.max(curve["mean_reward"])),
+        "genrl_settings": identity["genrl_settings"]}
+    if state is not None:
+        result["resumed_at_episodes"] = [*state.get("resumed_at_episodes", []), state["episodes"]]
+    atomic_write_json(out / SUMMARY, result)
+    remove_checkpoint(out)  # after the summary: the run is finished once that exists
+    return result
 
 
 # What a run writes in its folder (besides summary.json, checkpoint/ and run_record.json; see sb3_genrl.run_folder)
@@ -150,12 +157,19 @@ OUTPUTS = ("genrl_policy.zip", "genrl_policy.generator.pt", "learning_curve.csv"
 
 
 def _train(env: Any, generator: TrajectoryGenerator | str, episodes: int, out: pathlib.Path, progress_bar: bool,
-           genrl_kwargs: dict[str, Any]) -> GenRL:
-    """Train GenRL on ``env`` with SB3's logger in ``out``, save it there, and close ``env``."""
+           genrl_kwargs: dict[str, Any], state: dict[str, Any] | None, checkpointing: tuple[int, dict] | None) -> GenRL:
+    """Train GenRL on ``env`` with SB3's logger in ``out``, from the checkpoint ``state`` (``None``: from the start),
+    checkpointing every ``checkpointing[0]`` episodes; save it there, and close ``env``."""
     try:
-        model = make_genrl(env, generator, **genrl_kwargs)
-        model.set_logger(training_logger(out, genrl_kwargs["verbose"]))
-        model.learn(total_timesteps=episodes, progress_bar=progress_bar, tb_log_name="GenRL")
+        logger = training_logger(out, genrl_kwargs["verbose"])
+        if state is None:
+            model = make_genrl(env, generator, **genrl_kwargs)
+            model.set_logger(logger)
+        else:
+            model = resume_genrl(state, env, generator, genrl_kwargs["device"], logger)
+        callback = None if checkpointing is None else GenRLCheckpoint(out / CHECKPOINT_DIR, *checkpointing, state)
+        model.learn(total_timesteps=episodes - model.num_timesteps, progress_bar=progress_bar, tb_log_name="GenRL",
+                    reset_num_timesteps=state is None, callback=callback)
         model.logger.dump(model.num_timesteps)  # SB3 dumps before each update: this writes the last one's logs
         model.logger.close()
         model.save(out / "genrl_policy.zip")
@@ -192,8 +206,10 @@ MAIN_GUARD = ("n_envs > 1 plays the envs in their own processes, which import th
 
 
 def _check_arguments(episodes: int, batch_episodes: int, n_envs: int, seed: int, device: str,
-                     genrl_kwargs: dict[str, Any]) -> None:
+                     checkpoint_every: int | None, genrl_kwargs: dict[str, Any]) -> None:
     check_positive_int(episodes, "episodes")
+    if checkpoint_every is not None:
+        check_positive_int(checkpoint_every, "checkpoint_every")
     check_int(batch_episodes, "batch_episodes", minimum=2)
     check_positive_int(n_envs, "n_envs")
     if n_envs > 1 and getattr(multiprocessing.current_process(), "_inheriting", False):  # Python's own test
@@ -208,10 +224,12 @@ def _check_arguments(episodes: int, batch_episodes: int, n_envs: int, seed: int,
     check_genrl_settings(genrl_kwargs)
 
 
-def _training_env(env: LatentActionWrapper, n_envs: int, out: pathlib.Path) -> Any:
-    """The monitored training env: ``env`` itself, or ``n_envs`` copies of it in their own processes."""
+def _training_env(env: LatentActionWrapper, n_envs: int, out: pathlib.Path, *, append: bool = False) -> Any:
+    """The monitored training env: ``env`` itself, or ``n_envs`` copies of it in their own processes, each under a
+    :class:`~sb3_genrl.genrl.checkpoint.RandomStateRecorder` (``append``: a resumed run adds to the Monitor file)."""
     if n_envs == 1:
-        return monitor_episodes(env, out)
+        return monitor_episodes(RandomStateRecorder(env), out, append=append)
+    from stable_baselines3.common.monitor import ResultsWriter
     from stable_baselines3.common.vec_env import SubprocVecEnv, VecMonitor
 
     spec, generator = env.env.spec, env.generator  # the spec, not the id: the processes need not know the id
@@ -220,7 +238,12 @@ def _training_env(env: LatentActionWrapper, n_envs: int, out: pathlib.Path) -> A
         venv = SubprocVecEnv([partial(_episode_env, spec, generator) for _ in range(n_envs)])
     except (BrokenPipeError, EOFError, ConnectionResetError) as error:  # a process died while starting
         raise RuntimeError(f"the {n_envs} env processes did not start. {MAIN_GUARD}") from error
-    return VecMonitor(venv, str(out / MONITOR_FILE), info_keywords=(*EPISODE_INFO, "cpu_seconds"))
+    keys = (*EPISODE_INFO, "cpu_seconds")
+    monitor = VecMonitor(venv, None if append else str(out / MONITOR_FILE), info_keywords=keys)
+    if append:  # SB3's VecMonitor always starts a new file
+        monitor.results_writer = ResultsWriter(str(out / MONITOR_FILE), header={"t_start": monitor.t_start},
+                                               extra_keys=keys, override_existing=False)
+    return monitor
 
 
 def _episode_env(spec: gym.envs.registration.EnvSpec, generator: TrajectoryGenerator) -> gym.Env:
@@ -228,7 +251,7 @@ def _episode_env(spec: gym.envs.registration.EnvSpec, generator: TrajectoryGener
     import torch
 
     torch.set_num_threads(1)  # one core per env process
-    return episode_info(LatentActionWrapper(gym.make(spec), generator))
+    return episode_info(RandomStateRecorder(LatentActionWrapper(gym.make(spec), generator)))
 
 
 def _json_settings(genrl_kwargs: dict[str, Any]) -> dict[str, Any]:

@@ -176,7 +176,8 @@ def test_a_policy_refuses_a_generator_other_than_the_one_it_was_trained_with(tmp
         trained_with)
     GenRL.load(tmp_path / "policy.zip", device="cpu", generator=trained_with)  # in memory, the same content: accepted
     other.save(str(tmp_path / "vae.pt"))  # a new generator written to the same path
-    refused = r"the generator BetaVAE from '.*vae.pt' \(SHA-256 [0-9a-f]{16}\.\.\.\) is not the one .*policy.zip was trained"
+    refused = (r"the generator BetaVAE from '.*vae.pt' \(\(latent_dim, T, M\) = \(2, 69, 7\), SHA-256 [0-9a-f]{16}\.\.\.\) "
+               r"is not the one .*policy.zip was trained")
     with pytest.raises(ValueError, match=refused):
         GenRL.load(tmp_path / "policy.zip", device="cpu")
     with pytest.raises(ValueError, match=refused):
@@ -197,11 +198,11 @@ def test_a_generator_given_beside_an_env_that_wraps_another_is_refused(tmp_path)
     wrapping, other = _vae(0), _vae(1)
     wrapping.save(str(tmp_path / "vae.pt"))
     env = LatentActionWrapper(gym.make("GenRL/Hockey-v0"), wrapping)
-    with pytest.raises(ValueError, match=r"the generator given, BetaVAE \(SHA-256 [0-9a-f]{16}\.\.\.\), is not the one "
-                                         r"wrapping the env, BetaVAE \(SHA-256 [0-9a-f]{16}\.\.\.\)"):
+    with pytest.raises(ValueError, match=r"the generator given, BetaVAE \(\(latent_dim, T, M\) = \(2, 69, 7\), SHA-256 "
+                                         r"[0-9a-f]{16}\.\.\.\), is not the one wrapping the env, BetaVAE "):
         GenRL(env, other, n_steps=8)
     # The env's own generator, or one of the same content (its file), is accepted.
     assert GenRL(env, wrapping, n_steps=8).generator is wrapping
     assert GenRL(env, str(tmp_path / "vae.pt"), n_steps=8).generator_path == str(tmp_path / "vae.pt")
-    with pytest.raises(ValueError, match=r"LinearGenerator \(object 0x[0-9a-f]+\), is not the one wrapping the env"):
+    with pytest.raises(ValueError, match=r"LinearGenerator \(\(latent_dim, T, M\) = \(2, 5, 2\), object 0x[0-9a-f]+\), is not "):
         GenRL(LatentActionWrapper(FastReachEnv(), LinearGenerator()), LinearGenerator())  # of unknown content

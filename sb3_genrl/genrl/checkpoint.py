@@ -1,0 +1,234 @@
+"""Checkpoints of a GenRL run, so that a stopped ``genrl train-policy`` resumes where it stopped and ends as if it
+had not stopped.
+
+Every ``checkpoint_every`` episodes, at the start of an iteration (after the last EM update, before the next batch is
+played), :class:`GenRLCheckpoint` writes into ``OUT/checkpoint/``, as one unit (:func:`sb3_genrl.utils.write_checkpoint`):
+
+- ``model.zip``: SB3's save of the model: the weights, the value function's and the regression's Adam, the policy
+  average, and SB3's counters (``num_timesteps``, ``_n_updates``, ``_last_obs``, ``_last_episode_starts``, the
+  ``ep_info_buffer``);
+- ``memories.pt`` (read back with ``torch.load(weights_only=True)``): the value function's batches and the hindsight
+  relabelling's kept pulls, the random states (torch, NumPy, Python, and every env's: its own, its goal sampler's and
+  its spaces', as they were before the env drew its current context), and the logger's values not yet written;
+- ``state.json``: the run's identity, the episodes done (the Monitor file's rows) and its clocks.
+
+:func:`resume_genrl` rebuilds the model from it on a new env, which draws the same context again from the restored
+states, so a resumed run plays the same episodes and ends with the same parameters, bit for bit, as one that was not
+stopped (the Monitor file keeps its rows up to the checkpoint; ``logs/progress.csv`` starts again at the checkpoint,
+the earlier one kept as ``progress.until_episode_K.csv``).
+"""
+
+from __future__ import annotations
+
+import pathlib
+import random
+import time
+import warnings
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch as th
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.logger import Logger
+from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
+
+from sb3_genrl.generative.base import TrajectoryGenerator
+from sb3_genrl.genrl.genrl import GenRL
+from sb3_genrl.utils import read_checkpoint, write_checkpoint
+
+CHECKPOINT_EVERY = 640  # episodes between checkpoints of genrl train-policy (ten of GenRL's default iterations)
+MODEL, MEMORIES = "model.zip", "memories.pt"
+
+
+class RandomStateRecorder(gym.Wrapper):
+    """Keeps the random states of the env it wraps as they were before its last reset (see :func:`random_states`),
+    so that a resumed run can make the env draw the same context again."""
+
+    def __init__(self, env: gym.Env) -> None:
+        super().__init__(env)
+        self.states_before_reset: dict[str, Any] = {}
+
+    def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
+        self.states_before_reset = random_states(self.env)
+        return self.env.reset(**kwargs)
+
+    def random_states_before_reset(self) -> dict[str, Any]:
+        return self.states_before_reset
+
+    def set_random_states(self, states: dict[str, Any]) -> None:
+        set_random_states(self.env, states)
+
+
+class GenRLCheckpoint(BaseCallback):
+    """Write a checkpoint every ``every`` episodes, at the start of an iteration (see the module doc).
+
+    :param folder: the checkpoint folder (``OUT/checkpoint``)
+    :param every: episodes between checkpoints
+    :param identity: what the run is, checked on resume
+    :param start: the state the run was resumed from (``None``: a new run)
+    """
+
+    def __init__(self, folder: pathlib.Path, every: int, identity: dict[str, Any], start: dict[str, Any] | None) -> None:
+        super().__init__()
+        self.folder, self.every, self.identity = folder, int(every), identity
+        self._last = 0 if start is None else int(start["episodes"])
+        self._resumed = [] if start is None else [*start.get("resumed_at_episodes", []), self._last]
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _on_rollout_start(self) -> None:
+        episodes = int(self.model.num_timesteps)  # one step, one episode
+        if episodes - self._last >= self.every:
+            self.save()
+            self._last = episodes
+
+    def save(self) -> None:
+        """Write the model, its memories and random states, and the state naming them, as one unit."""
+        model, env = self.model, self.model.get_env()
+        memories = {"value_memory": list(model._value_memory),
+                    "hindsight_memory": [] if model.hindsight is None else list(model.hindsight.memory),
+                    "random_states": _global_random_states(model),
+                    "env_random_states": env.env_method("random_states_before_reset"),
+                    "logger": _pending_logs(model.logger)}
+        write_checkpoint(self.folder, {"model": (MODEL, lambda path: OnPolicyAlgorithm.save(model, path)),
+                                       "memories": (MEMORIES, lambda path: th.save(memories, path))}, {
+            "identity": self.identity, "episodes": int(model.num_timesteps),
+            "monitor_seconds": time.time() - _monitor_start(env), "cpu_seconds": env.env_method("cpu_seconds"),
+            "resumed_at_episodes": self._resumed})
+
+
+def resume_state(folder: pathlib.Path, identity: dict[str, Any]) -> dict[str, Any] | None:
+    """The state of the checkpoint in ``folder`` if it is one of the run ``identity``, else ``None``."""
+    state = read_checkpoint(folder)
+    return state if state is not None and state["identity"] == identity else None
+
+
+def resume_genrl(state: dict[str, Any], env: Any, generator: TrajectoryGenerator | str, device: Any,
+                 logger: Logger) -> GenRL:
+    """The model as the checkpoint ``state`` left it, on ``env`` (a new monitored env of the run, its envs wrapped in
+    :class:`RandomStateRecorder`), which is reset to draw the checkpoint's contexts again, with ``logger`` holding the
+    values the stopped run had not written yet."""
+    memories = th.load(state["paths"]["memories"], weights_only=True, map_location="cpu")
+    model = GenRL.load(state["paths"]["model"], env=env, device=device, force_reset=False, generator=generator)
+    model._value_memory.extend(_to_device(memories["value_memory"], model.device))
+    if model.hindsight is not None:
+        model.hindsight.memory.extend(_to_device(memories["hindsight_memory"], model.device))
+    venv = model.get_env()
+    for index, states in enumerate(memories["env_random_states"]):
+        venv.env_method("set_random_states", states, indices=[index])
+    venv.unwrapped._reset_seeds()  # no seed at this reset (loading seeded the env): the restored states draw
+    observations = venv.reset()
+    if not _equal(observations, model._last_obs):
+        warnings.warn("the resumed env did not draw the checkpoint's contexts again: the resumed run is not the "
+                      "uninterrupted one bit for bit", stacklevel=2)
+        model._last_obs = observations
+    _set_global_random_states(model, memories["random_states"])
+    model.set_logger(logger)
+    _restore_pending_logs(memories["logger"], logger)
+    _continue_clocks(venv, state)
+    return model
+
+
+def random_states(env: gym.Env) -> dict[str, Any]:
+    """The states of every NumPy random generator held by ``env`` and the wrappers in it (their own, a goal
+    sampler's, their spaces'), by ``"<depth>.<attribute>"``."""
+    states = {}
+    for depth, layer in enumerate(_layers(env)):
+        for name, value in vars(layer).items():
+            if isinstance(value, np.random.Generator):
+                states[f"{depth}.{name}"] = value.bit_generator.state
+            elif isinstance(value, gym.spaces.Space) and isinstance(value._np_random, np.random.Generator):
+                states[f"{depth}.{name}._np_random"] = value._np_random.bit_generator.state
+    return states
+
+
+def set_random_states(env: gym.Env, states: dict[str, Any]) -> None:
+    """Give the generators :func:`random_states` names the states it recorded (a generator not made yet is made)."""
+    layers = list(_layers(env))
+    for key, state in states.items():
+        depth, *path, attribute = key.split(".")
+        owner = layers[int(depth)]
+        for name in path:
+            owner = getattr(owner, name)
+        generator = getattr(owner, attribute, None)
+        if not isinstance(generator, np.random.Generator):
+            generator = np.random.Generator(getattr(np.random, state["bit_generator"])())
+            setattr(owner, attribute, generator)
+        generator.bit_generator.state = state
+
+
+def _layers(env: gym.Env) -> Any:
+    while isinstance(env, gym.Wrapper):
+        yield env
+        env = env.env
+    yield env
+
+
+def _global_random_states(model: GenRL) -> dict[str, Any]:
+    name, keys, position, has_gauss, cached = np.random.get_state()  # noqa: NPY002 (SB3 seeds the global one)
+    version, internal, gauss = random.getstate()
+    space = model.action_space._np_random
+    return {"torch": th.get_rng_state(), "cuda": th.cuda.get_rng_state_all() if th.cuda.is_available() else [],
+            "numpy": (name, th.from_numpy(keys.astype(np.int64)), position, has_gauss, cached),
+            "python": (version, internal, gauss), "action_space": None if space is None else space.bit_generator.state}
+
+
+def _set_global_random_states(model: GenRL, states: dict[str, Any]) -> None:
+    th.set_rng_state(states["torch"])
+    if states["cuda"] and th.cuda.is_available():
+        th.cuda.set_rng_state_all(states["cuda"])
+    name, keys, position, has_gauss, cached = states["numpy"]
+    np.random.set_state((name, keys.numpy().astype(np.uint32), position, has_gauss, cached))  # noqa: NPY002
+    random.setstate(states["python"])
+    if states["action_space"] is not None:
+        model.action_space.seed(0)
+        model.action_space._np_random.bit_generator.state = states["action_space"]
+
+
+def _pending_logs(logger: Any) -> dict[str, Any]:
+    """What SB3's logger holds and has not written yet (the last update's ``train/`` values: SB3 writes them with the
+    next batch's ``rollout/`` values)."""
+    values = {key: value.item() if isinstance(value, np.generic) else value for key, value in logger.name_to_value.items()
+              if isinstance(value, int | float | str | np.generic)}
+    return {"values": values, "counts": {key: int(logger.name_to_count[key]) for key in values},
+            "excluded": {key: logger.name_to_excluded.get(key) for key in values}}
+
+
+def _restore_pending_logs(logs: dict[str, Any], logger: Logger) -> None:
+    logger.name_to_value.update(logs["values"])
+    logger.name_to_count.update(logs["counts"])
+    logger.name_to_excluded.update({key: tuple(value) if value is not None else value
+                                    for key, value in logs["excluded"].items()})
+
+
+def _monitor_start(venv: Any) -> float:
+    """The ``t_start`` of the run's Monitor (a VecMonitor, or the Monitor of a one-env DummyVecEnv)."""
+    return float(venv.t_start) if hasattr(venv, "t_start") else float(venv.envs[0].t_start)
+
+
+def _continue_clocks(venv: Any, state: dict[str, Any]) -> None:
+    """Make the Monitor's ``t`` and ``cpu_seconds`` columns go on from the checkpoint's."""
+    start = time.time() - float(state["monitor_seconds"])
+    if hasattr(venv, "t_start"):
+        venv.t_start = start
+    else:
+        venv.envs[0].t_start = start
+    for index, seconds in enumerate(state["cpu_seconds"]):
+        venv.env_method("continue_from", float(seconds), indices=[index])
+
+
+def _to_device(value: Any, device: th.device) -> Any:
+    if isinstance(value, th.Tensor):
+        return value.to(device)
+    if isinstance(value, dict):
+        return {key: _to_device(item, device) for key, item in value.items()}
+    return type(value)(_to_device(item, device) for item in value)
+
+
+def _equal(first: Any, second: Any) -> bool:
+    if isinstance(first, dict):
+        return isinstance(second, dict) and first.keys() == second.keys() and all(
+            _equal(first[key], second[key]) for key in first)
+    return second is not None and np.array_equal(first, second)

@@ -1,0 +1,86 @@
+"""GenRL's checkpoints (sb3_genrl/genrl/checkpoint.py): a stopped train-policy run resumed with the same command ends
+as the run that was not stopped, bit for bit."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from conftest import LinearGenerator
+from genrl_test_helpers import HindsightReachEnv
+from test_train_policy import fast_reach_task  # noqa: F401 (the fixture)
+
+from sb3_genrl import GenRL
+from sb3_genrl.curves import MONITOR_FILE, read_monitor
+from sb3_genrl.genrl import train_policy
+
+
+class _Killed(Exception):
+    """Stands for a kill partway through training."""
+
+
+@pytest.fixture
+def hindsight_task(fast_reach_task):  # noqa: F811
+    """The registered toy task, its pulls relabelled with the point they reached."""
+    import gymnasium as gym
+
+    gym.registry[fast_reach_task.env_id].entry_point = HindsightReachEnv
+    yield fast_reach_task
+
+
+def _parameters(path) -> dict[str, np.ndarray]:
+    model = GenRL.load(path, generator=LinearGenerator())
+    tensors = {f"policy.{key}": value for key, value in model.policy.state_dict().items()}
+    tensors |= {f"average.{key}": value for key, value in model.policy_average.state_dict().items()}
+    tensors |= {f"hindsight_adam.{key}": value for key, value in model.hindsight.optimizer.state_dict()["state"][0].items()}
+    return {key: value.cpu().numpy() for key, value in tensors.items()}
+
+
+@pytest.mark.parametrize("n_envs", [1, 2])
+def test_a_stopped_run_resumed_with_the_same_command_ends_as_the_run_not_stopped(hindsight_task, tmp_path, monkeypatch,
+                                                                                n_envs):
+    settings = {"episodes": 192, "seed": 3, "batch_episodes": 32, "n_envs": n_envs, "value_history": 2,
+                "policy_averaging": 0.9, "hindsight_kwargs": {"history": 2, "regression_steps": 4},
+                "checkpoint_every": 64}
+    whole = train_policy("fast-reach", LinearGenerator(), out_dir=tmp_path / "whole", **settings)
+
+    learn = GenRL.train
+    monkeypatch.setattr(GenRL, "train", lambda model: learn(model) if model._n_updates < 3 else (_ for _ in ()).throw(
+        _Killed()))  # killed in the fourth update: the last checkpoint is at 64 episodes (two updates)
+    with pytest.raises(_Killed):
+        train_policy("fast-reach", LinearGenerator(), out_dir=tmp_path / "stopped", **settings)
+    state = json.loads((tmp_path / "stopped" / "checkpoint" / "state.json").read_text())
+    assert state["episodes"] == 64 and sorted(state["files"]) == ["memories", "model"]
+    assert len(read_monitor(tmp_path / "stopped" / MONITOR_FILE)["return"]) == 128  # four batches played
+    monkeypatch.undo()
+    resumed = train_policy("fast-reach", LinearGenerator(), out_dir=tmp_path / "stopped", **settings)
+
+    assert resumed["resumed_at_episodes"] == [64] and not (tmp_path / "stopped" / "checkpoint").exists()
+    assert {key: value for key, value in resumed.items() if "path" not in key and key != "log_dir"
+            and key != "resumed_at_episodes"} == {key: value for key, value in whole.items()
+                                                 if "path" not in key and key != "log_dir"}
+    # The same episodes (the Monitor's rewards and goals) and the same parameters, bit for bit.
+    rows = [read_monitor(tmp_path / name / MONITOR_FILE) for name in ("whole", "stopped")]
+    assert len(rows[1]["return"]) == 192
+    np.testing.assert_array_equal(rows[1]["return"], rows[0]["return"])
+    np.testing.assert_array_equal(rows[1]["distance"], rows[0]["distance"])
+    expected, got = (_parameters(tmp_path / name / "genrl_policy.zip") for name in ("whole", "stopped"))
+    assert got.keys() == expected.keys()
+    for key in expected:
+        np.testing.assert_array_equal(got[key], expected[key], err_msg=key)
+    # The training log: the rows up to the checkpoint (the first update's: SB3 writes an update's values with the next
+    # batch's) and the resumed run's, from the second update on, are those of the run not stopped.
+    logs = tmp_path / "stopped" / "logs"
+    whole_log, early, late = (_progress(path) for path in (tmp_path / "whole" / "logs" / "progress.csv",
+                                                            logs / "progress.until_episode_64.csv", logs / "progress.csv"))
+    for key in ("train/mean_reward", "train/kl"):
+        assert len(whole_log[key]) == 6 and early[key][:1] + late[key] == whole_log[key]
+
+
+def _progress(path) -> dict[str, list[str]]:
+    import csv
+
+    with open(path) as file:
+        rows = [row for row in csv.DictReader(file) if row.get("train/kl")]
+    return {key: [row[key] for row in rows] for key in ("train/mean_reward", "train/kl")}
