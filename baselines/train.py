@@ -68,7 +68,7 @@ from sb3_genrl.baselines.models import ppo_with_behaviour_cloning, sac_her_with_
 from sb3_genrl.envs import get_task
 from stable_baselines3 import PPO, SAC
 
-from sb3_genrl.checks import check_device, check_input_path, check_output_dir, check_positive_int, check_seed
+from sb3_genrl.checks import check_device, check_input_path, check_output_dir, check_positive_int, check_seed, sub_seed
 from sb3_genrl.curves import LOG_DIR, MONITOR_FILE, monitor_episodes, read_monitor, training_logger, write_learning_curve
 from sb3_genrl.genrl.generator_files import generator_digest
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED
@@ -78,26 +78,12 @@ from sb3_genrl.utils import atomic_path, atomic_write_json, folder_lock
 CHECKPOINT_EVERY = 250  # episodes between checkpoints of an off-policy baseline (about 5 minutes of one core)
 
 
-def train_baseline(
-    algorithm: str,
-    task: str,
-    *,
-    episodes: int,
-    out_dir: str | os.PathLike,
-    seed: int = 0,
-    demos: str | os.PathLike | dict[str, np.ndarray] | None = None,
-    demo_episodes: int | None = None,
-    generator: Any = None,
-    bc_kwargs: dict[str, Any] | None = None,
-    algorithm_kwargs: dict[str, Any] | None = None,
-    eval_goals: int = EVAL_GOALS,
-    checkpoint_every: int | None = CHECKPOINT_EVERY,
-    device: str = "auto",
-    progress_bar: bool = False,
-    verbose: int = 0,
-    window: int = 64,
-    overwrite: bool = False,
-) -> dict[str, Any]:
+def train_baseline(algorithm: str, task: str, *, episodes: int, out_dir: str | os.PathLike, seed: int = 0,
+                   demos: str | os.PathLike | dict[str, np.ndarray] | None = None, demo_episodes: int | None = None,
+                   generator: Any = None, bc_kwargs: dict[str, Any] | None = None,
+                   algorithm_kwargs: dict[str, Any] | None = None, eval_goals: int = EVAL_GOALS,
+                   checkpoint_every: int | None = CHECKPOINT_EVERY, device: str = "auto", progress_bar: bool = False,
+                   verbose: int = 0, window: int = 64, overwrite: bool = False) -> dict[str, Any]:
     """Train one baseline for ``episodes`` episodes and write its outputs to ``out_dir``.
 
     :param algorithm: one of :data:`BASELINES`
@@ -242,7 +228,7 @@ def _resumed_model(algorithm: str, task: str, out: pathlib.Path, state: dict[str
     model = SAC.load(state["paths"]["model"], env=monitor, device=device)
     model.load_replay_buffer(state["paths"]["buffer"])
     model._last_obs = None  # the new env starts with a reset (the saved observation belongs to the old one)
-    model.set_random_seed(state["identity"]["seed"] + state["episodes"])  # a resumed run is reproducible
+    model.set_random_seed(sub_seed(state["identity"]["seed"], state["episodes"]))  # a resumed run is reproducible
     resumed = [*state["summary"].get("resumed_at_episodes", []), state["episodes"]]
     return model, state["summary"] | {"resumed_at_episodes": resumed}
 

@@ -52,6 +52,25 @@ def check_seed(value: Any, name: str = "seed") -> int:
     return check_int(value, name, minimum=0, maximum=MAX_SEED)
 
 
+def sub_seed(seed: int, key: int) -> int:
+    """A seed for the sub-stream ``key`` of a run seeded with ``seed``, within :func:`check_seed`'s range.
+
+    ``seed + key`` while that is in range (the derivation the committed results were made with), else a seed drawn
+    from ``np.random.SeedSequence(seed, spawn_key=(key,))``: addition past ``2**32 - 1`` made a valid ``--seed`` fail
+    partway through a run.
+
+    :param seed: the run's seed (0 to ``2**32 - 1``)
+    :param key: which sub-stream (a non-negative integer: an offset, a count of episodes)
+    """
+    import numpy as np
+
+    check_seed(seed)
+    check_int(key, "key", minimum=0)
+    if seed + key <= MAX_SEED:
+        return int(seed + key)
+    return int(np.random.SeedSequence(seed, spawn_key=(key,)).generate_state(1)[0])
+
+
 def check_positive_float(value: Any, name: str) -> float:
     """A finite number > 0 (a learning rate, a weight)."""
     if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value) or value <= 0:

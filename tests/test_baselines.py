@@ -326,6 +326,26 @@ def test_a_run_resumed_twice_from_one_checkpoint_keeps_its_early_log(demos, tmp_
         assert (tmp_path / "logs" / "progress.until_episode_5.csv").read_text() == early
 
 
+def test_a_sac_run_with_the_largest_seed_resumes(demos, tmp_path, monkeypatch):
+    from sb3_genrl.baselines import checkpoint
+
+    watch = checkpoint.EpisodeCheckpoint._on_rollout_start
+
+    def killed_in_the_third_episode(callback):
+        watch(callback)
+        if callback.model.num_timesteps == 2 * 69 + 10:
+            raise _Killed
+
+    monkeypatch.setattr(checkpoint.EpisodeCheckpoint, "_on_rollout_start", killed_in_the_third_episode)
+    run = {"episodes": 3, "out_dir": tmp_path, "demos": demos, "demo_episodes": 10, "checkpoint_every": 2,
+           "device": "cpu", "seed": 2**32 - 1, "window": 3, "eval_goals": 2}
+    with pytest.raises(_Killed):
+        train_baseline("sac-no-prefill", "hockey", **run)
+    monkeypatch.undo()
+    summary = train_baseline("sac-no-prefill", "hockey", **run)  # seed + 2 episodes is past 32 bits
+    assert summary["resumed_at_episodes"] == [2] and summary["episodes_played"] == 3
+
+
 def test_a_baseline_rerun_never_leaves_a_summary_beside_another_runs_cloned_policy(demos, tmp_path, monkeypatch):
     from sb3_genrl.baselines import train as baseline_train
 

@@ -383,3 +383,12 @@ def test_policy_zips_are_loaded_without_unpickling(runs, tmp_path, cli):
     assert not marker.exists() and not (tmp_path / "v.gif").exists()
     load_policy(evil, gym.make("GenRL/Hockey-v0"), trust=True)  # what SB3's own load does: the payload runs
     assert marker.read_text() == "ran"
+
+
+def test_sub_seeds_keep_the_sums_in_range_and_stay_in_range_past_32_bits():
+    from sb3_genrl.checks import MAX_SEED, sub_seed
+
+    assert sub_seed(5, 1) == 6 and sub_seed(0, 640) == 640 and sub_seed(MAX_SEED - 3, 3) == MAX_SEED
+    past = [sub_seed(MAX_SEED, key) for key in (1, 2, 640)]
+    assert all(0 <= seed <= MAX_SEED for seed in past) and len(set(past)) == 3
+    assert past[0] == int(np.random.SeedSequence(MAX_SEED, spawn_key=(1,)).generate_state(1)[0])

@@ -264,3 +264,14 @@ def test_the_quickstart_video_stage_is_done_only_when_its_gif_and_its_strip_exis
     assert not _done(tmp_path, "video")
     (tmp_path / "policy_strip.png").write_bytes(b"\x89PNG")
     assert _done(tmp_path, "video")
+
+
+def test_the_quickstart_video_seed_stays_a_valid_seed_for_the_largest_seed():
+    from sb3_genrl.checks import MAX_SEED, check_seed
+    from sb3_genrl.study.quickstart import _stage_settings
+
+    def video_seed(seed: int) -> int:
+        return _stage_settings("hockey", 10, 2, 64, 32, {}, 10, 10, seed, True)["video"]["seed"]
+
+    assert video_seed(0) == 1 and video_seed(7) == 8  # the derivation the committed quickstart results were made with
+    assert check_seed(video_seed(MAX_SEED)) != MAX_SEED  # the video of a run with seed 2**32 - 1 no longer fails

@@ -10,6 +10,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from sb3_genrl.checks import sub_seed
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED
 from sb3_genrl.study.state import (
     check_and_record,
@@ -55,7 +56,8 @@ def quickstart(out_dir: str | os.PathLike, *, task: str, demo_episodes: int = 40
         iteration too (its entry in ``hyperparams/genrl.yml``, see :func:`task_settings`)
     :param pr_samples: samples per set for precision and recall
     :param dwpr_samples: samples per intervention for DwPR
-    :param seed: seed of the demonstrations, the generator, the evaluation and the policy (the video uses seed + 1)
+    :param seed: seed of the demonstrations, the generator, the evaluation and the policy (the video's:
+        :func:`~sb3_genrl.checks.sub_seed` of it)
     :param video: also render the trained policy (a GIF and a strip of frames)
     :param device: torch device
     :param progress_bar: show the stages' progress bars
@@ -108,7 +110,7 @@ def _stage_settings(task: str, demo_episodes: int, epochs: int, policy_episodes:
         "policy": {"task": task, "episodes": policy_episodes, "batch_episodes": batch_episodes,
                    "n_envs": QUICKSTART_ENVS, "seed": seed, "genrl_kwargs": genrl_kwargs,
                    "genrl": genrl_settings(genrl_kwargs)},  # every GenRL setting in effect, defaults included
-        **({"video": {**VIDEO, "seed": seed + 1}} if video else {})}
+        **({"video": {**VIDEO, "seed": sub_seed(seed, 1)}} if video else {})}
 
 
 # Where each stage writes (checked for "done") and where it records its settings.

@@ -204,5 +204,6 @@ def test_a_generator_given_beside_an_env_that_wraps_another_is_refused(tmp_path)
     # The env's own generator, or one of the same content (its file), is accepted.
     assert GenRL(env, wrapping, n_steps=8).generator is wrapping
     assert GenRL(env, str(tmp_path / "vae.pt"), n_steps=8).generator_path == str(tmp_path / "vae.pt")
-    with pytest.raises(ValueError, match=r"LinearGenerator \(\(latent_dim, T, M\) = \(2, 5, 2\), object 0x[0-9a-f]+\), is not "):
+    unknown = r"LinearGenerator \(\(latent_dim, T, M\) = \(2, 5, 2\), object 0x[0-9a-f]+\), is not "
+    with pytest.raises(ValueError, match=unknown):
         GenRL(LatentActionWrapper(FastReachEnv(), LinearGenerator()), LinearGenerator())  # of unknown content
