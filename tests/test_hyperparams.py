@@ -42,6 +42,7 @@ def test_an_entry_is_a_fresh_copy():
 
 def test_unknown_env_ids_and_algorithms_are_refused_naming_what_is_known():
     with pytest.raises(ValueError, match=r"hyperparams/genrl\.yml has no entry for 'GenRL/Golf-v0'; known env ids: "
+                                         r"FetchPickAndPlace-v4, FetchPush-v4, FetchReach-v4, FetchSlide-v4, "
                                          r"GenRL/Basketball-v0, GenRL/Hockey-v0"):
         load_hyperparams("genrl", "GenRL/Golf-v0")
     with pytest.raises(ValueError, match=r"no settings file tqc\.yml for 'tqc'; known: genrl, .*ppo, sac"):
