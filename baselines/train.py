@@ -68,7 +68,15 @@ from sb3_genrl.baselines.models import ppo_with_behaviour_cloning, sac_her_with_
 from sb3_genrl.envs import get_task
 from stable_baselines3 import PPO, SAC
 
-from sb3_genrl.checks import check_device, check_input_path, check_output_dir, check_positive_int, check_seed, sub_seed
+from sb3_genrl.checks import (
+    check_device,
+    check_episodes,
+    check_input_path,
+    check_output_dir,
+    check_positive_int,
+    check_seed,
+    sub_seed,
+)
 from sb3_genrl.curves import LOG_DIR, MONITOR_FILE, monitor_episodes, read_monitor, training_logger, write_learning_curve
 from sb3_genrl.genrl.generator_files import generator_digest
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED
@@ -255,7 +263,7 @@ def _check_arguments(algorithm: str, episodes: int, seed: int, demos: Any, demo_
         raise ValueError(f"{algorithm} needs a generator (generator=...)")
     if algorithm not in LATENT_BASELINES and demos is None:
         raise ValueError(f"{algorithm} needs demonstrations (demos=...)")
-    check_positive_int(episodes, "episodes")
+    check_episodes(episodes)
     check_seed(seed)
     check_positive_int(eval_goals, "eval_goals")
     if checkpoint_every is not None:

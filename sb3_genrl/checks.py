@@ -19,6 +19,14 @@ from typing import Any, TypeVar
 T = TypeVar("T")
 
 MAX_SEED = 2**32 - 1  # NumPy's legacy seeding (used by SB3's set_random_seed) takes seeds below 2**32
+MAX_EPISODES = 10**8  # a budget of episodes beyond this is a typo (a paper-scale run plays some thousands)
+MAX_VIDEO_EPISODES = 100  # episodes one video shows (each is rendered frame by frame and held in memory)
+
+
+class SettingError(ValueError, AssertionError):
+    """A bad setting: a ``ValueError`` as sb3-genrl raises them, and an ``AssertionError`` as SB3 and sb3-contrib raise
+    for the same setting (``n_steps * n_envs == 1`` with advantage normalisation), so code written for either
+    convention catches it."""
 
 
 def _named(name: str, text: str) -> str:
@@ -201,8 +209,14 @@ def option(check: Callable[..., T], parse: Callable[[str], Any] = str, **kwargs:
     return convert
 
 
+def check_episodes(value: Any, name: str = "episodes") -> int:
+    """A budget of episodes: an integer between 1 and :data:`MAX_EPISODES`."""
+    return check_int(value, name, minimum=1, maximum=MAX_EPISODES)
+
+
 # The argparse types the command line and the benchmark scripts share.
 COUNT = option(check_positive_int, int)
+EPISODES = option(check_episodes, int)
 SEED = option(check_seed, int)
 EXISTING = option(check_input_path)
 OUT_DIR = option(check_output_dir)

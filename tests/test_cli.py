@@ -41,14 +41,17 @@ def test_help_lists_the_commands_in_workflow_order_and_version(cli):
 
 
 @pytest.mark.parametrize(("argv", "message"), [
-    (("demos", "--task", "hockey", "--episodes", "-1", "--out", "D"), "argument --episodes: must be an integer >= 1, got -1"),
+    (("demos", "--task", "hockey", "--episodes", "-1", "--out", "D"),
+     "argument --episodes: must be an integer between 1 and 100000000, got -1"),
     (("demos", "--task", "hockey", "--episodes", "2.5", "--out", "D"), "argument --episodes: expected an integer, got '2.5'"),
     (("demos", "--task", "golf", "--out", "D"), "argument --task: invalid choice: 'golf'"),
     (("demos", "--task", "hockey", "--out", "FILE"), "argument --out: 'FILE' is a file; expected a folder"),
     (("demos", "--task", "hockey", "--out", "FILE/sub"), "argument --out: 'FILE/sub' cannot be created: 'FILE' is a file"),
     (("demos", "--task", "hockey", "--threads", "0", "--out", "D"), "argument --threads: must be an integer >= 1, got 0"),
-    (("quickstart", "--episodes", "-1", "--out", "D"), "argument --episodes: must be an integer >= 1, got -1"),
-    (("quickstart", "--demo-episodes", "0", "--out", "D"), "argument --demo-episodes: must be an integer >= 1, got 0"),
+    (("quickstart", "--episodes", "-1", "--out", "D"), "argument --episodes: must be an integer between 1 and 100000000, "
+                                                         "got -1"),
+    (("quickstart", "--demo-episodes", "0", "--out", "D"),
+     "argument --demo-episodes: must be an integer between 4 and 100000000, got 0"),
     (("quickstart", "--device", "bogus", "--out", "D"), "argument --device: must be 'auto' or a torch device"),
     (("quickstart", "--out", "FILE"), "argument --out: 'FILE' is a file; expected a folder"),
     (("train-policy", "--task", "hockey", "--generator", "GEN", "--episodes", "8", "--seed", "-1", "--out", "D"),
@@ -165,7 +168,7 @@ def test_library_functions_check_before_any_work(tmp_path):
     for threads in (2.5, "2", 0):
         with pytest.raises(ValueError, match="n_threads must be an integer >= 1"):
             make_demonstrations("hockey", 4, tmp_path / "demos", n_threads=threads, progress_bar=False)
-    with pytest.raises(ValueError, match="policy_episodes must be an integer >= 1, got -1"):
+    with pytest.raises(ValueError, match="policy_episodes must be an integer between 1 and 100000000, got -1"):
         quickstart(tmp_path / "quick", task="hockey", policy_episodes=-1)
     with pytest.raises(ValueError, match="device"):
         quickstart(tmp_path / "quick", task="hockey", device="bogus")
@@ -392,3 +395,80 @@ def test_sub_seeds_keep_the_sums_in_range_and_stay_in_range_past_32_bits():
     past = [sub_seed(MAX_SEED, key) for key in (1, 2, 640)]
     assert all(0 <= seed <= MAX_SEED for seed in past) and len(set(past)) == 3
     assert past[0] == int(np.random.SeedSequence(MAX_SEED, spawn_key=(1,)).generate_state(1)[0])
+
+
+def test_every_command_runs_torch_on_one_thread(tmp_path, monkeypatch, cli):
+    import torch
+
+    from sb3_genrl.cli import commands
+
+    seen = []
+    monkeypatch.setattr(commands, "compare_command", lambda args: seen.append(torch.get_num_threads()) or 0)
+    torch.set_num_threads(2)  # what torch picks on a 2-core machine
+    assert cli("compare", "--runs", tmp_path, "--out", tmp_path / "out")[0] == 0 and seen == [1]
+
+
+def test_absurd_counts_and_too_few_demonstrations_are_refused_before_any_work(tmp_path, cli, hockey_generator):
+    from sb3_genrl.study.quickstart import quickstart
+
+    huge = str(10**12)
+    for argv in (["train-policy", "--task", "hockey", "--generator", hockey_generator, "--episodes", huge],
+                 ["demos", "--task", "hockey", "--episodes", huge], ["baseline", "latent-trpo", "--task", "hockey",
+                                                                       "--generator", hockey_generator, "--episodes", huge]):
+        code, _, err = cli(*argv, "--out", tmp_path / "run")
+        assert code == 2 and "--episodes: must be an integer between 1 and 100000000" in err
+    code, _, err = cli("video", "--task", "hockey", "--generator", hockey_generator, "--goals", huge, "--out",
+                       tmp_path / "v.gif")
+    assert code == 2 and "--goals: must be an integer between 1 and 100" in err
+    code, _, err = cli("quickstart", "--demo-episodes", 1, "--out", tmp_path / "quick")
+    assert code == 2 and "--demo-episodes: must be an integer between 4 and" in err
+    with pytest.raises(ValueError, match="demo_episodes must be an integer between 4 and"):
+        quickstart(tmp_path / "quick", task="hockey", demo_episodes=3)
+    assert not (tmp_path / "run").exists() and not (tmp_path / "quick").exists()
+
+
+def test_a_full_disk_and_an_interrupt_are_one_line_with_their_exit_status(tmp_path, monkeypatch, cli):
+    import errno
+
+    from sb3_genrl.cli import commands
+
+    def fails_with(error):
+        def command(args):
+            raise error
+        return command
+
+    for error, status, line in (
+            (OSError(errno.ENOSPC, "No space left on device", str(tmp_path / "x.csv")), 1,
+             f"error: No space left on device: '{tmp_path / 'x.csv'}'"),
+            (KeyboardInterrupt(), 130, "interrupted; rerun the same command to resume"),
+            (RuntimeError("[enforce fail at inline_container.cc:664] . unexpected pos 64 vs 0"), 1,
+             "error: torch could not write a file (is the disk full?): [enforce fail at inline_container.cc:664]")):
+        monkeypatch.setattr(commands, "compare_command", fails_with(error))
+        code, _, err = cli("compare", "--runs", tmp_path, "--out", tmp_path / "out")
+        assert code == status and err.startswith(f"genrl compare: {line}") and err.count("\n") == 1
+
+
+def test_ctrl_c_of_a_run_with_env_processes_exits_130_in_one_line(tmp_path, hockey_generator):
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    run = tmp_path / "run"
+    process = subprocess.Popen([sys.executable, "-m", "sb3_genrl.cli", "train-policy", "--task", "hockey", "--generator",
+                                hockey_generator, "--episodes", "100000", "--batch-episodes", "2", "--n-envs", "2",
+                                "--out", str(run), "--no-progress-bar"], stdout=subprocess.DEVNULL,
+                               stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not ((run / "episodes.monitor.csv").is_file() and len((run / "episodes.monitor.csv").read_text()
+                                                                      .splitlines()) > 6):
+            assert time.monotonic() < deadline and process.poll() is None
+            time.sleep(0.2)
+        os.killpg(process.pid, signal.SIGINT)  # what Ctrl-C does: the whole process group
+        _, err = process.communicate(timeout=60)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert process.returncode == 130 and "Traceback" not in err
+    assert err.strip().splitlines()[-1] == "genrl train-policy: interrupted; rerun the same command to resume"

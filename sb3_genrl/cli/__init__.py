@@ -9,7 +9,9 @@ demonstration dataset and ``--episodes`` / ``--demo-episodes`` are counts; ``--o
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+import time
 from collections.abc import Callable
 
 WORKFLOW = ("play", "demos", "train-generator", "evaluate", "train-policy", "baseline", "compare", "video", "quickstart",
@@ -38,13 +40,37 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run ``genrl`` with ``argv`` (default: the command line); a known error is printed as one line, exit status 2."""
+    """Run ``genrl`` with ``argv`` (default: the command line). A known error is printed as one line, exit status 2;
+    an interrupt (Ctrl-C) exits with 130; a failed write or read (a full disk) is one line naming the cause and the
+    file, exit status 1."""
     parser = build_parser()
     args = parser.parse_args(argv)
     command: Callable[[argparse.Namespace], int] = args.func
-    try:
-        return int(command(args) or 0)
-    except KNOWN_ERRORS as error:
-        print(f"genrl {args.command}: error: {error}", file=sys.stderr)
-        return 2
+    import torch
 
+    # The networks are small: torch's default of one thread per core only oversubscribes the cores MuJoCo and the
+    # env processes use (a run took 5 times as long beside a second busy process), as the quickstart found first.
+    torch.set_num_threads(1)
+    try:
+        try:
+            return int(command(args) or 0)
+        except (EOFError, BrokenPipeError, ConnectionResetError) as error:  # env processes gone: by a Ctrl-C?
+            time.sleep(0.5)  # an interrupt that ended them reaches this process now, as KeyboardInterrupt
+            return _fail(args.command, f"the env processes ended unexpectedly ({type(error).__name__}); see above", 1)
+    except KeyboardInterrupt:
+        return _fail(args.command, "interrupted; rerun the same command to resume", 130)
+    except KNOWN_ERRORS as error:
+        return _fail(args.command, f"error: {error}", 2)
+    except OSError as error:  # a full disk, a folder gone: the cause and the file
+        where = " ".join(repr(os.fspath(name)) for name in (error.filename, error.filename2) if name is not None)
+        return _fail(args.command, f"error: {error.strerror or error}{': ' + where if where else ''}", 1)
+    except RuntimeError as error:
+        if "PytorchStreamWriter" not in str(error) and "unexpected pos" not in str(error):
+            raise
+        return _fail(args.command, "error: torch could not write a file (is the disk full?): "
+                                   f"{str(error).splitlines()[0]}", 1)
+
+
+def _fail(command: str, message: str, status: int) -> int:
+    print(f"genrl {command}: {message}", file=sys.stderr)
+    return status

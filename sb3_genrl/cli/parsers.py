@@ -8,7 +8,10 @@ from pathlib import Path
 
 from sb3_genrl.checks import (
     COUNT,
+    EPISODES,
     EXISTING,
+    MAX_EPISODES,
+    MAX_VIDEO_EPISODES,
     OUT_DIR,
     SEED,
     check_device,
@@ -61,7 +64,7 @@ def add_play(sub: argparse._SubParsersAction) -> None:
 def add_demos(sub: argparse._SubParsersAction) -> None:
     demos = sub.add_parser("demos", help="generate a task's demonstrations as a Minari dataset, with a coverage report")
     _task_option(demos)
-    demos.add_argument("--episodes", type=COUNT, default=40000, help="valid demonstrations to keep (paper: 40000)")
+    demos.add_argument("--episodes", type=EPISODES, default=40000, help="valid demonstrations to keep (paper: 40000)")
     demos.add_argument("--out", required=True, type=option(_check_dataset_out),
                        help="dataset folder to create (must not exist or be empty)")
     _seed_option(demos)
@@ -130,7 +133,7 @@ def add_train_policy(sub: argparse._SubParsersAction) -> None:
     policy = sub.add_parser("train-policy", help="train a GenRL policy over a generator's latent space (Algorithm 1)")
     _task_option(policy)
     policy.add_argument("--generator", required=True, type=EXISTING, help="file of a trained generator")
-    policy.add_argument("--episodes", type=COUNT, required=True, help="episodes (trajectories played) in total")
+    policy.add_argument("--episodes", type=EPISODES, required=True, help="episodes (trajectories played) in total")
     _seed_option(policy)
     policy.add_argument("--out", required=True, type=OUT_DIR, help="output folder (model, learning curve, logs)")
     policy.add_argument("--e-step", choices=("trpo", "kl_penalty"), default="trpo", help="E-step variant")
@@ -167,7 +170,7 @@ def add_baseline(sub: argparse._SubParsersAction) -> None:
                           help="demonstration dataset (ppo, sac, sac-no-prefill, sac-her)")
     baseline.add_argument("--demo-episodes", type=COUNT, default=None, help="use the first N demonstrations (default all)")
     baseline.add_argument("--generator", type=EXISTING, default=None, help="generator file (latent-ppo/-sac/-trpo)")
-    baseline.add_argument("--episodes", type=COUNT, required=True, help="budget of episodes")
+    baseline.add_argument("--episodes", type=EPISODES, required=True, help="budget of episodes")
     _seed_option(baseline)
     baseline.add_argument("--algorithm-kwargs", type=json_object_argument, default=None, metavar="JSON",
                           help="changes to the rl-zoo3 settings, as arguments of the SB3 class, e.g. "
@@ -202,7 +205,8 @@ def add_video(sub: argparse._SubParsersAction) -> None:
     source.add_argument("--generator", type=EXISTING, help="a generator file (random latent actions)")
     video.add_argument("--trust-policy", action="store_true",
                        help="unpickle the policy zip as SB3 does (runs code stored in it: only for trusted files)")
-    video.add_argument("--goals", type=COUNT, default=6, help="episodes (goals) to show")
+    video.add_argument("--goals", type=option(check_int, int, minimum=1, maximum=MAX_VIDEO_EPISODES), default=6,
+                       help=f"episodes (goals) to show, at most {MAX_VIDEO_EPISODES} (default 6)")
     _seed_option(video, "seed of the goals (and of the latent actions)")
     video.add_argument("--out", required=True, type=option(check_output_file, suffixes=VIDEO_SUFFIXES),
                        help="output file, .mp4 or .gif")
@@ -212,15 +216,17 @@ def add_video(sub: argparse._SubParsersAction) -> None:
 def add_quickstart(sub: argparse._SubParsersAction) -> None:
     from sb3_genrl.envs import DEFAULT_TASK, TASKS
     from sb3_genrl.hyperparams import known_env_ids, load_hyperparams
+    from sb3_genrl.study.quickstart import MIN_DEMO_EPISODES
 
     quick = sub.add_parser("quickstart", help="demonstrations -> VAE -> evaluation -> GenRL policy -> report, in minutes")
     quick.add_argument("--out", required=True, type=OUT_DIR, help="output folder (a rerun resumes it)")
     _task_option(quick, required=False, default=DEFAULT_TASK)
-    quick.add_argument("--demo-episodes", type=COUNT, default=4000, help="demonstrations to generate (default 4000)")
+    quick.add_argument("--demo-episodes", type=option(check_int, int, minimum=MIN_DEMO_EPISODES, maximum=MAX_EPISODES),
+                       default=4000, help=f"demonstrations to generate, at least {MIN_DEMO_EPISODES} (default 4000)")
     quick.add_argument("--epochs", type=COUNT, default=300, help="beta-VAE training epochs (default 300)")
     own = ", ".join(f"{name} {load_hyperparams('genrl', spec.env_id)['n_timesteps']}" for name, spec in TASKS.items()
                     if spec.env_id in known_env_ids("genrl"))
-    quick.add_argument("--episodes", type=COUNT, default=None, help=f"GenRL episodes (default: the task's own: {own})")
+    quick.add_argument("--episodes", type=EPISODES, default=None, help=f"GenRL episodes (default: the task's own: {own})")
     _seed_option(quick)
     quick.add_argument("--no-video", action="store_true", help="skip rendering the policy")
     _device_option(quick)

@@ -38,6 +38,32 @@ def save_generator_beside(generator: TrajectoryGenerator, model_path: pathlib.Pa
         pass
 
 
+def check_model_data(path: Any, data: dict[str, Any] | None) -> None:
+    """Refuse what is not a GenRL model zip, before SB3 loads it: a file without SB3's ``data`` entry (a generator
+    file, a torch checkpoint: SB3 raises a bare ``AssertionError``) or another algorithm's model (a PPO zip loads and
+    fails later with a shape error)."""
+    if not data:
+        kind = " (a generator file: load it with sb3_genrl.generative.load)" if _is_generator_file(path) else ""
+        raise ValueError(f"{path} is not an SB3 model zip{kind}; a GenRL model is the .zip that GenRL.save and genrl "
+                         "train-policy write")
+    if "n_em_iterations" not in data:
+        policy = data.get("policy_class")
+        name = getattr(policy, "__name__", None) or "another algorithm's"
+        raise ValueError(f"{path} is not a GenRL model: it holds a {name} policy of another algorithm (no GenRL "
+                         "settings); load it with that algorithm's load()")
+
+
+def _is_generator_file(path: Any) -> bool:
+    if not isinstance(path, str | os.PathLike):
+        return False
+    try:
+        from sb3_genrl.generative.serialization import FORMAT_MARKER
+
+        return th.load(path, map_location="cpu", weights_only=True).get("format") == FORMAT_MARKER
+    except Exception:  # noqa: BLE001 (any file that torch cannot read as ours is not a generator file)
+        return False
+
+
 def saved_generator(path: str | pathlib.Path | io.BufferedIOBase, data: dict[str, Any],
                     generator: TrajectoryGenerator | str | None, device: th.device | str,
                     ) -> tuple[TrajectoryGenerator | None, str | None]:
@@ -45,6 +71,7 @@ def saved_generator(path: str | pathlib.Path | io.BufferedIOBase, data: dict[str
     given (a file is loaded onto ``device``), else the file ``data`` names, else :func:`generator_file` of ``path``;
     ``(None, None)`` when there is none. One that is not the generator the model recorded is refused
     (:func:`check_recorded_generator`)."""
+    check_model_data(path, data)
     generator_path = os.path.abspath(generator) if isinstance(generator, str | os.PathLike) else None
     if generator is None:
         candidates = [data.get("generator_path")]

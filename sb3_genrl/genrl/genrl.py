@@ -18,6 +18,7 @@ from stable_baselines3.common.policies import ActorCriticPolicy, BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 from stable_baselines3.common.utils import explained_variance
 
+from sb3_genrl.checks import SettingError
 from sb3_genrl.generative.base import TrajectoryGenerator
 from sb3_genrl.genrl import generator_files
 from sb3_genrl.genrl.averaging import averaged_copy, update_average
@@ -28,7 +29,8 @@ from sb3_genrl.genrl.policies import (
     ContextStdPolicy,
     MlpPolicy,
     MultiInputPolicy,
-    default_log_std_init,
+    completed_like,
+    completed_policy_kwargs,
     limit_log_std_change,
     log_std_parameters,
 )
@@ -144,8 +146,9 @@ class GenRL(OnPolicyAlgorithm):
                 raise TypeError("GenRL(env, generator, generator=...) got the generator twice")
             policy, env, generator = "MlpPolicy", policy, env  # type: ignore[assignment]
         self.hindsight_kwargs = check_genrl_settings(dict(  # the values SB3 does not check itself
-            e_step=e_step, n_em_iterations=n_em_iterations, value_history=value_history, policy_averaging=policy_averaging,
-            max_log_std_change=max_log_std_change, hindsight_kwargs=hindsight_kwargs))["hindsight_kwargs"]
+            e_step=e_step, n_em_iterations=n_em_iterations, value_history=value_history, batch_size=batch_size,
+            policy_averaging=policy_averaging, max_log_std_change=max_log_std_change,
+            hindsight_kwargs=hindsight_kwargs))["hindsight_kwargs"]
         env, policy_kwargs = self._latent_env(env, generator, latent_clip, policy_kwargs, device)
         super().__init__(
             self._fitting_policy(policy, env), env, learning_rate=learning_rate, n_steps=n_steps,  # type: ignore[arg-type]
@@ -155,7 +158,7 @@ class GenRL(OnPolicyAlgorithm):
             tensorboard_log=tensorboard_log, policy_kwargs=policy_kwargs, verbose=verbose, seed=seed, device=device,
             _init_setup_model=False, supported_action_spaces=(spaces.Box,))
         if normalize_advantage and self.env is not None and self.n_steps * self.env.num_envs < 2:
-            raise ValueError(f"normalize_advantage needs n_steps * n_envs >= 2 episodes, got {self.n_steps * self.n_envs}")
+            raise SettingError(f"normalize_advantage needs n_steps * n_envs >= 2 episodes, got {self.n_steps * self.n_envs}")
         self.e_step, self.n_em_iterations, self.normalize_advantage = e_step, int(n_em_iterations), normalize_advantage
         self.target_kl, self.cg_max_steps, self.cg_damping = target_kl, cg_max_steps, cg_damping
         self.line_search_shrinking_factor, self.line_search_max_iter = line_search_shrinking_factor, line_search_max_iter
@@ -348,16 +351,16 @@ class GenRL(OnPolicyAlgorithm):
              device: th.device | str = "auto", custom_objects: dict[str, Any] | None = None, print_system_info: bool = False,
              force_reset: bool = True, *, generator: TrajectoryGenerator | str | None = None, **kwargs: Any) -> SelfGenRL:
         """Load like SB3. The generator is ``generator`` when given, else the saved path or ``<name>.generator.pt``
-        (refused when its SHA-256 is not the model's ``generator_sha256``).
-
-        Without any generator the model still predicts latent actions; ``predict_trajectory`` then raises.
-        """
+        (refused when its SHA-256 is not the model's ``generator_sha256``); without any, the model still predicts
+        latent actions and ``predict_trajectory`` raises. A file that is not a GenRL model zip is refused."""
         from stable_baselines3.common.save_util import load_from_zip_file
 
         data, _, _ = load_from_zip_file(path, device=device, custom_objects=custom_objects, load_data=True)
         if isinstance(path, io.BufferedIOBase):
             path.seek(0)
         generator, generator_path = generator_files.saved_generator(path, data or {}, generator, device)  # model's device
+        if isinstance(kwargs.get("policy_kwargs"), dict) and data:  # the constructor's: stored with the defaults added
+            kwargs["policy_kwargs"] = completed_like(kwargs["policy_kwargs"], data.get("policy_kwargs", {}))
         if env is not None:  # a raw env is wrapped as at training time
             latent_clip = kwargs.get("latent_clip", (data or {}).get("latent_clip", 3.0))
             env, generator = latent_action_env(env, generator, latent_clip=latent_clip)  # type: ignore[arg-type]
@@ -370,8 +373,8 @@ class GenRL(OnPolicyAlgorithm):
     def _latent_env(self, env: Any, generator: TrajectoryGenerator | str | None, latent_clip: float,
                     policy_kwargs: dict[str, Any] | None, device: th.device | str) -> tuple[Any, dict[str, Any]]:
         """Set ``generator``, ``generator_path`` and ``generator_sha256``; the env in its latent-action wrapper, and the
-        policy arguments completed with the prior's spread and, for Box contexts, :class:`BoxScaler`. A generator given
-        as a file is loaded onto ``device``; one given beside an env that wraps another is refused."""
+        policy arguments completed (:func:`~sb3_genrl.genrl.policies.completed_policy_kwargs`). A generator given as a
+        file is loaded onto ``device``; one given beside an env that wraps another is refused."""
         self.generator_path: str | None = None
         if isinstance(generator, str | os.PathLike):
             self.generator_path = os.path.abspath(generator)
@@ -379,12 +382,8 @@ class GenRL(OnPolicyAlgorithm):
         generator_files.check_same_generator(generator, env, self.generator_path)  # type: ignore[arg-type]
         env, self.generator = latent_action_env(env, generator, latent_clip=latent_clip)  # type: ignore[arg-type]
         self.generator_sha256 = generator_files.generator_digest(self.generator)  # saved, and checked by load()
-        policy_kwargs = dict(policy_kwargs or {})
-        if self.generator is not None:
-            policy_kwargs.setdefault("log_std_init", default_log_std_init(self.generator.prior))
-        if isinstance(getattr(env, "observation_space", None), spaces.Box):
-            policy_kwargs.setdefault("features_extractor_class", BoxScaler)  # bounded contexts onto [-1, 1]
-        return env, policy_kwargs
+        prior = None if self.generator is None else self.generator.prior
+        return env, completed_policy_kwargs(policy_kwargs, prior, getattr(env, "observation_space", None))
 
     @staticmethod
     def _fitting_policy(policy: Any, env: Any) -> Any:

@@ -11,12 +11,14 @@ goal region would otherwise need large first-layer weights, which trust-region s
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.distributions import DiagGaussianDistribution, Distribution
 from stable_baselines3.common.policies import ActorCriticPolicy, BasePolicy, MultiInputActorCriticPolicy
-from stable_baselines3.common.preprocessing import get_action_dim
+from stable_baselines3.common.preprocessing import get_action_dim, is_image_space
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
 
@@ -43,6 +45,27 @@ def actor_parameters(policy: ActorCriticPolicy) -> list[th.nn.Parameter]:
 def default_log_std_init(prior: Prior) -> float:
     """Log of the prior's standard deviation: 0 for N(0, 1), log(1/sqrt(3)) for U(-1, 1)."""
     return 0.0 if prior == "normal" else float(np.log(1.0 / np.sqrt(3.0)))
+
+
+def completed_policy_kwargs(policy_kwargs: dict[str, Any] | None, prior: Prior | None,
+                            observation_space: spaces.Space | None) -> dict[str, Any]:
+    """GenRL's policy arguments: ``policy_kwargs`` with, where not given, the prior's spread as ``log_std_init``
+    (:func:`default_log_std_init`) and, for a Box context that is not an image, :class:`BoxScaler` (an image keeps
+    SB3's own extractor and its division by 255: NatureCNN for ``"CnnPolicy"``, a flatten for ``"MlpPolicy"``)."""
+    policy_kwargs = dict(policy_kwargs or {})
+    if prior is not None:
+        policy_kwargs.setdefault("log_std_init", default_log_std_init(prior))
+    if isinstance(observation_space, spaces.Box) and not is_image_space(observation_space, check_channels=False):
+        policy_kwargs.setdefault("features_extractor_class", BoxScaler)  # bounded contexts onto [-1, 1]
+    return policy_kwargs
+
+
+def completed_like(policy_kwargs: dict[str, Any], stored: dict[str, Any]) -> dict[str, Any]:
+    """``policy_kwargs`` completed as the ``stored`` ones of a saved model were (what :func:`completed_policy_kwargs`
+    added), so that a model loaded with its constructor's own ``policy_kwargs`` passes SB3's check that they equal the
+    stored ones."""
+    added = {key: stored[key] for key in ("log_std_init", "features_extractor_class") if key in stored}
+    return added | policy_kwargs
 
 
 class BoxScaler(BaseFeaturesExtractor):

@@ -47,12 +47,13 @@ def check_genrl_settings(settings: Mapping[str, Any], name: str | None = None) -
     return {**settings, **checked}
 
 
-def _check_values(*, e_step: str, n_em_iterations: int, value_history: int, max_log_std_change: float | None,
-                  policy_averaging: float | None, hindsight_kwargs: Mapping[str, Any] | None) -> dict[str, Any]:
+def _check_values(*, e_step: str, n_em_iterations: int, value_history: int, batch_size: int,
+                  max_log_std_change: float | None, policy_averaging: float | None,
+                  hindsight_kwargs: Mapping[str, Any] | None) -> dict[str, Any]:
     """Refuse the values of the GenRL settings that SB3 does not check itself; the hindsight settings as a dict."""
     if e_step not in ("trpo", "kl_penalty"):
         raise ValueError(f"e_step must be 'trpo' or 'kl_penalty', got {e_step!r}")
-    for key, value in (("n_em_iterations", n_em_iterations), ("value_history", value_history)):
+    for key, value in (("n_em_iterations", n_em_iterations), ("value_history", value_history), ("batch_size", batch_size)):
         if isinstance(value, bool) or int(value) != value or value < 1:
             raise ValueError(f"{key} must be a positive integer, got {value!r}")
     if max_log_std_change is not None and not max_log_std_change > 0:

@@ -15,7 +15,15 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from sb3_genrl.checks import check_device, check_input_path, check_int, check_output_dir, check_positive_int, check_seed
+from sb3_genrl.checks import (
+    check_device,
+    check_episodes,
+    check_input_path,
+    check_int,
+    check_output_dir,
+    check_positive_int,
+    check_seed,
+)
 from sb3_genrl.curves import (
     EPISODE_INFO,
     LOG_DIR,
@@ -207,7 +215,7 @@ MAIN_GUARD = ("n_envs > 1 plays the envs in their own processes, which import th
 
 def _check_arguments(episodes: int, batch_episodes: int, n_envs: int, seed: int, device: str,
                      checkpoint_every: int | None, genrl_kwargs: dict[str, Any]) -> None:
-    check_positive_int(episodes, "episodes")
+    check_episodes(episodes)
     if checkpoint_every is not None:
         check_positive_int(checkpoint_every, "checkpoint_every")
     check_int(batch_episodes, "batch_episodes", minimum=2)

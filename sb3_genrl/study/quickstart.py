@@ -32,6 +32,8 @@ DEFAULT_POLICY_EPISODES, DEFAULT_BATCH_EPISODES = 3000, 64
 # GenRL plays its episodes in two env processes, one per core of the 2-core machine the quickstart is sized for
 # (the simulation is most of the policy stage's time). Fixed, not the machine's core count: the result depends on it.
 QUICKSTART_ENVS = 2
+# Precision and recall with k = 3 neighbours need more than 3 samples in each set: the demonstrations, at least 4
+MIN_DEMO_EPISODES = 4
 VIDEO = {"goals": 4, "width": 320, "height": 240, "fps": 20}
 
 
@@ -66,15 +68,14 @@ def quickstart(out_dir: str | os.PathLike, *, task: str, demo_episodes: int = 40
     """
     import torch
 
-    from sb3_genrl.checks import check_device, check_output_dir, check_positive_int, check_seed
+    from sb3_genrl.checks import check_device, check_output_dir, check_seed
     from sb3_genrl.envs import get_task
 
     episodes, batch_episodes, genrl_kwargs = task_settings(task)
     policy_episodes = episodes if policy_episodes is None else policy_episodes
     video = video and get_task(task).video  # a task without the arm tasks' renderer is not filmed
-    for name, value in dict(demo_episodes=demo_episodes, epochs=epochs, policy_episodes=policy_episodes,
-                            pr_samples=pr_samples, dwpr_samples=dwpr_samples).items():
-        check_positive_int(value, name)
+    _check_counts(demo_episodes=demo_episodes, epochs=epochs, policy_episodes=policy_episodes, pr_samples=pr_samples,
+                  dwpr_samples=dwpr_samples)
     if batch_episodes % QUICKSTART_ENVS:
         raise ValueError(f"task {task!r}: the quickstart plays its GenRL episodes in {QUICKSTART_ENVS} env processes, "
                          f"so the task's batch_episodes ({batch_episodes}) must be a multiple of {QUICKSTART_ENVS}")
@@ -93,6 +94,17 @@ def quickstart(out_dir: str | os.PathLike, *, task: str, demo_episodes: int = 40
         log = log or (lambda _line: None)
         timings = _run_stages(out, settings, device, progress_bar, log)
         return _write_report(out, task, seed, video, timings, log)
+
+
+def _check_counts(*, demo_episodes: int, epochs: int, policy_episodes: int, pr_samples: int, dwpr_samples: int) -> None:
+    """Refuse counts the stages cannot run with, before the demonstrations are made."""
+    from sb3_genrl.checks import MAX_EPISODES, check_episodes, check_int, check_positive_int
+
+    for name, value in dict(epochs=epochs, dwpr_samples=dwpr_samples).items():
+        check_positive_int(value, name)
+    check_episodes(policy_episodes, "policy_episodes")
+    for name, value in dict(demo_episodes=demo_episodes, pr_samples=pr_samples).items():
+        check_int(value, name, minimum=MIN_DEMO_EPISODES, maximum=MAX_EPISODES)
 
 
 def _stage_settings(task: str, demo_episodes: int, epochs: int, policy_episodes: int, batch_episodes: int,

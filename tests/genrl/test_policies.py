@@ -147,3 +147,32 @@ def test_context_std_trust_region_needs_a_bounded_context():
     with pytest.raises(ValueError, match="needs a bounded Box context scaled by BoxScaler"):
         GenRL("ContextStdPolicy", unbounded, max_log_std_change=0.01)
     GenRL("ContextStdPolicy", unbounded)  # without the trust region the spread may depend on any features
+
+
+class _ImageContextEnv(gym.Env):
+    """A one-step env whose context is a 36x36 RGB image."""
+
+    observation_space = gym.spaces.Box(0, 255, (36, 36, 3), dtype=np.uint8)
+    action_space = gym.spaces.Box(-1.0, 1.0, (2,), dtype=np.float32)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        return self.np_random.integers(0, 256, (36, 36, 3), dtype=np.uint8), {}
+
+    def step(self, action):
+        return self.observation_space.sample(), -float(np.abs(action).mean()), True, False, {}
+
+
+def test_an_image_context_keeps_sb3s_extractors_and_is_scaled_once():
+    from stable_baselines3.common.policies import ActorCriticCnnPolicy
+    from stable_baselines3.common.torch_layers import FlattenExtractor, NatureCNN
+
+    cnn = GenRL(ActorCriticCnnPolicy, LatentActionWrapper(_ImageContextEnv(), LinearGenerator()), n_steps=4)
+    assert isinstance(cnn.policy.features_extractor, NatureCNN)
+    mlp = GenRL(LatentActionWrapper(_ImageContextEnv(), LinearGenerator()), n_steps=4)
+    assert isinstance(mlp.policy.pi_features_extractor, FlattenExtractor)
+    for value, expected in ((0, 0.0), (255, 1.0)):  # SB3 divides by 255, and nothing rescales it again
+        image = th.full((1, 36, 36, 3), value, dtype=th.uint8)
+        features = mlp.policy.extract_features(mlp.policy.obs_to_tensor(image.numpy())[0],
+                                               mlp.policy.pi_features_extractor)
+        assert th.all(features == expected)

@@ -207,3 +207,24 @@ def test_a_generator_given_beside_an_env_that_wraps_another_is_refused(tmp_path)
     unknown = r"LinearGenerator \(\(latent_dim, T, M\) = \(2, 5, 2\), object 0x[0-9a-f]+\), is not "
     with pytest.raises(ValueError, match=unknown):
         GenRL(LatentActionWrapper(FastReachEnv(), LinearGenerator()), LinearGenerator())  # of unknown content
+
+
+def test_load_accepts_the_constructors_own_policy_kwargs(tmp_path):
+    GenRL(FastReachEnv(), LinearGenerator(), n_steps=8, policy_kwargs={"net_arch": [32]}).save(tmp_path / "policy.zip")
+    loaded = GenRL.load(tmp_path / "policy.zip", env=FastReachEnv(), generator=LinearGenerator(),
+                        policy_kwargs={"net_arch": [32]})
+    assert loaded.policy_kwargs["net_arch"] == [32]
+    with pytest.raises(ValueError, match="policy kwargs do not equal"):  # other ones are still refused, as by SB3
+        GenRL.load(tmp_path / "policy.zip", env=FastReachEnv(), generator=LinearGenerator(),
+                   policy_kwargs={"net_arch": [64]})
+
+
+def test_load_refuses_a_generator_file_and_another_algorithms_zip_naming_them(tmp_path):
+    from stable_baselines3 import PPO
+
+    _vae(0).save(str(tmp_path / "vae.pt"))
+    with pytest.raises(ValueError, match=r"vae.pt is not an SB3 model zip \(a generator file"):
+        GenRL.load(tmp_path / "vae.pt")
+    PPO("MlpPolicy", "Pendulum-v1", n_steps=8, batch_size=8).save(tmp_path / "ppo.zip")
+    with pytest.raises(ValueError, match="ppo.zip is not a GenRL model: it holds a ActorCriticPolicy policy"):
+        GenRL.load(tmp_path / "ppo.zip")

@@ -90,3 +90,18 @@ def test_hindsight_is_checked():
                                    context_space=gym.spaces.Dict({"goal": gym.spaces.Box(-1, 1, (2,))}))
     with pytest.raises(ValueError, match="hindsight_kwargs relabels Box contexts"):
         GenRL("MultiInputPolicy", dict_env, hindsight_kwargs={})
+
+
+def test_one_episode_per_batch_is_refused_as_sb3_and_sb3_contrib_refuse_it():
+    from conftest import FastReachEnv, LinearGenerator
+
+    for expected in (ValueError, AssertionError):  # sb3-genrl's convention and SB3's (PPO, TRPO: AssertionError)
+        with pytest.raises(expected, match="n_steps \\* n_envs >= 2"):
+            GenRL(FastReachEnv(), LinearGenerator(), n_steps=1)
+
+
+def test_a_batch_size_of_zero_is_refused_naming_it():
+    with pytest.raises(ValueError, match="batch_size must be a positive integer, got 0"):
+        GenRL(FastReachEnv(), LinearGenerator(), batch_size=0)
+    with pytest.raises(ValueError, match="batch_size must be a positive integer, got 0"):
+        check_genrl_settings({"batch_size": 0})
