@@ -70,8 +70,9 @@ def test_the_scripted_experts_solve_random_initial_states_open_loop(task, least)
 
 
 def test_demonstrations_generator_and_genrl_on_fetch_push(tmp_path):
-    from sb3_genrl.data import dataset_info, load_arrays
     from sb3_genrl.envs.demonstrations import make_demonstrations
+
+    from sb3_genrl.data import dataset_info, load_arrays
     from sb3_genrl.generative import train_generator
     from sb3_genrl.genrl import GenRL, train_policy
 
