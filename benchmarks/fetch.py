@@ -1,6 +1,6 @@
 """GenRL on Gymnasium-Robotics' Fetch tasks: the deterministic policy's success rate on held-out initial states.
 
-Makes the task's demonstrations (or reads ``--data``), trains the quickstart's generator for the Fetch tasks (VAE7,
+Makes the task's demonstrations (or reads ``--data``), trains the quickstart's generator for the Fetch tasks (VAE9,
 300 epochs; or reads ``--generator``), measures the generator's own limit (the share of ``--limit-states`` held-out
 initial states that some of ``--prior-draws`` draws from its prior solves), then trains GenRL with the task's entry in
 ``hyperparams/genrl.yml`` and several seeds. Every ``--eval-every`` episodes and at the end, each seed's deterministic
