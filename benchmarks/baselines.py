@@ -48,7 +48,7 @@ from typing import Any
 import gymnasium as gym
 from sb3_genrl.baselines.hyperparameters import baseline_kwargs_argument
 from sb3_genrl.benchmarks.baselines_results import METHODS, WINDOW, core_hours, merge_results, method_result, write_outputs
-from sb3_genrl.envs import TASKS
+from sb3_genrl.envs import arm_tasks
 
 from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, OUT_DIR, SEED, json_object_argument
 from sb3_genrl.utils import atomic_write_json
@@ -232,7 +232,7 @@ def arguments(argv: list[str] | None = None) -> argparse.Namespace:
     from sb3_genrl.genrl import check_genrl_settings
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--task", default="hockey", choices=sorted(TASKS), help="a registered task (default: hockey)")
+    parser.add_argument("--task", default="hockey", choices=arm_tasks(), help="a task on the arm (default: hockey)")
     parser.add_argument("--episodes", type=COUNT, default=3000, help="episode budget of every run")
     parser.add_argument("--seeds", type=SEED, nargs="+", default=[0, 1, 2])
     parser.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)

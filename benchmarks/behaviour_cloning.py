@@ -67,7 +67,7 @@ def seed_result(run: pathlib.Path, task: str, transitions: dict[str, np.ndarray]
 def main(argv: list[str] | None = None) -> int:
     from sb3_genrl.baselines.evaluation import EVAL_GOALS
     from sb3_genrl.baselines.feedback import add_time_feature, evaluate_feedback_policy
-    from sb3_genrl.envs import TASKS, get_task
+    from sb3_genrl.envs import arm_tasks, get_task
 
     from sb3_genrl.checks import EXISTING, JSON_OUT, SEED
     from sb3_genrl.data import load_transitions
@@ -75,7 +75,7 @@ def main(argv: list[str] | None = None) -> int:
     from sb3_genrl.utils import atomic_write_json
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--task", default="hockey", choices=sorted(TASKS))
+    parser.add_argument("--task", default="hockey", choices=arm_tasks())
     parser.add_argument("--work", type=EXISTING, help="the baselines benchmark's work folder "
                         "(default: benchmarks/runs/baselines_TASK)")
     parser.add_argument("--seeds", type=SEED, nargs="+", default=[0, 1, 2])

@@ -19,7 +19,7 @@ from gymnasium.envs.registration import register, registry
 from sb3_genrl.envs import basketball, fetch, hockey
 from sb3_genrl.envs.spec import TaskSpec
 
-__all__ = ["DEFAULT_TASK", "TASKS", "TaskSpec", "get_task", "make_task", "register_envs", "register_task"]
+__all__ = ["DEFAULT_TASK", "TASKS", "TaskSpec", "arm_tasks", "get_task", "make_task", "register_envs", "register_task"]
 
 TASKS: dict[str, TaskSpec] = {}
 # Gymnasium-Robotics' Fetch tasks, when its optional extra is installed (``pip install "sb3-genrl[robotics]"``; looked up
@@ -65,6 +65,15 @@ def get_task(task: str | TaskSpec) -> TaskSpec:
             return spec
     raise ValueError(f"unknown task {task!r}; expected one of {sorted(TASKS)} or their Gymnasium ids "
                      f"{sorted(spec.env_id for spec in TASKS.values())}")
+
+
+def arm_tasks() -> tuple[str, ...]:
+    """The registered tasks on the package's arm (:class:`~sb3_genrl.envs.base.ArmTaskEnv`): those that the scripted
+    motions' showcase, the feedback baselines, the video and the study run on (not, for now, the Fetch tasks)."""
+    from sb3_genrl.envs.base import ArmTaskEnv
+
+    return tuple(name for name, spec in TASKS.items()
+                 if isinstance(spec.env_class, type) and issubclass(spec.env_class, ArmTaskEnv))
 
 
 def make_task(name: str, **kwargs: Any):

@@ -49,15 +49,18 @@ def play_scripted(out_dir: str | Path, *, tasks: tuple[str, ...] | None = None, 
     with ``np.random.default_rng(seed)``; its goal, marked in red, is the point it reaches, as in the demonstrations.
 
     :param out_dir: output folder (created)
-    :param tasks: task names from :data:`sb3_genrl.envs.TASKS` (default: all registered tasks)
+    :param tasks: task names from :func:`sb3_genrl.envs.arm_tasks` (default: all of them)
     :param seed: seed of the motions
     :param width: frame width (pixels)
     :param height: frame height (pixels)
     :return: the report's path
     """
-    from sb3_genrl.envs import TASKS, get_task
+    from sb3_genrl.envs import arm_tasks, get_task
 
-    specs = [get_task(name) for name in tasks or tuple(TASKS)]
+    specs = [get_task(name) for name in tasks or arm_tasks()]
+    others = [spec.name for spec in specs if spec.name not in arm_tasks()]
+    if others:
+        raise ValueError(f"the scripted motions are shown for the tasks on the package's arm {arm_tasks()}; got {others}")
     check_seed(seed)
     check_positive_int(width, "width")
     check_positive_int(height, "height")

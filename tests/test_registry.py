@@ -192,3 +192,27 @@ def test_train_policy_takes_the_tasks_genrl_settings(reach_task, tmp_path, monke
     from sb3_genrl.genrl.policies import ContextStdPolicy
 
     assert isinstance(GenRL.load(tmp_path / "task" / "genrl_policy.zip", device="cpu").policy, ContextStdPolicy)
+
+
+def test_the_arms_workflows_run_on_the_arms_tasks_only(tmp_path, cli):
+    # The scripted motions' showcase, the baselines, the video and the study are the arm tasks' machinery: with the
+    # Fetch tasks registered (the robotics extra), "every task" means the arm's, and a Fetch task is refused at once.
+    from sb3_genrl.envs import TASKS, arm_tasks
+
+    from sb3_genrl.showcase import play_scripted
+    from sb3_genrl.study import run_study
+
+    assert arm_tasks() == ("hockey", "basketball")
+    fetch = [name for name in TASKS if name not in arm_tasks()]
+    assert fetch, "the test command installs the robotics extra: the Fetch tasks must be registered"
+    (tmp_path / "g.pt").write_bytes(b"")  # an input that exists: only --task is wrong
+    for command in (("play", "--out", tmp_path / "p"), ("study", "--scale", "smoke", "--out", tmp_path / "s"),
+                    ("video", "--generator", tmp_path / "g.pt", "--out", tmp_path / "v.gif"),
+                    ("compare", "--runs", tmp_path, "--out", tmp_path / "c")):
+        code, _, err = cli(*command, "--task", fetch[0])
+        assert code == 2 and f"invalid choice: '{fetch[0]}'" in err, (command, err)
+    with pytest.raises(ValueError, match=f"unknown task '{fetch[0]}' for the study"):
+        run_study(fetch[0], "smoke", tmp_path / "s")
+    with pytest.raises(ValueError, match="the scripted motions are shown for the tasks on the package's arm"):
+        play_scripted(tmp_path / "p", tasks=(fetch[0],))
+    assert not any(path.exists() for path in (tmp_path / "p", tmp_path / "s", tmp_path / "c", tmp_path / "v.gif"))

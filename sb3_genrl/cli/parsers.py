@@ -27,11 +27,13 @@ from sb3_genrl.cli import commands
 
 
 def _task_option(parser: argparse.ArgumentParser, *, required: bool = True, default: str | None = None,
-                 extra: tuple[str, ...] = (), nargs: str | None = None) -> None:
-    from sb3_genrl.envs import TASKS
+                 extra: tuple[str, ...] = (), nargs: str | None = None, arm_only: bool = False) -> None:
+    from sb3_genrl.envs import TASKS, arm_tasks
 
-    parser.add_argument("--task", required=required, default=default, choices=(*TASKS, *extra), nargs=nargs,
-                        help="a registered task" + (f" (default: {default})" if default else ""))
+    parser.add_argument("--task", required=required, default=default, choices=(*(arm_tasks() if arm_only else TASKS),
+                                                                                  *extra), nargs=nargs,
+                        help=("a task on the package's arm" if arm_only else "a registered task")
+                        + (f" (default: {default})" if default else ""))
 
 
 def _seed_option(parser: argparse.ArgumentParser, text: str = "seed of every random draw") -> None:
@@ -56,7 +58,7 @@ def _overwrite_option(parser: argparse.ArgumentParser) -> None:
 def add_play(sub: argparse._SubParsersAction) -> None:
     play = sub.add_parser("play", help="play each task's scripted expert, render it and write a short report")
     play.add_argument("--out", required=True, type=OUT_DIR, help="output folder (report.md, GIFs, frame strips)")
-    _task_option(play, required=False, nargs="+")
+    _task_option(play, required=False, nargs="+", arm_only=True)
     _seed_option(play, "seed of the scripted motions")
     play.set_defaults(func=commands.play_command)
 
@@ -165,7 +167,7 @@ def add_baseline(sub: argparse._SubParsersAction) -> None:
     baseline = sub.add_parser("baseline", help="train PPO (BC), SAC (with or without prefilled buffer), SAC+HER, or a "
                               "stock algorithm on the latent space")
     baseline.add_argument("algorithm", choices=BASELINES)
-    _task_option(baseline)
+    _task_option(baseline, arm_only=True)
     baseline.add_argument("--demos", type=EXISTING, default=None,
                           help="demonstration dataset (ppo, sac, sac-no-prefill, sac-her)")
     baseline.add_argument("--demo-episodes", type=COUNT, default=None, help="use the first N demonstrations (default all)")
@@ -189,7 +191,7 @@ def add_baseline(sub: argparse._SubParsersAction) -> None:
 
 def add_compare(sub: argparse._SubParsersAction) -> None:
     compare = sub.add_parser("compare", help="GenRL vs baselines over seeds: reward curves and table contacts")
-    _task_option(compare, required=False)
+    _task_option(compare, required=False, arm_only=True)
     compare.add_argument("--runs", nargs="+", required=True, type=EXISTING, help="run folders (several seeds per method)")
     compare.add_argument("--out", required=True, type=OUT_DIR, help="output folder")
     compare.set_defaults(func=commands.compare_command)
@@ -199,7 +201,7 @@ def add_video(sub: argparse._SubParsersAction) -> None:
     from sb3_genrl.video import VIDEO_SUFFIXES
 
     video = sub.add_parser("video", help="render a GenRL policy (or a generator's random trajectories) to MP4 or GIF")
-    _task_option(video)
+    _task_option(video, arm_only=True)
     source = video.add_mutually_exclusive_group(required=True)
     source.add_argument("--policy", type=EXISTING, help="a GenRL run folder or model zip")
     source.add_argument("--generator", type=EXISTING, help="a generator file (random latent actions)")
@@ -238,7 +240,7 @@ def add_study(sub: argparse._SubParsersAction) -> None:
     from sb3_genrl.study import MODELS, SCALES
 
     study = sub.add_parser("study", help="the paper's experiments at a scale, with tables, plots and report.md")
-    _task_option(study, required=False, default="all", extra=("all",))
+    _task_option(study, required=False, default="all", extra=("all",), arm_only=True)
     study.add_argument("--scale", choices=tuple(SCALES), default="small", help="size of every stage (default: small)")
     study.add_argument("--out", required=True, type=OUT_DIR, help="study folder (a rerun resumes it)")
     study.add_argument("--executor", choices=("local", "ray"), default="local", help="worker processes or Ray tasks")

@@ -54,7 +54,7 @@ def run_study(task: str, scale: str | StudyScale, out_dir: str | os.PathLike, *,
     :class:`~sb3_genrl.study.state.SettingsConflictError` before any work; a folder that another process is
     working in raises :class:`~sb3_genrl.study.state.FolderInUseError`.
 
-    :param task: a task name from :data:`sb3_genrl.envs.TASKS`, or ``all`` for every registered task
+    :param task: a task name from :func:`sb3_genrl.envs.arm_tasks`, or ``all`` for all of them
     :param scale: ``smoke``, ``small`` or ``paper`` (see :data:`~sb3_genrl.study.scales.SCALES`), or a
         :class:`~sb3_genrl.study.scales.StudyScale` of one's own
     :param out_dir: the study folder
@@ -67,10 +67,10 @@ def run_study(task: str, scale: str | StudyScale, out_dir: str | os.PathLike, *,
     :param log: called with a line of progress after each finished job
     :return: the report's path
     """
-    from sb3_genrl.envs import TASKS
+    from sb3_genrl.envs import arm_tasks
 
-    if task not in (*TASKS, "all"):
-        raise ValueError(f"unknown task {task!r}; expected one of {tuple(TASKS)} or 'all'")
+    if task not in (*arm_tasks(), "all"):  # the study's baselines and measures are those of the arm's tasks
+        raise ValueError(f"unknown task {task!r} for the study; expected one of {arm_tasks()} or 'all'")
     if not isinstance(scale, StudyScale) and scale not in SCALES:
         raise ValueError(f"unknown scale {scale!r}; expected one of {sorted(SCALES)} or a StudyScale")
     if executor not in ("local", "ray"):
@@ -82,7 +82,7 @@ def run_study(task: str, scale: str | StudyScale, out_dir: str | os.PathLike, *,
         check_positive_int(workers, "workers")
     check_device(device)
     settings = (scale if isinstance(scale, StudyScale) else SCALES[scale]).as_dict()
-    tasks = tuple(TASKS) if task == "all" else (task,)
+    tasks = arm_tasks() if task == "all" else (task,)
     out = check_output_dir(out_dir)
     log = log or (lambda _line: None)
     with folder_lock(out):
