@@ -22,6 +22,7 @@ import time
 
 import numpy as np
 import torch
+from sb3_genrl.benchmarks.genrl import make_generator
 from sb3_genrl.envs import TASKS, get_task
 from sb3_genrl.envs.fetch import FETCH_HORIZON
 from sb3_genrl.envs.fetch_demonstrations import evaluate_success, play_expert
@@ -29,7 +30,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from sb3_genrl import __version__
 from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, SEED
-from sb3_genrl.generative import load, train_generator
+from sb3_genrl.generative import load
 from sb3_genrl.genrl.train import genrl_settings, make_genrl
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED
 from sb3_genrl.study.quickstart import quickstart_preset, task_settings
@@ -59,22 +60,6 @@ class SuccessCurve(BaseCallback):
         self.record["curve_env_steps"].append(int(self.num_timesteps) * FETCH_HORIZON)
         self.record["curve_success"].append(result["success_rate"])
         self.write()
-
-
-def make_generator(task: str, args: argparse.Namespace, work: str) -> tuple[str, dict[str, object]]:
-    """``--generator``, or the quickstart's generator for the task trained on ``--data`` or new demonstrations."""
-    if args.generator is not None:
-        return args.generator, {"generator": os.path.abspath(args.generator)}
-    data = args.data
-    if data is None:
-        from sb3_genrl.envs.demonstrations import make_demonstrations
-
-        data = os.path.join(work, "demonstrations")
-        make_demonstrations(task, args.demos, data, seed=0, n_threads=args.threads, progress_bar=False)
-    path, preset = os.path.join(work, "vae.pt"), quickstart_preset(task)
-    vae = train_generator(data, preset=preset, epochs=args.epochs, seed=0, out=path, progress_bar=False)
-    return path, {"demonstrations": args.demos if args.data is None else os.path.abspath(args.data), "preset": preset,
-                  "epochs": args.epochs, "best_epoch": vae.best_epoch}
 
 
 def generator_limit(task: str, generator_path: str, states: int, draws: int) -> dict[str, object]:
@@ -144,7 +129,8 @@ def main(argv: list[str] | None = None) -> None:
         atomic_write_json(args.out, result)
 
     with tempfile.TemporaryDirectory() as work:
-        generator_path, result["generator"] = make_generator(args.task, args, work)
+        generator_path, result["generator"] = make_generator(args.task, quickstart_preset(args.task), args, work,
+                                                             threads=args.threads)
         result["generator_limit"] = generator_limit(args.task, generator_path, args.limit_states, args.prior_draws)
         write()
         for seed in args.seeds:

@@ -75,8 +75,10 @@ class Setting:
         return 100.0 if self.unit == "cm" else 1.0
 
 
-def make_generator(setting: Setting, args: argparse.Namespace, work: str) -> tuple[str, dict[str, object]]:
-    """The generator to benchmark: ``--generator``, or a beta-VAE trained on ``--data`` or on new demonstrations."""
+def make_generator(task: str, preset: str, args: argparse.Namespace, work: str, threads: int | None = 1
+                   ) -> tuple[str, dict[str, object]]:
+    """The generator to benchmark: ``--generator``, or the ``preset`` trained on ``--data`` or on ``--demos`` new
+    demonstrations (made on ``threads`` threads), with its record."""
     if args.generator is not None:
         return args.generator, {"generator": os.path.abspath(args.generator)}
     data = args.data
@@ -85,15 +87,15 @@ def make_generator(setting: Setting, args: argparse.Namespace, work: str) -> tup
 
         data = os.path.join(work, "demonstrations")
         start = time.perf_counter()
-        make_demonstrations(setting.task, args.demos, data, seed=0, n_threads=1, progress_bar=False)
+        make_demonstrations(task, args.demos, data, seed=0, n_threads=threads, progress_bar=False)
         print(f"{args.demos} demonstrations in {time.perf_counter() - start:.0f} s", flush=True)
     path = os.path.join(work, "vae.pt")
     start = time.perf_counter()
-    vae = train_generator(data, preset=args.preset, epochs=args.epochs, seed=0, out=path, progress_bar=False)
+    vae = train_generator(data, preset=preset, epochs=args.epochs, seed=0, out=path, progress_bar=False)
     seconds = time.perf_counter() - start
-    print(f"{args.preset}: best checkpoint at epoch {vae.best_epoch} of {args.epochs} ({seconds:.0f} s)", flush=True)
+    print(f"{preset}: best checkpoint at epoch {vae.best_epoch} of {args.epochs} ({seconds:.0f} s)", flush=True)
     return path, {"demonstrations": args.demos if args.data is None else os.path.abspath(args.data),
-                  "preset": args.preset, "epochs": args.epochs, "best_epoch": vae.best_epoch}
+                  "preset": preset, "epochs": args.epochs, "best_epoch": vae.best_epoch}
 
 
 def run_seed(setting: Setting, generator_path: str, seed: int, args: argparse.Namespace, work: str) -> dict[str, object]:
@@ -232,7 +234,7 @@ def main(argv: list[str] | None = None) -> None:
         "eval_goals": args.eval_goals, "target_m": setting.target_m, "genrl_kwargs": args.genrl_kwargs,
         "genrl_settings": genrl_settings(args.genrl_kwargs), "runs": []}
     with tempfile.TemporaryDirectory() as work:
-        generator_path, result["generator"] = make_generator(setting, args, work)
+        generator_path, result["generator"] = make_generator(setting.task, args.preset, args, work)
         start = time.perf_counter()
         goals = held_out_goals(setting.task, args.final_goals, EVAL_GOAL_SEED)
         limit = generator_limit(load(generator_path, device="cpu"), setting.task, goals, grid=args.grid)
