@@ -234,6 +234,20 @@ class _Killed(Exception):
     """Stands for the process being killed."""
 
 
+def _killed_in_episode(monkeypatch, episode: int) -> None:
+    """Make a SAC run on hockey stop (raise :class:`_Killed`) 10 steps into its ``episode``-th episode (69 steps each)."""
+    from sb3_genrl.baselines import checkpoint
+
+    watch = checkpoint.EpisodeCheckpoint._on_rollout_start
+
+    def killed(callback):
+        watch(callback)
+        if callback.model.num_timesteps == (episode - 1) * 69 + 10:
+            raise _Killed
+
+    monkeypatch.setattr(checkpoint.EpisodeCheckpoint, "_on_rollout_start", killed)
+
+
 def _open_in_this_process(path) -> bool:
     """Whether this process holds ``path`` open (Linux: its /proc/self/fd links)."""
     target = os.path.realpath(path)
@@ -242,16 +256,7 @@ def _open_in_this_process(path) -> bool:
 
 @pytest.mark.parametrize("algorithm", ["sac", "sac-her"])
 def test_a_stopped_off_policy_run_resumes_from_its_checkpoint(algorithm, demos, tmp_path, monkeypatch):
-    from sb3_genrl.baselines import checkpoint
-
-    watch = checkpoint.EpisodeCheckpoint._on_rollout_start
-
-    def killed_in_the_fourth_episode(callback):
-        watch(callback)
-        if callback.model.num_timesteps == 3 * 69 + 10:
-            raise _Killed
-
-    monkeypatch.setattr(checkpoint.EpisodeCheckpoint, "_on_rollout_start", killed_in_the_fourth_episode)
+    _killed_in_episode(monkeypatch, 4)
     run = {"episodes": 5, "out_dir": tmp_path, "demos": demos, "demo_episodes": 10, "checkpoint_every": 2,
            "device": "cpu", "seed": 1, "window": 5}
     with pytest.raises(_Killed):
@@ -304,16 +309,7 @@ def test_a_checkpoint_interrupted_while_written_leaves_the_previous_one_whole(de
 
 
 def test_a_run_resumed_twice_from_one_checkpoint_keeps_its_early_log(demos, tmp_path, monkeypatch):
-    from sb3_genrl.baselines import checkpoint
-
-    watch = checkpoint.EpisodeCheckpoint._on_rollout_start
-
-    def killed_in_the_sixth_episode(callback):
-        watch(callback)
-        if callback.model.num_timesteps == 5 * 69 + 10:
-            raise _Killed
-
-    monkeypatch.setattr(checkpoint.EpisodeCheckpoint, "_on_rollout_start", killed_in_the_sixth_episode)
+    _killed_in_episode(monkeypatch, 6)
     run = {"episodes": 6, "out_dir": tmp_path, "demos": demos, "demo_episodes": 10, "checkpoint_every": 5,
            "device": "cpu", "seed": 1, "window": 3, "eval_goals": 2}
     with pytest.raises(_Killed):
@@ -327,16 +323,7 @@ def test_a_run_resumed_twice_from_one_checkpoint_keeps_its_early_log(demos, tmp_
 
 
 def test_a_sac_run_with_the_largest_seed_resumes(demos, tmp_path, monkeypatch):
-    from sb3_genrl.baselines import checkpoint
-
-    watch = checkpoint.EpisodeCheckpoint._on_rollout_start
-
-    def killed_in_the_third_episode(callback):
-        watch(callback)
-        if callback.model.num_timesteps == 2 * 69 + 10:
-            raise _Killed
-
-    monkeypatch.setattr(checkpoint.EpisodeCheckpoint, "_on_rollout_start", killed_in_the_third_episode)
+    _killed_in_episode(monkeypatch, 3)
     run = {"episodes": 3, "out_dir": tmp_path, "demos": demos, "demo_episodes": 10, "checkpoint_every": 2,
            "device": "cpu", "seed": 2**32 - 1, "window": 3, "eval_goals": 2}
     with pytest.raises(_Killed):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from scipy.spatial.distance import cdist
+from test_metrics import POINT_SETS, point_sets
 
 from sb3_genrl.metrics import density_coverage
 
@@ -20,25 +21,10 @@ def brute_force(real: np.ndarray, generated: np.ndarray, k: int) -> tuple[float,
     return float(inside.sum(0).mean() / k), float(inside.any(1).mean())
 
 
-def grid_points(rng: np.random.Generator, n: int, dim: int) -> np.ndarray:
-    """Integer points on a small grid: exact duplicates and exactly tied distances."""
-    return rng.integers(0, 3, size=(n, dim)).astype(np.float32)
-
-
-@pytest.mark.parametrize("kind", ["gaussian", "grid", "offset_grid", "trajectories"])
+@pytest.mark.parametrize("kind", POINT_SETS)
 @pytest.mark.parametrize("k", [1, 3, 5])
 def test_density_coverage_matches_brute_force(kind: str, k: int) -> None:
-    rng = np.random.default_rng(10 + k)
-    if kind == "gaussian":
-        real, generated = rng.normal(size=(70, 6)), rng.normal(0.3, 0.8, size=(45, 6))
-    elif kind == "grid":
-        real, generated = grid_points(rng, 60, 3), grid_points(rng, 50, 3)
-    elif kind == "offset_grid":  # exact ties that float32 values far from the origin cannot resolve
-        real = 1000.0 + grid_points(rng, 60, 4).astype(np.float64) / 4
-        generated = 1000.0 + grid_points(rng, 50, 4).astype(np.float64) / 4
-    else:  # (N, T, M) with a large common offset, where float32 cancellation is worst
-        real = 100.0 + rng.normal(size=(50, 4, 3)).astype(np.float32)
-        generated = 100.0 + rng.normal(size=(40, 4, 3)).astype(np.float32)
+    real, generated = point_sets(kind, np.random.default_rng(10 + k))
     density, coverage = brute_force(real, generated, k)
     assert 0 < coverage  # the sets overlap: the comparison is not between zeros
     for batch_size in (1, 4, 17, None):

@@ -64,20 +64,26 @@ def grid_points(rng: np.random.Generator, n: int, dim: int) -> np.ndarray:
     return rng.integers(0, 3, size=(n, dim)).astype(np.float32)
 
 
-@pytest.mark.parametrize("kind", ["gaussian", "grid", "offset_grid", "trajectories"])
+POINT_SETS = ("gaussian", "grid", "offset_grid", "trajectories")
+
+
+def point_sets(kind: str, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Real and generated sets of one of :data:`POINT_SETS`' kinds, each a hard case of its own."""
+    if kind == "gaussian":
+        return rng.normal(size=(70, 6)), rng.normal(0.4, 1.2, size=(45, 6))
+    if kind == "grid":
+        return grid_points(rng, 60, 3), grid_points(rng, 50, 3)
+    if kind == "offset_grid":  # exact ties that float32 values far from the origin cannot resolve
+        return (1000.0 + grid_points(rng, 60, 4).astype(np.float64) / 4,
+                1000.0 + grid_points(rng, 50, 4).astype(np.float64) / 4)
+    # (N, T, M) with a large common offset, where float32 cancellation is worst
+    return 100.0 + rng.normal(size=(50, 4, 3)).astype(np.float32), 100.0 + rng.normal(size=(40, 4, 3)).astype(np.float32)
+
+
+@pytest.mark.parametrize("kind", POINT_SETS)
 @pytest.mark.parametrize("k", [1, 3, 5])
 def test_precision_recall_matches_brute_force(kind: str, k: int) -> None:
-    rng = np.random.default_rng(k)
-    if kind == "gaussian":
-        real, generated = rng.normal(size=(70, 6)), rng.normal(0.4, 1.2, size=(45, 6))
-    elif kind == "grid":
-        real, generated = grid_points(rng, 60, 3), grid_points(rng, 50, 3)
-    elif kind == "offset_grid":  # exact ties that float32 values far from the origin cannot resolve
-        real = 1000.0 + grid_points(rng, 60, 4).astype(np.float64) / 4
-        generated = 1000.0 + grid_points(rng, 50, 4).astype(np.float64) / 4
-    else:  # (N, T, M) with a large common offset, where float32 cancellation is worst
-        real = 100.0 + rng.normal(size=(50, 4, 3)).astype(np.float32)
-        generated = 100.0 + rng.normal(size=(40, 4, 3)).astype(np.float32)
+    real, generated = point_sets(kind, np.random.default_rng(k))
     expected = brute_force(real, generated, k)
     for batch_size in (1, 4, 17, None):
         result = precision_recall(real, generated, k, batch_size=batch_size, device="cpu", return_radii=True)
