@@ -25,7 +25,7 @@ from typing import Any
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.monitor import Monitor
 
-from sb3_genrl.run_folder import CHECKPOINT_DIR, keep_episodes, remove_checkpoint  # noqa: F401 (re-exported)
+from sb3_genrl.run_folder import CHECKPOINT_DIR, differing, keep_episodes, remove_checkpoint  # noqa: F401 (re-exported)
 from sb3_genrl.utils import read_checkpoint, write_checkpoint
 
 MODEL, BUFFER = "model.zip", "replay_buffer.pkl"
@@ -81,8 +81,8 @@ def resume_state(out: pathlib.Path, identity: dict[str, Any]) -> dict[str, Any] 
         return None
     recorded = state["identity"]
     if recorded != identity:
-        differ = sorted(k for k in set(recorded) | set(identity) if recorded.get(k) != identity.get(k))
-        raise ValueError(f"{out} holds a checkpoint of another run (it differs in {', '.join(differ)}); use another "
+        raise ValueError(f"{out} holds a checkpoint of another run (it differs in "
+                         f"{', '.join(differing(recorded, identity))}); use another "
                          f"out_dir, or delete {out / CHECKPOINT_DIR} to start this run afresh")
     return state
 

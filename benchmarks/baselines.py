@@ -51,6 +51,7 @@ from sb3_genrl.benchmarks.baselines_results import METHODS, WINDOW, core_hours, 
 from sb3_genrl.envs import arm_tasks
 
 from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, OUT_DIR, SEED, json_object_argument
+from sb3_genrl.run_folder import differing
 from sb3_genrl.utils import atomic_write_json
 
 HERE = pathlib.Path(__file__).resolve().parent
@@ -153,8 +154,8 @@ def finished(run: pathlib.Path, settings: dict[str, Any]) -> bool:
         return False
     recorded = json.loads(record.read_text())["settings"]
     if recorded != settings:
-        differ = sorted(k for k in set(recorded) | set(settings) if recorded.get(k) != settings.get(k))
-        raise ValueError(f"{run} holds a finished run with other settings ({', '.join(differ)}); use another --work")
+        raise ValueError(f"{run} holds a finished run with other settings ({', '.join(differing(recorded, settings))}); "
+                         "use another --work")
     return True
 
 

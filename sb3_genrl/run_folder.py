@@ -52,15 +52,19 @@ def open_run(out: str | os.PathLike[str], identity: Mapping[str, Any], outputs: 
             raise RunFolderError(f"{out} holds a run's files ({', '.join(present)}) but no {RUN_RECORD} saying what run "
                                  f"made them. Nothing was changed: {_WAYS_OUT}")
         if recorded != identity:
-            differ = sorted(key for key in set(recorded) | set(identity) if recorded.get(key) != identity.get(key))
-            raise RunFolderError(f"{out} holds another run (it differs in {', '.join(differ)}). Nothing was changed: "
-                                 f"{_WAYS_OUT}")
+            raise RunFolderError(f"{out} holds another run (it differs in {', '.join(differing(recorded, identity))}). "
+                                 f"Nothing was changed: {_WAYS_OUT}")
         if (out / SUMMARY).is_file():
             return json.loads((out / SUMMARY).read_text())
     if overwrite or not (out / CHECKPOINT_DIR / CHECKPOINT_STATE).is_file():
         _remove(out, present)
     atomic_write_json(out / RUN_RECORD, identity)
     return None
+
+
+def differing(recorded: Mapping[str, Any], identity: Mapping[str, Any]) -> list[str]:
+    """The keys whose values differ between two runs' records (a key missing from one counts), sorted."""
+    return sorted(key for key in set(recorded) | set(identity) if recorded.get(key) != identity.get(key))
 
 
 _WAYS_OUT = ("rerun with that run's settings, choose another output folder (--out), or pass --overwrite "
