@@ -1,0 +1,1 @@
+"""GenRL as an rl-zoo3 algorithm (the ``zoo`` extra): ``python -m sb3_genrl.zoo train --algo genrl --env ...``."""
