@@ -225,10 +225,69 @@ def test_correlation_table_few_models_and_rendering(tmp_path) -> None:
     for line, expected in zip(lines, table.rows, strict=True):
         cells = [cell.strip() for cell in line.strip("|").split("|")]
         assert cells[:3] == [expected.group, expected.measure, str(expected.num_models)]
-        for cell, value in zip(cells[3:5], (expected.pearson_r, expected.p_value), strict=True):
+        for cell, value in zip([cells[i] for i in (3, 5, 6, 8)], (expected.pearson_r, expected.p_value,
+                                                            expected.spearman_rho, expected.spearman_p), strict=True):
             assert (cell == "nan" and math.isnan(value)) or float(cell) == pytest.approx(value, abs=5e-5)
     with pytest.raises(ValueError, match="no 'score'"):
         correlation_table([{"model": "x", "recall": 1.0}])
+
+
+def brute_force_bootstrap(x, y, resamples: int, seed: int):
+    """Reference: one resample at a time with scipy's coefficients, the documented draw of the resamples."""
+    from scipy.stats import pearsonr, spearmanr
+
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    index = np.random.default_rng(seed).integers(0, len(x), size=(resamples, len(x)))
+    r, rho = [], []
+    for i in index:
+        if np.ptp(x[i]) > 0 and np.ptp(y[i]) > 0:
+            r.append(pearsonr(x[i], y[i]).statistic)
+            rho.append(spearmanr(x[i], y[i]).statistic)
+    return np.percentile(r, [2.5, 97.5]), np.percentile(rho, [2.5, 97.5]), len(r)
+
+
+def test_bootstrap_intervals_equal_a_loop_over_resamples_and_scipy_bootstrap() -> None:
+    from scipy.stats import bootstrap, spearmanr
+
+    from sb3_genrl.metrics.bootstrap import bootstrap_correlations
+
+    rng = np.random.default_rng(1)
+    x = np.array([0.1, 0.1, 0.5, 0.5, 0.9])  # ties: exact duplicates in many resamples, constant ones too
+    y = x + rng.normal(0, 0.3, size=len(x))
+    pearson_ci, spearman_ci = bootstrap_correlations(x, y, resamples=400, seed=5)
+    expected_r, expected_rho, defined = brute_force_bootstrap(x, y, 400, 5)
+    assert 0 < 400 - defined and pearson_ci.defined == spearman_ci.defined == defined and pearson_ci.resamples == 400
+    np.testing.assert_allclose([pearson_ci.low, pearson_ci.high], expected_r, atol=1e-12)
+    np.testing.assert_allclose([spearman_ci.low, spearman_ci.high], expected_rho, atol=1e-12)
+    # Against scipy's own percentile bootstrap (other resamples): the same interval up to resampling noise.
+    x, y = rng.normal(size=15), rng.normal(size=15)
+    y = y + x
+    pearson_ci, spearman_ci = bootstrap_correlations(x, y, resamples=4000, seed=0)
+    for statistic, ours in ((lambda a, b: np.corrcoef(a, b)[0, 1], pearson_ci),
+                            (lambda a, b: spearmanr(a, b).statistic, spearman_ci)):
+        theirs = bootstrap((x, y), statistic, paired=True, vectorized=False, n_resamples=4000, method="percentile",
+                           rng=np.random.default_rng(1)).confidence_interval
+        assert abs(ours.low - theirs.low) < 0.05 and abs(ours.high - theirs.high) < 0.05
+
+
+def test_correlation_rows_hold_spearman_and_the_bootstrap_intervals(tmp_path) -> None:
+    from scipy.stats import spearmanr
+
+    rng = np.random.default_rng(2)
+    records = [{"model": f"m{i}", "recall": rng.uniform(), "score": rng.normal()} for i in range(7)]
+    row = correlation_table(records, measure_names=["recall"], resamples=300, seed=3).rows[0]
+    x, y = [r["recall"] for r in records], [r["score"] for r in records]
+    assert row.spearman_rho == pytest.approx(spearmanr(x, y).statistic, abs=1e-12)
+    expected_r, expected_rho, _ = brute_force_bootstrap(x, y, 300, 3)
+    np.testing.assert_allclose([row.pearson_low, row.pearson_high, row.spearman_low, row.spearman_high],
+                               [*expected_r, *expected_rho], atol=1e-12)
+    assert row.pearson_low <= row.pearson_r <= row.pearson_high and row.resamples == 300
+    table = correlation_table(records, measure_names=["recall"], resamples=300, seed=3)
+    table.to_csv(tmp_path / "t.csv")
+    with open(tmp_path / "t.csv") as file:
+        written = next(csv.DictReader(file))
+    assert float(written["spearman_low"]) == row.spearman_low and written["resamples"] == "300"
+    assert f"[{row.pearson_low:.2f}, {row.pearson_high:.2f}]" in table.to_markdown()
 
 
 def test_evaluate_generators_writes_table_and_plots(tmp_path) -> None:

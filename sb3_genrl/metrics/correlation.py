@@ -2,7 +2,8 @@
 
 Pearson's R and its two-sided p-value between each evaluation measure (precision, recall, delta_1, mean delta, ...)
 and the policy score of each generative model (the best reward of its GenRL policies), per model type and for all
-models together.
+models together; beside it Spearman's rho, and for both a 95% percentile bootstrap interval over the models
+(:mod:`sb3_genrl.metrics.bootstrap`).
 """
 
 from __future__ import annotations
@@ -18,12 +19,14 @@ import numpy as np
 from scipy.stats import pearsonr
 
 from sb3_genrl.markdown import markdown_table
+from sb3_genrl.metrics.bootstrap import BOOTSTRAP_SEED, DEFAULT_RESAMPLES, bootstrap_correlations, spearman
 from sb3_genrl.utils import atomic_write_text
 
 # The five measures of a generator (paper section 5.2): the one list every table, report and correlation uses.
 MEASURES = ("precision", "recall", "delta_1", "delta_2", "mean_delta")
 ALL_MODELS = "ALL"
-_COLUMNS = ("group", "measure", "num_models", "pearson_r", "p_value", "note")
+_COLUMNS = ("group", "measure", "num_models", "pearson_r", "p_value", "pearson_low", "pearson_high", "spearman_rho",
+            "spearman_p", "spearman_low", "spearman_high", "resamples", "note")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -36,6 +39,13 @@ class CorrelationRow:
     :param pearson_r: Pearson's correlation coefficient, ``nan`` when undefined (see ``note``)
     :param p_value: two-sided p-value of the null hypothesis of no correlation, ``nan`` when undefined
     :param note: why the value is undefined or which models were left out, empty otherwise
+    :param pearson_low: lower end of the 95% bootstrap interval of Pearson's R
+    :param pearson_high: its upper end
+    :param spearman_rho: Spearman's rank correlation
+    :param spearman_p: its two-sided p-value
+    :param spearman_low: lower end of the 95% bootstrap interval of Spearman's rho
+    :param spearman_high: its upper end
+    :param resamples: bootstrap resamples drawn (0: no interval)
     """
 
     group: str
@@ -44,6 +54,13 @@ class CorrelationRow:
     pearson_r: float
     p_value: float
     note: str = ""
+    pearson_low: float = math.nan
+    pearson_high: float = math.nan
+    spearman_rho: float = math.nan
+    spearman_p: float = math.nan
+    spearman_low: float = math.nan
+    spearman_high: float = math.nan
+    resamples: int = 0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -60,10 +77,14 @@ class CorrelationTable:
         raise KeyError(f"no row for group {group!r} and measure {measure!r}")
 
     def to_markdown(self, digits: int = 3) -> str:
-        """A Markdown table, one line per (group, measure), values rounded to ``digits`` decimals."""
-        rows = [(row.group, row.measure, row.num_models, row.pearson_r, row.p_value, row.note) for row in self.rows]
-        header = ("group", "measure", "models", "Pearson's R", "p-value", "note")
-        return markdown_table(header, rows, digits=digits, align="llrrrl") + "\n"
+        """A Markdown table, one line per (group, measure), values rounded to ``digits`` decimals, each coefficient
+        with its 95% bootstrap interval."""
+        rows = [(row.group, row.measure, row.num_models, row.pearson_r, _interval(row.pearson_low, row.pearson_high),
+                 row.p_value, row.spearman_rho, _interval(row.spearman_low, row.spearman_high), row.spearman_p,
+                 row.note) for row in self.rows]
+        header = ("group", "measure", "models", "Pearson's R", "95% interval", "p-value", "Spearman's rho",
+                  "95% interval", "p-value", "note")
+        return markdown_table(header, rows, digits=digits, align="llrrlrrlrl") + "\n"
 
     def to_csv(self, path: str | os.PathLike) -> None:
         """Write the rows to ``path`` as CSV with full float precision (``nan`` for undefined values)."""
@@ -71,8 +92,13 @@ class CorrelationTable:
         writer = csv.writer(table)
         writer.writerow(_COLUMNS)
         for row in self.rows:
-            writer.writerow([row.group, row.measure, row.num_models, repr(row.pearson_r), repr(row.p_value), row.note])
+            writer.writerow([row.group, row.measure, row.num_models, *(repr(getattr(row, name)) for name in _COLUMNS[3:11]),
+                             row.resamples, row.note])
         atomic_write_text(path, table.getvalue(), newline="")
+
+
+def _interval(low: float, high: float) -> str:
+    return "" if math.isnan(low) else f"[{low:.2f}, {high:.2f}]"
 
 
 def pearson(x: np.ndarray, y: np.ndarray) -> tuple[float, float, str]:
@@ -113,8 +139,10 @@ def _records(measures: Sequence[Mapping] | Mapping[str, Mapping[str, float]], sc
 def correlation_table(measures: Sequence[Mapping] | Mapping[str, Mapping[str, float]],
                       scores: Mapping[str, float] | None = None, model_types: Mapping[str, str] | None = None, *,
                       measure_names: Sequence[str] | None = None, score_key: str = "score", type_key: str = "type",
-                      model_key: str = "model", include_all: bool = True) -> CorrelationTable:
-    """Pearson's R and p-value of each measure against the policy score, per model type and for all models.
+                      model_key: str = "model", include_all: bool = True, resamples: int = DEFAULT_RESAMPLES,
+                      seed: int = BOOTSTRAP_SEED) -> CorrelationTable:
+    """Pearson's R and p-value of each measure against the policy score, per model type and for all models, with
+    Spearman's rho and 95% bootstrap intervals of both.
 
     Input, either form:
 
@@ -135,6 +163,8 @@ def correlation_table(measures: Sequence[Mapping] | Mapping[str, Mapping[str, fl
     :param type_key: key of the model type in the records
     :param model_key: key of the model name in the records
     :param include_all: add the ``"ALL"`` group when there are model types
+    :param resamples: bootstrap resamples of each interval (0: no intervals)
+    :param seed: seed of the resamples (the same for every row, see :mod:`sb3_genrl.metrics.bootstrap`)
     :return: a :class:`CorrelationTable`
     """
     records = _records(measures, scores, model_types, score_key, type_key, model_key)
@@ -162,5 +192,17 @@ def correlation_table(measures: Sequence[Mapping] | Mapping[str, Mapping[str, fl
             if not finite.all():
                 left_out = [str(member.get(model_key, "?")) for member, ok in zip(members, finite, strict=True) if not ok]
                 note = "; ".join(filter(None, [note, f"left out (non-finite): {', '.join(left_out)}"]))
-            rows.append(CorrelationRow(group, name, int(finite.sum()), r, p, note))
+            rows.append(_row(group, name, x[finite], y[finite], r, p, note, resamples, seed))
     return CorrelationTable(tuple(rows))
+
+
+def _row(group: str, measure: str, x: np.ndarray, y: np.ndarray, r: float, p: float, note: str, resamples: int,
+         seed: int) -> CorrelationRow:
+    rho, rho_p = spearman(x, y)
+    intervals = {}
+    if resamples > 0:
+        pearson_ci, spearman_ci = bootstrap_correlations(x, y, resamples=resamples, seed=seed)
+        intervals = {"pearson_low": pearson_ci.low, "pearson_high": pearson_ci.high,
+                     "spearman_low": spearman_ci.low, "spearman_high": spearman_ci.high}
+    return CorrelationRow(group, measure, len(x), r, p, note, spearman_rho=rho, spearman_p=rho_p,
+                          resamples=resamples, **intervals)
