@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import math
 
+import gymnasium as gym
 import numpy as np
 import pytest
 from scipy.spatial.distance import cdist
@@ -323,8 +324,8 @@ def test_cli_evaluate(tmp_path, cli) -> None:
     assert code == 0, err
     with open(tmp_path / "out" / "results.csv") as file:
         row = next(csv.DictReader(file))
-    assert f"vae: precision {float(row['precision']):.3f}, recall {float(row['recall']):.3f}" in printed
-    assert f"density {float(row['density']):.3f}, coverage {float(row['coverage']):.3f}" in printed
+    cells = [f"{float(row[key]):.3f}" for key in ("precision", "recall", "density", "coverage", "delta_1", "mean_delta")]
+    assert f"| 1 | vae | {' | '.join(cells)} | " in printed  # the scorecard's row
     assert (tmp_path / "out" / "results.md").read_text().splitlines()[2].startswith("| vae | ")
     assert (tmp_path / "out" / "disentanglement.png").exists()
     # More samples than the data holds, or none: refused before any model is loaded or evaluated.
@@ -426,3 +427,90 @@ def test_precision_recall_refuses_values_whose_squared_distances_overflow_float6
     with pytest.raises(ValueError, match="overflow") as error:
         precision_recall(points * 1e160, points)
     assert "generated" in str(error.value) or "real" in str(error.value)
+
+
+def test_prior_rollout_equals_a_loop_over_goals_and_draws_stepped_one_by_one() -> None:
+    from conftest import FastReachEnv, LinearGenerator
+
+    from sb3_genrl.metrics.prior_rollout import prior_rollout
+
+    generator, goals = LinearGenerator(), np.array([[0.5, -0.2], [-0.6, 0.3], [0.0, 0.7]])
+    result = prior_rollout(generator, FastReachEnv(), contexts=goals, draws=4, seed=9)
+    alphas = generator.sample_prior(12, np.random.default_rng(np.random.SeedSequence(9).spawn(1)[0]))
+    env, expected = FastReachEnv(), []
+    for g, goal in enumerate(goals):
+        rewards = []
+        for alpha in np.clip(alphas[4 * g:4 * g + 4], -3, 3):  # GenRL's action box
+            env.reset(options={"goal": goal})
+            for action in generator.decode(alpha[None])[0]:
+                _, reward, terminated, _, _ = env.step(action)
+            assert terminated
+            rewards.append(reward)
+        expected.append(max(rewards))
+    np.testing.assert_allclose(result.best, expected, rtol=1e-6)
+    summary = result.summary()
+    assert summary["prior_median"] == pytest.approx(np.median(expected)) and summary["prior_episodes"] == 12
+    assert summary["prior_q25"] <= summary["prior_median"] <= summary["prior_q75"]
+
+
+def test_prior_rollout_on_hockey_plays_the_held_out_goals_of_its_seed_one_trajectory_at_a_time(hockey_generator) -> None:
+    from sb3_genrl.baselines.feedback import held_out_goals
+
+    from sb3_genrl.generative import load
+    from sb3_genrl.metrics.prior_rollout import PRIOR_ROLLOUT_SEED, prior_rollout
+
+    generator = load(hockey_generator, device="cpu")
+    result = prior_rollout(generator, "hockey", contexts=2, draws=2)
+    alphas = generator.sample_prior(4, np.random.default_rng(np.random.SeedSequence(PRIOR_ROLLOUT_SEED).spawn(1)[0]))
+    # decoded in one batch, as the rollout decodes them (torch's float32 results depend on the batch, and the
+    # simulation is chaotic enough to show it), then each played alone for its goal
+    trajectories = generator.decode(np.clip(alphas, -3, 3))
+    env, expected = gym.make("GenRL/Hockey-v0").unwrapped, []
+    for g, goal in enumerate(held_out_goals("hockey", 2, PRIOR_ROLLOUT_SEED)):
+        expected.append(max(env.play_trajectory(trajectories[i], goal)[0] for i in (2 * g, 2 * g + 1)))
+    np.testing.assert_allclose(result.best, expected, atol=1e-6)
+    with pytest.raises(ValueError, match="needs a task with the fast path"):
+        prior_rollout(generator, gym.make("Pendulum-v1"), contexts=1, draws=1)
+
+
+def test_scorecard_ranks_converged_models_by_the_prior_rollout_and_sets_apart_the_untrained() -> None:
+    from sb3_genrl.metrics.scorecard import NOT_CONVERGED_PRECISION, rank_key, ranked, scorecard_markdown
+
+    def row(name, precision, prior):
+        return {"model": name, "precision": precision, "recall": 0.5, "density": 1.0, "coverage": 0.5,
+                "delta_1": 0.5, "mean_delta": 0.4, "prior_median": prior, "prior_q25": prior - 0.1,
+                "prior_q75": prior + 0.1, "prior_episodes": 8, "prior_seconds": 0.5}
+
+    rows = [row("A", 0.9, -0.3), row("B", NOT_CONVERGED_PRECISION - 0.01, -0.01), row("C", 0.5, -0.1),
+            row("D", NOT_CONVERGED_PRECISION, -0.2)]
+    assert rank_key(rows) == "prior_median" and [r["model"] for r in ranked(rows)] == ["C", "D", "A", "B"]
+    lines = scorecard_markdown(rows).splitlines()
+    assert lines[0].startswith("Ranked by the prior rollout") and lines[-1].startswith("| 4 | B |")
+    assert lines[-1].endswith("| not converged |") and lines[-2].endswith("| ok |")
+    without_prior = [{key: value for key, value in r.items() if not key.startswith("prior")} for r in rows]
+    assert rank_key(without_prior) == "precision"
+    assert [r["model"] for r in ranked(without_prior)] == ["A", "C", "D", "B"]
+
+
+def test_genrl_evaluate_with_a_task_prints_the_ranked_scorecard_with_the_prior_rollout(tmp_path, cli,
+                                                                                        hockey_generator) -> None:
+    import json
+    import shutil
+
+    from sb3_genrl.generative import load
+    from sb3_genrl.metrics.prior_rollout import prior_rollout
+
+    generator = load(hockey_generator, device="cpu")
+    np.save(tmp_path / "real.npy", generator.decode(generator.sample_prior(60, np.random.default_rng(0))))
+    shutil.copy(hockey_generator, tmp_path / "second.pt")
+    code, out, err = cli("evaluate", hockey_generator, tmp_path / "second.pt", "--data", tmp_path / "real.npy",
+                         "--n", 40, "--dwpr-n", 8, "--interventions", 2, "--task", "hockey", "--contexts", 3,
+                         "--draws", 2, "--prior-seed", 11, "--out", tmp_path / "eval", "--device", "cpu")
+    assert code == 0, err
+    expected = prior_rollout(generator, "hockey", contexts=3, draws=2, seed=11).summary()
+    results = json.loads((tmp_path / "eval" / "results.json").read_text())
+    for result in results:
+        assert result["prior_median"] == pytest.approx(expected["prior_median"], abs=1e-9)
+        assert result["prior_episodes"] == 6 and len(result["prior_best"]) == 3
+    assert "Ranked by the prior rollout" in out and f"| {expected['prior_median']:.3f} |" in out
+    assert (tmp_path / "eval" / "scorecard.md").read_text().strip() in out

@@ -48,17 +48,21 @@ def train_generator_command(args: argparse.Namespace) -> int:
 
 
 def evaluate_command(args: argparse.Namespace) -> int:
+    from sb3_genrl.envs import get_task
     from sb3_genrl.metrics import evaluate_generators
+    from sb3_genrl.metrics.scorecard import scorecard_markdown
 
+    task = args.task
+    if task is not None and not hasattr(get_task(task).env_class, "play_trajectories"):
+        print(f"{task} has no fast path (play_trajectories): the prior rollout is skipped")
+        task = None
     evaluations = evaluate_generators(args.models, args.data, n=args.n, k=args.k, dwpr_n=args.dwpr_n,
                                       interventions=args.interventions, seed=args.seed, out_dir=args.out,
-                                      device=args.device)
-    for evaluation in evaluations:
-        row = evaluation.row()
-        print(f"{row['model']}: precision {row['precision']:.3f}, recall {row['recall']:.3f}, "
-              f"delta_1 {row['delta_1']:.3f}, mean delta {row['mean_delta']:.3f}, density {row['density']:.3f}, "
-              f"coverage {row['coverage']:.3f}")
-    print(f"wrote {args.out}/results.md, results.csv, precision_recall.png, disentanglement.png")
+                                      device=args.device, task=task, contexts=args.contexts, draws=args.draws,
+                                      prior_seed=args.prior_seed)
+    print(scorecard_markdown([evaluation.row() for evaluation in evaluations]))
+    print(f"wrote {args.out}/scorecard.md, results.md, results.csv, results.json, precision_recall.png, "
+          "disentanglement.png")
     return 0
 
 

@@ -115,7 +115,8 @@ def add_train_generator(sub: argparse._SubParsersAction) -> None:
 
 
 def add_evaluate(sub: argparse._SubParsersAction) -> None:
-    evaluate = sub.add_parser("evaluate", help="precision/recall and DwPR of trained generators (paper section 5.2)")
+    evaluate = sub.add_parser("evaluate", help="precision/recall, DwPR, density/coverage and, with --task, the prior "
+                              "rollout of trained generators: a ranked scorecard (paper section 5.2)")
     evaluate.add_argument("models", nargs="+", type=EXISTING, metavar="MODEL_FILE", help="trained generator files")
     evaluate.add_argument("--data", required=True, type=EXISTING,
                           help="real trajectories: demonstration dataset or .npy/.npz (N, T, M) array")
@@ -126,6 +127,11 @@ def add_evaluate(sub: argparse._SubParsersAction) -> None:
     evaluate.add_argument("--k", type=COUNT, default=3, help="neighbourhood size (paper: 3)")
     _seed_option(evaluate)
     _device_option(evaluate)
+    _task_option(evaluate, required=False)
+    evaluate.add_argument("--contexts", type=COUNT, default=64, help="prior rollout (with --task): goals (64)")
+    evaluate.add_argument("--draws", type=COUNT, default=16, help="prior rollout: prior draws per goal (16)")
+    evaluate.add_argument("--prior-seed", type=SEED, default=4242,
+                          help="prior rollout: seed of its goals (4242: neither the final evaluations' nor the tuning's)")
     evaluate.set_defaults(func=commands.evaluate_command)
 
 

@@ -1,5 +1,5 @@
 """Evaluation of generative models (paper section 5.2): precision and recall, DwPR, correlation with policy scores;
-beyond the paper, density and coverage (Naeem et al., 2020)."""
+beyond the paper, density and coverage (Naeem et al., 2020), the prior rollout on the task and the ranked scorecard."""
 
 from sb3_genrl.metrics.correlation import MEASURES, CorrelationRow, CorrelationTable, correlation_table, pearson
 from sb3_genrl.metrics.density_coverage import DensityCoverage, density_coverage
@@ -7,6 +7,7 @@ from sb3_genrl.metrics.dwpr import DwPR, default_intervention_values, dwpr
 from sb3_genrl.metrics.evaluate import GeneratorEvaluation, evaluate_generator, evaluate_generators, real_subset
 from sb3_genrl.metrics.plots import labelled_scatter
 from sb3_genrl.metrics.precision_recall import PrecisionRecall, precision_recall
+from sb3_genrl.metrics.prior_rollout import PriorRollout, prior_rollout
 
 __all__ = [
     "MEASURES",
@@ -16,6 +17,7 @@ __all__ = [
     "DwPR",
     "GeneratorEvaluation",
     "PrecisionRecall",
+    "PriorRollout",
     "correlation_table",
     "default_intervention_values",
     "density_coverage",
@@ -25,5 +27,6 @@ __all__ = [
     "labelled_scatter",
     "pearson",
     "precision_recall",
+    "prior_rollout",
     "real_subset",
 ]

@@ -1,5 +1,6 @@
 """Evaluation of trained generators (paper section 6.1.2): precision/recall against demonstrations and DwPR, and
-beyond the paper density and coverage (Naeem et al., 2020) from the same samples.
+beyond the paper density and coverage (Naeem et al., 2020) from the same samples and, for a task with the fast path,
+the prior rollout (:mod:`sb3_genrl.metrics.prior_rollout`).
 
 Results are written after each model, so an interrupted evaluation keeps every model it finished.
 """
@@ -26,12 +27,21 @@ from sb3_genrl.metrics.density_coverage import DensityCoverage, density_coverage
 from sb3_genrl.metrics.dwpr import DEFAULT_DWPR_SAMPLES, DEFAULT_INTERVENTIONS, DwPR, decode_batched, dwpr
 from sb3_genrl.metrics.plots import labelled_scatter
 from sb3_genrl.metrics.precision_recall import PrecisionRecall, precision_recall
+from sb3_genrl.metrics.prior_rollout import (
+    DEFAULT_CONTEXTS,
+    DEFAULT_DRAWS,
+    PRIOR_ROLLOUT_SEED,
+    PriorRollout,
+    prior_rollout,
+)
 from sb3_genrl.utils import atomic_write_json, atomic_write_text
 
 # Paper section 6.1.2: 15000 generated against 15000 fixed, randomly chosen training trajectories, k = 3.
 DEFAULT_SAMPLES = 15000
 # The paper's measures, then density and coverage (not part of the paper's correlation analysis).
 TABLE_COLUMNS = ("model", *MEASURES, "density", "coverage")
+# The prior rollout's columns, after those when a task was given.
+PRIOR_COLUMNS = ("prior_median", "prior_q25", "prior_q75", "prior_episodes", "prior_seconds")
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -42,26 +52,31 @@ class GeneratorEvaluation:
     :param precision_recall: precision and recall against the real trajectories
     :param dwpr: disentanglement with precision and recall
     :param density_coverage: density and coverage of the same generated samples against the same real ones
+    :param prior: the prior rollout on a task (None: no task given)
     """
 
     name: str
     precision_recall: PrecisionRecall
     dwpr: DwPR
     density_coverage: DensityCoverage
+    prior: PriorRollout | None = None
 
     def row(self) -> dict[str, float | str]:
-        """The table row: the model's name, its :data:`~sb3_genrl.metrics.MEASURES`, density and coverage."""
+        """The table row: the model's name, its :data:`~sb3_genrl.metrics.MEASURES`, density and coverage, and the
+        prior rollout's :data:`PRIOR_COLUMNS` when there is one."""
         values = (self.precision_recall.precision, self.precision_recall.recall, self.dwpr.delta_1, self.dwpr.delta_2,
                   self.dwpr.mean_delta)
+        prior = {} if self.prior is None else {key: self.prior.summary()[key] for key in PRIOR_COLUMNS}
         return {"model": self.name, **dict(zip(MEASURES, values, strict=True)),
-                "density": self.density_coverage.density, "coverage": self.density_coverage.coverage}
+                "density": self.density_coverage.density, "coverage": self.density_coverage.coverage, **prior}
 
     def details(self) -> dict[str, Any]:
         """The row plus the per-dimension DwPR values and the sample sizes (JSON-ready)."""
         return {**self.row(), "delta": self.dwpr.delta.tolist(), "dwpr_precision": self.dwpr.precision.tolist(),
                 "dwpr_recall": self.dwpr.recall.tolist(), "intervention_values": self.dwpr.intervention_values.tolist(),
                 "k": self.dwpr.k, "num_real": self.precision_recall.num_real,
-                "num_generated": self.precision_recall.num_generated, "dwpr_n": self.dwpr.n}
+                "num_generated": self.precision_recall.num_generated, "dwpr_n": self.dwpr.n,
+                **({} if self.prior is None else {**self.prior.summary(), "prior_best": self.prior.best.tolist()})}
 
 
 def _named_generators(models: Sequence[str | os.PathLike | TrajectoryGenerator] | Mapping[str, str | os.PathLike
@@ -91,17 +106,21 @@ def _as_generator(model: str | os.PathLike | TrajectoryGenerator, device: torch.
 def write_results(evaluations: Sequence[GeneratorEvaluation], out_dir: str | os.PathLike) -> None:
     """Write ``results.csv``, ``results.md``, the two scatter plots and, last, ``results.json`` into ``out_dir``
     (each file atomically)."""
+    from sb3_genrl.metrics.scorecard import scorecard_markdown
+
     out = Path(out_dir)
     rows = [evaluation.row() for evaluation in evaluations]
+    columns = TABLE_COLUMNS + (PRIOR_COLUMNS if all(evaluation.prior for evaluation in evaluations) else ())
     table = io.StringIO()
-    writer = csv.DictWriter(table, fieldnames=TABLE_COLUMNS)
+    writer = csv.DictWriter(table, fieldnames=columns)
     writer.writeheader()
-    writer.writerows({key: repr(value) if isinstance(value, float) else value for key, value in row.items()}
+    writer.writerows({key: repr(row[key]) if isinstance(row[key], float) else row[key] for key in columns}
                      for row in rows)
     atomic_write_text(out / "results.csv", table.getvalue(), newline="")
-    markdown = markdown_table(TABLE_COLUMNS, [[row[column] for column in TABLE_COLUMNS] for row in rows],
-                              align="l" + "r" * (len(TABLE_COLUMNS) - 1))
+    markdown = markdown_table(columns, [[row[column] for column in columns] for row in rows],
+                              align="l" + "r" * (len(columns) - 1))
     atomic_write_text(out / "results.md", markdown + "\n")
+    atomic_write_text(out / "scorecard.md", scorecard_markdown(rows) + "\n")
     labels = [str(row["model"]) for row in rows]
     labelled_scatter([row["precision"] for row in rows], [row["recall"] for row in rows], labels,
                      out / "precision_recall.png", xlabel="precision", ylabel="recall", title="Precision and recall")
@@ -130,8 +149,9 @@ def real_subset(real: np.ndarray, n: int, seed: int | np.random.SeedSequence = 0
 
 def evaluate_generator(generator: TrajectoryGenerator, real: np.ndarray, *, n: int = DEFAULT_SAMPLES, k: int = 3,
                        dwpr_n: int = DEFAULT_DWPR_SAMPLES, interventions: int = DEFAULT_INTERVENTIONS, seed: int = 0,
-                       name: str = "model", device: torch.device | str = "auto",
-                       batch_size: int | None = None) -> GeneratorEvaluation:
+                       name: str = "model", device: torch.device | str = "auto", batch_size: int | None = None,
+                       task: str | None = None, contexts: int = DEFAULT_CONTEXTS, draws: int = DEFAULT_DRAWS,
+                       prior_seed: int = PRIOR_ROLLOUT_SEED) -> GeneratorEvaluation:
     """Precision/recall, density and coverage of ``n`` prior samples of one generator against ``real``, and its DwPR.
 
     This is the one evaluation of a generator: :func:`evaluate_generators` (``genrl evaluate``, the quickstart)
@@ -148,6 +168,10 @@ def evaluate_generator(generator: TrajectoryGenerator, real: np.ndarray, *, n: i
     :param name: the model's name in the result
     :param device: torch device for the distances; ``"auto"`` uses a GPU when there is one
     :param batch_size: edge length of the distance blocks (default: from the memory budget)
+    :param task: a task with the fast path (hockey, basketball) for the prior rollout (None: none)
+    :param contexts: the prior rollout's goals
+    :param draws: its prior draws per goal
+    :param prior_seed: seed of its goals (:data:`~sb3_genrl.metrics.prior_rollout.PRIOR_ROLLOUT_SEED`)
     """
     if np.ndim(real) != 3:
         raise ValueError(f"real trajectories must have shape (N, T, M), got {np.shape(real)}")
@@ -159,22 +183,26 @@ def evaluate_generator(generator: TrajectoryGenerator, real: np.ndarray, *, n: i
     pr = precision_recall(real, generated, k, batch_size=batch_size, device=device)
     dc = density_coverage(real, generated, k, batch_size=batch_size, device=device)
     disentanglement = dwpr(generator, dwpr_n, interventions, k, seed=dwpr_rng, batch_size=batch_size, device=device)
-    return GeneratorEvaluation(name, pr, disentanglement, dc)
+    prior = None if task is None else prior_rollout(generator, task, contexts=contexts, draws=draws, seed=prior_seed)
+    return GeneratorEvaluation(name, pr, disentanglement, dc, prior)
 
 
 def evaluate_generators(models: Sequence[str | os.PathLike | TrajectoryGenerator] | Mapping[str, str | os.PathLike
                         | TrajectoryGenerator], data: str | os.PathLike | np.ndarray, *, n: int = DEFAULT_SAMPLES,
                         k: int = 3, dwpr_n: int = DEFAULT_DWPR_SAMPLES, interventions: int = DEFAULT_INTERVENTIONS,
                         seed: int = 0, out_dir: str | os.PathLike, device: torch.device | str = "auto",
-                        batch_size: int | None = None) -> list[GeneratorEvaluation]:
+                        batch_size: int | None = None, task: str | None = None, contexts: int = DEFAULT_CONTEXTS,
+                        draws: int = DEFAULT_DRAWS, prior_seed: int = PRIOR_ROLLOUT_SEED) -> list[GeneratorEvaluation]:
     """Precision/recall, density/coverage against real trajectories and DwPR of each generator, written as each
     model completes.
 
     The real set is ``n`` trajectories drawn once with ``seed`` (:func:`real_subset`; there must be at least
     ``n``) and shared by every model; each model is evaluated by :func:`evaluate_generator` with the same ``seed``.
     Files in ``out_dir``: ``results.csv`` and ``results.md`` (precision, recall, delta_1, delta_2, mean_delta,
-    density and coverage per model), ``results.json`` (also the per-dimension deltas), ``precision_recall.png``
-    and ``disentanglement.png`` (the paper's scatter plots).
+    density and coverage per model, and with ``task`` the prior rollout's median, quartiles and cost),
+    ``scorecard.md`` (the same ranked, :mod:`sb3_genrl.metrics.scorecard`), ``results.json`` (also the
+    per-dimension deltas and each goal's best prior reward), ``precision_recall.png`` and ``disentanglement.png``
+    (the paper's scatter plots).
 
     :param models: generator files (loaded with ``sb3_genrl.generative.load``) or generator objects, or a mapping
         name -> either; names default to file stems
@@ -188,6 +216,10 @@ def evaluate_generators(models: Sequence[str | os.PathLike | TrajectoryGenerator
     :param out_dir: output folder (created)
     :param device: torch device for loading and distances; ``"auto"`` uses a GPU when there is one
     :param batch_size: edge length of the distance blocks (default: from the memory budget)
+    :param task: a task with the fast path for the prior rollout (None: none)
+    :param contexts: the prior rollout's goals
+    :param draws: its prior draws per goal
+    :param prior_seed: seed of its goals
     :return: the evaluations, in model order
     """
     named = _named_generators(models)
@@ -197,6 +229,8 @@ def evaluate_generators(models: Sequence[str | os.PathLike | TrajectoryGenerator
         check_positive_int(value, name)
     check_seed(seed)
     check_device(device)
+    if task is not None:
+        _check_prior_task(task, contexts, draws, prior_seed)
     out = check_output_dir(out_dir)
     real = load_trajectories(data)
     _check_sample_sizes(real, n, dwpr_n, interventions)
@@ -206,9 +240,23 @@ def evaluate_generators(models: Sequence[str | os.PathLike | TrajectoryGenerator
     for name, model in named:
         evaluations.append(evaluate_generator(_as_generator(model, device), real, n=n, k=k, dwpr_n=dwpr_n,
                                               interventions=interventions, seed=seed, name=name, device=device,
-                                              batch_size=batch_size))
+                                              batch_size=batch_size, task=task, contexts=contexts, draws=draws,
+                                              prior_seed=prior_seed))
         write_results(evaluations, out)
     return evaluations
+
+
+def _check_prior_task(task: str, contexts: int, draws: int, prior_seed: int) -> None:
+    """Refuse a task without the fast path, or bad prior-rollout sizes, before any work."""
+    from sb3_genrl.envs import get_task
+
+    check_positive_int(contexts, "contexts")
+    check_positive_int(draws, "draws")
+    check_seed(prior_seed)
+    spec = get_task(task)  # raises, naming the registered tasks
+    if not hasattr(spec.env_class, "play_trajectories"):
+        raise ValueError(f"the prior rollout needs a task with the fast path play_trajectories() (hockey, basketball); "
+                         f"{task} has none: evaluate it without --task")
 
 
 def _check_sample_sizes(real: np.ndarray, n: int, dwpr_n: int, interventions: int) -> None:

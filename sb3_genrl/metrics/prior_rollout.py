@@ -1,0 +1,111 @@
+"""The prior rollout: how well a generator's prior alone does on a task, before any policy training.
+
+For each of ``contexts`` goals, ``draws`` latent actions are drawn from the generator's prior, decoded and played
+through the task; the measure is the distribution over goals of the best reward that the draws reach for that goal
+(median and quartiles). It is a task-grounded check of a generator beside precision and recall: a latent space in
+which some draw lands near every goal gives GenRL's search somewhere to start. Its cost, ``contexts x draws``
+episodes and the seconds they took, is reported with it.
+
+The goals are drawn with ``np.random.default_rng(seed)`` from the task's goal distribution, as
+:func:`sb3_genrl.genrl.evaluate_on_goals` draws them; the default seed :data:`PRIOR_ROLLOUT_SEED` is neither the
+final evaluations' :data:`~sb3_genrl.hyperparams.EVAL_GOAL_SEED` nor the tuning's
+:data:`~sb3_genrl.hyperparams.TUNING_GOAL_SEED`, so the measure never sees the goals a policy is judged on. The latent
+actions are drawn from a seed of their own spawned from ``seed``; they are clipped to GenRL's action box and played
+through :meth:`sb3_genrl.wrappers.LatentActionWrapper.play_batch`, the fast path GenRL itself uses.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from sb3_genrl.generative.base import TrajectoryGenerator
+
+PRIOR_ROLLOUT_SEED = 4242  # the prior rollout's goals: not EVAL_GOAL_SEED (12345), not TUNING_GOAL_SEED (777)
+DEFAULT_CONTEXTS = 64
+DEFAULT_DRAWS = 16
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class PriorRollout:
+    """The best reward of ``draws`` prior draws for each of ``contexts`` goals.
+
+    :param best: the best reward per goal, ``(contexts,)``
+    :param draws: prior draws per goal
+    :param seed: seed of the goals (and, spawned from it, of the draws)
+    :param episodes: episodes played (``contexts x draws``)
+    :param seconds: wall-clock seconds of the decoding and playing
+    :param cpu_seconds: CPU seconds of this process for the same
+    """
+
+    best: np.ndarray
+    draws: int
+    seed: int
+    episodes: int
+    seconds: float
+    cpu_seconds: float
+
+    def summary(self) -> dict[str, Any]:
+        """Median, quartiles and mean of the best reward per goal, with the sizes and the cost (JSON-ready)."""
+        q25, median, q75 = np.percentile(self.best, [25, 50, 75])
+        return {"prior_median": float(median), "prior_q25": float(q25), "prior_q75": float(q75),
+                "prior_mean": float(np.mean(self.best)), "prior_contexts": len(self.best), "prior_draws": self.draws,
+                "prior_seed": self.seed, "prior_episodes": self.episodes, "prior_seconds": self.seconds,
+                "prior_cpu_seconds": self.cpu_seconds}
+
+
+def _latent_env(task: str | gym.Env, generator: TrajectoryGenerator) -> Any:
+    from sb3_genrl.wrappers import LatentActionWrapper
+
+    if isinstance(task, gym.Env):
+        env = task
+    else:
+        from sb3_genrl.envs import get_task
+
+        env = gym.make(get_task(task).env_id)
+    if not hasattr(env.unwrapped, "play_trajectories"):
+        name = task if isinstance(task, str) else type(env.unwrapped).__name__
+        env.close()
+        raise ValueError(f"the prior rollout needs a task with the fast path play_trajectories(); {name} has none")
+    return LatentActionWrapper(env, generator)
+
+
+def prior_rollout(generator: TrajectoryGenerator, task: str | gym.Env, *, contexts: int | np.ndarray = DEFAULT_CONTEXTS,
+                  draws: int = DEFAULT_DRAWS, seed: int = PRIOR_ROLLOUT_SEED, n_threads: int = 1) -> PriorRollout:
+    """The best reward that ``draws`` prior draws reach for each goal (see the module's description).
+
+    :param generator: the trained generator
+    :param task: a task name or Gymnasium id of a task with ``play_trajectories`` (hockey, basketball), or such an env
+    :param contexts: how many goals to draw (the task's ``sample_goal``), or the goals themselves ``(G, goal_dim)``
+    :param draws: prior draws per goal
+    :param seed: seed of the goals; the draws come from a seed spawned from it
+    :param n_threads: simulation threads
+    :return: a :class:`PriorRollout`
+    """
+    from sb3_genrl.checks import check_positive_int, check_seed
+
+    check_positive_int(draws, "draws")
+    check_seed(seed)
+    env = _latent_env(task, generator)
+    try:
+        if np.ndim(contexts) == 0:
+            check_positive_int(contexts, "contexts")
+            rng = np.random.default_rng(seed)
+            goals = np.array([env.unwrapped.sample_goal(rng) for _ in range(int(contexts))], dtype=np.float64)
+        else:
+            goals = np.asarray(contexts, dtype=np.float64)
+            if goals.ndim != 2 or not len(goals):
+                raise ValueError(f"contexts must be a count or goals of shape (G, goal_dim), got {goals.shape}")
+        wall, cpu = time.perf_counter(), time.process_time()
+        latent_rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0])
+        alphas = generator.sample_prior(len(goals) * draws, latent_rng)  # goal g plays draws g*draws .. (g+1)*draws-1
+        rewards, _ = env.play_batch(alphas, np.repeat(goals, draws, axis=0), n_threads=n_threads)
+        best = rewards.reshape(len(goals), draws).max(axis=1)
+        return PriorRollout(best, draws, seed, len(goals) * draws, time.perf_counter() - wall,
+                            time.process_time() - cpu)
+    finally:
+        env.close()
