@@ -82,7 +82,8 @@ def load_genrl_settings(env_id: str) -> tuple[int, int, dict[str, Any]]:
     further GenRL arguments, checked by :func:`sb3_genrl.genrl.check_genrl_settings`.
 
     One GenRL step is one episode: ``n_timesteps`` is the budget of episodes and ``n_envs`` (default 1) x
-    ``n_steps`` the episodes of an iteration, ``N``; a run in another number of env processes keeps ``N``.
+    ``n_steps`` the episodes of an iteration, ``N``; a run in another number of env processes keeps ``N``. The
+    entry's ``env_wrapper`` is rl-zoo3's (:mod:`sb3_genrl.zoo`), not a GenRL setting.
 
     :param env_id: the task's Gymnasium id, e.g. ``GenRL/Hockey-v0``
     :return: ``(episodes, batch_episodes, genrl_kwargs)``; ``genrl_kwargs`` may name the ``policy``
@@ -94,6 +95,7 @@ def load_genrl_settings(env_id: str) -> tuple[int, int, dict[str, Any]]:
     for key in ("n_timesteps", "n_steps"):
         if key not in entry:
             raise ValueError(f"{name}: needs {key}")
+    entry.pop("env_wrapper", None)  # rl-zoo3's latent-action wrapper (sb3_genrl.zoo): the package's runs build their own
     episodes, n_envs, n_steps = entry.pop("n_timesteps"), entry.pop("n_envs", 1), entry.pop("n_steps")
     for key, value, minimum in (("n_timesteps", episodes, 1), ("n_envs", n_envs, 1), ("n_steps", n_steps, 1)):
         if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
