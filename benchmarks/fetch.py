@@ -1,12 +1,21 @@
 """GenRL on Gymnasium-Robotics' Fetch tasks: the deterministic policy's success rate on held-out initial states.
 
-Makes the task's demonstrations (or reads ``--data``), trains the quickstart's generator for the Fetch tasks (VAE9,
-300 epochs; or reads ``--generator``), measures the generator's own limit (the share of ``--limit-states`` held-out
-initial states that some of ``--prior-draws`` draws from its prior solves), then trains GenRL with the task's entry in
-``hyperparams/genrl.yml`` and several seeds. Every ``--eval-every`` episodes and at the end, each seed's deterministic
-policy plays ``--eval-states`` held-out initial states (seeds from :data:`~sb3_genrl.hyperparams.EVAL_GOAL_SEED`); the
-curve is against episodes and environment steps (50 per episode). The JSON is written after every evaluation, so an
-interrupted run keeps what it finished (default: ``benchmarks/results/fetch_TASK.json``).
+Stages, each kept in ``--work`` (default ``runs/fetch/TASK``) and in the JSON as it finishes, so that the same command
+after a stop resumes where it stopped (a run's settings are recorded and checked on resume):
+
+1. ``--demos`` demonstrations (seed 0; or ``--data``) and the task's generator recipe (VAE9, ``--epochs``);
+2. the generator's reconstructions of ``--recon-demos`` new demonstrations (seed 1, not trained on), replayed from
+   their own initial states: the share that reach their own aims;
+3. the generator's own limit: ``--limit-states`` held-out initial states x ``--prior-draws`` draws from its prior
+   (100 x 100 = 10^4 by default), the share of states that some draw solves (and the best of 1 and 10 draws);
+4. GenRL with the task's entry in ``hyperparams/genrl.yml``, one run per seed: every ``--eval-every`` episodes (at
+   the start of an iteration, after its update) and at the end, the deterministic policy plays ``--eval-states``
+   held-out initial states (reset seeds from :data:`~sb3_genrl.hyperparams.EVAL_GOAL_SEED`, never used in tuning);
+   the curve is against episodes and environment steps (50 per episode). Each seed checkpoints at every evaluation
+   (:mod:`sb3_genrl.genrl.checkpoint`) and resumes from it.
+
+The JSON (default ``benchmarks/results/fetch_TASK.json``) says ``"complete": false`` and how far each seed got until
+every stage is done.
 
     python benchmarks/fetch.py --task fetch-push                   # 3 seeds x 3000 episodes, 500 held-out states
     python benchmarks/fetch.py --task fetch-reach --seeds 0 --eval-states 100
@@ -15,79 +24,30 @@ interrupted run keeps what it finished (default: ``benchmarks/results/fetch_TASK
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import platform
-import tempfile
 import time
 
 import numpy as np
 import torch
+from sb3_genrl.benchmarks.fetch_seed import train_seed
 from sb3_genrl.benchmarks.genrl import make_generator
 from sb3_genrl.envs import TASKS, get_task
-from sb3_genrl.envs.fetch import FETCH_HORIZON
-from sb3_genrl.envs.fetch_demonstrations import evaluate_success, play_expert
-from stable_baselines3.common.callbacks import BaseCallback
+from sb3_genrl.envs.fetch_demonstrations import prior_best_success, reconstruction_success
 
 from sb3_genrl import __version__
 from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, SEED
 from sb3_genrl.generative import load
-from sb3_genrl.genrl.train import genrl_settings, make_genrl
+from sb3_genrl.genrl.train import genrl_settings
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED
 from sb3_genrl.study.quickstart import quickstart_preset, task_settings
 from sb3_genrl.utils import atomic_write_json
 
 RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 FETCH_TASKS = sorted(name for name in TASKS if name.startswith("fetch-"))
-
-
-class SuccessCurve(BaseCallback):
-    """Every ``every`` episodes: the deterministic policy's success rate on the held-out states, kept and written."""
-
-    def __init__(self, task: str, every: int, states: int, record: dict, write) -> None:
-        super().__init__()
-        self.task, self.every, self.states, self.record, self.write = task, every, states, record, write
-        self.next = every
-
-    def _on_step(self) -> bool:
-        if self.num_timesteps >= self.next:
-            self.next += self.every
-            self.evaluate()
-        return True
-
-    def evaluate(self) -> None:
-        result = evaluate_success(self.model, self.task, episodes=self.states, seed=EVAL_GOAL_SEED)
-        self.record["curve_episodes"].append(int(self.num_timesteps))
-        self.record["curve_env_steps"].append(int(self.num_timesteps) * FETCH_HORIZON)
-        self.record["curve_success"].append(result["success_rate"])
-        self.write()
-
-
-def generator_limit(task: str, generator_path: str, states: int, draws: int) -> dict[str, object]:
-    """The share of held-out initial states that at least one of ``draws`` prior draws solves (open-loop)."""
-    generator, env_id = load(generator_path, device="cpu"), get_task(task).env_id
-    rng = np.random.default_rng(0)
-    solved = []
-    for i in range(states):
-        trajectories = np.clip(generator.decode(generator.sample_prior(draws, rng)), -1.0, 1.0).astype(np.float32)
-        solved.append(any(play_expert(env_id, tau, EVAL_GOAL_SEED + i, None)["is_success"] for tau in trajectories))
-    return {"states": states, "prior_draws": draws, "success_rate": float(np.mean(solved))}
-
-
-def run_seed(task: str, generator_path: str, seed: int, args: argparse.Namespace, row: dict, write) -> None:
-    """Train GenRL with one seed, evaluating every ``--eval-every`` episodes and at the end (into ``row``)."""
-    import gymnasium as gym
-
-    episodes, batch_episodes, genrl_kwargs = task_settings(task)
-    model = make_genrl(gym.make(get_task(task).env_id), load(generator_path, device="cpu"), seed=seed, device="cpu",
-                       n_steps=batch_episodes, **genrl_kwargs)
-    curve = SuccessCurve(task, args.eval_every, args.eval_states, row, write)
-    start = time.perf_counter()
-    model.learn(args.episodes or episodes, callback=curve)
-    row["seconds"] = time.perf_counter() - start
-    if not row["curve_episodes"] or row["curve_episodes"][-1] != model.num_timesteps:
-        curve.evaluate()
-    row["final_success"] = row["curve_success"][-1]
-    write()
+RECONSTRUCTION_SEED = 1  # the demonstrations whose reconstructions are replayed: not the training set's (seed 0)
 
 
 def arguments(argv: list[str] | None = None) -> argparse.Namespace:
@@ -99,48 +59,115 @@ def arguments(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--epochs", type=COUNT, default=300, help="generator epochs (default 300)")
     parser.add_argument("--episodes", type=COUNT, default=None, help="GenRL episodes (default: the task's)")
     parser.add_argument("--seeds", type=SEED, nargs="+", default=[0, 1, 2])
-    parser.add_argument("--eval-every", type=COUNT, default=500, help="episodes between evaluations (default 500)")
+    parser.add_argument("--eval-every", type=COUNT, default=None,
+                        help="episodes between evaluations, a multiple of the episodes per iteration (default: about "
+                             "a sixth of the budget)")
     parser.add_argument("--eval-states", type=COUNT, default=500, help="held-out initial states per evaluation")
-    parser.add_argument("--limit-states", type=COUNT, default=20, help="held-out states of the generator's limit")
-    parser.add_argument("--prior-draws", type=COUNT, default=1000, help="prior draws per state of the generator's limit")
-    parser.add_argument("--threads", type=COUNT, default=2, help="demonstration worker processes")
+    parser.add_argument("--recon-demos", type=COUNT, default=200, help="new demonstrations reconstructed (default 200)")
+    parser.add_argument("--limit-states", type=COUNT, default=100, help="held-out states of the generator's limit")
+    parser.add_argument("--prior-draws", type=COUNT, default=100, help="prior draws per state of the generator's limit")
+    parser.add_argument("--threads", type=COUNT, default=1, help="worker processes playing episodes (default 1)")
+    parser.add_argument("--work", default=None, help="folder of the stages' files (default: runs/fetch/TASK)")
     parser.add_argument("--out", type=JSON_OUT, default=None, help="JSON output (default: results/fetch_TASK.json)")
+    parser.add_argument("--overwrite", action="store_true", help="start again instead of resuming --out")
     args = parser.parse_args(argv)
     args.out = args.out or os.path.join(RESULTS, f"fetch_{args.task}.json")
+    args.work = os.path.abspath(args.work or os.path.join(ROOT, "runs", "fetch", args.task))
+    episodes, batch_episodes, _ = task_settings(args.task)
+    args.episodes = args.episodes or episodes
+    args.eval_every = args.eval_every or max(batch_episodes, round(args.episodes / 6 / batch_episodes) * batch_episodes)
+    if args.eval_every % batch_episodes:
+        parser.error(f"--eval-every must be a multiple of the task's {batch_episodes} episodes per iteration")
     return args
+
+
+def settings_of(args: argparse.Namespace) -> dict[str, object]:
+    """What the run is: compared with the JSON's on resume."""
+    _, batch_episodes, genrl_kwargs = task_settings(args.task)
+    return {"task": args.task, "env_id": get_task(args.task).env_id, "episodes": args.episodes,
+            "batch_episodes": batch_episodes, "genrl_settings": genrl_settings(genrl_kwargs),
+            "seeds": list(args.seeds), "eval_every": args.eval_every, "eval_states": args.eval_states,
+            "eval_seed": EVAL_GOAL_SEED, "demonstrations": args.demos if args.data is None else os.path.abspath(args.data),
+            "generator": "trained" if args.generator is None else os.path.abspath(args.generator),
+            "preset": quickstart_preset(args.task), "epochs": args.epochs, "recon_demos": args.recon_demos,
+            "limit_states": args.limit_states, "prior_draws": args.prior_draws}
+
+
+def start(args: argparse.Namespace) -> dict[str, object]:
+    """The JSON to continue (same settings) or a new one."""
+    settings = settings_of(args)
+    if os.path.exists(args.out) and not args.overwrite:
+        with open(args.out) as file:
+            result = json.load(file)
+        if result.get("settings") != settings:
+            differ = sorted(key for key in settings if result.get("settings", {}).get(key) != settings[key])
+            raise SystemExit(f"{args.out} holds another run (it differs in {', '.join(differ)}): give another --out, "
+                             f"or --overwrite to start again")
+        return result
+    return {"benchmark": f"fetch_{args.task}", "settings": settings, "complete": False, "runs": []}
+
+
+def generator_stage(args: argparse.Namespace, result: dict, write) -> str:
+    """The generator: the one in ``--work`` if the JSON records it, else made (demonstrations, training)."""
+    os.makedirs(args.work, exist_ok=True)
+    path = os.path.join(args.work, "vae.pt")
+    if "generator" in result and (args.generator is not None or os.path.exists(path)):
+        return args.generator or path
+    data = os.path.join(args.work, "demonstrations")
+    if args.data is None and os.path.isdir(data) and os.listdir(data):
+        args.data = data  # made before the stop (a dataset folder is written as one unit)
+    start_time = time.perf_counter()
+    path, record = make_generator(args.task, quickstart_preset(args.task), args, args.work, threads=args.threads)
+    if args.data == data:
+        record["demonstrations"] = args.demos
+    if args.generator is None:
+        from sb3_genrl.data import dataset_info
+
+        record["demonstration_info"] = dataset_info(args.data or data)
+    result["generator"] = record | {"seconds": time.perf_counter() - start_time}
+    write()
+    return path
 
 
 def main(argv: list[str] | None = None) -> None:
     args = arguments(argv)
     torch.set_num_threads(1)
-    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-    _, _, genrl_kwargs = task_settings(args.task)
-    result: dict[str, object] = {
-        "benchmark": f"fetch_{args.task}", "task": args.task, "env_id": get_task(args.task).env_id,
-        "sb3_genrl": __version__, "torch": torch.__version__, "machine": platform.machine(), "cpus": os.cpu_count(),
-        "episodes": args.episodes or task_settings(args.task)[0], "eval_states": args.eval_states,
-        "eval_seed": EVAL_GOAL_SEED, "genrl_kwargs": genrl_kwargs, "genrl_settings": genrl_settings(genrl_kwargs),
-        "runs": []}
+    result = start(args)
+    result.update(sb3_genrl=__version__, torch=torch.__version__, machine=platform.machine(), cpus=os.cpu_count())
 
     def write() -> None:
-        finals = [run["final_success"] for run in result["runs"] if "final_success" in run]
+        finals = [run["final_success"] for run in result["runs"] if run.get("finished")]
         if finals:
-            result.update(final_success_mean=float(np.mean(finals)), final_success_std=float(np.std(finals)))
+            result.update(final_success_mean=float(np.mean(finals)), final_success_std=float(np.std(finals)),
+                          finished_seeds=len(finals))
         atomic_write_json(args.out, result)
 
-    with tempfile.TemporaryDirectory() as work:
-        generator_path, result["generator"] = make_generator(args.task, quickstart_preset(args.task), args, work,
-                                                             threads=args.threads)
-        result["generator_limit"] = generator_limit(args.task, generator_path, args.limit_states, args.prior_draws)
+    generator_path = generator_stage(args, result, write)
+    generator = load(generator_path, device="cpu")
+    if "reconstruction" not in result:
+        result["reconstruction"] = reconstruction_success(generator, args.task, args.recon_demos, RECONSTRUCTION_SEED,
+                                                          args.threads)
         write()
-        for seed in args.seeds:
-            row = {"seed": seed, "curve_episodes": [], "curve_env_steps": [], "curve_success": []}
+    print(f"reconstructions reach their aims: {result['reconstruction']['success_rate']:.3f}", flush=True)
+    if "generator_limit" not in result:
+        begin = time.perf_counter()
+        result["generator_limit"] = prior_best_success(generator, args.task, args.limit_states, args.prior_draws,
+                                                       EVAL_GOAL_SEED, args.threads)
+        result["generator_limit"]["seconds"] = time.perf_counter() - begin
+        write()
+    print(f"the best of {args.prior_draws} prior draws solves {result['generator_limit']['success_rate']:.3f} of "
+          f"{args.limit_states} held-out states", flush=True)
+    for seed in args.seeds:
+        row = next((run for run in result["runs"] if run["seed"] == seed), None)
+        if row is None:
+            row = {"seed": seed, "finished": False, "curve_episodes": [], "curve_env_steps": [], "curve_success": []}
             result["runs"].append(row)
-            run_seed(args.task, generator_path, seed, args, row, write)
-            print(f"seed {seed}: success {row['final_success']:.3f} after {row['curve_episodes'][-1]} episodes "
-                  f"({row['seconds']:.0f} s)", flush=True)
-    print(f"GenRL on {args.task}: {result.get('final_success_mean', float('nan')):.3f} mean final success; the "
-          f"generator's prior draws solve {result['generator_limit']['success_rate']:.3f} of the states; wrote {args.out}")
+        if not row["finished"]:
+            train_seed(args.task, generator_path, seed, args, row, write)
+        print(f"seed {seed}: success {row['final_success']:.3f} after {row['curve_episodes'][-1]} episodes", flush=True)
+    result["complete"] = True
+    write()
+    print(f"GenRL on {args.task}: {result['final_success_mean']:.3f} mean final success; wrote {args.out}")
 
 
 if __name__ == "__main__":

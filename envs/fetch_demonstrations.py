@@ -74,7 +74,7 @@ def _demonstration(env_id: str, seed: int, k: int) -> dict[str, Any]:
     reset_seed = int(rng.integers(2**31))
     family = next(family for family in FAMILIES.values() if family.env_id == env_id)
     aim = family.sample_aim(rng, _env(env_id).unwrapped)  # the env's constants: the gripper's start, the table
-    return play_expert(env_id, None, reset_seed, aim, rng)
+    return play_expert(env_id, None, reset_seed, aim, rng) | {"reset_seed": reset_seed}
 
 
 def _play_chunk(env_id: str, seed: int, start: int, stop: int) -> list[dict[str, Any] | None]:
@@ -166,3 +166,67 @@ def evaluate_success(model: Any, task: str | TaskSpec, episodes: int = 100, seed
     env.close()
     return {"episodes": episodes, "seed": seed, "success_rate": float(np.mean(successes)),
             "successes": successes, "distances": distances}
+
+
+def _replay_chunk(env_id: str, actions: np.ndarray, reset_seeds: list[int], aims: list[np.ndarray | None]
+                  ) -> list[tuple[bool, float]]:
+    """Play each of ``actions`` open-loop from its reset seed: whether it solved the env's goal, and its distance to
+    its aim (None: the env's goal)."""
+    played = [play_expert(env_id, tau, seed, aim) for tau, seed, aim in zip(actions, reset_seeds, aims, strict=True)]
+    return [(p["is_success"], p["aim_distance"] if p["on_table"] else np.inf) for p in played]
+
+
+def _replay(env_id: str, actions: np.ndarray, reset_seeds: list[int], aims: list[np.ndarray | None],
+            n_threads: int, chunk: int = 100) -> list[tuple[bool, float]]:
+    """:func:`_replay_chunk` over ``n_threads`` worker processes (1: here), in the order given."""
+    parts = [(env_id, actions[i:i + chunk], reset_seeds[i:i + chunk], aims[i:i + chunk])
+             for i in range(0, len(actions), chunk)]
+    if n_threads == 1:
+        return [row for part in parts for row in _replay_chunk(*part)]
+    with concurrent.futures.ProcessPoolExecutor(n_threads, mp_context=multiprocessing.get_context("spawn")) as pool:
+        return [row for rows in pool.map(_replay_chunk, *zip(*parts, strict=True)) for row in rows]
+
+
+def reconstruction_success(generator: Any, task: str | TaskSpec, episodes: int, seed: int,
+                           n_threads: int = 1) -> dict[str, Any]:
+    """How closely a VAE reproduces demonstrations it was not trained on: ``episodes`` new valid demonstrations (drawn
+    as :func:`make_arrays` draws them, with ``seed``; give another seed than the training set's), each encoded to its
+    posterior mean, decoded and replayed open-loop from its own reset state; the share that end within 5 cm of the
+    demonstration's aim (object on the table) and the median miss (m)."""
+    spec = get_task(task)
+    demonstrations, k = [], 0
+    while len(demonstrations) < episodes:
+        played = _demonstration(spec.env_id, seed, k)
+        k += 1
+        if is_valid(played):
+            demonstrations.append(played)
+    actions = np.stack([d["actions"] for d in demonstrations])
+    decoded = np.clip(generator.decode(generator.encode(actions)[0]), -1.0, 1.0).astype(np.float32)
+    rows = _replay(spec.env_id, decoded, [d["reset_seed"] for d in demonstrations],
+                   [d["aim"] for d in demonstrations], n_threads)
+    misses = np.array([distance for _, distance in rows])
+    return {"demonstrations": episodes, "seed": seed, "drawn": k, "success_rate": float(np.mean(misses < 0.05)),
+            "median_miss_m": float(np.median(misses))}
+
+
+def prior_best_success(generator: Any, task: str | TaskSpec, states: int, draws: int, seed: int,
+                       n_threads: int = 1) -> dict[str, Any]:
+    """The generator's own limit: for each of ``states`` initial states (reset seeds ``seed, seed + 1, ...``),
+    ``draws`` latent actions from its prior, decoded and played open-loop; per state the number of draws that solve
+    the env's goal (``info["is_success"]``). Returns the share of states solved by at least one draw (best of
+    ``draws``), the best of 1, 10 and 100 draws (estimated from the same counts, without replacement) and the counts."""
+    from math import comb
+
+    spec = get_task(task)
+    rng = np.random.default_rng([seed, states, draws])
+    actions = np.clip(generator.decode(generator.sample_prior(states * draws, rng)), -1.0, 1.0).astype(np.float32)
+    rows = _replay(spec.env_id, actions, [seed + i // draws for i in range(states * draws)], [None] * len(actions),
+                   n_threads)
+    solved = np.array([success for success, _ in rows], dtype=bool).reshape(states, draws).sum(axis=1)
+
+    def best_of(k: int) -> float:  # P(at least one of k draws without replacement solves the state), mean over states
+        return float(np.mean([1.0 - comb(draws - int(s), k) / comb(draws, k) for s in solved]))
+
+    return {"states": states, "prior_draws_per_state": draws, "seed": seed, "success_rate": best_of(draws),
+            "best_of": {str(k): best_of(k) for k in (1, 10, 100) if k <= draws}, "solving_draws": solved.tolist()}
+

@@ -95,3 +95,29 @@ def test_demonstrations_generator_and_genrl_on_fetch_push(tmp_path):
     evaluation = get_task("fetch-push").evaluate(model, "fetch-push", episodes=3, seed=5)
     assert evaluation["success_rate"] == np.mean(evaluation["successes"]) and len(evaluation["distances"]) == 3
     assert all((d < 0.05) == s for d, s in zip(evaluation["distances"], evaluation["successes"], strict=True))
+
+
+def test_the_generators_limit_counts_the_draws_that_solve_each_state():
+    from sb3_genrl.envs.fetch import reach_expert
+    from sb3_genrl.envs.fetch_demonstrations import prior_best_success
+
+    import_robotics()  # the fix, whatever imported Gymnasium-Robotics first
+    states, draws, seed = 2, 4, 123
+    solving = (3, 1)  # the first draws of each state that play the expert aimed at the state's goal
+
+    class IndexGenerator:  # draw i's latent action is i; the first solving[state] draws of a state play the expert
+        def sample_prior(self, n, rng):
+            return np.arange(n, dtype=np.float64)[:, None]
+
+        def decode(self, alpha):
+            env = gym.make("FetchReach-v4")
+            out = []
+            for i in alpha[:, 0].astype(int):
+                obs, _ = env.reset(seed=int(seed + i // draws))
+                good = i % draws < solving[i // draws]
+                out.append(reach_expert(obs["observation"], obs["desired_goal"]) if good else np.zeros((50, 4)))
+            return np.array(out)
+
+    result = prior_best_success(IndexGenerator(), "fetch-reach", states, draws, seed)
+    assert result["solving_draws"] == list(solving)  # the zero actions never reach a goal 15 cm away or more
+    assert result["success_rate"] == 1.0 and result["best_of"]["1"] == pytest.approx(np.mean(solving) / draws)

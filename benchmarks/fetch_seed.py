@@ -1,0 +1,105 @@
+"""One seed of the Fetch benchmark (``benchmarks/fetch.py``): GenRL trained with the held-out success curve, checkpointed
+at every evaluation and resumed from its checkpoint.
+
+The run's folder (``WORK/seed_S``) holds SB3's Monitor file and logger, the checkpoint (as ``genrl train-policy``
+writes it, :mod:`sb3_genrl.genrl.checkpoint`) and, at the end, the model. The curve's points past the checkpoint a
+resumed run starts from are dropped from the row and measured again.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import pathlib
+import shutil
+import time
+from collections.abc import Callable
+
+import gymnasium as gym
+from sb3_genrl.envs import get_task
+from sb3_genrl.envs.fetch import FETCH_HORIZON
+from sb3_genrl.envs.fetch_demonstrations import evaluate_success
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+
+from sb3_genrl.curves import monitor_episodes, training_logger
+from sb3_genrl.generative import load
+from sb3_genrl.genrl.checkpoint import GenRLCheckpoint, RandomStateRecorder, resume_genrl, resume_state
+from sb3_genrl.genrl.generator_files import generator_digest
+from sb3_genrl.genrl.train import genrl_settings, make_genrl
+from sb3_genrl.hyperparams import EVAL_GOAL_SEED
+from sb3_genrl.study.quickstart import task_settings
+from sb3_genrl.wrappers import LatentActionWrapper
+
+CURVE = ("curve_episodes", "curve_env_steps", "curve_success")
+
+
+class SuccessCurve(BaseCallback):
+    """Every ``every`` episodes, at the start of an iteration (after the update): the deterministic policy's success
+    rate on ``states`` held-out initial states, appended to ``row`` and written."""
+
+    def __init__(self, task: str, every: int, states: int, row: dict, write: Callable[[], None]) -> None:
+        super().__init__()
+        self.task, self.every, self.states, self.row, self.write = task, every, states, row, write
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _on_rollout_start(self) -> None:
+        episodes = int(self.num_timesteps)
+        if episodes and episodes % self.every == 0 and episodes not in self.row["curve_episodes"]:
+            self.evaluate()
+
+    def evaluate(self) -> None:
+        start = time.perf_counter()
+        result = evaluate_success(self.model, self.task, episodes=self.states, seed=EVAL_GOAL_SEED)
+        episodes = int(self.num_timesteps)
+        self.row["curve_episodes"].append(episodes)
+        self.row["curve_env_steps"].append(episodes * FETCH_HORIZON)
+        self.row["curve_success"].append(result["success_rate"])
+        self.row["evaluation_seconds"] = self.row.get("evaluation_seconds", 0.0) + time.perf_counter() - start
+        self.row["episodes_done"] = episodes
+        self.write()
+        print(f"  seed {self.row['seed']}, {episodes} episodes: success {result['success_rate']:.3f}", flush=True)
+
+
+def train_seed(task: str, generator_path: str, seed: int, args: argparse.Namespace, row: dict,
+               write: Callable[[], None]) -> None:
+    """Train (or resume) GenRL with one seed to ``args.episodes``, evaluating on the way and at the end (into ``row``)."""
+    _, batch_episodes, genrl_kwargs = task_settings(task)
+    folder = pathlib.Path(args.work) / f"seed_{seed}"
+    generator = load(generator_path, device="cpu")
+    identity = {"algorithm": "genrl", "task": task, "episodes": int(args.episodes), "seed": seed,
+                "batch_episodes": batch_episodes, "generator_sha256": generator_digest(generator),
+                "genrl_settings": genrl_settings(genrl_kwargs)}
+    state = resume_state(folder / "checkpoint", identity)
+    if state is None:  # from the start: what an earlier unfinished try left is dropped
+        shutil.rmtree(folder, ignore_errors=True)
+        row.update({key: [] for key in CURVE}, seconds=0.0, evaluation_seconds=0.0)
+    else:
+        kept = sum(episodes <= state["episodes"] for episodes in row["curve_episodes"])
+        row.update({key: row[key][:kept] for key in CURVE})
+        row["resumed_at_episodes"] = [*row.get("resumed_at_episodes", []), int(state["episodes"])]
+    os.makedirs(folder, exist_ok=True)
+    env = monitor_episodes(RandomStateRecorder(LatentActionWrapper(gym.make(get_task(task).env_id), generator)),
+                           folder, append=state is not None)
+    logger = training_logger(folder)
+    if state is None:
+        model = make_genrl(env, generator, seed=seed, device="cpu", n_steps=batch_episodes, **genrl_kwargs)
+        model.set_logger(logger)
+    else:
+        model = resume_genrl(state, env, generator, "cpu", logger)
+    curve = SuccessCurve(task, args.eval_every, args.eval_states, row, write)
+    checkpoint = GenRLCheckpoint(folder / "checkpoint", args.eval_every, identity, state)
+    begin = time.perf_counter()
+    model.learn(int(args.episodes) - model.num_timesteps, callback=CallbackList([curve, checkpoint]),
+                reset_num_timesteps=state is None)
+    row["seconds"] = row.get("seconds", 0.0) + time.perf_counter() - begin
+    if not row["curve_episodes"] or row["curve_episodes"][-1] != model.num_timesteps:
+        curve.evaluate()
+    model.logger.close()
+    model.save(folder / "genrl_policy.zip")
+    env.close()
+    row.update(final_success=row["curve_success"][-1], episodes=int(model.num_timesteps),
+               env_steps=int(model.num_timesteps) * FETCH_HORIZON, finished=True)
+    write()
+    shutil.rmtree(folder / "checkpoint", ignore_errors=True)
