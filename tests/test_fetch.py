@@ -2,6 +2,7 @@
 the workflow (demonstrations, a generator, GenRL, the success rate) on tiny sizes."""
 
 import importlib
+import json
 
 import gymnasium as gym
 import mujoco
@@ -121,3 +122,18 @@ def test_the_generators_limit_counts_the_draws_that_solve_each_state():
     result = prior_best_success(IndexGenerator(), "fetch-reach", states, draws, seed)
     assert result["solving_draws"] == list(solving)  # the zero actions never reach a goal 15 cm away or more
     assert result["success_rate"] == 1.0 and result["best_of"]["1"] == pytest.approx(np.mean(solving) / draws)
+
+
+def test_the_results_table_labels_a_partial_run_with_the_episodes_reached(tmp_path):
+    from sb3_genrl.benchmarks.fetch_results import main
+
+    run = {"seed": 0, "finished": False, "curve_episodes": [512, 1024], "curve_env_steps": [25600, 51200],
+           "curve_success": [0.1, 0.2]}
+    done = dict(run, seed=1, finished=True, final_success=0.4, curve_success=[0.3, 0.4])
+    result = {"settings": {"episodes": 3000}, "complete": False, "runs": [run, done],
+              "reconstruction": {"success_rate": 0.6}, "generator_limit": {"success_rate": 0.7, "best_of": {"1": 0.1}}}
+    (tmp_path / "fetch_fetch-push.json").write_text(json.dumps(result))
+    main(["--results", str(tmp_path)])
+    line = next(line for line in (tmp_path / "fetch.md").read_text().splitlines() if line.startswith("| fetch-push"))
+    assert "partial: seed 0: 1024 (running), seed 1: 1024" in line and "0.400 ± 0.000 (1 seeds)" in line
+    assert (tmp_path / "fetch_curves.png").stat().st_size > 0
