@@ -18,11 +18,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import policy_distances
+from sb3_genrl.envs import get_task
 
 from sb3_genrl.genrl.train import genrl_settings
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED, load_genrl_settings
 from sb3_genrl.study import run_study
-from sb3_genrl.study.scales import SCALES
+from sb3_genrl.study.scales import SCALES, task_scale
 from sb3_genrl.study.state import SettingsConflictError
 
 SMOKE_MODELS = ("VAE1", "GAN1")  # one of each kind: every table and plot of the study has something to show
@@ -49,6 +50,9 @@ def test_smoke_study_writes_every_table_and_plot_and_resumes(tmp_path, cli):
         summaries = [json.loads((root / "policies" / name / f"seed{s}" / "summary.json").read_text())
                      for s in range(SCALES["smoke"].seeds)]
         assert row["rewards"] == [s["best_mean_reward"] for s in summaries] and row["score"] == max(row["rewards"])
+        assert row["final"] == np.mean([s["final_mean_reward"] for s in summaries]) and row["half_score"] <= row["score"]
+        assert [epoch for epoch, _ in row["selection"]] == [1, 2] and row["prior_median"] == evaluation["prior_median"]
+        assert all(s["genrl_settings"]["n_steps"] == load_genrl_settings("GenRL/Hockey-v0")[1] for s in summaries)
         assert all(s["episodes"] == SCALES["smoke"].policy_episodes for s in summaries)
     table1 = {row["model"]: row for row in _csv_rows(root / "tables" / "table1_models.csv")}
     assert {name: float(row["best reward"]) for name, row in table1.items()} == {n: r["score"] for n, r in rows.items()}
@@ -68,7 +72,8 @@ def test_smoke_study_writes_every_table_and_plot_and_resumes(tmp_path, cli):
     best = max(rows.values(), key=lambda r: r["score"])
     report = (root / "report.md").read_text()
     assert f"Best generator: **{best['model']}** (best reward {best['score']:.3f}" in report
-    for section in ("Table 1", "Tables 4-5", "Tables 2-3", "GenRL vs PPO vs SAC"):
+    for section in ("Table 1", "The ranking's stability", "Tables 4-5", "Tables 2-3", "Generator training",
+                    "GenRL vs PPO vs SAC"):
         assert f"## {section}" in report
 
     # The report states the settings the stages recorded.
@@ -88,7 +93,9 @@ def test_smoke_study_writes_every_table_and_plot_and_resumes(tmp_path, cli):
     message, small = str(error.value), SCALES["small"]
     assert f"{root / 'demonstrations'}: episodes {smoke.demo_episodes} (recorded) vs {small.demo_episodes}" in message
     assert f"{root / 'generators'}: epochs {smoke.generator_epochs} (recorded) vs {small.generator_epochs}" in message
-    assert f"{root / 'policies'}: episodes {smoke.policy_episodes} (recorded) vs {small.policy_episodes}" in message
+    small_hockey = task_scale(small.as_dict(), "hockey")
+    assert f"{root / 'policies'}: episodes {smoke.policy_episodes} (recorded) vs {small_hockey['policy_episodes']}" \
+        in message
     assert json.loads((tmp_path / "study.json").read_text())["scale"] == "smoke"
     assert stamps == {p: p.stat().st_mtime_ns for p in outputs}
 
@@ -116,7 +123,7 @@ RAY_STUDY = """
 import sys
 from dataclasses import replace
 from sb3_genrl.study import run_study
-from sb3_genrl.study.scales import SCALES
+from sb3_genrl.study.scales import SCALES, task_scale
 
 run_study("hockey", replace(SCALES["smoke"], seeds=1, baseline_episodes=0), sys.argv[1], executor="ray",
           address=sys.argv[2], models=("VAE3",), connect_timeout=float(sys.argv[3]))
@@ -275,3 +282,82 @@ def test_the_quickstart_video_seed_stays_a_valid_seed_for_the_largest_seed():
 
     assert video_seed(0) == 1 and video_seed(7) == 8  # the derivation the committed quickstart results were made with
     assert check_seed(video_seed(MAX_SEED)) != MAX_SEED  # the video of a run with seed 2**32 - 1 no longer fails
+
+
+def _study_row(name: str, precision: float, score: float, half: float, final: float, prior: float) -> dict:
+    return {"model": name, "type": name[:3], "latent_dim": 2, "beta": 0.01, "info_weight": 0.1, "precision": precision,
+            "recall": 0.5 + score / 10, "delta_1": 0.5, "delta_2": 0.4, "mean_delta": 0.45 - half / 10,
+            "density": 1.0 + final, "coverage": 0.5, "prior_median": prior, "prior_q25": prior - 0.1,
+            "prior_q75": prior + 0.1, "best_epoch": 4, "selection": [[2, 0.5], [4, 0.2], [6, 0.3]],
+            "rewards": [score, score - 0.1], "score": score, "half_rewards": [half], "half_score": half,
+            "final_rewards": [final], "final": final}
+
+
+def test_the_report_leaves_unconverged_generators_out_of_the_correlations_and_states_the_stability(tmp_path):
+    from scipy.stats import pearsonr, spearmanr
+
+    from sb3_genrl.study.report import write_task_report
+
+    rng = np.random.default_rng(0)
+    rows = [_study_row(f"VAE{i}", 0.9, *rng.normal(size=4)) for i in range(1, 6)]
+    rows += [_study_row(f"GAN{i}", 0.5, *rng.normal(size=4)) for i in range(1, 4)]
+    rows += [_study_row("GAN4", 0.149, 10.0, 10.0, 10.0, 10.0)]  # not converged: would dominate every correlation
+    report = write_task_report("hockey", rows, tmp_path, scale={"prior_draws": 16, "prior_contexts": 64}).read_text()
+    assert "left out of every correlation and of the stability: GAN4 (0.149)." in report
+    ranked = rows[:-1]
+    stability = json.loads((tmp_path / "tables" / "stability.json").read_text())
+    expected = spearmanr([r["half_score"] for r in ranked], [r["score"] for r in ranked]).statistic
+    assert stability["models"] == 8 and stability["rho"] == pytest.approx(expected, abs=1e-12)
+    assert f"**{expected:.3f}** (95% bootstrap interval" in report
+    assert stability["low"] <= stability["rho"] <= stability["high"] and stability["stable"] == (expected >= 0.9)
+    tables = {(row["group"], row["measure"]): row for row in _csv_rows(tmp_path / "tables" / "correlation.csv")}
+    recall = tables[("ALL", "recall")]
+    assert int(recall["num_models"]) == 8
+    assert float(recall["pearson_r"]) == pytest.approx(
+        pearsonr([r["recall"] for r in ranked], [r["score"] for r in ranked]).statistic, abs=1e-12)
+    final = {row["measure"]: row for row in _csv_rows(tmp_path / "tables" / "prediction_final.csv")}
+    assert sorted(final) == sorted(["precision", "recall", "delta_1", "delta_2", "mean_delta", "density", "coverage",
+                                    "prior_median"])
+    assert float(final["prior_median"]["spearman_rho"]) == pytest.approx(
+        spearmanr([r["prior_median"] for r in ranked], [r["final"] for r in ranked]).statistic, abs=1e-12)
+    assert {row["group"] for row in final.values()} == {"ALL"}
+    selection = {row["model"]: row for row in _csv_rows(tmp_path / "tables" / "selection.csv")}
+    assert selection["GAN4"]["status"] == "not converged" and float(selection["VAE1"]["selection MSE kept"]) == 0.2
+    for name in ("selection_vae", "selection_gan"):
+        assert (tmp_path / "plots" / f"{name}.png").stat().st_size > 1000
+
+
+def test_half_budget_best_reads_the_iterations_within_half_the_episodes():
+    from sb3_genrl.study.jobs import half_budget_best
+
+    curve = {"episodes": np.array([16.0, 32, 48, 64]), "mean_reward": np.array([-3.0, -1.0, -0.5, -2.0])}
+    assert half_budget_best(curve, 64) == -1.0 and half_budget_best(curve, 100) == -0.5
+    assert half_budget_best(curve, 16) == -3.0  # the first iteration already ends past half the budget
+
+
+def test_each_task_runs_its_own_episodes_per_iteration_and_a_changed_budget_is_refused(tmp_path):
+    from dataclasses import replace
+
+    from sb3_genrl.study.runner import _conflicts
+
+    small = SCALES["small"].as_dict()
+    for task in ("hockey", "basketball"):
+        _, batch_episodes, _ = load_genrl_settings(get_task(task).env_id)
+        resolved = task_scale(small, task)
+        assert resolved["batch_episodes"] == batch_episodes and resolved["policy_episodes"] == \
+            SCALES["small"].policy_episodes[task]
+    with pytest.raises(ValueError, match="not for 'hockey'"):
+        task_scale({**small, "policy_episodes": {"basketball": 10}}, "hockey")
+    # A study folder whose policies were recorded with hockey's settings refuses another budget or batch size.
+    from sb3_genrl.study.runner import _stages
+    from sb3_genrl.utils import atomic_write_json
+
+    hockey = task_scale(small, "hockey")
+    for record, wanted, _ in _stages("hockey", tmp_path, hockey, None):
+        atomic_write_json(record, wanted)
+    assert _conflicts("hockey", hockey, tmp_path) == []
+    changed = task_scale(replace(SCALES["small"], batch_episodes=64).as_dict(), "hockey")
+    assert [line for line in _conflicts("hockey", changed, tmp_path) if "policies" in line] == [
+        f"{tmp_path / 'policies'}: batch_episodes {hockey['batch_episodes']} (recorded) vs 64 (this run)"]
+    fewer_draws = {**hockey, "prior_draws": 4}
+    assert any("prior_draws 16 (recorded) vs 4" in line for line in _conflicts("hockey", fewer_draws, tmp_path))

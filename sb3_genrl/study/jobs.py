@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from sb3_genrl.metrics.prior_rollout import PRIOR_ROLLOUT_SEED  # the prior rollout's goals (not the evaluations')
 from sb3_genrl.study.state import (
     STAGE_FILE,
     check_and_record,
@@ -45,12 +46,16 @@ def generator_job(task: str, name: str, scale: dict[str, Any], dataset: str, tas
     :param task_dir: the task's study folder (``generators/``, ``evaluation/``, ``policies/`` are written in it)
     :param device: torch device
     :param torch_threads: torch threads of this job (one per worker process keeps the cores busy without contention)
-    :return: the generator's row: preset values, measures and GenRL rewards per seed
+    :return: the generator's row: preset values, measures (the paper's, density, coverage, the prior rollout's),
+        the selection error after each evaluation of its training, GenRL's best rewards per seed (``rewards``, their
+        best ``score``), the best within the first half of the budget (``half_rewards``, ``half_score``) and the final
+        iteration's (``final_rewards``, their mean ``final``)
     """
     import torch
 
     from sb3_genrl.generative import PRESETS, load, train_generator
     from sb3_genrl.metrics import MEASURES
+    from sb3_genrl.study.report import SCORECARD_MEASURES
 
     torch.set_num_threads(torch_threads)
     root = pathlib.Path(task_dir)
@@ -65,26 +70,31 @@ def generator_job(task: str, name: str, scale: dict[str, Any], dataset: str, tas
     generator = load(model_path, device=device)
     fingerprint = file_fingerprint(model_path)
 
-    evaluation = _evaluation(generator, name, fingerprint, scale, dataset, root, device)
+    evaluation = _evaluation(task, generator, name, fingerprint, scale, dataset, root, device)
 
     # GenRL (paper 6.1.3): one policy per seed, all from this generator file.
     policies = root / "policies" / name
     check_and_record(policies / STAGE_FILE, {"generator": fingerprint}, folder=root,
                      output_exists=any(policies.glob("seed*/summary.json")))
-    rewards = []
-    for seed in range(scale["seeds"]):
-        rewards.append(_policy_reward(task, model_path, seed, scale, policies / f"seed{seed}", device))
+    runs = [_policy_rewards(task, model_path, seed, scale, policies / f"seed{seed}", device)
+            for seed in range(scale["seeds"])]
+    rewards, half, final = ([run[key] for run in runs] for key in ("best", "half", "final"))
 
     spec = PRESETS[name]
     return {"model": name, "type": "VAE" if name.startswith("VAE") else "GAN", "latent_dim": spec["latent_dim"],
-            "beta": spec.get("beta"), "info_weight": spec.get("info_weight"), **{
-                key: evaluation[key] for key in MEASURES},
-            "rewards": rewards, "score": float(np.max(rewards))}
+            "beta": spec.get("beta"), "info_weight": spec.get("info_weight"),
+            **{key: evaluation[key] for key in (*MEASURES, *SCORECARD_MEASURES)},
+            "prior_q25": evaluation["prior_q25"], "prior_q75": evaluation["prior_q75"],
+            "best_epoch": generator.best_epoch,
+            "selection": [[record["epoch"], record["selection_mse"]] for record in generator.history],
+            "rewards": rewards, "score": float(np.max(rewards)), "half_rewards": half, "half_score": float(np.max(half)),
+            "final_rewards": final, "final": float(np.mean(final))}
 
 
-def _evaluation(generator: Any, name: str, fingerprint: str, scale: dict[str, Any], dataset: str,
+def _evaluation(task: str, generator: Any, name: str, fingerprint: str, scale: dict[str, Any], dataset: str,
                 root: pathlib.Path, device: str) -> dict[str, Any]:
-    """Precision/recall against the fixed real subset and DwPR (paper 5.2), or the stored result of this file."""
+    """Precision/recall against the fixed real subset and DwPR (paper 5.2), density, coverage and the prior rollout,
+    or the stored result of this file."""
     from sb3_genrl.data import load_actions
     from sb3_genrl.metrics import evaluate_generator, real_subset
 
@@ -95,8 +105,11 @@ def _evaluation(generator: Any, name: str, fingerprint: str, scale: dict[str, An
         return stored
     real = real_subset(load_actions(dataset), scale["pr_samples"], EVALUATION_SEED)
     result = evaluate_generator(generator, real, n=scale["pr_samples"], k=K, dwpr_n=scale["dwpr_samples"],
-                                interventions=INTERVENTIONS, seed=EVALUATION_SEED, name=name, device=device)
+                                interventions=INTERVENTIONS, seed=EVALUATION_SEED, name=name, device=device, task=task,
+                                contexts=scale["prior_contexts"], draws=scale["prior_draws"],
+                                prior_seed=PRIOR_ROLLOUT_SEED)
     evaluation = {**result.details(), "generator": fingerprint}
+    evaluation.pop("prior_best")  # per goal: not needed by the report
     atomic_write_json(path, evaluation)
     return evaluation
 
@@ -110,14 +123,26 @@ def task_genrl_kwargs(task: str) -> dict[str, Any]:
     return task_settings(task)[2]
 
 
-def _policy_reward(task: str, model_path: pathlib.Path, seed: int, scale: dict[str, Any], run_dir: pathlib.Path,
-                   device: str) -> float:
+def _policy_rewards(task: str, model_path: pathlib.Path, seed: int, scale: dict[str, Any], run_dir: pathlib.Path,
+                    device: str) -> dict[str, float]:
+    """One GenRL run's best iteration mean reward, the best within the first half of its budget (from its learning
+    curve) and its final iteration's."""
+    from sb3_genrl.curves import read_curve
     from sb3_genrl.genrl import train_policy
 
     if not (run_dir / "summary.json").exists():
         train_policy(task, str(model_path), episodes=scale["policy_episodes"], seed=seed, out_dir=run_dir,
                      batch_episodes=scale["batch_episodes"], device=device, **task_genrl_kwargs(task))
-    return float(json.loads((run_dir / "summary.json").read_text())["best_mean_reward"])
+    summary = json.loads((run_dir / "summary.json").read_text())
+    return {"best": float(summary["best_mean_reward"]), "final": float(summary["final_mean_reward"]),
+            "half": half_budget_best(read_curve(run_dir / "learning_curve.csv"), scale["policy_episodes"])}
+
+
+def half_budget_best(curve: dict[str, np.ndarray], episodes: int) -> float:
+    """The best iteration mean reward of a learning curve among the iterations that end within ``episodes / 2``
+    episodes (the first iteration's when even that ends later)."""
+    within = curve["episodes"] <= episodes / 2
+    return float(np.max(curve["mean_reward"][within]) if within.any() else curve["mean_reward"][0])
 
 
 def baseline_job(algorithm: str, task: str, seed: int, episodes: int, dataset: str, demo_episodes: int, run_dir: str,

@@ -1,4 +1,5 @@
-"""The study's tables (paper tables 1-5) and plots, and its ``report.md``."""
+"""The study's tables (paper tables 1-5, with bootstrap intervals), the ranking's stability, every generator's
+selection curve, the scorecard's predictions, the plots, and its ``report.md``."""
 
 from __future__ import annotations
 
@@ -10,7 +11,18 @@ from typing import Any
 
 from sb3_genrl.curves import mean_std_over_seeds, plot_curves, read_curve
 from sb3_genrl.markdown import markdown_table
-from sb3_genrl.metrics import MEASURES, correlation_table, labelled_scatter
+from sb3_genrl.metrics import labelled_scatter
+from sb3_genrl.study.report_tables import (
+    SCORECARD_MEASURES,  # noqa: F401 (the job's row holds these measures)
+    correlations,
+    excluded_line,
+    measures_table,
+    predictions,
+    selection_table,
+    stability,
+    stability_line,
+    table1,
+)
 from sb3_genrl.utils import atomic_write_text
 
 
@@ -35,6 +47,12 @@ def _write_plots(task: str, rows: list[dict[str, Any]], root: pathlib.Path, plot
         if series:
             plot_curves(series, plots / f"learning_curves_{kind.lower()}.png", ylabel="mean reward per iteration",
                         title=f"{task}: GenRL with each {kind} (mean +- std over seeds)")
+    for kind in ("VAE", "GAN"):
+        series = {r["model"]: ([e for e, _ in r["selection"]], [m for _, m in r["selection"]], None)
+                  for r in rows if r["type"] == kind and r["selection"]}
+        if series:
+            plot_curves(series, plots / f"selection_{kind.lower()}.png", xlabel="epoch",
+                        ylabel="model-selection MSE (held-out)", title=f"{task}: each {kind}'s training")
     names = [r["model"] for r in rows]
     labelled_scatter([r["precision"] for r in rows], [r["recall"] for r in rows], names, plots / "precision_recall.png",
                      xlabel="precision", ylabel="recall", title=f"{task}: precision and recall")
@@ -47,39 +65,59 @@ def _write_plots(task: str, rows: list[dict[str, Any]], root: pathlib.Path, plot
 
 def write_task_report(task: str, rows: list[dict[str, Any]], task_dir: str | pathlib.Path, *,
                       scale: dict[str, Any], comparison: pathlib.Path | None = None) -> pathlib.Path:
-    """Tables 1-5 for one task (Markdown and CSV), the plots, and ``report.md`` linking them."""
+    """Tables 1-5 for one task (Markdown and CSV), the stability, the selection curves, the plots, and ``report.md``
+    linking them."""
     root = pathlib.Path(task_dir)
     tables, plots = root / "tables", root / "plots"
     tables.mkdir(parents=True, exist_ok=True)
     plots.mkdir(parents=True, exist_ok=True)
     rows = sorted(rows, key=lambda r: (r["type"] != "VAE", int(r["model"][3:])))
-
-    # Table 1: the models and the best reward GenRL reached with each (max over seeds of the best iteration mean).
-    header1 = ["model", "N_alpha", "beta / lambda", "best reward", "reward per seed"]
-    table1 = [[r["model"], r["latent_dim"], r["beta"] if r["type"] == "VAE" else r["info_weight"], r["score"],
-               " / ".join(f"{x:.3f}" for x in r["rewards"])] for r in rows]
-    _write_csv(tables / "table1_models.csv", header1, table1)
-
-    # Tables 4-5: precision, recall and disentanglement of each model.
-    header_m = ["model", *MEASURES]
-    table_m = [[r["model"], *(r[m] for m in MEASURES)] for r in rows]
-    _write_csv(tables / "measures.csv", header_m, table_m)
-
-    # Tables 2-3: Pearson R and p-value of each measure against the best reward, per model type and for all.
-    correlations = correlation_table(rows, measure_names=list(MEASURES), score_key="score")
-    correlations.to_csv(tables / "correlation.csv")
-
+    parts = {"table1_models": table1(rows), "measures": measures_table(rows), "selection": selection_table(rows)}
+    for name, (header, table) in parts.items():
+        _write_csv(tables / f"{name}.csv", header, table)
+    markdown = {name: markdown_table(header, table) for name, (header, table) in parts.items()}
+    tables23, by_best, by_final = correlations(rows), predictions(rows, "score"), predictions(rows, "final")
+    for name, table in (("correlation", tables23), ("prediction_best", by_best), ("prediction_final", by_final)):
+        table.to_csv(tables / f"{name}.csv")
+        markdown[name] = table.to_markdown().rstrip("\n")
+    steady = stability(rows)
+    atomic_write_text(tables / "stability.json", json.dumps(steady, indent=2) + "\n")
     _write_plots(task, rows, root, plots)
+    for name, text in markdown.items():
+        atomic_write_text(tables / f"{name}.md", text.rstrip("\n") + "\n")
+    report = root / "report.md"
+    atomic_write_text(report, "\n".join(_report_lines(task, rows, scale, markdown, steady, comparison, root)))
+    return report
 
+
+def _report_lines(task: str, rows: list[dict[str, Any]], scale: dict[str, Any], markdown: dict[str, str],
+                  steady: dict[str, Any], comparison: pathlib.Path | None, root: pathlib.Path) -> list[str]:
     best = max(rows, key=lambda r: r["score"])
+    intervals = ("Each coefficient has its 95% percentile bootstrap interval over the models (resampled with "
+                 "replacement, seed 0, the number of resamples in the CSV).")
     lines = [f"# GenRL study: {task}", "",
              f"Settings (as recorded with each stage): `{json.dumps(scale)}`", "",
              f"Best generator: **{best['model']}** (best reward {best['score']:.3f}, i.e. {-best['score'] * 100:.1f} cm).",
-             "", "## Table 1: generators and GenRL reward", "",
-             "Best reward = the highest mean reward of a GenRL iteration, over all seeds (paper section 6.1.3).", "",
-             markdown_table(header1, table1), "",
-             "## Tables 4-5: precision, recall and disentanglement", "", markdown_table(header_m, table_m), "",
-             "## Tables 2-3: correlation of each measure with the best reward", "", correlations.to_markdown(), "",
+             "", excluded_line(rows), "", "## Table 1: generators and GenRL reward", "",
+             "Best reward = the highest mean reward of a GenRL iteration, over all seeds (paper section 6.1.3); at "
+             "half budget: the same within the first half of the episodes; final: the last iteration's, mean over "
+             "seeds.", "", markdown["table1_models"], "",
+             "## The ranking's stability", "", stability_line(steady), "",
+             "## Tables 4-5: precision, recall and disentanglement", "",
+             "With density and coverage (Naeem et al., 2020) and the prior rollout (the best reward of "
+             f"{scale.get('prior_draws')} prior draws for each of {scale.get('prior_contexts')} held-out goals: "
+             "median and quartiles over the goals).", "", markdown["measures"], "",
+             "## Tables 2-3: correlation of each measure with the best reward", "", intervals, "",
+             markdown["correlation"], "",
+             "## Which measure predicts GenRL's reward", "",
+             "Every measure against the best reward and against the final reward, over all converged generators.", "",
+             "Against the best reward:", "", markdown["prediction_best"], "",
+             "Against the final reward:", "", markdown["prediction_final"], "",
+             "## Generator training", "",
+             "The model-selection error (paper appendix B: 100 generated against held-out trajectories) at each "
+             "evaluation of each generator's training; the epoch kept is the one of the smallest.", "",
+             markdown["selection"], "",
+             "![VAE training](plots/selection_vae.png) ![GAN training](plots/selection_gan.png)", "",
              "## Plots", "",
              "![VAE learning curves](plots/learning_curves_vae.png)", "",
              "![GAN learning curves](plots/learning_curves_gan.png)", "",
@@ -88,10 +126,4 @@ def write_task_report(task: str, rows: list[dict[str, Any]], task_dir: str | pat
     if comparison is not None:
         lines += ["## GenRL vs PPO vs SAC", "", comparison.read_text().split("\n", 2)[2].replace(
             "](", f"]({comparison.parent.relative_to(root)}/"), ""]
-    markdown = {"table1_models.md": markdown_table(header1, table1), "measures.md": markdown_table(header_m, table_m),
-                "correlation.md": correlations.to_markdown()}
-    for name, text in markdown.items():
-        atomic_write_text(tables / name, text + "\n")
-    report = root / "report.md"
-    atomic_write_text(report, "\n".join(lines))
-    return report
+    return lines

@@ -20,13 +20,14 @@ from sb3_genrl.study.jobs import (
     EVALUATION_SEED,
     GENERATOR_SEED,
     INTERVENTIONS,
+    PRIOR_ROLLOUT_SEED,
     K,
     baseline_job,
     generator_job,
     task_genrl_kwargs,
 )
 from sb3_genrl.study.report import write_task_report
-from sb3_genrl.study.scales import SCALES, StudyScale
+from sb3_genrl.study.scales import SCALES, StudyScale, task_scale
 from sb3_genrl.study.state import (
     STAGE_FILE,
     check_and_record,
@@ -86,12 +87,13 @@ def run_study(task: str, scale: str | StudyScale, out_dir: str | os.PathLike, *,
     out = check_output_dir(out_dir)
     log = log or (lambda _line: None)
     with folder_lock(out):
-        refuse_conflicts(out, [line for name in tasks for line in _conflicts(name, settings, out / name)])
+        refuse_conflicts(out, [line for name in tasks
+                               for line in _conflicts(name, task_scale(settings, name), out / name)])
         run = _ray_map(address, connect_timeout) if executor == "ray" else \
             _local_map(workers or len(os.sched_getaffinity(0)))
         atomic_write_json(out / "study.json", {"task": task, "scale": "custom" if isinstance(scale, StudyScale) else scale,
                                         **settings})
-        reports = [_run_task(name, settings, out / name, run, models, device, log) for name in tasks]
+        reports = [_run_task(name, task_scale(settings, name), out / name, run, models, device, log) for name in tasks]
     if len(reports) == 1:
         return reports[0]
     index = out / "report.md"
@@ -120,7 +122,9 @@ def _stages(task: str, task_dir: pathlib.Path, scale: dict[str, Any],
         (generators / STAGE_FILE, {"epochs": scale["generator_epochs"], "eval_every": scale["eval_every"],
                                    "seed": GENERATOR_SEED, **made_from}, any(generators.glob("*.pt"))),
         (evaluation / STAGE_FILE, {"n": scale["pr_samples"], "dwpr_n": scale["dwpr_samples"], "k": K,
-                                   "interventions": INTERVENTIONS, "seed": EVALUATION_SEED, **made_from},
+                                   "interventions": INTERVENTIONS, "seed": EVALUATION_SEED,
+                                   "prior_contexts": scale["prior_contexts"], "prior_draws": scale["prior_draws"],
+                                   "prior_seed": PRIOR_ROLLOUT_SEED, **made_from},
          any(path.name != STAGE_FILE for path in evaluation.glob("*.json"))),
         (policies / STAGE_FILE, {"episodes": scale["policy_episodes"], "batch_episodes": scale["batch_episodes"],
                                  "genrl_kwargs": task_genrl_kwargs(task),
@@ -197,6 +201,7 @@ def _recorded_scale(task_dir: pathlib.Path, dataset: pathlib.Path, rows: list[di
     baselines = read_settings(task_dir / "comparison" / STAGE_FILE) if comparison is not None else {"episodes": 0}
     return {"demo_episodes": dataset_info(dataset)["episodes"], "generator_epochs": generators["epochs"],
             "eval_every": generators["eval_every"], "pr_samples": evaluation["n"], "dwpr_samples": evaluation["dwpr_n"],
+            "prior_contexts": evaluation["prior_contexts"], "prior_draws": evaluation["prior_draws"],
             "policy_episodes": policies["episodes"], "batch_episodes": policies["batch_episodes"],
             "seeds": min(len(row["rewards"]) for row in rows), "baseline_episodes": baselines["episodes"]}
 
