@@ -222,6 +222,7 @@ class ArmTaskEnv(gym.Env, EzPickle):
         return self._renderer.render().copy()
 
     def close(self) -> None:
+        self._close_pool()
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
@@ -324,7 +325,7 @@ class ArmTaskEnv(gym.Env, EzPickle):
         for name, value in (("n_threads", n_threads), ("chunk", chunk)):
             if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
-        datas = [mujoco.MjData(self.model) for _ in range(n_threads)]
+        datas, pool = self._rollout_pool(n_threads)
         rewards = np.empty(len(trajectories))
         infos: list[dict[str, Any]] = []
         joint_states = np.empty((len(trajectories), self.horizon + 1, 14), np.float32) if return_joint_states else None
@@ -341,8 +342,8 @@ class ArmTaskEnv(gym.Env, EzPickle):
             controls = ramp(previous, commands, self.frame_skip).reshape(len(batch), -1, 7)
             hold = np.repeat(commands[:, -1:], self.settle_steps * self.frame_skip, axis=1)
             controls = np.concatenate([controls, hold], axis=1)
-            states, sensordata = rollout.rollout(self.model, datas, self.initial_state[None], controls,
-                                                 initial_warmstart=np.zeros((1, self.model.nv)))
+            states, sensordata = pool.rollout(self.model, datas, self.initial_state[None], controls,
+                                              initial_warmstart=np.zeros((1, self.model.nv)))
             for i, rows in enumerate(sensordata):
                 length = self._episode_length(rows)
                 reward, info = self._finish(rows[:length], goals[start + i], int(clipped[i]))
@@ -353,6 +354,20 @@ class ArmTaskEnv(gym.Env, EzPickle):
         if joint_states is not None:
             return rewards, infos, joint_states
         return rewards, infos
+
+    def _rollout_pool(self, n_threads: int) -> tuple[list[mujoco.MjData], rollout.Rollout]:
+        """One ``MjData`` per thread and ``mujoco.rollout``'s thread pool, kept between calls: making them anew costs
+        milliseconds per call, as much as a short batch's physics (batched GenRL plays a batch every step)."""
+        if getattr(self, "_pool", None) is None or self._pool[0] != n_threads:
+            self._close_pool()
+            self._pool = (n_threads, [mujoco.MjData(self.model) for _ in range(n_threads)],
+                          rollout.Rollout(nthread=n_threads if n_threads > 1 else 0))
+        return self._pool[1], self._pool[2]
+
+    def _close_pool(self) -> None:
+        if getattr(self, "_pool", None) is not None:
+            self._pool[2].close()
+            self._pool = None
 
     def _joint_states(self, states: np.ndarray, length: int) -> np.ndarray:
         """Joint positions and velocities (as :meth:`_get_obs` clips them) after each control step of a rollout."""

@@ -3,9 +3,10 @@
 from importlib.metadata import PackageNotFoundError, entry_points, version
 
 from sb3_genrl.genrl import GenRL
+from sb3_genrl.vec_env import BatchedLatentVecEnv
 from sb3_genrl.wrappers import LatentActionWrapper
 
-__all__ = ["GenRL", "LatentActionWrapper", "__version__"]
+__all__ = ["BatchedLatentVecEnv", "GenRL", "LatentActionWrapper", "__version__"]
 
 try:
     __version__ = version("sb3-genrl")

@@ -118,6 +118,7 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         bound = 1.0 if generator.prior == "uniform" else self.latent_clip
         self.action_space = spaces.Box(-bound, bound, shape=(generator.latent_dim,), dtype=np.float32)
         self._needs_reset = True
+        self._prepared: tuple[np.ndarray, dict[str, Any]] | None = None  # see prepare_step
 
     def _checked_hold_action(self, hold_action: np.ndarray | None) -> np.ndarray:
         """Check that the env's per-step actions are the generator's rows; return the hold action in the env's dtype."""
@@ -183,6 +184,7 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         obs, info = self.env.reset(seed=seed) if options is None else self.env.reset(seed=seed, options=options)
         self._context = self._observe(obs)
         self._needs_reset = False
+        self._prepared = None
         return copy.deepcopy(self._context), dict(info)
 
     def check_action(self, alpha: np.ndarray) -> tuple[np.ndarray, bool]:
@@ -213,11 +215,13 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         if self._needs_reset:
             raise RuntimeError("LatentActionWrapper: call reset() before step(); each episode is a single step")
         alpha, latent_clipped = self.check_action(action)
-        tau = self._decode(alpha[None])[0]
-        if self.use_fast_path:
-            info = self._play_fast(tau)
+        prepared, self._prepared = self._prepared, None
+        if prepared is not None and np.array_equal(prepared[0], alpha):  # already played (prepare_step)
+            info = prepared[1]
+        elif self.use_fast_path:
+            info = self._play_fast(self._decode(alpha[None])[0])
         else:
-            info = self._play_steps(tau)
+            info = self._play_steps(self._decode(alpha[None])[0])
         info["latent_clipped"] = latent_clipped
         if not np.isfinite(info["reward"]):  # refused here: a NaN would silently stall any learner downstream
             raise ValueError(f"{type(self.env.unwrapped).__name__} returned the non-finite reward {info['reward']!r} for "
@@ -231,11 +235,24 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self._needs_reset = True
         return copy.deepcopy(self._context), info["reward"], True, False, info
 
-    def _play_fast(self, tau: np.ndarray) -> dict[str, Any]:
+    def fast_path_goal(self) -> np.ndarray:
+        """The current episode's goal as the fast path plays it: the task's own (float64) ``goal`` when it has one
+        (``get_context()`` may round it), else its context."""
         task = self.env.unwrapped
-        goal = getattr(task, "goal", None)  # the task's own (float64) goal: get_context() may round it
-        goal = np.asarray(task.get_context() if goal is None else goal, dtype=np.float64)
-        rewards, infos = task.play_trajectories(tau[None], goal[None])
+        goal = getattr(task, "goal", None)
+        return np.asarray(task.get_context() if goal is None else goal, dtype=np.float64)
+
+    def prepare_step(self, alpha: np.ndarray, reward: float, info: dict[str, Any]) -> None:
+        """Hand the next ``step`` the result of ``alpha`` (a checked latent action) played elsewhere for the current
+        episode through the task's ``play_trajectories`` (its reward and info): a ``step`` with that very action
+        returns it instead of playing it again (:class:`~sb3_genrl.vec_env.BatchedLatentVecEnv` plays all its envs'
+        actions in one call); any other action is played as usual."""
+        info = dict(info)
+        info.update(reward=float(reward), steps_played=self.generator.horizon, hold_steps=0, ended=True, fast_path=True)
+        self._prepared = (np.array(alpha, dtype=np.float32), info)
+
+    def _play_fast(self, tau: np.ndarray) -> dict[str, Any]:
+        rewards, infos = self.env.unwrapped.play_trajectories(tau[None], self.fast_path_goal()[None])
         info = dict(infos[0])
         info.update(reward=float(rewards[0]), steps_played=len(tau), hold_steps=0, ended=True, fast_path=True)
         return info

@@ -8,10 +8,12 @@ mode, the mode that collected the batch.
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import torch as th
 from sb3_contrib.common.utils import conjugate_gradient_solver, flat_grad
-from stable_baselines3.common.distributions import kl_divergence
+from stable_baselines3.common.distributions import Distribution, kl_divergence
 from stable_baselines3.common.policies import ActorCriticPolicy
 from torch.nn.utils import parameters_to_vector, vector_to_parameters
 
@@ -20,25 +22,40 @@ from sb3_genrl.genrl.policies import actor_parameters
 Batch = tuple[th.Tensor, th.Tensor, th.Tensor, th.Tensor]  # observations, actions, log pi(actions), advantages
 
 
-def surrogate(q: ActorCriticPolicy, pi: ActorCriticPolicy, batch: Batch) -> tuple[th.Tensor, th.Tensor]:
+def variational_copy(policy: ActorCriticPolicy, previous: ActorCriticPolicy | None) -> ActorCriticPolicy:
+    """``q_phi`` for an E-step, equal to ``policy`` (phi <- theta): ``previous`` (an earlier call's, of the same
+    architecture) given the policy's parameters, or a copy of the policy the first time (a deep copy at every E-step
+    also copies the policy's optimizer, a few milliseconds each)."""
+    if previous is None:
+        return copy.deepcopy(policy)
+    previous.load_state_dict(policy.state_dict())
+    previous.set_training_mode(policy.training)
+    return previous
+
+
+def surrogate(q: ActorCriticPolicy, pi: ActorCriticPolicy, batch: Batch,
+              pi_distribution: Distribution | None = None) -> tuple[th.Tensor, th.Tensor]:
     """Eq. 5's terms: E_{alpha ~ pi}[q(alpha|s) / pi(alpha|s) A(s, alpha)] and E_s[KL(q(.|s) || pi(.|s))].
 
     :param q: the variational policy (gradients flow through it)
     :param pi: the fixed policy (no gradient)
     :param batch: observations, actions, their log-probabilities under the policy that collected them, advantages
+    :param pi_distribution: ``pi``'s distribution at the batch's observations, when already computed
     """
     observations, actions, log_prob_pi, advantages = batch
     q_distribution = q.get_distribution(observations)
     ratio = th.exp(q_distribution.log_prob(actions) - log_prob_pi)
-    with th.no_grad():
-        pi_distribution = pi.get_distribution(observations)
+    if pi_distribution is None:
+        with th.no_grad():
+            pi_distribution = pi.get_distribution(observations)
     return (ratio * advantages).mean(), kl_divergence(q_distribution, pi_distribution).mean()
 
 
-def _candidate(q: ActorCriticPolicy, pi: ActorCriticPolicy, batch: Batch) -> tuple[float, float] | None:
+def _candidate(q: ActorCriticPolicy, pi: ActorCriticPolicy, batch: Batch,
+               pi_distribution: Distribution) -> tuple[float, float] | None:
     """Eq. 5's surrogate and KL for a line-search candidate, or ``None`` when its distribution is invalid."""
     try:
-        objective, kl = surrogate(q, pi, batch)
+        objective, kl = surrogate(q, pi, batch, pi_distribution)
     except ValueError:  # torch.distributions rejected a non-finite mean or a non-positive standard deviation
         return None
     objective_value, kl_value = objective.item(), kl.item()
@@ -55,7 +72,9 @@ def trpo_e_step(q: ActorCriticPolicy, pi: ActorCriticPolicy, batch: Batch, *, ta
 
     :return: ``policy_objective``, ``line_search_success``, ``accepted_fraction`` (of the full step), ``step_size``
     """
-    objective, kl = surrogate(q, pi, batch)
+    with th.no_grad():  # pi is fixed: its distribution serves the whole step, the line search's candidates included
+        pi_distribution = pi.get_distribution(batch[0])
+    objective, kl = surrogate(q, pi, batch, pi_distribution)
     # Actor parameters of q: those the KL depends on (the value head is not part of q(alpha|s)).
     named = actor_parameters(q)
     grads_kl = th.autograd.grad(kl, named, create_graph=True, allow_unused=True)
@@ -82,7 +101,7 @@ def trpo_e_step(q: ActorCriticPolicy, pi: ActorCriticPolicy, batch: Batch, *, ta
     with th.no_grad():
         for _ in range(line_search_max_iter):
             vector_to_parameters(phi_0 + fraction * max_step * direction, params)
-            candidate = _candidate(q, pi, batch)
+            candidate = _candidate(q, pi, batch, pi_distribution)
             if candidate is not None and candidate[1] < target_kl and candidate[0] > objective_0:
                 new_objective = candidate[0]
                 break

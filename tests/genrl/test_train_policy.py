@@ -80,8 +80,9 @@ def test_train_policy_writes_curve_model_and_logs(fast_reach_task, tmp_path, cap
     assert "missing.pt' does not exist" in capsys.readouterr().err
 
 
-def test_train_policy_plays_several_envs_in_their_own_processes(fast_reach_task, tmp_path):
-    """n_envs > 1: SubprocVecEnv under VecMonitor; every episode recorded, the run reproducible from its seed."""
+def test_train_policy_plays_several_envs_together(fast_reach_task, tmp_path):
+    """n_envs > 1 on a task with a fast path: BatchedLatentVecEnv under VecMonitor; every episode recorded, the run
+    reproducible from its seed."""
     from sb3_genrl.curves import read_monitor
 
     runs = [train_policy("fast-reach", LinearGenerator(), episodes=64, seed=3, out_dir=tmp_path / name,
@@ -97,14 +98,19 @@ def test_train_policy_plays_several_envs_in_their_own_processes(fast_reach_task,
     assert not (tmp_path / "c").exists()
 
 
-def test_several_envs_without_a_main_guard_fail_with_a_clear_error(hockey_generator, tmp_path):
-    """A script that starts env processes at import time: both the env process and the script say what to do."""
+def test_several_envs_without_a_main_guard_fail_with_a_clear_error(tmp_path):
+    """A script that starts env processes at import time (a task without a fast path: one process per env): both the
+    env process and the script say what to do."""
+    import pathlib
     import subprocess
     import sys
 
     script = tmp_path / "no_guard.py"
-    script.write_text("from sb3_genrl.genrl import train_policy\n"
-                      f"train_policy('hockey', {hockey_generator!r}, episodes=4, batch_episodes=2, n_envs=2, "
+    script.write_text(f"import sys\nsys.path.insert(0, {str(pathlib.Path(__file__).parents[1])!r})\n"
+                      "import gymnasium as gym\nfrom conftest import LinearGenerator, ReachEnv\n"
+                      "from sb3_genrl.genrl import train_policy\n"
+                      "gym.register('GenRLTest/StepReach-v0', entry_point=ReachEnv)\n"
+                      "train_policy('GenRLTest/StepReach-v0', LinearGenerator(), episodes=4, batch_episodes=2, n_envs=2, "
                       f"out_dir={str(tmp_path / 'run')!r})\n")
     run = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300, cwd=tmp_path)
     assert run.returncode != 0

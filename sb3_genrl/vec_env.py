@@ -1,0 +1,82 @@
+"""Batched collection: every env's latent action of a VecEnv step decoded and played in one threaded fast-path call.
+
+GenRL's episodes are open-loop: each is one trajectory that the task's fast path
+(``play_trajectories(trajectories, goals, n_threads=...)``, MuJoCo's threaded ``rollout`` for the arm tasks) plays
+without Python in the loop. :class:`BatchedLatentVecEnv` is SB3's ``DummyVecEnv`` whose step hands all its envs'
+trajectories to that path at once, on all cores, in the training process: no env process, no pickling, one call per
+step instead of one per episode. Each env is then stepped as ``DummyVecEnv`` steps it, through all its wrappers, and
+its :class:`~sb3_genrl.LatentActionWrapper` returns the result already played for that very latent action, so
+Monitor records, ``VecMonitor``, callbacks, ``EvalCallback``, ``get_attr``/``env_method``, seeding and resets are
+SB3's own, and every reward and info is the one the env's own ``step`` gives (each latent action is decoded alone, as
+``step`` decodes it: a batch decode rounds in the last bit, which would change a run's results).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from stable_baselines3.common.vec_env import DummyVecEnv
+
+from sb3_genrl.wrappers import LatentActionWrapper, find_latent_wrapper
+
+
+def default_threads() -> int:
+    """The cores this process may run on (``os.sched_getaffinity``; ``os.cpu_count`` where that is missing)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+def has_batched_fast_path(env: gym.Env) -> bool:
+    """Whether ``env`` holds a :class:`~sb3_genrl.LatentActionWrapper` that plays through its task's fast path."""
+    wrapper = find_latent_wrapper(env)
+    return wrapper is not None and wrapper.use_fast_path
+
+
+class BatchedLatentVecEnv(DummyVecEnv):
+    """SB3's ``DummyVecEnv`` over latent-action envs whose step plays all envs' trajectories in one fast-path call.
+
+    Every env must hold a :class:`~sb3_genrl.LatentActionWrapper` (possibly inside further wrappers) on the fast
+    path, and all must wrap the same task (one type, one spec): their trajectories are played by the first env's
+    task. An env whose step is not handed the latent action that was played for it (a wrapper above the
+    ``LatentActionWrapper`` that changes actions) plays its own, as without batching.
+
+    :param env_fns: functions that build the envs (as for ``DummyVecEnv``)
+    :param n_threads: simulation threads of the fast path (default: all cores, :func:`default_threads`)
+    """
+
+    def __init__(self, env_fns: Sequence[Callable[[], gym.Env]], n_threads: int | None = None) -> None:
+        super().__init__(list(env_fns))
+        self.n_threads = default_threads() if n_threads is None else n_threads
+        if isinstance(self.n_threads, bool) or not isinstance(self.n_threads, int | np.integer) or self.n_threads < 1:
+            raise ValueError(f"n_threads must be a positive integer, got {n_threads!r}")
+        wrappers = [find_latent_wrapper(env) for env in self.envs]
+        if any(wrapper is None or not wrapper.use_fast_path for wrapper in wrappers):
+            raise ValueError("BatchedLatentVecEnv needs envs with a LatentActionWrapper on its task's fast path "
+                             "(play_trajectories and get_context); use DummyVecEnv or SubprocVecEnv for the others")
+        self.latent_wrappers: list[LatentActionWrapper] = wrappers  # type: ignore[assignment]
+        tasks = [wrapper.env.unwrapped for wrapper in self.latent_wrappers]
+        if any(type(task) is not type(tasks[0]) or task.spec != tasks[0].spec for task in tasks):
+            raise ValueError("BatchedLatentVecEnv plays all envs' trajectories with one task: its envs must wrap the "
+                             f"same task, got {sorted({f'{type(task).__name__} {task.spec}' for task in tasks})}")
+
+    def step_wait(self) -> Any:
+        play_together(self.latent_wrappers, self.actions, n_threads=int(self.n_threads))
+        return super().step_wait()
+
+
+def play_together(wrappers: Sequence[LatentActionWrapper], actions: np.ndarray, *, n_threads: int) -> None:
+    """Play ``actions[i]`` for ``wrappers[i]``'s current episode, all in one fast-path call of the first wrapper's
+    task, and leave each result with its wrapper, for its next ``step`` with that action
+    (:meth:`~sb3_genrl.LatentActionWrapper.prepare_step`)."""
+    alphas = [wrapper.check_action(action)[0] for wrapper, action in zip(wrappers, actions, strict=True)]
+    trajectories = np.stack([wrapper._decode(alpha[None])[0] for wrapper, alpha in zip(wrappers, alphas, strict=True)])
+    goals = np.stack([wrapper.fast_path_goal() for wrapper in wrappers])
+    rewards, infos = wrappers[0].env.unwrapped.play_trajectories(trajectories, goals, n_threads=n_threads)
+    for wrapper, alpha, reward, info in zip(wrappers, alphas, rewards, infos, strict=True):
+        wrapper.prepare_step(alpha, float(reward), info)

@@ -1,0 +1,116 @@
+"""Tests of sb3_genrl.vec_env.BatchedLatentVecEnv: one fast-path call per step, the step path's results, SB3's tools."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch as th
+from conftest import FastReachEnv, LinearGenerator, ReachEnv
+from genrl_test_helpers import HindsightReachEnv
+from stable_baselines3.common.callbacks import EvalCallback
+from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
+
+from sb3_genrl import GenRL, LatentActionWrapper
+from sb3_genrl.curves import read_monitor
+from sb3_genrl.vec_env import BatchedLatentVecEnv, default_threads
+
+WRAPPER_KEYS = ("fast_path", "steps_played", "hold_steps", "ended")  # how a step was played, not what it gave
+
+
+class CountingReachEnv(HindsightReachEnv):
+    """HindsightReachEnv that counts its fast-path calls and the trajectories each played."""
+
+    calls: list[int] = []
+
+    def play_trajectories(self, trajectories, goals, *, n_threads=1):
+        CountingReachEnv.calls.append(len(trajectories))
+        return super().play_trajectories(trajectories, goals, n_threads=n_threads)
+
+
+def _same(first, second) -> bool:
+    """Equal values, bit for bit, in nested tuples and arrays (an info's ``hindsight`` is ``(context, reward)``)."""
+    if isinstance(first, tuple | list):
+        return len(first) == len(second) and all(_same(a, b) for a, b in zip(first, second, strict=True))
+    return np.array_equal(first, second)
+
+
+def hockey_envs(generator, n, **kwargs):
+    return [lambda: LatentActionWrapper(gym.make("GenRL/Hockey-v0"), generator, **kwargs) for _ in range(n)]
+
+
+def test_a_batched_step_gives_the_step_paths_rewards_and_infos():
+    """Hockey, three envs, two steps of the same latent actions from the same seed: the batched env, one fast-path
+    call per episode (DummyVecEnv) and the step-by-step path give the same contexts, rewards and infos."""
+    from sb3_genrl.generative import make_generator
+
+    th.manual_seed(0)
+    generator = make_generator("VAE1", horizon=69, action_dim=7, device="cpu")
+    envs = {"batched": BatchedLatentVecEnv(hockey_envs(generator, 3), n_threads=2),
+            "one by one": DummyVecEnv(hockey_envs(generator, 3)),
+            "step by step": DummyVecEnv(hockey_envs(generator, 3, use_fast_path=False))}
+    actions = np.random.default_rng(1).normal(size=(2, 3, generator.latent_dim)).astype(np.float32)
+    results = {}
+    for name, venv in envs.items():
+        venv.seed(5)
+        observations = [venv.reset()]
+        steps = []
+        for step_actions in actions:
+            observation, reward, done, infos = venv.step(step_actions)
+            observations.append(observation)
+            steps.append((reward, done, infos))
+        results[name] = (observations, steps)
+        venv.close()
+    batched_observations, batched_steps = results["batched"]
+    for name in ("one by one", "step by step"):
+        observations, steps = results[name]
+        np.testing.assert_array_equal(np.stack(observations), np.stack(batched_observations))
+        for (reward, done, infos), (batched_reward, batched_done, batched_infos) in zip(steps, batched_steps,
+                                                                                         strict=True):
+            np.testing.assert_array_equal(reward, batched_reward)
+            np.testing.assert_array_equal(done, batched_done)
+            for info, batched_info in zip(infos, batched_infos, strict=True):
+                keys = set(info) - set(WRAPPER_KEYS) if name == "step by step" else set(info)
+                assert keys <= set(batched_info)
+                assert all(_same(info[key], batched_info[key]) for key in keys), (info, batched_info)
+    assert all(info["fast_path"] for _, _, infos in batched_steps for info in infos)
+
+
+def _toy_envs(n):
+    return [lambda: LatentActionWrapper(CountingReachEnv(), LinearGenerator()) for _ in range(n)]
+
+
+def test_genrl_on_the_batched_env_learns_as_on_dummy_vec_env_with_monitor_and_eval_callback(tmp_path):
+    """GenRL (hindsight, value history) on a monitored batched env: the same parameters, bit for bit, as on SB3's
+    DummyVecEnv; one fast-path call per step of all 4 envs; every episode in the Monitor file with the rollouts'
+    rewards; EvalCallback evaluates on a batched env as on any VecEnv."""
+    settings = dict(n_steps=4, batch_size=8, seed=2, value_history=2, n_critic_updates=2, hindsight_kwargs={"history": 2,
+                                                                                     "regression_steps": 4})
+    parameters = {}
+    for name, venv_class in (("dummy", DummyVecEnv), ("batched", BatchedLatentVecEnv)):
+        venv = VecMonitor(venv_class(_toy_envs(4)), str(tmp_path / name), info_keywords=("reward",))
+        evaluation = EvalCallback(VecMonitor(venv_class(_toy_envs(2))), n_eval_episodes=4, eval_freq=4,
+                                  log_path=str(tmp_path / f"{name}_eval"), verbose=0)
+        CountingReachEnv.calls = []
+        model = GenRL(venv, **settings).learn(48, callback=evaluation)
+        parameters[name] = th.cat([p.detach().flatten() for p in model.policy.parameters()])
+        venv.close()
+        episodes = read_monitor(tmp_path / f"{name}.monitor.csv")
+        assert len(episodes["return"]) == 48 and np.all(episodes["length"] == 1)
+        np.testing.assert_allclose(episodes["return"], episodes["reward"], atol=1e-6)
+        assert len(evaluation.evaluations_results) == 3 and all(len(r) == 4 for r in evaluation.evaluations_results)
+        if name == "batched":  # training's steps of 4 envs, the evaluations' of 2: never one call per episode
+            assert sorted(set(CountingReachEnv.calls)) == [2, 4] and CountingReachEnv.calls.count(4) == 12
+    assert th.equal(parameters["dummy"], parameters["batched"])
+
+
+def test_a_batched_env_refuses_envs_without_the_fast_path_and_bad_thread_counts():
+    with pytest.raises(ValueError, match="fast path"):
+        BatchedLatentVecEnv([lambda: LatentActionWrapper(ReachEnv(), LinearGenerator())])
+    with pytest.raises(ValueError, match="same task"):
+        BatchedLatentVecEnv([lambda: LatentActionWrapper(FastReachEnv(), LinearGenerator()),
+                             lambda: LatentActionWrapper(CountingReachEnv(), LinearGenerator())])
+    for bad in (0, 1.5, True):
+        with pytest.raises(ValueError, match="n_threads must be a positive integer"):
+            BatchedLatentVecEnv(_toy_envs(1), n_threads=bad)
+    assert BatchedLatentVecEnv(_toy_envs(1)).n_threads == default_threads() >= 1
