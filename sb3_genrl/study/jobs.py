@@ -10,7 +10,9 @@ pool or Ray can run it.
 from __future__ import annotations
 
 import json
+import math
 import pathlib
+import time
 from typing import Any
 
 import numpy as np
@@ -65,8 +67,10 @@ def generator_job(task: str, name: str, scale: dict[str, Any], dataset: str, tas
     # Generator (paper 6.1.2, appendix B): trained on the demonstrations' action trajectories.
     model_path = root / "generators" / f"{name}.pt"
     if not model_path.exists():  # the file is written atomically: it exists only once training is complete
+        start = time.process_time()
         train_generator(dataset, preset=name, epochs=scale["generator_epochs"], eval_every=scale["eval_every"],
                         seed=GENERATOR_SEED, out=model_path, device=device)
+        atomic_write_json(model_path.with_suffix(".time.json"), {"cpu_seconds": time.process_time() - start})
     generator = load(model_path, device=device)
     fingerprint = file_fingerprint(model_path)
 
@@ -79,6 +83,8 @@ def generator_job(task: str, name: str, scale: dict[str, Any], dataset: str, tas
     runs = [_policy_rewards(task, model_path, seed, scale, policies / f"seed{seed}", device)
             for seed in range(scale["seeds"])]
     rewards, half, final = ([run[key] for run in runs] for key in ("best", "half", "final"))
+    cpu_seconds = {"generator": _recorded_seconds(model_path.with_suffix(".time.json")),
+                   "evaluation": evaluation.get("cpu_seconds", math.nan), "genrl": sum(run["cpu_seconds"] for run in runs)}
 
     spec = PRESETS[name]
     return {"model": name, "type": "VAE" if name.startswith("VAE") else "GAN", "latent_dim": spec["latent_dim"],
@@ -88,7 +94,12 @@ def generator_job(task: str, name: str, scale: dict[str, Any], dataset: str, tas
             "best_epoch": generator.best_epoch,
             "selection": [[record["epoch"], record["selection_mse"]] for record in generator.history],
             "rewards": rewards, "score": float(np.max(rewards)), "half_rewards": half, "half_score": float(np.max(half)),
-            "final_rewards": final, "final": float(np.mean(final))}
+            "final_rewards": final, "final": float(np.mean(final)), "cpu_seconds": cpu_seconds}
+
+
+def _recorded_seconds(path: pathlib.Path) -> float:
+    """The CPU seconds a stage recorded (nan when it has no record: made by an older version)."""
+    return float(json.loads(path.read_text())["cpu_seconds"]) if path.is_file() else math.nan
 
 
 def _evaluation(task: str, generator: Any, name: str, fingerprint: str, scale: dict[str, Any], dataset: str,
@@ -103,12 +114,13 @@ def _evaluation(task: str, generator: Any, name: str, fingerprint: str, scale: d
     if stored is not None:
         refuse_conflicts(root, settings_conflicts(path, stored, {"generator": fingerprint}))
         return stored
+    start = time.process_time()
     real = real_subset(load_actions(dataset), scale["pr_samples"], EVALUATION_SEED)
     result = evaluate_generator(generator, real, n=scale["pr_samples"], k=K, dwpr_n=scale["dwpr_samples"],
                                 interventions=INTERVENTIONS, seed=EVALUATION_SEED, name=name, device=device, task=task,
                                 contexts=scale["prior_contexts"], draws=scale["prior_draws"],
                                 prior_seed=PRIOR_ROLLOUT_SEED)
-    evaluation = {**result.details(), "generator": fingerprint}
+    evaluation = {**result.details(), "generator": fingerprint, "cpu_seconds": time.process_time() - start}
     evaluation.pop("prior_best")  # per goal: not needed by the report
     atomic_write_json(path, evaluation)
     return evaluation
@@ -126,8 +138,8 @@ def task_genrl_kwargs(task: str) -> dict[str, Any]:
 def _policy_rewards(task: str, model_path: pathlib.Path, seed: int, scale: dict[str, Any], run_dir: pathlib.Path,
                     device: str) -> dict[str, float]:
     """One GenRL run's best iteration mean reward, the best within the first half of its budget (from its learning
-    curve) and its final iteration's."""
-    from sb3_genrl.curves import read_curve
+    curve), its final iteration's and its CPU seconds (its Monitor file's, the process that played and learned)."""
+    from sb3_genrl.curves import MONITOR_FILE, read_curve, read_monitor
     from sb3_genrl.genrl import train_policy
 
     if not (run_dir / "summary.json").exists():
@@ -135,7 +147,8 @@ def _policy_rewards(task: str, model_path: pathlib.Path, seed: int, scale: dict[
                      batch_episodes=scale["batch_episodes"], device=device, **task_genrl_kwargs(task))
     summary = json.loads((run_dir / "summary.json").read_text())
     return {"best": float(summary["best_mean_reward"]), "final": float(summary["final_mean_reward"]),
-            "half": half_budget_best(read_curve(run_dir / "learning_curve.csv"), scale["policy_episodes"])}
+            "half": half_budget_best(read_curve(run_dir / "learning_curve.csv"), scale["policy_episodes"]),
+            "cpu_seconds": float(read_monitor(run_dir / MONITOR_FILE)["cpu_seconds"][-1])}
 
 
 def half_budget_best(curve: dict[str, np.ndarray], episodes: int) -> float:

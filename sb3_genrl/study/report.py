@@ -15,6 +15,7 @@ from sb3_genrl.metrics import labelled_scatter
 from sb3_genrl.study.report_tables import (
     SCORECARD_MEASURES,  # noqa: F401 (the job's row holds these measures)
     correlations,
+    cpu_line,
     excluded_line,
     measures_table,
     predictions,
@@ -98,7 +99,7 @@ def _report_lines(task: str, rows: list[dict[str, Any]], scale: dict[str, Any], 
     lines = [f"# GenRL study: {task}", "",
              f"Settings (as recorded with each stage): `{json.dumps(scale)}`", "",
              f"Best generator: **{best['model']}** (best reward {best['score']:.3f}, i.e. {-best['score'] * 100:.1f} cm).",
-             "", excluded_line(rows), "", "## Table 1: generators and GenRL reward", "",
+             "", excluded_line(rows), "", cpu_line(rows), "", "## Table 1: generators and GenRL reward", "",
              "Best reward = the highest mean reward of a GenRL iteration, over all seeds (paper section 6.1.3); at "
              "half budget: the same within the first half of the episodes; final: the last iteration's, mean over "
              "seeds.", "", markdown["table1_models"], "",

@@ -94,3 +94,14 @@ def excluded_line(rows: list[dict[str, Any]]) -> str:
     rule = (f"A generator whose precision is below {NOT_CONVERGED_PRECISION} is reported as not converged and left "
             "out of every correlation and of the stability")
     return f"{rule}: {', '.join(names)}." if names else f"{rule}; every generator here reaches it."
+
+
+def cpu_line(rows: list[dict[str, Any]]) -> str:
+    """The CPU time the generators' stages took, summed over the models (from each stage's own record)."""
+    totals = {stage: sum(r.get("cpu_seconds", {}).get(stage, math.nan) for r in rows)
+              for stage in ("generator", "evaluation", "genrl")}
+    total = sum(totals.values())
+    parts = ", ".join(f"{stage} {seconds / 3600:.2f} h" for stage, seconds in totals.items())
+    return (f"CPU time of the {len(rows)} generators' stages: {total / 3600:.2f} h ({parts}; one core each, as recorded "
+            "when each stage ran; nan: a stage made by a version that recorded none). The demonstrations and the "
+            "baselines are not counted.")

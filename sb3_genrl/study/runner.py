@@ -166,7 +166,8 @@ def _run_task(task: str, scale: dict[str, Any], task_dir: pathlib.Path, run, mod
     for row in run(jobs):
         rows.append(row)
         log(f"{task}: {row['model']} precision {row['precision']:.3f} recall {row['recall']:.3f} "
-            f"mean delta {row['mean_delta']:.3f} best reward {row['score']:.3f}")
+            f"mean delta {row['mean_delta']:.3f} coverage {row['coverage']:.3f} prior median {row['prior_median']:.3f} "
+            f"best reward {row['score']:.3f} (half budget {row['half_score']:.3f}) final {row['final']:.3f}")
     atomic_write_json(task_dir / "results.json", rows)
 
     comparison = None
