@@ -4,6 +4,7 @@ on hockey with a small untrained generator."""
 from __future__ import annotations
 
 import inspect
+import json
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +14,7 @@ import yaml
 pytest.importorskip("rl_zoo3")
 
 from sb3_genrl import GenRL  # noqa: E402
-from sb3_genrl.hyperparams import TUNING_GOAL_SEED, load_hyperparams  # noqa: E402
+from sb3_genrl.hyperparams import EVAL_GOAL_SEED, TUNING_GOAL_SEED, load_hyperparams  # noqa: E402
 from sb3_genrl.zoo.__main__ import main  # noqa: E402
 
 ENV_ID = "GenRL/Hockey-v0"
@@ -107,12 +108,14 @@ def test_the_zoo_and_train_policy_build_the_same_genrl_from_the_file(trained, ho
 def test_a_small_study_tries_the_entry_first(hockey_generator, tmp_path):
     import optuna
 
+    from sb3_genrl.zoo import held_out
     from sb3_genrl.zoo.sampler import SEARCH_SPACE, convert_genrl_params, entry_params
 
     storage = f"sqlite:///{tmp_path / 'study.db'}"
     zoo("train", "--algo", "genrl", "--env", ENV_ID, "-optimize", "--n-trials", 2, "--n-timesteps", 16,
         "--eval-episodes", 3, "--storage", storage, "--study-name", "tiny", "--seed", 0, "-f", tmp_path / "logs",
-        "--device", "cpu", "--no-optim-plots", *with_generator(hockey_generator))
+        "--device", "cpu", "--no-optim-plots", "--optimization-log-path", tmp_path / "trials",
+        *with_generator(hockey_generator))
     trials = optuna.load_study(study_name="tiny", storage=storage).trials
     assert [trial.state for trial in trials] == [optuna.trial.TrialState.COMPLETE] * 2
     entry = load_hyperparams("genrl", ENV_ID)
@@ -121,6 +124,17 @@ def test_a_small_study_tries_the_entry_first(hockey_generator, tmp_path):
     assert first["n_steps"] == entry["n_steps"] and first["hindsight_kwargs"] == entry["hindsight_kwargs"]
     assert set(trials[1].params) == set(SEARCH_SPACE)
     assert all(value <= 0 for value in (trial.value for trial in trials))  # minus a distance to the goals
+    # the entry's and the best trial's saved policies on held-out goals, by the package's evaluation
+    assert held_out.main(["--env", ENV_ID, "--storage", storage, "--study-name", "tiny", "--trials",
+                          str(tmp_path / "trials"), "--goals", "4", "--out", str(tmp_path / "held_out.json")]) == 0
+    result = json.loads((tmp_path / "held_out.json").read_text())
+    best = max(range(2), key=lambda number: trials[number].value)
+    assert (result["entry"]["trial"], result["best"]["trial"]) == (0, best)
+    for name in ("entry", "best"):
+        model = GenRL.load(tmp_path / "trials" / f"trial_{result[name]['trial']}" / "best_model.zip", device="cpu")
+        mean = -one_at_a_time(model, 4, EVAL_GOAL_SEED).mean()
+        assert result[name]["held_out_mean_m"] == pytest.approx(mean, abs=0.05)  # batched: rounding, chaotic contacts
+    assert result["better"] == min(("entry", "best"), key=lambda name: result[name]["held_out_mean_m"])
 
 
 def test_evaluations_replay_the_tuning_goals(hockey_generator):

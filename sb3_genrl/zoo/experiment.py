@@ -30,14 +30,16 @@ WRAPPER = "sb3_genrl.zoo.latent_action"
 class TuningGoals(VecEnvWrapper):
     """Each ``reset()`` reseeds the envs, env ``i`` with ``seed + i``: every evaluation plays the same goals. With one
     env the goals of an evaluation of ``n`` episodes are those of
-    :func:`sb3_genrl.genrl.train.evaluate_on_goals` with ``goals=n`` and the same seed."""
+    :func:`sb3_genrl.genrl.train.evaluate_on_goals` with ``goals=n`` and the same seed. With ``seed=None`` (the
+    training envs, wrapped alike so that SB3's ``EvalCallback`` sees envs of one type) nothing is reseeded."""
 
-    def __init__(self, venv: VecEnv, seed: int = TUNING_GOAL_SEED) -> None:
+    def __init__(self, venv: VecEnv, seed: int | None = TUNING_GOAL_SEED) -> None:
         super().__init__(venv)
         self.goal_seed = seed
 
     def reset(self) -> Any:
-        self.venv.seed(self.goal_seed)
+        if self.goal_seed is not None:
+            self.venv.seed(self.goal_seed)
         return self.venv.reset()
 
     def step_wait(self) -> Any:
@@ -56,7 +58,9 @@ class GenRLExperimentManager(ExperimentManager):
 
     def create_envs(self, n_envs: int, eval_env: bool = False, no_log: bool = False) -> VecEnv:
         env = super().create_envs(n_envs, eval_env=eval_env, no_log=no_log)
-        return TuningGoals(env) if eval_env and self.algo == "genrl" else env
+        if self.algo != "genrl":
+            return env
+        return TuningGoals(env, TUNING_GOAL_SEED if eval_env else None)
 
     def hyperparameters_optimization(self) -> None:
         with self._entry_as_first_trial():
