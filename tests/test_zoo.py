@@ -50,7 +50,7 @@ def trained(tmp_path_factory: pytest.TempPathFactory, hockey_generator: str) -> 
     """A zoo run of one iteration (16 episodes) of the file's hockey settings, in rl-zoo3's ``logs/`` layout."""
     logs = tmp_path_factory.mktemp("zoo") / "logs"
     zoo("train", "--algo", "genrl", "--env", ENV_ID, "-n", 16, "--seed", 3, "--eval-freq", -1, "-f", logs,
-        "--device", "cpu", *with_generator(hockey_generator))
+        "--save-freq", 16, "-tb", logs.parent / "tensorboard", "--device", "cpu", *with_generator(hockey_generator))
     return logs
 
 
@@ -60,6 +60,8 @@ def test_train_saves_in_rl_zoo3s_layout_with_the_generator_it_used(trained, hock
 
     run = trained / RUN
     assert (run / "GenRL-Hockey-v0.zip").is_file() and (run / "0.monitor.csv").is_file()
+    assert (run / "rl_model_16_steps.zip").is_file()  # --save-freq's checkpoint
+    assert any((trained.parent / "tensorboard" / "GenRL-Hockey-v0").glob("*/events.out.tfevents.*"))  # -tb
     config = yaml.load((run / "GenRL-Hockey-v0" / "config.yml").read_text(), Loader=yaml.UnsafeLoader)
     (wrapper,) = config["env_wrapper"]
     assert wrapper == {"sb3_genrl.zoo.latent_action": {
