@@ -91,3 +91,29 @@ def add_goal_demonstrations(model: OffPolicyAlgorithm, episodes: dict[str, Any])
                        np.array([episodes["rewards"][i, t]]), np.array([terminal]),
                        [episodes["infos"][i] if terminal else {"terminal": False}])
     return n * horizon
+
+
+def fetch_goal_episodes(task: str, arrays: dict[str, np.ndarray]) -> dict[str, Any]:
+    """A Fetch task's demonstrations (:func:`sb3_genrl.data.load_arrays` of its dataset) as goal-conditioned episodes
+    for :func:`add_goal_demonstrations`: the env's observation at every step, its achieved goal read from it as
+    Gymnasium-Robotics' ``_get_obs`` forms it (the gripper's position for Reach, the object's otherwise), the
+    demonstration's aim as desired goal, and the rewards by the env's own ``compute_reward``.
+
+    :param task: a Fetch task
+    :param arrays: the dataset's ``observations`` (N, 51, 3 + D: the reached goal, then the observation), ``actions``
+        (N, 50, 4) and ``sampled_goals`` (N, 3), the aims
+    """
+    spec = get_task(task)
+    env = spec.env_class()  # Gymnasium-Robotics' env, its MuJoCo fix applied (sb3_genrl.envs.fetch_mujoco)
+    observation = np.asarray(arrays["observations"][:, :, 3:], dtype=np.float64)
+    if observation.shape[-1] != env.observation_space["observation"].shape[0]:
+        raise ValueError(f"the demonstrations' observations have {observation.shape[-1]} numbers, {spec.env_id}'s "
+                         f"{env.observation_space['observation'].shape[0]}: not this task's dataset")
+    achieved = observation[:, :, 3:6] if env.has_object else observation[:, :, 0:3]
+    n, steps = arrays["actions"].shape[:2]
+    desired = np.repeat(np.asarray(arrays["sampled_goals"], dtype=np.float64)[:, None], steps + 1, axis=1)
+    rewards = env.compute_reward(achieved[:, 1:].reshape(-1, 3), desired[:, 1:].reshape(-1, 3), None).reshape(n, steps)
+    env.close()
+    return {"observation": observation, "achieved_goal": achieved, "desired_goal": desired,
+            "actions": np.asarray(arrays["actions"], dtype=np.float32), "rewards": rewards,
+            "infos": [{"is_success": float(reward == 0.0)} for reward in rewards[:, -1]]}

@@ -29,8 +29,8 @@ import os
 import platform
 import time
 
-import numpy as np
 import torch
+from sb3_genrl.benchmarks.fetch_results import seed_row, write_result
 from sb3_genrl.benchmarks.fetch_seed import train_seed
 from sb3_genrl.benchmarks.genrl import make_generator
 from sb3_genrl.envs import TASKS, get_task
@@ -42,7 +42,6 @@ from sb3_genrl.generative import load
 from sb3_genrl.genrl.train import genrl_settings
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED
 from sb3_genrl.study.quickstart import quickstart_preset, task_settings
-from sb3_genrl.utils import atomic_write_json
 
 RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -136,11 +135,7 @@ def main(argv: list[str] | None = None) -> None:
     result.update(sb3_genrl=__version__, torch=torch.__version__, machine=platform.machine(), cpus=os.cpu_count())
 
     def write() -> None:
-        finals = [run["final_success"] for run in result["runs"] if run.get("finished")]
-        if finals:
-            result.update(final_success_mean=float(np.mean(finals)), final_success_std=float(np.std(finals)),
-                          finished_seeds=len(finals))
-        atomic_write_json(args.out, result)
+        write_result(args.out, result)
 
     generator_path = generator_stage(args, result, write)
     generator = load(generator_path, device="cpu")
@@ -158,10 +153,7 @@ def main(argv: list[str] | None = None) -> None:
     print(f"the best of {args.prior_draws} prior draws solves {result['generator_limit']['success_rate']:.3f} of "
           f"{args.limit_states} held-out states", flush=True)
     for seed in args.seeds:
-        row = next((run for run in result["runs"] if run["seed"] == seed), None)
-        if row is None:
-            row = {"seed": seed, "finished": False, "curve_episodes": [], "curve_env_steps": [], "curve_success": []}
-            result["runs"].append(row)
+        row = seed_row(result, seed)
         if not row["finished"]:
             train_seed(args.task, generator_path, seed, args, row, write)
         print(f"seed {seed}: success {row['final_success']:.3f} after {row['curve_episodes'][-1]} episodes", flush=True)

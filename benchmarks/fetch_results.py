@@ -20,7 +20,7 @@ import os
 import numpy as np
 
 from sb3_genrl.markdown import markdown_table
-from sb3_genrl.utils import atomic_path, atomic_write_text
+from sb3_genrl.utils import atomic_path, atomic_write_json, atomic_write_text
 
 RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
 TASKS = ("fetch-reach", "fetch-push", "fetch-pick-and-place", "fetch-slide")
@@ -29,6 +29,24 @@ TARGETS = {"fetch-reach": (0.99, 500), "fetch-push": (0.95, 3000), "fetch-pick-a
 # rl-zoo3's benchmark.md, TQC+HER, one seed: mean return and the environment steps of its run
 ZOO_TQC = {"fetch-reach": (-1.66, 20_000), "fetch-push": (-8.80, 1_000_000), "fetch-pick-and-place": (-9.33, 1_000_000),
            "fetch-slide": (-29.2, 3_000_000)}
+
+
+def seed_row(result: dict, seed: int) -> dict:
+    """The row of ``seed`` in a benchmark's ``result["runs"]``, added (empty, unfinished) when it has none."""
+    row = next((run for run in result["runs"] if run["seed"] == seed), None)
+    if row is None:
+        row = {"seed": seed, "finished": False, "curve_episodes": [], "curve_env_steps": [], "curve_success": []}
+        result["runs"].append(row)
+    return row
+
+
+def write_result(path: str, result: dict) -> None:
+    """Write a benchmark's JSON (atomically), with the mean and spread of its finished seeds' final success."""
+    finals = [run["final_success"] for run in result["runs"] if run.get("finished")]
+    if finals:
+        result.update(final_success_mean=float(np.mean(finals)), final_success_std=float(np.std(finals)),
+                      finished_seeds=len(finals))
+    atomic_write_json(path, result)
 
 
 def read(results: str) -> dict[str, dict]:

@@ -19,6 +19,7 @@ from gymnasium import spaces
 from sb3_genrl.envs import get_task
 from sb3_genrl.envs.demonstrations import perturbation
 from sb3_genrl.envs.fetch import FAMILIES, FETCH_HORIZON, GRIPPER_GAIN, PERTURBATION, STEP_METRES, is_valid
+from sb3_genrl.envs.fetch_mujoco import fix_joint_helpers
 from sb3_genrl.envs.spec import TaskSpec
 from tqdm.auto import tqdm
 
@@ -27,6 +28,7 @@ _ENVS: dict[str, gym.Env] = {}  # one env per task in each worker process
 
 def _env(env_id: str) -> gym.Env:
     if env_id not in _ENVS:
+        fix_joint_helpers()  # also when Gymnasium-Robotics registered its own ids first (imported before sb3_genrl)
         _ENVS[env_id] = gym.make(env_id)
     return _ENVS[env_id]
 
@@ -155,6 +157,7 @@ def evaluate_success(model: Any, task: str | TaskSpec, episodes: int = 100, seed
 
     if model.generator is None:
         raise ValueError("this GenRL model has no generator: pass generator= to GenRL.load()")
+    fix_joint_helpers()
     env = LatentActionWrapper(gym.make(get_task(task).env_id), model.generator)
     successes, distances = [], []
     for i in range(episodes):

@@ -88,6 +88,16 @@ def test_demonstrations_generator_and_genrl_on_fetch_push(tmp_path):
     again = load_arrays(make_demonstrations("fetch-push", 12, tmp_path / "again", seed=3, n_threads=2,
                                             progress_bar=False))
     np.testing.assert_array_equal(again["actions"], arrays["actions"])
+    # as SAC+HER's demonstrations: the achieved goal read from the observation is the env's own (the stored reached
+    # point is the env's achieved_goal at the end), the desired goal the aim, the rewards the env's compute_reward
+    from sb3_genrl.baselines.her import fetch_goal_episodes
+
+    episodes = fetch_goal_episodes("fetch-push", arrays)
+    np.testing.assert_allclose(episodes["achieved_goal"][:, -1], arrays["reached"], rtol=1e-6)
+    np.testing.assert_allclose(episodes["desired_goal"][:, 0], arrays["sampled_goals"], rtol=1e-6)
+    distances = np.linalg.norm(episodes["achieved_goal"][:, 1:] - episodes["desired_goal"][:, 1:], axis=-1)
+    np.testing.assert_array_equal(episodes["rewards"], -(distances > 0.05).astype(float))
+    assert np.all(episodes["rewards"][:, -1] == 0.0) and np.any(episodes["rewards"] == -1.0)
 
     generator = train_generator(dataset, preset="VAE9", epochs=2, seed=0, out=tmp_path / "vae.pt", progress_bar=False)
     result = train_policy("fetch-push", generator, episodes=32, batch_episodes=16, out_dir=tmp_path / "policy",
