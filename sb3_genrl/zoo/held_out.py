@@ -5,7 +5,8 @@ rl-zoo3's study (``python -m sb3_genrl.zoo train --algo genrl -optimize --storag
 ``hyperparams/genrl.yml`` (:mod:`sb3_genrl.zoo.experiment`). This plays the policy that each of the two saved
 (``TRIALS/trial_N/best_model.zip``, the best of its evaluations on the tuning goals) on the held-out goals
 (:data:`~sb3_genrl.hyperparams.EVAL_GOAL_SEED`) with the package's evaluation,
-:func:`sb3_genrl.genrl.train.evaluate_on_goals`, and writes both, and which is better there, to a JSON file::
+:func:`sb3_genrl.genrl.train.evaluate_on_goals`, and with rl-zoo3's ``enjoy --no-render`` on the same goals, and
+writes both, and which is better there, to a JSON file::
 
     python -m sb3_genrl.zoo.held_out --env GenRL/Hockey-v0 --storage sqlite:///hockey.db --study-name genrl-hockey \\
         --trials trials --out benchmarks/results/zoo_study_hockey.json
@@ -15,11 +16,14 @@ from __future__ import annotations
 
 import argparse
 import os
+import pathlib
 import platform
+import shutil
 import sys
 from typing import Any
 
 import numpy as np
+from huggingface_sb3 import EnvironmentName
 
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED
 
@@ -42,11 +46,15 @@ def compare(env_id: str, storage: str, study_name: str, trials_folder: str, goal
         "trials": [{"number": trial.number, "state": trial.state.name, "tuning_mean_reward": trial.value,
                     "params": trial.params} for trial in study.trials]}
     for name, trial in (("entry", entry), ("best", best)):
-        distances = held_out_distances(os.path.join(trials_folder, f"trial_{trial.number}", "best_model.zip"), env_id,
-                                       goals)
+        model_path = os.path.join(trials_folder, f"trial_{trial.number}", "best_model.zip")
+        distances = held_out_distances(model_path, env_id, goals)
+        enjoyed = -enjoy_rewards(model_path, env_id, goals)
         result[name] = {"trial": trial.number, "tuning_mean_reward": trial.value,
                         "genrl_kwargs": convert_genrl_params(trial.params), "held_out_mean_m": float(distances.mean()),
-                        "held_out_median_m": float(np.median(distances)), "held_out_max_m": float(distances.max())}
+                        "held_out_median_m": float(np.median(distances)), "held_out_max_m": float(distances.max()),
+                        "enjoy_mean_m": float(enjoyed.mean()),
+                        "enjoy_max_difference_m": float(np.abs(enjoyed - distances).max()),
+                        "enjoy_goals_differing_by_over_1mm": int(np.sum(np.abs(enjoyed - distances) > 1e-3))}
     result["better"] = "best" if result["best"]["held_out_mean_m"] < result["entry"]["held_out_mean_m"] else "entry"
     return result
 
@@ -59,6 +67,32 @@ def held_out_distances(model_path: str, env_id: str, goals: int) -> np.ndarray:
     model = GenRL.load(model_path, device="cpu")
     _, rewards, _ = evaluate_on_goals(model, env_id, goals=goals, seed=EVAL_GOAL_SEED)
     return -np.asarray(rewards)
+
+
+def enjoy_rewards(model_path: str, env_id: str, goals: int) -> np.ndarray:
+    """The episode rewards of rl-zoo3's ``enjoy --no-render -n goals --seed EVAL_GOAL_SEED`` on a saved policy, put in
+    an rl-zoo3 log folder of its own (the policy as its best model, the generator saved beside it as the env
+    wrapper's)."""
+    import tempfile
+
+    import yaml
+
+    from sb3_genrl.genrl.generator_files import generator_digest, generator_file
+    from sb3_genrl.zoo.__main__ import main as zoo
+    from sb3_genrl.zoo.experiment import WRAPPER
+    from sb3_genrl.zoo.wrapper import load_generator
+
+    generator = generator_file(model_path)
+    wrapper = {WRAPPER: {"generator": str(generator), "generator_sha256": generator_digest(load_generator(generator))}}
+    with tempfile.TemporaryDirectory() as folder:
+        run = pathlib.Path(folder) / "genrl" / f"{EnvironmentName(env_id)}_1"
+        (run / EnvironmentName(env_id)).mkdir(parents=True)
+        shutil.copy(model_path, run / "best_model.zip")
+        (run / EnvironmentName(env_id) / "config.yml").write_text(yaml.dump({"env_wrapper": [wrapper]}))
+        (run / EnvironmentName(env_id) / "args.yml").write_text(yaml.dump({"env_kwargs": None}))
+        zoo(["enjoy", "--algo", "genrl", "--env", env_id, "-f", folder, "--exp-id", "1", "--load-best", "--no-render",
+             "-n", str(goals), "--seed", str(EVAL_GOAL_SEED), "--reward-log", folder, "--device", "cpu", "--verbose", "0"])
+        return np.loadtxt(pathlib.Path(folder) / "0.monitor.csv", delimiter=",", skiprows=2, ndmin=2)[:, 0]
 
 
 def main(argv: list[str] | None = None) -> int:
