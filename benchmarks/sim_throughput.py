@@ -25,6 +25,19 @@ def _trajectories(task: str, n: int, rng: np.random.Generator) -> np.ndarray:
     return np.stack([scripted_throw(strength=s, yaw=y) for s, y in rng.uniform([0.6, -1.2], [1.2, 1.2], (n, 2))])
 
 
+def scripted_episodes(task: str, env, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` scripted trajectories of the task's expert and ``n`` goals, from seed 0 (what this benchmark plays)."""
+    rng = np.random.default_rng(0)
+    trajectories = _trajectories(task, n, rng)
+    return trajectories, np.array([env.sample_goal(rng) for _ in range(n)])
+
+
+def open_loop_rate(env, trajectories: np.ndarray, goals: np.ndarray, threads: int, repeats: int) -> float:
+    """Episodes per second of the fast path playing all ``trajectories`` in one call on ``threads`` threads (best of
+    ``repeats``)."""
+    return len(trajectories) / _best_of(repeats, lambda: env.play_trajectories(trajectories, goals, n_threads=threads))
+
+
 def _best_of(repeats: int, fn) -> float:
     times = []
     for _ in range(repeats):
@@ -36,9 +49,7 @@ def _best_of(repeats: int, fn) -> float:
 
 def measure(task: str, episodes: int, step_episodes: int, repeats: int) -> dict:
     env = HockeyEnv() if task == "hockey" else BasketballEnv()
-    rng = np.random.default_rng(0)
-    trajectories = _trajectories(task, episodes, rng)
-    goals = np.array([env.sample_goal(rng) for _ in range(episodes)])
+    trajectories, goals = scripted_episodes(task, env, episodes)
     physics_steps = (env.horizon + env.settle_steps) * env.frame_skip
     # The same commanded joint positions the open-loop path sends, held after the last action.
     commands = env.home_qpos() + np.cumsum(np.clip(trajectories, -env.max_joint_delta, env.max_joint_delta), axis=1)
@@ -62,8 +73,7 @@ def measure(task: str, episodes: int, step_episodes: int, repeats: int) -> dict:
     results = {"task": task, "episodes": episodes, "physics_steps_per_episode": physics_steps}
     results["raw_mj_step"] = episodes / _best_of(repeats, raw_bound)
     for threads in (1, 2):
-        results[f"open_loop_{threads}_thread"] = episodes / _best_of(
-            repeats, lambda t=threads: env.play_trajectories(trajectories, goals, n_threads=t))
+        results[f"open_loop_{threads}_thread"] = open_loop_rate(env, trajectories, goals, threads, repeats)
     results["step_by_step"] = step_episodes / _best_of(repeats, step_path)
     results["open_loop_1_thread_vs_bound"] = results["open_loop_1_thread"] / results["raw_mj_step"]
     results["step_by_step_vs_bound"] = results["step_by_step"] / results["raw_mj_step"]

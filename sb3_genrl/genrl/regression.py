@@ -31,6 +31,17 @@ def policy_mean(policy: ActorCriticPolicy, contexts: th.Tensor) -> th.Tensor:
     return policy.action_net(policy.mlp_extractor.forward_actor(features))
 
 
+def fixed_features(policy: ActorCriticPolicy, contexts: th.Tensor) -> th.Tensor | None:
+    """The policy's features of all ``contexts`` at once, when its features extractor trains no parameters
+    (:class:`~sb3_genrl.genrl.policies.BoxScaler`, a flatten): each row is then its context's alone, so a fit's steps
+    take their rows instead of computing them again; ``None`` for an extractor that trains."""
+    extractor = policy.pi_features_extractor
+    if any(parameter.requires_grad for parameter in extractor.parameters()):
+        return None
+    with th.no_grad():
+        return policy.extract_features(contexts, extractor)
+
+
 def regress_mean(policy: ActorCriticPolicy, optimizer: th.optim.Optimizer, contexts: th.Tensor, actions: th.Tensor, *,
                  steps: int, batch_size: int, weighted: bool = False) -> list[float]:
     """Fit the policy's mean to ``actions`` at ``contexts`` by ``steps`` steps of ``optimizer`` (over
@@ -44,6 +55,7 @@ def regress_mean(policy: ActorCriticPolicy, optimizer: th.optim.Optimizer, conte
     :return: the loss (the mean squared error over the latent dimensions, weighted) of every minibatch
     """
     losses = []  # kept as tensors, read once at the end (one .item() per step costs about 2% of a step)
+    features = None if weighted else fixed_features(policy, contexts)
     for _ in range(steps):
         indices = th.randint(len(actions), (min(batch_size, len(actions)),), device=actions.device)
         target = actions[indices]
@@ -53,6 +65,8 @@ def regress_mean(policy: ActorCriticPolicy, optimizer: th.optim.Optimizer, conte
             with th.no_grad():
                 weights = th.exp(-0.5 * ((target - mean) / distribution.stddev).pow(2).sum(1))
             loss = (weights * (mean - target).pow(2).mean(1)).sum() / weights.sum().clamp_min(1e-8)
+        elif features is not None:
+            loss = (policy.action_net(policy.mlp_extractor.forward_actor(features[indices])) - target).pow(2).mean()
         else:
             loss = (policy_mean(policy, contexts[indices]) - target).pow(2).mean()
         optimizer.zero_grad()
