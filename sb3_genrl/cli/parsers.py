@@ -149,8 +149,8 @@ def add_train_policy(sub: argparse._SubParsersAction) -> None:
                         help="episodes per EM iteration N, at least 2 (default: the task's, or 64 with "
                              "--library-defaults)")
     policy.add_argument("--n-envs", type=COUNT, default=1,
-                        help="envs played at a time, each in its own process (one per core); a divisor of "
-                             "--batch-episodes (default 1)")
+                        help="envs played at a time, a divisor of --batch-episodes (default 1): on the arm tasks "
+                             "in one threaded simulation call per step on all cores, on others one process each")
     policy.add_argument("--library-defaults", action="store_true",
                         help="GenRL's own defaults instead of the task's settings and batch_episodes "
                              "(its entry in hyperparams/genrl.yml)")
