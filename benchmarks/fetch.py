@@ -3,7 +3,8 @@
 Stages, each kept in ``--work`` (default ``runs/fetch/TASK``) and in the JSON as it finishes, so that the same command
 after a stop resumes where it stopped (a run's settings are recorded and checked on resume):
 
-1. ``--demos`` demonstrations (seed 0; or ``--data``) and the task's generator recipe (VAE9, ``--epochs``);
+1. ``--demos`` demonstrations (seed 0; or ``--data``) and the task's generator recipe (``TaskSpec.generator_preset``,
+   ``--epochs``);
 2. the generator's reconstructions of ``--recon-demos`` new demonstrations (seed 1, not trained on), replayed from
    their own initial states: the share that reach their own aims;
 3. the generator's own limit: ``--limit-states`` held-out initial states x ``--prior-draws`` draws from its prior

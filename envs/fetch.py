@@ -206,7 +206,7 @@ def _task(name: str, short: str, maker: Callable[..., Any]) -> TaskSpec:
                     in_goal_region=in_goal_region, cell_size=0.03 if name == "Slide" else 0.02,
                     sample_expert=family.expert, perturbation_scales=PERTURBATION, is_valid=is_valid,
                     action_dim=FETCH_ACTION_DIM, demonstrations=make_arrays,
-                    evaluate=evaluate_success, generator_preset="VAE9", video=False)
+                    evaluate=evaluate_success, generator_preset="VAE-FETCH", video=False)
 
 
 TASKS = (_task("Reach", "fetch-reach", make_fetch_reach), _task("Push", "fetch-push", make_fetch_push),

@@ -99,7 +99,7 @@ def test_demonstrations_generator_and_genrl_on_fetch_push(tmp_path):
     np.testing.assert_array_equal(episodes["rewards"], -(distances > 0.05).astype(float))
     assert np.all(episodes["rewards"][:, -1] == 0.0) and np.any(episodes["rewards"] == -1.0)
 
-    generator = train_generator(dataset, preset="VAE9", epochs=2, seed=0, out=tmp_path / "vae.pt", progress_bar=False)
+    generator = train_generator(dataset, preset="VAE-FETCH", epochs=2, seed=0, out=tmp_path / "vae.pt", progress_bar=False)
     result = train_policy("fetch-push", generator, episodes=32, batch_episodes=16, out_dir=tmp_path / "policy",
                           hindsight_kwargs={"history": 2, "regression_steps": 4}, device="cpu")
     model = GenRL.load(result["model_path"], generator=generator, device="cpu")
