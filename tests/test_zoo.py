@@ -107,6 +107,7 @@ def test_the_zoo_and_train_policy_build_the_same_genrl_from_the_file(trained, ho
         np.testing.assert_allclose(zoo_tensor.numpy(), package_tensor.numpy(), rtol=0, atol=1e-5)
 
 
+@pytest.mark.slow  # about 15 s: two trials, each policy evaluated twice
 def test_a_small_study_tries_the_entry_first(hockey_generator, tmp_path):
     import optuna
 
