@@ -9,10 +9,12 @@ after a stop resumes where it stopped (a run's settings are recorded and checked
    their own initial states: the share that reach their own aims;
 3. the generator's own limit: ``--limit-states`` held-out initial states x ``--prior-draws`` draws from its prior
    (100 x 100 = 10^4 by default), the share of states that some draw solves (and the best of 1 and 10 draws);
-4. GenRL with the task's entry in ``hyperparams/genrl.yml``, one run per seed: every ``--eval-every`` episodes (at
-   the start of an iteration, after its update) and at the end, the deterministic policy plays ``--eval-states``
-   held-out initial states (reset seeds from :data:`~sb3_genrl.hyperparams.EVAL_GOAL_SEED`, never used in tuning);
-   the curve is against episodes and environment steps (50 per episode). Each seed checkpoints at every evaluation
+4. GenRL with the task's entry in ``hyperparams/genrl.yml``, one run per seed, its policy's mean first fitted to the
+   demonstrations' latent codes (``--demo-init-steps``, 0: not; ``fetch_seed.fit_mean_to_demonstrations``): at
+   episode 0, every ``--eval-every`` episodes (at the start of an iteration, after its update) and at the end, the
+   deterministic policy plays ``--eval-states`` held-out initial states (reset seeds from
+   :data:`~sb3_genrl.hyperparams.EVAL_GOAL_SEED`, never used in tuning); the curve is against episodes and
+   environment steps (50 per episode). Each seed checkpoints at every evaluation
    (:mod:`sb3_genrl.genrl.checkpoint`) and resumes from it.
 
 The JSON (default ``benchmarks/results/fetch_TASK.json``) says ``"complete": false`` and how far each seed got until
@@ -28,6 +30,7 @@ import argparse
 import json
 import os
 import platform
+import shutil
 import time
 
 import torch
@@ -69,10 +72,21 @@ def arguments(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--threads", type=COUNT, default=1, help="worker processes playing episodes (default 1)")
     parser.add_argument("--work", default=None, help="folder of the stages' files (default: runs/fetch/TASK)")
     parser.add_argument("--out", type=JSON_OUT, default=None, help="JSON output (default: results/fetch_TASK.json)")
+    parser.add_argument("--demo-init-steps", type=int, default=4000,
+                        help="Adam steps fitting the policy's mean to the demonstrations' latent codes before GenRL "
+                             "(0: none; default 4000)")
     parser.add_argument("--overwrite", action="store_true", help="start again instead of resuming --out")
+    parser.add_argument("--new-runs", action="store_true",
+                        help="keep --out's demonstrations, generator and its measures, and start its GenRL runs again "
+                             "(when only GenRL's settings differ)")
     args = parser.parse_args(argv)
     args.out = args.out or os.path.join(RESULTS, f"fetch_{args.task}.json")
     args.work = os.path.abspath(args.work or os.path.join(ROOT, "runs", "fetch", args.task))
+    args.dataset = args.data or os.path.join(args.work, "demonstrations")  # the warm start's demonstrations
+    if args.demo_init_steps < 0:
+        parser.error("--demo-init-steps must be >= 0")
+    if args.demo_init_steps and args.generator is not None and args.data is None:
+        parser.error("--demo-init-steps needs the demonstrations: give --data with --generator (or --demo-init-steps 0)")
     episodes, batch_episodes, _ = task_settings(args.task)
     args.episodes = args.episodes or episodes
     args.eval_every = args.eval_every or max(batch_episodes, round(args.episodes / 6 / batch_episodes) * batch_episodes)
@@ -90,7 +104,11 @@ def settings_of(args: argparse.Namespace) -> dict[str, object]:
             "eval_seed": EVAL_GOAL_SEED, "demonstrations": args.demos if args.data is None else os.path.abspath(args.data),
             "generator": "trained" if args.generator is None else os.path.abspath(args.generator),
             "preset": quickstart_preset(args.task), "epochs": args.epochs, "recon_demos": args.recon_demos,
-            "limit_states": args.limit_states, "prior_draws": args.prior_draws}
+            "limit_states": args.limit_states, "prior_draws": args.prior_draws,
+            "demo_init_steps": args.demo_init_steps}
+
+
+RUN_SETTINGS = ("episodes", "batch_episodes", "genrl_settings", "seeds", "eval_every", "eval_states", "demo_init_steps")
 
 
 def start(args: argparse.Namespace) -> dict[str, object]:
@@ -101,8 +119,15 @@ def start(args: argparse.Namespace) -> dict[str, object]:
             result = json.load(file)
         if result.get("settings") != settings:
             differ = sorted(key for key in settings if result.get("settings", {}).get(key) != settings[key])
-            raise SystemExit(f"{args.out} holds another run (it differs in {', '.join(differ)}): give another --out, "
-                             f"or --overwrite to start again")
+            if not (args.new_runs and set(differ) <= set(RUN_SETTINGS)):
+                raise SystemExit(f"{args.out} holds another run (it differs in {', '.join(differ)}): give another "
+                                 "--out, --overwrite to start again, or --new-runs if only GenRL's settings differ")
+            print(f"{args.out}: GenRL's runs start again ({', '.join(differ)} differ); its other stages are kept")
+            for run in result["runs"]:
+                shutil.rmtree(os.path.join(args.work, f"seed_{run['seed']}"), ignore_errors=True)
+            result.update(settings=settings, runs=[], complete=False)
+            for key in ("final_success_mean", "final_success_std", "finished_seeds"):
+                result.pop(key, None)
         return result
     return {"benchmark": f"fetch_{args.task}", "settings": settings, "complete": False, "runs": []}
 

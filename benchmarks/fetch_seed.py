@@ -14,6 +14,7 @@ import pathlib
 import shutil
 import time
 from collections.abc import Callable
+from typing import Any
 
 import gymnasium as gym
 from sb3_genrl.envs import get_task
@@ -49,10 +50,12 @@ class SuccessCurve(BaseCallback):
         if episodes and episodes % self.every == 0 and episodes not in self.row["curve_episodes"]:
             self.evaluate()
 
-    def evaluate(self) -> None:
+    def evaluate(self, model: Any = None) -> None:
+        """Evaluate ``model`` (default: the trained one, at its episodes; a model before training: at 0)."""
         start = time.perf_counter()
-        result = evaluate_success(self.model, self.task, episodes=self.states, seed=EVAL_GOAL_SEED)
-        episodes = int(self.num_timesteps)
+        model = self.model if model is None else model
+        result = evaluate_success(model, self.task, episodes=self.states, seed=EVAL_GOAL_SEED)
+        episodes = int(model.num_timesteps)
         self.row["curve_episodes"].append(episodes)
         self.row["curve_env_steps"].append(episodes * FETCH_HORIZON)
         self.row["curve_success"].append(result["success_rate"])
@@ -60,6 +63,26 @@ class SuccessCurve(BaseCallback):
         self.row["episodes_done"] = episodes
         self.write()
         print(f"  seed {self.row['seed']}, {episodes} episodes: success {result['success_rate']:.3f}", flush=True)
+
+
+def fit_mean_to_demonstrations(model: Any, generator: Any, dataset: str, steps: int) -> dict[str, float]:
+    """Start GenRL's policy from the demonstrations: fit its mean, by ``steps`` Adam steps (learning rate 1e-3,
+    minibatches of 256) of the regression that GenRL's hindsight component uses, to each demonstration's posterior
+    mean at its context (its reset observation with the goal it reached, as the dataset stores it at step 0: the
+    context its hindsight relabelling would give), the latent codes clipped to GenRL's ``latent_clip``."""
+    import numpy as np
+    import torch as th
+
+    from sb3_genrl.data import load_arrays
+    from sb3_genrl.genrl.regression import mean_parameters, regress_mean
+
+    arrays = load_arrays(dataset)
+    contexts = th.as_tensor(arrays["observations"][:, 0], dtype=th.float32)
+    latents = np.clip(generator.encode(arrays["actions"])[0], -model.latent_clip, model.latent_clip)
+    optimizer = th.optim.Adam(mean_parameters(model.policy), lr=1e-3)
+    losses = regress_mean(model.policy, optimizer, contexts, th.as_tensor(latents), steps=steps, batch_size=256)
+    return {"demonstrations": len(latents), "steps": steps, "first_loss": float(losses[0]),
+            "last_loss": float(np.mean(losses[-100:]))}
 
 
 def train_seed(task: str, generator_path: str, seed: int, args: argparse.Namespace, row: dict,
@@ -70,7 +93,7 @@ def train_seed(task: str, generator_path: str, seed: int, args: argparse.Namespa
     generator = load(generator_path, device="cpu")
     identity = {"algorithm": "genrl", "task": task, "episodes": int(args.episodes), "seed": seed,
                 "batch_episodes": batch_episodes, "generator_sha256": generator_digest(generator),
-                "genrl_settings": genrl_settings(genrl_kwargs)}
+                "genrl_settings": genrl_settings(genrl_kwargs), "demo_init_steps": args.demo_init_steps}
     state = resume_state(folder / "checkpoint", identity)
     if state is None:  # from the start: what an earlier unfinished try left is dropped
         shutil.rmtree(folder, ignore_errors=True)
@@ -83,12 +106,15 @@ def train_seed(task: str, generator_path: str, seed: int, args: argparse.Namespa
     env = monitor_episodes(RandomStateRecorder(LatentActionWrapper(gym.make(get_task(task).env_id), generator)),
                            folder, append=state is not None)
     logger = training_logger(folder)
+    curve = SuccessCurve(task, args.eval_every, args.eval_states, row, write)
     if state is None:
         model = make_genrl(env, generator, seed=seed, device="cpu", n_steps=batch_episodes, **genrl_kwargs)
         model.set_logger(logger)
+        if args.demo_init_steps:
+            row["demo_init"] = fit_mean_to_demonstrations(model, generator, args.dataset, args.demo_init_steps)
+            curve.evaluate(model)  # the policy before its first episode
     else:
         model = resume_genrl(state, env, generator, "cpu", logger)
-    curve = SuccessCurve(task, args.eval_every, args.eval_states, row, write)
     checkpoint = GenRLCheckpoint(folder / "checkpoint", args.eval_every, identity, state)
     begin = time.perf_counter()
     model.learn(int(args.episodes) - model.num_timesteps, callback=CallbackList([curve, checkpoint]),

@@ -103,6 +103,15 @@ def test_demonstrations_generator_and_genrl_on_fetch_push(tmp_path):
     result = train_policy("fetch-push", generator, episodes=32, batch_episodes=16, out_dir=tmp_path / "policy",
                           hindsight_kwargs={"history": 2, "regression_steps": 4}, device="cpu")
     model = GenRL.load(result["model_path"], generator=generator, device="cpu")
+    # the benchmark's warm start: the mean fitted to each demonstration's posterior mean at its context
+    from sb3_genrl.benchmarks.fetch_seed import fit_mean_to_demonstrations
+
+    contexts = arrays["observations"][:, 0]
+    latents = generator.encode(arrays["actions"])[0]
+    before = np.mean((model.predict(contexts, deterministic=True)[0] - latents) ** 2)
+    fitted = fit_mean_to_demonstrations(model, generator, dataset, steps=300)
+    after = np.mean((model.predict(contexts, deterministic=True)[0] - latents) ** 2)
+    assert fitted["demonstrations"] == 12 and after < 0.2 * before and fitted["last_loss"] < fitted["first_loss"]
     evaluation = get_task("fetch-push").evaluate(model, "fetch-push", episodes=3, seed=5)
     assert evaluation["success_rate"] == np.mean(evaluation["successes"]) and len(evaluation["distances"]) == 3
     assert all((d < 0.05) == s for d, s in zip(evaluation["distances"], evaluation["successes"], strict=True))
