@@ -8,7 +8,8 @@ after a stop resumes where it stopped (a run's settings are recorded and checked
 2. the generator's reconstructions of ``--recon-demos`` new demonstrations (seed 1, not trained on), replayed from
    their own initial states: the share that reach their own aims;
 3. the generator's own limit: ``--limit-states`` held-out initial states x ``--prior-draws`` draws from its prior
-   (100 x 100 = 10^4 by default), the share of states that some draw solves (and the best of 1 and 10 draws);
+   (100 x 100 = 10^4 by default), the share of states that some draw solves (and the best of 1 and 10 draws),
+   measured after the first seed of stage 4;
 4. GenRL with the task's entry in ``hyperparams/genrl.yml``, one run per seed, its policy's mean first fitted to the
    demonstrations' latent codes (``--demo-init-steps``, 0: not; ``fetch_seed.fit_mean_to_demonstrations``): at
    episode 0, every ``--eval-every`` episodes (at the start of an iteration, after its update) and at the end, the
@@ -154,6 +155,18 @@ def generator_stage(args: argparse.Namespace, result: dict, write) -> str:
     return path
 
 
+def generator_limit(args: argparse.Namespace, generator: object, result: dict, write) -> None:
+    """The generator's limit (stage 3), unless the JSON has it."""
+    if "generator_limit" not in result:
+        begin = time.perf_counter()
+        result["generator_limit"] = prior_best_success(generator, args.task, args.limit_states, args.prior_draws,
+                                                       EVAL_GOAL_SEED, args.threads)
+        result["generator_limit"]["seconds"] = time.perf_counter() - begin
+        write()
+    print(f"the best of {args.prior_draws} prior draws solves {result['generator_limit']['success_rate']:.3f} of "
+          f"{args.limit_states} held-out states", flush=True)
+
+
 def main(argv: list[str] | None = None) -> None:
     args = arguments(argv)
     torch.set_num_threads(1)
@@ -170,19 +183,13 @@ def main(argv: list[str] | None = None) -> None:
                                                           args.threads)
         write()
     print(f"reconstructions reach their aims: {result['reconstruction']['success_rate']:.3f}", flush=True)
-    if "generator_limit" not in result:
-        begin = time.perf_counter()
-        result["generator_limit"] = prior_best_success(generator, args.task, args.limit_states, args.prior_draws,
-                                                       EVAL_GOAL_SEED, args.threads)
-        result["generator_limit"]["seconds"] = time.perf_counter() - begin
-        write()
-    print(f"the best of {args.prior_draws} prior draws solves {result['generator_limit']['success_rate']:.3f} of "
-          f"{args.limit_states} held-out states", flush=True)
-    for seed in args.seeds:
+    for index, seed in enumerate(args.seeds):
         row = seed_row(result, seed)
         if not row["finished"]:
             train_seed(args.task, generator_path, seed, args, row, write)
         print(f"seed {seed}: success {row['final_success']:.3f} after {row['curve_episodes'][-1]} episodes", flush=True)
+        if index == 0:  # after the first seed: its result comes first, the generator's limit next
+            generator_limit(args, generator, result, write)
     result["complete"] = True
     write()
     print(f"GenRL on {args.task}: {result['final_success_mean']:.3f} mean final success; wrote {args.out}")
