@@ -348,7 +348,7 @@ def test_each_task_runs_its_own_episodes_per_iteration_and_a_changed_budget_is_r
         _, batch_episodes, _ = load_genrl_settings(get_task(task).env_id)
         resolved = task_scale(small, task)
         assert resolved["batch_episodes"] == batch_episodes and resolved["policy_episodes"] == \
-            SCALES["small"].policy_episodes[task]
+            SCALES["small"].policy_episodes[task] and resolved["seeds"] == SCALES["small"].seeds[task]
     with pytest.raises(ValueError, match="not for 'hockey'"):
         task_scale({**small, "policy_episodes": {"basketball": 10}}, "hockey")
     # A study folder whose policies were recorded with hockey's settings refuses another budget or batch size.
