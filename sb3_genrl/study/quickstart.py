@@ -29,8 +29,9 @@ from sb3_genrl.utils import atomic_write_json, atomic_write_text
 QUICKSTART_PRESET = "VAE1"
 # A task without an entry in hyperparams/genrl.yml: the paper's 3000 episodes, GenRL's default 64 per iteration.
 DEFAULT_POLICY_EPISODES, DEFAULT_BATCH_EPISODES = 3000, 64
-# GenRL plays its episodes in two env processes, one per core of the 2-core machine the quickstart is sized for
-# (the simulation is most of the policy stage's time). Fixed, not the machine's core count: the result depends on it.
+# GenRL plays two envs at a time (the arm tasks: each step's two trajectories in one threaded simulation call, see
+# sb3_genrl.vec_env; other tasks: one process each). Fixed, not the machine's core count: the result depends on it.
+# All of an iteration's episodes per call would be faster, but would give other results than the quickstart's so far.
 QUICKSTART_ENVS = 2
 # Precision and recall with k = 3 neighbours need more than 3 samples in each set: the demonstrations, at least 4
 MIN_DEMO_EPISODES = 4
@@ -77,7 +78,7 @@ def quickstart(out_dir: str | os.PathLike, *, task: str, demo_episodes: int = 40
     _check_counts(demo_episodes=demo_episodes, epochs=epochs, policy_episodes=policy_episodes, pr_samples=pr_samples,
                   dwpr_samples=dwpr_samples)
     if batch_episodes % QUICKSTART_ENVS:
-        raise ValueError(f"task {task!r}: the quickstart plays its GenRL episodes in {QUICKSTART_ENVS} env processes, "
+        raise ValueError(f"task {task!r}: the quickstart plays its GenRL episodes in {QUICKSTART_ENVS} envs at a time, "
                          f"so the task's batch_episodes ({batch_episodes}) must be a multiple of {QUICKSTART_ENVS}")
     check_seed(seed)
     check_device(device)
