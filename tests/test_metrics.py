@@ -514,3 +514,10 @@ def test_genrl_evaluate_with_a_task_prints_the_ranked_scorecard_with_the_prior_r
         assert result["prior_episodes"] == 6 and len(result["prior_best"]) == 3
     assert "Ranked by the prior rollout" in out and f"| {expected['prior_median']:.3f} |" in out
     assert (tmp_path / "eval" / "scorecard.md").read_text().strip() in out
+    # A task without the fast path: the other measures, and a line saying the prior rollout is skipped.
+    code, out, err = cli("evaluate", hockey_generator, "--data", tmp_path / "real.npy", "--n", 40, "--dwpr-n", 8,
+                         "--interventions", 2, "--task", "fetch-reach", "--out", tmp_path / "fetch", "--device", "cpu")
+    assert code == 0, err
+    assert "fetch-reach has no fast path (play_trajectories): the prior rollout is skipped" in out
+    assert "Ranked by precision" in out and "prior_median" not in json.loads((tmp_path / "fetch" / "results.json")
+                                                                              .read_text())[0]
