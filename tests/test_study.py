@@ -54,6 +54,8 @@ def test_smoke_study_writes_every_table_and_plot_and_resumes(tmp_path, cli):
         assert [epoch for epoch, _ in row["selection"]] == [1, 2] and row["prior_median"] == evaluation["prior_median"]
         assert all(s["genrl_settings"]["n_steps"] == load_genrl_settings("GenRL/Hockey-v0")[1] for s in summaries)
         assert all(seconds > 0 for seconds in row["cpu_seconds"].values()), row["cpu_seconds"]
+        # the policies' record holds the GenRL settings the runs played
+        assert json.loads((root / "policies" / "stage.json").read_text())["genrl"] == summaries[0]["genrl_settings"]
         assert all(s["episodes"] == SCALES["smoke"].policy_episodes for s in summaries)
     table1 = {row["model"]: row for row in _csv_rows(root / "tables" / "table1_models.csv")}
     assert {name: float(row["best reward"]) for name, row in table1.items()} == {n: r["score"] for n, r in rows.items()}

@@ -128,7 +128,8 @@ def _stages(task: str, task_dir: pathlib.Path, scale: dict[str, Any],
          any(path.name != STAGE_FILE for path in evaluation.glob("*.json"))),
         (policies / STAGE_FILE, {"episodes": scale["policy_episodes"], "batch_episodes": scale["batch_episodes"],
                                  "genrl_kwargs": task_genrl_kwargs(task),
-                                 "genrl": genrl_settings(task_genrl_kwargs(task))},  # GenRL's defaults included
+                                 # every GenRL setting in effect, GenRL's defaults included
+                                 "genrl": genrl_settings({**task_genrl_kwargs(task), "n_steps": scale["batch_episodes"]})},
          any(policies.glob("*/seed*/summary.json")))]
     if scale["baseline_episodes"] > 0:
         stages.append((comparison / STAGE_FILE, {"episodes": scale["baseline_episodes"],
