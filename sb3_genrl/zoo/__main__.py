@@ -14,10 +14,12 @@ USAGE = f"usage: python -m sb3_genrl.zoo {{{','.join(SCRIPTS)}}} [rl-zoo3 argume
 def main(argv: list[str] | None = None) -> int:
     """Run one of rl-zoo3's scripts with ``argv`` (default: the command line's)."""
     argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] in (["-h"], ["--help"]):
+        print(f"{USAGE}\n(each script's own options: python -m sb3_genrl.zoo SCRIPT --help)")
+        return 0
     if not argv or argv[0] not in SCRIPTS:
-        print(USAGE if not argv or argv[0] in ("-h", "--help") else f"{USAGE}\nunknown script {argv[0]!r}",
-              file=sys.stderr)
-        return 0 if argv and argv[0] in ("-h", "--help") else 2
+        print(USAGE if not argv else f"{USAGE}\nunknown script {argv[0]!r}", file=sys.stderr)
+        return 2
     from sb3_genrl.zoo import register
 
     register()
