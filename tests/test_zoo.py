@@ -202,3 +202,8 @@ def test_every_task_entry_lies_in_the_search_space():
         converted = convert_genrl_params(entry_params(entry))
         entry["hindsight_kwargs"] = {"regression_steps": 0, **entry["hindsight_kwargs"]}  # hindsight's default
         assert {key: entry.get(key, converted[key]) for key in converted} == converted, env_id
+
+
+def test_the_entry_point_names_its_scripts(capsys):
+    assert main(["--help"]) == 0 and "{train,enjoy,record_video}" in capsys.readouterr().out
+    assert main(["plot_train"]) == 2 and "unknown script 'plot_train'" in capsys.readouterr().err
