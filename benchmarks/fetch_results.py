@@ -76,20 +76,49 @@ def row(task: str, result: dict) -> list:
     limit = result.get("generator_limit", {})
     finished = [run["final_success"] for run in result.get("runs", []) if run.get("finished")]
     success = f"{np.mean(finished):.3f} ± {np.std(finished):.3f} ({len(finished)} seeds)" if finished else "-"
+    start = [run["curve_success"][0] for run in result.get("runs", []) if run["curve_episodes"][:1] == [0]]
+    start_cell = f"{np.mean(start):.3f} ({len(start)} seeds)" if start else "-"
     target, budget = TARGETS[task]
     return [task, demos, recon, limit.get("best_of", {}).get("1", float("nan")), limit.get("success_rate", float("nan")),
-            success, result["settings"]["episodes"], f">= {target} in {budget}", status(result)]
+            start_cell, success, result["settings"]["episodes"], f">= {target} in {budget}", status(result)]
 
 
-def table(found: dict[str, dict]) -> str:
+def table(found: dict[str, dict], tqc_logs: str | None = None) -> str:
     header = ["task", "demonstrations", "reconstructions reach their aims", "one prior draw solves",
-              "best of 100 prior draws", "GenRL held-out success (final, mean ± std)", "GenRL episodes", "target",
+              "best of 100 prior draws", "GenRL at episode 0 (mean fitted to the demonstrations)",
+              "GenRL held-out success (final, mean ± std)", "GenRL episodes", "target",
               "run"]
     lines = [markdown_table(header, [row(task, result) for task, result in found.items()])]
     zoo = [[task, f"{ret:.2f}", steps, steps // 50] for task, (ret, steps) in ZOO_TQC.items()]
     lines += ["", "rl-zoo3's published TQC+HER (benchmark.md, one seed; mean return, -1 per step away from the goal):", "",
               markdown_table(["task", "mean return", "env steps", "episodes"], zoo)]
+    progress = tqc_progress(tqc_logs) if tqc_logs else []
+    if progress:
+        lines += ["", "TQC+HER here (rl-zoo3's entry point and stock settings, `benchmarks/tqc_fetch.sh`; running, "
+                  "partial):", "", markdown_table(["run", "episodes", "env steps",
+                                                   "success, rl-zoo3's last evaluation"], progress)]
     return "\n".join(lines) + "\n"
+
+
+def tqc_progress(logs: str) -> list[list]:
+    """TQC+HER's runs by ``benchmarks/tqc_fetch.sh`` in ``logs``: per env id, the episodes done and the success of
+    rl-zoo3's own evaluation at the last segment's end (its ``evaluations.npz``; rl-zoo3's evaluation episodes, not the
+    held-out states)."""
+    import csv
+    import glob
+
+    rows = []
+    for listing in sorted(glob.glob(os.path.join(logs, "*_segments.csv"))):
+        with open(listing) as file:
+            segments = list(csv.DictReader(file))
+        if not segments:
+            continue
+        last = segments[-1]
+        evaluations = os.path.join(last["folder"], "evaluations.npz")
+        success = float(np.load(evaluations)["successes"][-1].mean()) if os.path.exists(evaluations) else float("nan")
+        rows.append([os.path.basename(listing).removesuffix("_segments.csv"), int(last["env_steps_total"]) // 50,
+                     int(last["env_steps_total"]), success])
+    return rows
 
 
 def plot(found: dict[str, dict], path: str) -> None:
@@ -118,14 +147,16 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--results", default=RESULTS, help="folder of the fetch_TASK.json files")
     parser.add_argument("--out", default=None, help="folder of fetch.md and fetch_curves.png (default: --results)")
+    parser.add_argument("--tqc", default=None, help="benchmarks/tqc_fetch.sh's log folder (e.g. runs/tqc): its progress")
     args = parser.parse_args(argv)
     found = read(args.results)
     if not found:
         raise SystemExit(f"no fetch_TASK.json in {args.results}")
     out = args.out or args.results
-    atomic_write_text(os.path.join(out, "fetch.md"), table(found))
+    text = table(found, args.tqc)
+    atomic_write_text(os.path.join(out, "fetch.md"), text)
     plot(found, os.path.join(out, "fetch_curves.png"))
-    print(table(found))
+    print(text)
 
 
 if __name__ == "__main__":
