@@ -76,6 +76,9 @@ def arguments(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--demo-init-steps", type=int, default=4000,
                         help="Adam steps fitting the policy's mean to the demonstrations' latent codes before GenRL "
                              "(0: none; default 4000)")
+    parser.add_argument("--demo-memory", action="store_true",
+                        help="keep the demonstrations in GenRL's hindsight memory for the whole run "
+                             "(fetch_seed.DemonstrationMemory)")
     parser.add_argument("--overwrite", action="store_true", help="start again instead of resuming --out")
     parser.add_argument("--new-runs", action="store_true",
                         help="keep --out's demonstrations, generator and its measures, and start its GenRL runs again "
@@ -86,7 +89,7 @@ def arguments(argv: list[str] | None = None) -> argparse.Namespace:
     args.dataset = args.data or os.path.join(args.work, "demonstrations")  # the warm start's demonstrations
     if args.demo_init_steps < 0:
         parser.error("--demo-init-steps must be >= 0")
-    if args.demo_init_steps and args.generator is not None and args.data is None:
+    if (args.demo_init_steps or args.demo_memory) and args.generator is not None and args.data is None:
         parser.error("--demo-init-steps needs the demonstrations: give --data with --generator (or --demo-init-steps 0)")
     episodes, batch_episodes, _ = task_settings(args.task)
     args.episodes = args.episodes or episodes
@@ -106,10 +109,11 @@ def settings_of(args: argparse.Namespace) -> dict[str, object]:
             "generator": "trained" if args.generator is None else os.path.abspath(args.generator),
             "preset": quickstart_preset(args.task), "epochs": args.epochs, "recon_demos": args.recon_demos,
             "limit_states": args.limit_states, "prior_draws": args.prior_draws,
-            "demo_init_steps": args.demo_init_steps}
+            "demo_init_steps": args.demo_init_steps, "demo_memory": args.demo_memory}
 
 
-RUN_SETTINGS = ("episodes", "batch_episodes", "genrl_settings", "seeds", "eval_every", "eval_states", "demo_init_steps")
+RUN_SETTINGS = ("episodes", "batch_episodes", "genrl_settings", "seeds", "eval_every", "eval_states", "demo_init_steps",
+                "demo_memory")
 
 
 def start(args: argparse.Namespace) -> dict[str, object]:

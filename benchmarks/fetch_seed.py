@@ -85,6 +85,38 @@ def fit_mean_to_demonstrations(model: Any, generator: Any, dataset: str, steps: 
             "last_loss": float(np.mean(losses[-100:]))}
 
 
+class DemonstrationMemory(BaseCallback):
+    """Keep the demonstrations in GenRL's hindsight memory for the whole run, as one batch of relabelled pulls
+    (context, posterior mean, reward 0: each reached the goal of its context) that the E-step and the regression of
+    the mean use as they use the kept pulls: at the start of every iteration the batch is put back as the newest, so
+    it never ages out of the last ``history`` batches (as the demonstrations stay in SAC+HER's buffer)."""
+
+    def __init__(self, generator: Any, dataset: str, latent_clip: float) -> None:
+        super().__init__()
+        import numpy as np
+        import torch as th
+
+        from sb3_genrl.data import load_arrays
+
+        arrays = load_arrays(dataset)
+        latents = np.clip(generator.encode(arrays["actions"])[0], -latent_clip, latent_clip)
+        self.batch = (th.as_tensor(arrays["observations"][:, 0], dtype=th.float32), th.as_tensor(latents),
+                      th.zeros(len(latents)))
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _on_rollout_start(self) -> None:
+        import torch as th
+
+        memory, contexts = self.model.hindsight.memory, self.batch[0]
+        kept = [entry for entry in memory  # (a resumed run's memory holds the checkpoint's copy of the batch)
+                if not (entry[0].shape == contexts.shape and th.equal(entry[0], contexts))]
+        memory.clear()
+        memory.extend(kept[-(memory.maxlen - 1):] if memory.maxlen > 1 else [])
+        memory.append(self.batch)
+
+
 def train_seed(task: str, generator_path: str, seed: int, args: argparse.Namespace, row: dict,
                write: Callable[[], None]) -> None:
     """Train (or resume) GenRL with one seed to ``args.episodes``, evaluating on the way and at the end (into ``row``)."""
@@ -93,7 +125,8 @@ def train_seed(task: str, generator_path: str, seed: int, args: argparse.Namespa
     generator = load(generator_path, device="cpu")
     identity = {"algorithm": "genrl", "task": task, "episodes": int(args.episodes), "seed": seed,
                 "batch_episodes": batch_episodes, "generator_sha256": generator_digest(generator),
-                "genrl_settings": genrl_settings(genrl_kwargs), "demo_init_steps": args.demo_init_steps}
+                "genrl_settings": genrl_settings(genrl_kwargs), "demo_init_steps": args.demo_init_steps,
+                "demo_memory": args.demo_memory}
     state = resume_state(folder / "checkpoint", identity)
     if state is None:  # from the start: what an earlier unfinished try left is dropped
         shutil.rmtree(folder, ignore_errors=True)
@@ -116,8 +149,11 @@ def train_seed(task: str, generator_path: str, seed: int, args: argparse.Namespa
     else:
         model = resume_genrl(state, env, generator, "cpu", logger)
     checkpoint = GenRLCheckpoint(folder / "checkpoint", args.eval_every, identity, state)
+    callbacks = [curve, checkpoint]
+    if args.demo_memory:  # before the checkpoint's save in the same call: saved with the batch in place
+        callbacks.insert(1, DemonstrationMemory(generator, args.dataset, model.latent_clip))
     begin = time.perf_counter()
-    model.learn(int(args.episodes) - model.num_timesteps, callback=CallbackList([curve, checkpoint]),
+    model.learn(int(args.episodes) - model.num_timesteps, callback=CallbackList(callbacks),
                 reset_num_timesteps=state is None)
     row["seconds"] = row.get("seconds", 0.0) + time.perf_counter() - begin
     if not row["curve_episodes"] or row["curve_episodes"][-1] != model.num_timesteps:
