@@ -150,7 +150,7 @@ def generator_stage(args: argparse.Namespace, result: dict, write) -> str:
     path, record = make_generator(args.task, quickstart_preset(args.task), args, args.work, threads=args.threads)
     if args.data == data:
         record["demonstrations"] = args.demos
-    if args.generator is None:
+    if args.generator is None or args.data is not None:
         from sb3_genrl.data import dataset_info
 
         record["demonstration_info"] = dataset_info(args.data or data)

@@ -71,7 +71,9 @@ def status(result: dict) -> str:
 
 def row(task: str, result: dict) -> list:
     generator = result.get("generator", {})
-    demos = generator.get("demonstration_info", {}).get("episodes", generator.get("demonstrations", ""))
+    demos = generator.get("demonstration_info", {}).get("episodes", generator.get("demonstrations"))
+    if demos is None:  # a run given --generator: the count its warm start read
+        demos = next((run["demo_init"]["demonstrations"] for run in result.get("runs", []) if "demo_init" in run), "")
     recon = result.get("reconstruction", {}).get("success_rate", float("nan"))
     limit = result.get("generator_limit", {})
     finished = [run["final_success"] for run in result.get("runs", []) if run.get("finished")]
