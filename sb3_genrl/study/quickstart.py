@@ -48,8 +48,8 @@ def quickstart(out_dir: str | os.PathLike, *, task: str, demo_episodes: int = 40
     made it (``vae.stage.json``, ``evaluation/stage.json``, ``policy/stage.json``, ``video.stage.json``; the
     dataset's own metadata) and the fingerprint of its input, and a rerun with other settings raises
     :class:`~sb3_genrl.study.state.SettingsConflictError` before any work; one process at a time may work in
-    ``out_dir`` (:class:`~sb3_genrl.study.state.FolderInUseError`). Defaults take about seven minutes on a 2-core CPU
-    shared with other work (basketball: about sixteen).
+    ``out_dir`` (:class:`~sb3_genrl.study.state.FolderInUseError`). The README gives the stages' times of the committed
+    reports.
 
     :param out_dir: output folder (a rerun resumes it)
     :param task: a task name from :data:`sb3_genrl.envs.TASKS`
