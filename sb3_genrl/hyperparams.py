@@ -3,7 +3,7 @@
 Each file maps env ids (``GenRL/Hockey-v0``) to an entry of algorithm arguments plus rl-zoo3's own keys
 (``n_timesteps``, ``policy``, ``n_envs``, ``normalize``, ...). The files are installed with the package
 (``sb3_genrl.hyperparams_files``, mapped to the repository's ``hyperparams/`` folder). Also the goal seeds that keep
-tuning apart from evaluation: :data:`EVAL_GOAL_SEED` and :data:`TUNING_GOAL_SEED`.
+tuning apart from evaluation: :data:`EVAL_GOAL_SEED`, :data:`TUNING_GOAL_SEED` and :data:`PRIOR_ROLLOUT_SEED`.
 """
 
 from __future__ import annotations
@@ -15,11 +15,12 @@ import pathlib
 from importlib import resources
 from typing import Any
 
-__all__ = ["EVAL_GOAL_SEED", "TUNING_GOAL_SEED", "hyperparams_file", "known_algos", "known_env_ids", "lay_over",
-           "load_genrl_settings", "load_hyperparams", "parse_kwargs"]
+__all__ = ["EVAL_GOAL_SEED", "PRIOR_ROLLOUT_SEED", "TUNING_GOAL_SEED", "hyperparams_file", "known_algos", "known_env_ids",
+           "lay_over", "load_genrl_settings", "load_hyperparams", "parse_kwargs"]
 
 EVAL_GOAL_SEED = 12345  # the held-out goals of every final evaluation (never used for tuning)
 TUNING_GOAL_SEED = 777  # the goals settings are chosen on (never used for evaluation)
+PRIOR_ROLLOUT_SEED = 4242  # the goals of the generator scorecard's prior rollout (neither of the above)
 
 _PACKAGE = "sb3_genrl.hyperparams_files"
 _KWARGS = ("policy_kwargs", "replay_buffer_kwargs")  # the entries' keys that may be rl-zoo3's "dict(...)" strings

@@ -24,8 +24,8 @@ import gymnasium as gym
 import numpy as np
 
 from sb3_genrl.generative.base import TrajectoryGenerator
+from sb3_genrl.hyperparams import PRIOR_ROLLOUT_SEED
 
-PRIOR_ROLLOUT_SEED = 4242  # the prior rollout's goals: not EVAL_GOAL_SEED (12345), not TUNING_GOAL_SEED (777)
 DEFAULT_CONTEXTS = 64
 DEFAULT_DRAWS = 16
 

@@ -6,6 +6,10 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 from typing import Any
 
+from sb3_genrl.envs import basketball, hockey
+
+_HOCKEY, _BASKETBALL = hockey.TASK.name, basketball.TASK.name
+
 
 @dataclass(frozen=True)
 class StudyScale:
@@ -76,12 +80,12 @@ SCALES: dict[str, StudyScale] = {
     # iteration, and basketball's settings anneal the policy's spread over many more episodes than hockey's need,
     # so it runs 2 seeds of 12000 where hockey runs 3 of 1024.
     "small": StudyScale(demo_episodes=4000, generator_epochs=600, eval_every=25, pr_samples=2000, dwpr_samples=1000,
-                        policy_episodes={"hockey": 1024, "basketball": 12000}, seeds={"hockey": 3, "basketball": 2},
+                        policy_episodes={_HOCKEY: 1024, _BASKETBALL: 12000}, seeds={_HOCKEY: 3, _BASKETBALL: 2},
                         baseline_episodes=192),
     # The paper's sizes (sections 6.1.2-6.1.4) and each task's budget of hyperparams/genrl.yml: a GPU or a cluster.
     # The baselines run the budget of benchmarks/baselines.py (3000 episodes, 3 seeds; their settings are the
     # library's defaults there and here).
     "paper": StudyScale(demo_episodes=40000, generator_epochs=5000, eval_every=50, pr_samples=15000, dwpr_samples=10000,
-                        policy_episodes={"hockey": 3000, "basketball": 20000}, seeds=3, baseline_episodes=3000,
+                        policy_episodes={_HOCKEY: 3000, _BASKETBALL: 20000}, seeds=3, baseline_episodes=3000,
                         prior_contexts=100, prior_draws=100),
 }
