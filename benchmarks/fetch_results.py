@@ -74,14 +74,15 @@ def row(task: str, result: dict) -> list:
     demos = generator.get("demonstration_info", {}).get("episodes", generator.get("demonstrations"))
     if demos is None:  # a run given --generator: the count its warm start read
         demos = next((run["demo_init"]["demonstrations"] for run in result.get("runs", []) if "demo_init" in run), "")
-    recon = result.get("reconstruction", {}).get("success_rate", float("nan"))
+    recon = result.get("reconstruction", {}).get("success_rate", "not yet measured")
     limit = result.get("generator_limit", {})
     finished = [run["final_success"] for run in result.get("runs", []) if run.get("finished")]
     success = f"{np.mean(finished):.3f} ± {np.std(finished):.3f} ({len(finished)} seeds)" if finished else "-"
     start = [run["curve_success"][0] for run in result.get("runs", []) if run["curve_episodes"][:1] == [0]]
     start_cell = f"{np.mean(start):.3f} ({len(start)} seeds)" if start else "-"
     target, budget = TARGETS[task]
-    return [task, demos, recon, limit.get("best_of", {}).get("1", float("nan")), limit.get("success_rate", float("nan")),
+    pending = "not yet measured"
+    return [task, demos, recon, limit.get("best_of", {}).get("1", pending), limit.get("success_rate", pending),
             start_cell, success, result["settings"]["episodes"], f">= {target} in {budget}", status(result)]
 
 
