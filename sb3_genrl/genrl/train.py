@@ -84,10 +84,10 @@ def train_policy(task: str, generator: TrajectoryGenerator | str, *, episodes: i
                  **genrl_kwargs: Any) -> dict[str, Any]:
     """Train a GenRL policy for ``episodes`` episodes on ``task`` and write everything to ``out_dir``.
 
-    Writes ``genrl_policy.zip`` (the model), ``summary.json``, ``episodes.monitor.csv`` (SB3's Monitor: one row per
-    episode, written as training goes), ``logs/`` (SB3's logger: ``progress.csv`` and TensorBoard, one row per EM
-    iteration), ``learning_curve.csv`` and ``learning_curve.png`` (the mean reward of each iteration's N episodes,
-    the columns of the baselines' curves, :func:`sb3_genrl.curves.write_learning_curve`).
+    Writes ``genrl_policy.zip`` (the model; a generator given as a path is kept as its ``generator_path``),
+    ``summary.json``, ``episodes.monitor.csv`` (SB3's Monitor: one row per episode, written as training goes),
+    ``logs/`` (SB3's logger: ``progress.csv`` and TensorBoard, one row per EM iteration), ``learning_curve.csv`` and
+    ``learning_curve.png`` (each iteration's mean reward, :func:`sb3_genrl.curves.write_learning_curve`).
 
     :param task: a task name from :data:`sb3_genrl.envs.TASKS`, or any registered Gymnasium id
     :param generator: the trajectory generator or the path of a saved one
@@ -98,13 +98,11 @@ def train_policy(task: str, generator: TrajectoryGenerator | str, *, episodes: i
         :mod:`sb3_genrl.run_folder`)
     :param e_step: ``"trpo"`` or ``"kl_penalty"`` (see :class:`~sb3_genrl.GenRL`)
     :param batch_episodes: episodes per EM iteration, ``N``
-    :param n_envs: envs played at a time; a divisor of ``batch_episodes``. Above 1, a task with a fast path (the arm
-        tasks) plays each step's ``n_envs`` trajectories in one threaded call in this process
-        (:class:`~sb3_genrl.vec_env.BatchedLatentVecEnv`; ``batch_episodes``: all of an iteration's at once, the
-        fastest), any other task each env in its own process (SB3's ``SubprocVecEnv``: a script must then run its
-        work under ``if __name__ == "__main__":``, and the Monitor file's ``cpu_seconds`` is the CPU time of the env
-        process that played the episode). The result depends on it (the envs draw their goals from seeds ``seed``,
-        ``seed + 1``, ...), not on the machine nor on ``n_threads``.
+    :param n_envs: envs played at a time; a divisor of ``batch_episodes``. Above 1, the arm tasks play each step's
+        trajectories in one threaded call in this process (:class:`~sb3_genrl.vec_env.BatchedLatentVecEnv`), any
+        other task each env in its own process (SB3's ``SubprocVecEnv``: a script must then run its work under
+        ``if __name__ == "__main__":``; the Monitor's ``cpu_seconds`` is then the env process's). The result depends
+        on it (the envs draw their goals from seeds ``seed``, ``seed + 1``, ...), not on the machine nor ``n_threads``.
     :param device: torch device
     :param progress_bar: show a progress bar
     :param verbose: GenRL verbosity
@@ -118,13 +116,11 @@ def train_policy(task: str, generator: TrajectoryGenerator | str, *, episodes: i
         ``best_mean_reward``, ``genrl_settings``: every GenRL hyperparameter in effect, see :func:`genrl_settings`)
     """
     env_id, task_name = _resolve_env_id(task)
-    _check_arguments(episodes, batch_episodes, n_envs, seed, device, checkpoint_every, {"e_step": e_step, **genrl_kwargs})
-    if n_threads is not None:
-        check_positive_int(n_threads, "n_threads")
+    _check_arguments(episodes, batch_episodes, n_envs, seed, device, checkpoint_every, n_threads,
+                     {"e_step": e_step, **genrl_kwargs})
     out = check_output_dir(out_dir)
     # Built first: a generator that does not fit the task is refused before anything is written.
     env = LatentActionWrapper(gym.make(env_id), _as_generator(generator))
-    # The generator is given as it came (a path is kept as the model's generator_path, saved in the zip).
     batch_size = min(batch_episodes, genrl_kwargs.pop("batch_size", 64))
     arguments = {"e_step": e_step, "n_steps": batch_episodes // n_envs, "batch_size": batch_size, "seed": seed,
                  "device": device, "verbose": verbose, **genrl_kwargs}
@@ -221,10 +217,12 @@ MAIN_GUARD = ("n_envs > 1 plays the envs in their own processes, which import th
 
 
 def _check_arguments(episodes: int, batch_episodes: int, n_envs: int, seed: int, device: str,
-                     checkpoint_every: int | None, genrl_kwargs: dict[str, Any]) -> None:
+                     checkpoint_every: int | None, n_threads: int | None, genrl_kwargs: dict[str, Any]) -> None:
     check_episodes(episodes)
     if checkpoint_every is not None:
         check_positive_int(checkpoint_every, "checkpoint_every")
+    if n_threads is not None:
+        check_positive_int(n_threads, "n_threads")
     check_int(batch_episodes, "batch_episodes", minimum=2)
     check_positive_int(n_envs, "n_envs")
     if n_envs > 1 and getattr(multiprocessing.current_process(), "_inheriting", False):  # Python's own test
