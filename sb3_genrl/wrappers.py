@@ -247,15 +247,16 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         episode through the task's ``play_trajectories`` (its reward and info): a ``step`` with that very action
         returns it instead of playing it again (:class:`~sb3_genrl.vec_env.BatchedLatentVecEnv` plays all its envs'
         actions in one call); any other action is played as usual."""
-        info = dict(info)
-        info.update(reward=float(reward), steps_played=self.generator.horizon, hold_steps=0, ended=True, fast_path=True)
-        self._prepared = (np.array(alpha, dtype=np.float32), info)
+        self._prepared = (np.array(alpha, dtype=np.float32), self._fast_path_info(reward, info))
 
     def _play_fast(self, tau: np.ndarray) -> dict[str, Any]:
         rewards, infos = self.env.unwrapped.play_trajectories(tau[None], self.fast_path_goal()[None])
-        info = dict(infos[0])
-        info.update(reward=float(rewards[0]), steps_played=len(tau), hold_steps=0, ended=True, fast_path=True)
-        return info
+        return self._fast_path_info(rewards[0], infos[0])
+
+    def _fast_path_info(self, reward: float, info: dict[str, Any]) -> dict[str, Any]:
+        """A step's info from one trajectory's fast-path result: the task's info with the step path's keys."""
+        return {**info, "reward": float(reward), "steps_played": self.generator.horizon, "hold_steps": 0, "ended": True,
+                "fast_path": True}
 
     def _play_steps(self, tau: np.ndarray) -> dict[str, Any]:
         rewards: list[float] = []
