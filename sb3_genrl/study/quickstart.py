@@ -29,6 +29,8 @@ from sb3_genrl.utils import atomic_write_json, atomic_write_text
 QUICKSTART_PRESET = "VAE1"
 # A task without an entry in hyperparams/genrl.yml: the paper's 3000 episodes, GenRL's default 64 per iteration.
 DEFAULT_POLICY_EPISODES, DEFAULT_BATCH_EPISODES = 3000, 64
+# The generator stage's defaults (also the generator of the rl-zoo3 runs, sb3_genrl.zoo.generators)
+DEMO_EPISODES, GENERATOR_EPOCHS, GENERATOR_EVAL_EVERY = 4000, 300, 10
 # GenRL plays two envs at a time (the arm tasks: each step's two trajectories in one threaded simulation call, see
 # sb3_genrl.vec_env; other tasks: one process each). Fixed, not the machine's core count: the result depends on it.
 # All of an iteration's episodes per call would be faster, but would give other results than the quickstart's so far.
@@ -38,7 +40,7 @@ MIN_DEMO_EPISODES = 4
 VIDEO = {"goals": 4, "width": 320, "height": 240, "fps": 20}
 
 
-def quickstart(out_dir: str | os.PathLike, *, task: str, demo_episodes: int = 4000, epochs: int = 300,
+def quickstart(out_dir: str | os.PathLike, *, task: str, demo_episodes: int = DEMO_EPISODES, epochs: int = GENERATOR_EPOCHS,
                policy_episodes: int | None = None, pr_samples: int = 1000, dwpr_samples: int = 500, seed: int = 0,
                video: bool = True, device: str = "auto", progress_bar: bool = True,
                log: Callable[[str], None] | None = None) -> pathlib.Path:
@@ -117,7 +119,8 @@ def _stage_settings(task: str, demo_episodes: int, epochs: int, policy_episodes:
 
     return {
         "demonstrations": {"task": task, "episodes": demo_episodes, "seed": seed, "version": sb3_genrl.__version__},
-        "generator": {"preset": quickstart_preset(task), "epochs": epochs, "eval_every": 10, "seed": seed},
+        "generator": {"preset": quickstart_preset(task), "epochs": epochs, "eval_every": GENERATOR_EVAL_EVERY,
+                      "seed": seed},
         # precision/recall compares at most as many samples as there are demonstrations
         "evaluation": {"n": min(pr_samples, demo_episodes), "dwpr_n": dwpr_samples, "k": 3, "interventions": 5, "seed": seed},
         "policy": {"task": task, "episodes": policy_episodes, "batch_episodes": batch_episodes,

@@ -14,9 +14,10 @@ import os
 import pathlib
 from collections.abc import Callable
 
+from sb3_genrl.study.quickstart import DEMO_EPISODES, GENERATOR_EPOCHS, GENERATOR_EVAL_EVERY
+
 CACHE_VARIABLE = "SB3_GENRL_CACHE"
-# The quickstart's generator stage (sb3_genrl.study.quickstart): its defaults, kept equal by a test
-DEMO_EPISODES, EPOCHS, EVAL_EVERY, SEED = 4000, 300, 10, 0
+SEED = 0  # the quickstart's default seed
 
 
 def cache_folder() -> pathlib.Path:
@@ -38,7 +39,7 @@ def generator_settings(task: str) -> dict[str, object]:
     from sb3_genrl.study.quickstart import quickstart_preset
 
     return {"task": get_task(task).name, "demo_episodes": DEMO_EPISODES, "preset": quickstart_preset(task),
-            "epochs": EPOCHS, "eval_every": EVAL_EVERY, "seed": SEED, "version": sb3_genrl.__version__}
+            "epochs": GENERATOR_EPOCHS, "eval_every": GENERATOR_EVAL_EVERY, "seed": SEED, "version": sb3_genrl.__version__}
 
 
 def build_default_generator(task: str, *, device: str = "auto", progress_bar: bool = True,
@@ -67,7 +68,7 @@ def build_default_generator(task: str, *, device: str = "auto", progress_bar: bo
             log(f"{settings['task']}: no generator in {folder} yet; making the quickstart's: {DEMO_EPISODES} "
                 "demonstrations")
             make_demonstrations(task, DEMO_EPISODES, dataset, seed=SEED, progress_bar=progress_bar)
-        log(f"{settings['task']}: training the generator {settings['preset']} for {EPOCHS} epochs -> {path}")
-        train_generator(dataset, preset=str(settings["preset"]), epochs=EPOCHS, eval_every=EVAL_EVERY, seed=SEED,
-                        out=path, progress_bar=progress_bar, device=device)
+        log(f"{settings['task']}: training the generator {settings['preset']} for {GENERATOR_EPOCHS} epochs -> {path}")
+        train_generator(dataset, preset=str(settings["preset"]), epochs=GENERATOR_EPOCHS,
+                        eval_every=GENERATOR_EVAL_EVERY, seed=SEED, out=path, progress_bar=progress_bar, device=device)
     return path
