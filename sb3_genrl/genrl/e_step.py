@@ -9,6 +9,7 @@ mode, the mode that collected the batch.
 from __future__ import annotations
 
 import copy
+from collections.abc import Callable
 
 import numpy as np
 import torch as th
@@ -17,6 +18,7 @@ from stable_baselines3.common.distributions import Distribution, kl_divergence
 from stable_baselines3.common.policies import ActorCriticPolicy
 from torch.nn.utils import parameters_to_vector, vector_to_parameters
 
+from sb3_genrl.genrl.fisher import gaussian_fisher
 from sb3_genrl.genrl.policies import actor_parameters
 
 Batch = tuple[th.Tensor, th.Tensor, th.Tensor, th.Tensor]  # observations, actions, log pi(actions), advantages
@@ -76,18 +78,15 @@ def trpo_e_step(q: ActorCriticPolicy, pi: ActorCriticPolicy, batch: Batch, *, ta
         pi_distribution = pi.get_distribution(batch[0])
     objective, kl = surrogate(q, pi, batch, pi_distribution)
     # Actor parameters of q: those the KL depends on (the value head is not part of q(alpha|s)).
-    named = actor_parameters(q)
-    grads_kl = th.autograd.grad(kl, named, create_graph=True, allow_unused=True)
-    params = [p for p, g in zip(named, grads_kl, strict=True) if g is not None]
-    grad_kl = th.cat([g.reshape(-1) for g in grads_kl if g is not None])
-    grad_objective = flat_grad(objective, params, retain_graph=True)
+    params, kl_hessian = kl_hessian_product(q, batch[0], pi_distribution, kl)
+    grad_objective = flat_grad(objective, params, retain_graph=True)  # (the fallback differentiates the KL again)
 
-    def fisher_vector_product(vector: th.Tensor, retain_graph: bool = True) -> th.Tensor:
-        return flat_grad((grad_kl * vector).sum(), params, retain_graph=retain_graph) + cg_damping * vector
+    def fisher_vector_product(vector: th.Tensor) -> th.Tensor:
+        return kl_hessian(vector) + cg_damping * vector
 
     # Natural-gradient direction F^-1 g (conjugate gradient), scaled so that the quadratic KL model equals target_kl.
     direction = conjugate_gradient_solver(fisher_vector_product, grad_objective, max_iter=cg_max_steps).detach()
-    curvature = th.dot(direction, fisher_vector_product(direction, retain_graph=False)).item()
+    curvature = th.dot(direction, fisher_vector_product(direction)).item()
     objective_0 = objective.item()
     if not (np.isfinite(curvature) and curvature > 0 and bool(th.isfinite(direction).all())):
         # No step: F is positive definite in exact arithmetic, a non-positive curvature is numerical breakdown.
@@ -111,6 +110,21 @@ def trpo_e_step(q: ActorCriticPolicy, pi: ActorCriticPolicy, batch: Batch, *, ta
             fraction = 0.0
     return {"policy_objective": new_objective, "line_search_success": float(fraction > 0),
             "accepted_fraction": fraction, "step_size": fraction * max_step}
+
+
+def kl_hessian_product(q: ActorCriticPolicy, observations: th.Tensor, pi_distribution: Distribution, kl: th.Tensor,
+                       ) -> tuple[list[th.nn.Parameter], Callable[[th.Tensor], th.Tensor]]:
+    """The parameters the KL depends on (``q``'s actor's, in order), and ``v -> H v`` for ``H`` the KL's Hessian in
+    them at ``q = pi``: the analytic Fisher-vector product of a diagonal Gaussian (:mod:`sb3_genrl.genrl.fisher`) where
+    the policy's structure is a known one, else the double backward pass through autograd's graph of ``kl``."""
+    named = actor_parameters(q)
+    fisher = gaussian_fisher(q, observations, pi_distribution.distribution.stddev, named)  # type: ignore[attr-defined]
+    if fisher is not None:
+        return named, fisher
+    grads_kl = th.autograd.grad(kl, named, create_graph=True, allow_unused=True)
+    params = [p for p, g in zip(named, grads_kl, strict=True) if g is not None]
+    grad_kl = th.cat([g.reshape(-1) for g in grads_kl if g is not None])
+    return params, lambda vector: flat_grad((grad_kl * vector).sum(), params, retain_graph=True)
 
 
 def kl_penalty_e_step(q: ActorCriticPolicy, pi: ActorCriticPolicy, batch: Batch, *, kl_coef: float, n_epochs: int,

@@ -12,6 +12,7 @@ from __future__ import annotations
 import torch as th
 from stable_baselines3.common.policies import ActorCriticPolicy
 
+from sb3_genrl.genrl.fused import FlatAdam, FlatMlp, mean_backward_scale, mlp_layers
 from sb3_genrl.genrl.policies import actor_parameters
 
 # Names of the parameters that set the spread alone: MlpPolicy's log_std, ContextStdPolicy's log_std_net.
@@ -54,8 +55,11 @@ def regress_mean(policy: ActorCriticPolicy, optimizer: th.optim.Optimizer, conte
 
     :return: the loss (the mean squared error over the latent dimensions, weighted) of every minibatch
     """
-    losses = []  # kept as tensors, read once at the end (one .item() per step costs about 2% of a step)
     features = None if weighted else fixed_features(policy, contexts)
+    fused = None if features is None else fused_mean(policy, optimizer)
+    if fused is not None:
+        return fused_regression(*fused, features, actions, steps=steps, batch_size=batch_size)  # type: ignore[arg-type]
+    losses = []  # kept as tensors, read once at the end (one .item() per step costs about 2% of a step)
     for _ in range(steps):
         indices = th.randint(len(actions), (min(batch_size, len(actions)),), device=actions.device)
         target = actions[indices]
@@ -73,4 +77,37 @@ def regress_mean(policy: ActorCriticPolicy, optimizer: th.optim.Optimizer, conte
         loss.backward()
         optimizer.step()
         losses.append(loss.detach())
+    return th.stack(losses).tolist() if losses else []
+
+
+def fused_mean(policy: ActorCriticPolicy, optimizer: th.optim.Optimizer) -> tuple[FlatMlp, FlatAdam] | None:
+    """The policy's mean as a :class:`~sb3_genrl.genrl.fused.FlatMlp` with ``optimizer``'s update of it, or ``None``
+    when its MLP or its optimizer is not one the fused steps know (then :func:`regress_mean` takes autograd's steps)."""
+    layers = mlp_layers([policy.mlp_extractor.policy_net, policy.action_net])
+    parameters = mean_parameters(policy)
+    if layers is None or {id(p) for linear, _ in layers for p in (linear.weight, linear.bias)} != set(map(id, parameters)):
+        return None
+    adam = FlatAdam.build(optimizer, parameters)
+    return None if adam is None else (FlatMlp(layers, adam), adam)
+
+
+def fused_regression(mlp: FlatMlp, adam: FlatAdam, features: th.Tensor, actions: th.Tensor, *, steps: int,
+                     batch_size: int) -> list[float]:
+    """:func:`regress_mean`'s unweighted steps on fixed features, fused (:mod:`sb3_genrl.genrl.fused`): the same draws
+    of minibatches (one ``randint`` call for all steps draws what one call per step would), the same arithmetic.
+
+    :return: the loss of every minibatch
+    """
+    size = min(batch_size, len(actions))
+    indices = th.randint(len(actions), (steps, size), device=actions.device)
+    scale = mean_backward_scale(size * actions[0].numel(), actions)
+    losses = []
+    with th.no_grad():
+        for rows in indices:
+            outputs = mlp.forward(features[rows])
+            error = outputs[-1] - actions[rows]
+            losses.append(error.pow(2).mean())
+            mlp.backward(outputs, (2.0 * error) * scale)  # autograd's backward of the mean of the squared errors
+            adam.step()
+    adam.write_back()
     return th.stack(losses).tolist() if losses else []

@@ -9,6 +9,7 @@ import torch as th
 from stable_baselines3.common.policies import ActorCriticPolicy
 from torch.nn import functional as F
 
+from sb3_genrl.genrl.fused import FlatAdam, FlatMlp, mlp_layers
 from sb3_genrl.genrl.policies import actor_parameters
 
 # (observations, returns) of one batch; observations are a tensor, or a dict of tensors for Dict contexts
@@ -28,8 +29,11 @@ def fit_value_function(policy: ActorCriticPolicy, memory: deque[Batch], *, epoch
     """
     observations = concatenate([observations for observations, _ in memory])
     returns = th.cat([returns for _, returns in memory])
-    actor = actor_parameters(policy)
     use_foreach(policy.optimizer)
+    fused = fused_value(policy, observations)
+    if fused is not None:
+        return fused_value_fit(*fused, returns, epochs=epochs, batch_size=batch_size)
+    actor = actor_parameters(policy)
     losses = []
     for _ in range(epochs):
         permutation = th.randperm(len(returns), device=returns.device)
@@ -42,6 +46,52 @@ def fit_value_function(policy: ActorCriticPolicy, memory: deque[Batch], *, epoch
                 parameter.grad = None
             policy.optimizer.step()
             losses.append(loss.detach())
+    return th.stack(losses).tolist() if losses else []
+
+
+def fused_value(policy: ActorCriticPolicy, observations: Any) -> tuple[FlatMlp, FlatAdam, th.Tensor] | None:
+    """The value function as a :class:`~sb3_genrl.genrl.fused.FlatMlp` with the policy optimizer's update of it, and
+    the features of ``observations``; ``None`` when the features extractor trains, or the MLP or the optimizer is not
+    one the fused steps know (then :func:`fit_value_function` takes autograd's steps)."""
+    extractor = policy.vf_features_extractor
+    layers = mlp_layers([policy.mlp_extractor.value_net, policy.value_net])
+    if layers is None or any(parameter.requires_grad for parameter in extractor.parameters()):
+        return None
+    critic = [parameter for linear, _ in layers for parameter in (linear.weight, linear.bias)]
+    trained = {id(p) for p in policy.parameters() if p.requires_grad} - {id(p) for p in actor_parameters(policy)}
+    if trained != set(map(id, critic)):  # the fit would train parameters outside the value MLP
+        return None
+    adam = FlatAdam.build(policy.optimizer, critic)
+    if adam is None:
+        return None
+    with th.no_grad():
+        features = policy.extract_features(observations, extractor)
+    return FlatMlp(layers, adam), adam, features
+
+
+def fused_value_fit(mlp: FlatMlp, adam: FlatAdam, features: th.Tensor, returns: th.Tensor, *, epochs: int,
+                    batch_size: int) -> list[float]:
+    """:func:`fit_value_function`'s steps on fixed features, fused (:mod:`sb3_genrl.genrl.fused`): the same
+    shuffles, the same arithmetic (the mean squared error's gradient by ``mse_loss_backward``, as autograd takes it).
+
+    :return: the loss of every minibatch
+    """
+    losses = []
+    with th.no_grad():
+        one = th.ones((), dtype=returns.dtype, device=returns.device)  # the loss's own gradient, as backward() seeds it
+        for _ in range(epochs):
+            permutation = th.randperm(len(returns), device=returns.device)
+            for start in range(0, len(returns), batch_size):
+                indices = permutation[start : start + batch_size]
+                outputs = mlp.forward(features[indices])
+                values, targets = outputs[-1].flatten(), returns[indices]
+                losses.append(F.mse_loss(values, targets))
+                grad = th.ops.aten.mse_loss_backward(one, values, targets, 1)  # 1: the mean reduction
+                mlp.backward(outputs, grad.view(-1, 1))
+                adam.step()
+    if losses:  # as autograd's steps leave them: the actor's gradients cleared, the value function's last ones kept
+        adam.optimizer.zero_grad()
+    adam.write_back()
     return th.stack(losses).tolist() if losses else []
 
 

@@ -91,3 +91,75 @@ def test_weighted_regress_mean_keeps_to_the_branch_the_policy_is_on():
         errors[weighted] = ((mean - expected).abs().max().item(), (mean - expected - shift).abs().max().item())
     assert errors[False][0] < 0.25 and errors[False][1] > 0.75  # the average of the branches, on neither
     assert errors[True][1] < 0.1 and errors[True][0] > 0.9  # the first branch
+
+
+def _autograd_regression(policy, optimizer, contexts, actions, *, steps, batch_size):
+    """The regression's steps as autograd and torch.optim take them: one minibatch draw, forward, backward and Adam
+    step at a time (the independent computation of the fused steps)."""
+    features = policy.extract_features(contexts, policy.pi_features_extractor).detach()
+    losses = []
+    for _ in range(steps):
+        indices = th.randint(len(actions), (min(batch_size, len(actions)),))
+        loss = (policy.action_net(policy.mlp_extractor.forward_actor(features[indices])) - actions[indices]).pow(2).mean()
+        optimizer.zero_grad()
+        loss.backward()
+        optimizer.step()
+        losses.append(loss.item())
+    return losses
+
+
+def assert_same_fit(first, second, first_optimizer, second_optimizer):
+    """Two fitted policies and their Adam optimizers hold the same numbers, bit for bit."""
+    for (name, value), other in zip(first.state_dict().items(), second.state_dict().values(), strict=True):
+        th.testing.assert_close(value, other, rtol=0, atol=0, msg=name)
+    for parameter, other in zip(first.parameters(), second.parameters(), strict=True):
+        assert (parameter.grad is None) == (other.grad is None)
+        if parameter.grad is not None:
+            th.testing.assert_close(parameter.grad, other.grad, rtol=0, atol=0)
+    states, other_states = first_optimizer.state_dict()["state"], second_optimizer.state_dict()["state"]
+    assert states.keys() == other_states.keys()
+    for key, state in states.items():
+        for field, value in state.items():
+            assert value.dtype == other_states[key][field].dtype
+            th.testing.assert_close(value, other_states[key][field], rtol=0, atol=0)
+
+
+@pytest.mark.parametrize(("policy_name", "activation", "foreach"), [
+    ("MlpPolicy", th.nn.Tanh, True), ("ContextStdPolicy", th.nn.Tanh, True), ("MlpPolicy", th.nn.ReLU, False)])
+def test_fused_regression_is_autograd_and_adam_bit_for_bit(policy_name, activation, foreach):
+    import copy
+
+    from sb3_genrl.genrl.regression import fused_mean, mean_parameters, regress_mean
+
+    policy = GenRL(policy_name, FastReachEnv(), LinearGenerator(), seed=0, policy_kwargs={
+        "net_arch": {"pi": [32, 32, 32], "vf": [8]}, "activation_fn": activation}).policy
+    generator = th.Generator().manual_seed(0)
+    contexts = th.rand(300, 2, generator=generator) * 1.6 - 0.8
+    actions = th.randn(300, 2, generator=generator)
+    fits = []
+    for fit in (regress_mean, _autograd_regression):
+        copied = copy.deepcopy(policy)
+        optimizer = th.optim.Adam(mean_parameters(copied), lr=1e-3, foreach=foreach)
+        assert fit is _autograd_regression or fused_mean(copied, optimizer) is not None  # the fused steps are taken
+        th.manual_seed(1)
+        # from a fresh optimizer, then from its moments; a batch larger than the pulls takes them all each step
+        losses = fit(copied, optimizer, contexts, actions, steps=40, batch_size=64)
+        losses += fit(copied, optimizer, contexts[:50], actions[:50], steps=30, batch_size=64)
+        fits.append((copied, optimizer, losses))
+    (fused, fused_optimizer, fused_losses), (expected, expected_optimizer, expected_losses) = fits
+    assert fused_losses == expected_losses and len(fused_losses) == 70
+    assert_same_fit(fused, expected, fused_optimizer, expected_optimizer)
+    assert not th.equal(fused.action_net.weight, policy.action_net.weight)  # it did fit
+
+
+def test_regress_mean_takes_autograd_steps_where_the_fused_ones_do_not_apply():
+    from sb3_genrl.genrl.regression import fused_mean, mean_parameters, regress_mean
+
+    policy = GenRL(FastReachEnv(), LinearGenerator(), seed=0).policy
+    sgd = th.optim.SGD(mean_parameters(policy), lr=1e-2)
+    assert fused_mean(policy, sgd) is None
+    assert fused_mean(policy, th.optim.Adam(mean_parameters(policy), weight_decay=1e-4)) is None
+    assert fused_mean(policy, th.optim.Adam(mean_parameters(policy)[:2])) is None  # not all of the mean's parameters
+    contexts = th.rand(64, 2, generator=th.Generator().manual_seed(0)) * 1.6 - 0.8
+    losses = regress_mean(policy, sgd, contexts, contexts.flip(1), steps=200, batch_size=32)
+    assert np.mean(losses[-20:]) < 0.5 * np.mean(losses[:20])

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import collections
+
 import numpy as np
 import pytest
 import torch as th
@@ -81,3 +83,58 @@ def test_observation_batches_join_and_index_as_tensors_and_dicts():
     dicts = concatenate([{"goal": first, "t": th.zeros(3)}, {"goal": second, "t": th.ones(2)}])
     th.testing.assert_close(dicts["goal"], joined)
     th.testing.assert_close(take(dicts, th.tensor([3]))["t"], th.ones(1))
+
+
+def _autograd_value_fit(policy, memory, *, epochs, batch_size):
+    """The value fit as autograd and torch.optim take it, one minibatch at a time (the independent computation of
+    the fused steps)."""
+    from torch.nn import functional as F
+
+    from sb3_genrl.genrl.policies import actor_parameters
+
+    observations, returns = th.cat([o for o, _ in memory]), th.cat([r for _, r in memory])
+    for group in policy.optimizer.param_groups:
+        group["foreach"] = True
+    losses = []
+    for _ in range(epochs):
+        permutation = th.randperm(len(returns))
+        for start in range(0, len(returns), batch_size):
+            indices = permutation[start : start + batch_size]
+            loss = F.mse_loss(policy.predict_values(observations[indices]).flatten(), returns[indices])
+            policy.optimizer.zero_grad()
+            loss.backward()
+            for parameter in actor_parameters(policy):
+                parameter.grad = None
+            policy.optimizer.step()
+            losses.append(loss.item())
+    return losses
+
+
+@pytest.mark.parametrize("policy_name", ["MlpPolicy", "ContextStdPolicy"])
+def test_fused_value_fit_is_autograd_and_adam_bit_for_bit(policy_name):
+    import copy
+
+    from test_regression import assert_same_fit
+
+    from sb3_genrl.genrl.value import fit_value_function, fused_value
+
+    policy = GenRL(policy_name, FastReachEnv(), LinearGenerator(), seed=0,
+                   policy_kwargs={"net_arch": {"pi": [8], "vf": [32, 32]}}).policy
+    generator = th.Generator().manual_seed(0)
+    observations = th.rand(90, 2, generator=generator) * 1.6 - 0.8
+    returns = th.randn(90, generator=generator)
+    memory = collections.deque([(observations[:50], returns[:50]), (observations[50:], returns[50:])])
+    fits = []
+    for fit in (fit_value_function, _autograd_value_fit):
+        copied = copy.deepcopy(policy)
+        assert fit is _autograd_value_fit or fused_value(copied, observations) is not None  # the fused steps are taken
+        for parameter in copied.parameters():  # gradients left by an earlier fit (the regression's) are cleared
+            parameter.grad = th.ones_like(parameter)
+        th.manual_seed(1)
+        losses = fit(copied, memory, epochs=3, batch_size=32)  # 90 returns: minibatches of 32, 32 and 26
+        losses += fit(copied, collections.deque([memory[0]]), epochs=2, batch_size=64)
+        fits.append((copied, losses))
+    (fused, fused_losses), (expected, expected_losses) = fits
+    assert fused_losses == expected_losses and len(fused_losses) == 9 + 2
+    assert_same_fit(fused, expected, fused.optimizer, expected.optimizer)
+    assert not th.equal(fused.value_net.weight, policy.value_net.weight)  # it did fit
