@@ -67,6 +67,7 @@ class GaussianFisher:
                 self.inputs.append(output)
 
     def _view(self, vector: th.Tensor, key: int, shape: th.Size) -> th.Tensor:
+        """The part of a flat ``vector`` that belongs to the parameter ``key`` (its ``id``), shaped as it."""
         start, end = self.slices[key]
         return vector[start:end].view(shape)
 

@@ -17,10 +17,11 @@ from collections.abc import Callable, Sequence
 import torch as th
 from torch import nn
 
-# Activations the fused passes know: the function, and its derivative as autograd computes it from the output
+# Activations the fused passes know: the function (in place, on a fresh layer output), and its derivative as autograd
+# computes it from the output
 ACTIVATIONS: dict[type[nn.Module], tuple[Callable[[th.Tensor], th.Tensor], Callable[[th.Tensor, th.Tensor], th.Tensor]]] = {
-    nn.Tanh: (th.tanh, lambda grad, output: th.ops.aten.tanh_backward(grad, output)),
-    nn.ReLU: (th.relu, lambda grad, output: th.ops.aten.threshold_backward(grad, output, 0)),
+    nn.Tanh: (th.tanh_, lambda grad, output: th.ops.aten.tanh_backward(grad, output)),
+    nn.ReLU: (th.relu_, lambda grad, output: th.ops.aten.threshold_backward(grad, output, 0)),
 }
 Layer = tuple[nn.Linear, type[nn.Module] | None]  # a linear layer and the activation after it (None: none)
 

@@ -103,9 +103,9 @@ def fused_regression(mlp: FlatMlp, adam: FlatAdam, features: th.Tensor, actions:
     scale = mean_backward_scale(size * actions[0].numel(), actions)
     losses = []
     with th.no_grad():
-        for rows in indices:
-            outputs = mlp.forward(features[rows])
-            error = outputs[-1] - actions[rows]
+        for inputs, targets in zip(features[indices], actions[indices], strict=True):  # every step's rows, gathered once
+            outputs = mlp.forward(inputs)
+            error = outputs[-1] - targets
             losses.append(error.pow(2).mean())
             mlp.backward(outputs, (2.0 * error) * scale)  # autograd's backward of the mean of the squared errors
             adam.step()

@@ -81,10 +81,10 @@ def fused_value_fit(mlp: FlatMlp, adam: FlatAdam, features: th.Tensor, returns: 
         one = th.ones((), dtype=returns.dtype, device=returns.device)  # the loss's own gradient, as backward() seeds it
         for _ in range(epochs):
             permutation = th.randperm(len(returns), device=returns.device)
+            shuffled_features, shuffled_returns = features[permutation], returns[permutation]  # the epoch's rows, at once
             for start in range(0, len(returns), batch_size):
-                indices = permutation[start : start + batch_size]
-                outputs = mlp.forward(features[indices])
-                values, targets = outputs[-1].flatten(), returns[indices]
+                outputs = mlp.forward(shuffled_features[start : start + batch_size])
+                values, targets = outputs[-1].flatten(), shuffled_returns[start : start + batch_size]
                 losses.append(F.mse_loss(values, targets))
                 grad = th.ops.aten.mse_loss_backward(one, values, targets, 1)  # 1: the mean reduction
                 mlp.backward(outputs, grad.view(-1, 1))
