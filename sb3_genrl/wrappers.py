@@ -49,7 +49,8 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
     it; an open-loop trajectory depends on the whole reset state (e.g. where the object starts), not only on the goal.
     The step's ``info["hindsight"]`` is derived from the API alone: the context with the last achieved goal as
     desired goal (the reset observation unchanged), and the reward the episode would have earned for it, by
-    ``compute_reward`` of each step played (the last step's, or their sum with ``reward="sum"``). The episode's
+    ``compute_reward`` of each step played (the last step's, or their sum with ``reward="sum"``); ``None`` (not
+    relabelled) when the achieved goal at the start already earns that reward: the trajectory moved nothing. The episode's
     success, ``info["is_success"]`` of its last step when the env reports it, is in the step's info, so SB3's
     algorithms (GenRL included) log ``rollout/success_rate``.
 
@@ -183,6 +184,8 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         """Reset the wrapped task (``options``, e.g. ``{"goal": xy}``, are passed on when given) and observe its context."""
         obs, info = self.env.reset(seed=seed) if options is None else self.env.reset(seed=seed, options=options)
         self._context = self._observe(obs)
+        # a goal env's achieved goal at the start: a pull whose trajectory leaves it where it was is not relabelled
+        self._start_achieved = copy.deepcopy(obs["achieved_goal"]) if self._context_source == "goal" else None
         self._needs_reset = False
         self._prepared = None
         return copy.deepcopy(self._context), dict(info)
@@ -291,11 +294,19 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     def _goal_hindsight(self, goal_steps: list[tuple[Any, dict[str, Any]]]) -> tuple[np.ndarray, float] | None:
         """A goal env's relabelled pull: the context with the last achieved goal as desired goal, and the reward of
-        the steps played for that goal by ``compute_reward`` (the last step's, or the sum with ``reward="sum"``)."""
+        the steps played for that goal by ``compute_reward`` (the last step's, or the sum with ``reward="sum"``);
+        ``None`` when the achieved goal at the start already earns the end's reward (the trajectory moved nothing)."""
         if not goal_steps:
             return None
         new_goal = goal_steps[-1][0]
         compute_reward = self.env.unwrapped.compute_reward
+        # A trajectory that leaves the achieved goal where it started (its start already earns the reward of its end,
+        # e.g. a push that misses the object) solves its relabelled goal whatever it does: such a pull teaches the
+        # policy nothing about reaching goals, and is not relabelled.
+        last_info = goal_steps[-1][1]
+        if (float(np.asarray(compute_reward(self._start_achieved, new_goal, last_info)).item())
+                >= float(np.asarray(compute_reward(new_goal, new_goal, last_info)).item())):
+            return None
         rewards = [float(np.asarray(compute_reward(achieved, new_goal, info)).item()) for achieved, info in
                    (goal_steps[-1:] if self.reward_mode == "last" else goal_steps)]
         desired = np.ravel(new_goal).astype(np.float32)

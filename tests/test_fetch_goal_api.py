@@ -74,6 +74,18 @@ def test_context_and_hindsight_come_from_the_goal_env_api(reward):
         assert r == (own[-1] if reward == "last" else own.sum())
 
 
+def test_a_pull_that_leaves_the_achieved_goal_where_it_started_is_not_relabelled():
+    env = LatentActionWrapper(PointGoalEnv(), LinearGenerator())
+    for displacement, relabelled in ((0.0, False), (0.6 * THRESHOLD, False), (3.0 * THRESHOLD, True)):
+        context, _ = env.reset(seed=3)
+        # the latent action whose trajectory moves the point by `displacement` along x: R alpha + C = (d, 0)
+        alpha = np.linalg.solve(R, np.array([displacement, 0.0]) - C).astype(np.float32)
+        _, _, _, _, info = env.step(alpha)
+        moved = np.linalg.norm(env.unwrapped.position - env.unwrapped.start)
+        assert moved == pytest.approx(displacement, abs=1e-5)
+        assert (info["hindsight"] is not None) == relabelled, displacement
+
+
 def test_genrl_picks_multi_input_policy_for_a_dict_context():
     class DictEnv(gym.ObservationWrapper):  # other keys than a goal env's: the context is the Dict reset observation
         def __init__(self, env):
