@@ -84,12 +84,17 @@ def load_genrl_settings(env_id: str) -> tuple[int, int, dict[str, Any]]:
 
     One GenRL step is one episode: ``n_timesteps`` is the budget of episodes and ``n_envs`` (default 1) x
     ``n_steps`` the episodes of an iteration, ``N``; a run in another number of env processes keeps ``N``. The
-    entry's ``env_wrapper`` is rl-zoo3's (:mod:`sb3_genrl.zoo`), not a GenRL setting.
+    entry's ``env_wrapper`` is rl-zoo3's (:mod:`sb3_genrl.zoo`), not a GenRL setting. Its ``callback`` (rl-zoo3's
+    key, e.g. the Fetch tasks' :class:`~sb3_genrl.genrl.demonstrations.DemonstrationCallback`) is kept among the
+    settings as ``callback``, a list of ``{class path: {arguments}}``, which :func:`sb3_genrl.genrl.train_policy` builds
+    (and refuses without the demonstrations it needs).
 
     :param env_id: the task's Gymnasium id, e.g. ``GenRL/Hockey-v0``
-    :return: ``(episodes, batch_episodes, genrl_kwargs)``; ``genrl_kwargs`` may name the ``policy``
+    :return: ``(episodes, batch_episodes, genrl_kwargs)``; ``genrl_kwargs`` may name the ``policy`` and the
+        ``callback``
     """
     from sb3_genrl.genrl import check_genrl_settings
+    from sb3_genrl.genrl.demonstrations import callback_entries
 
     entry = load_hyperparams("genrl", env_id)
     name = f"{hyperparams_file('genrl')} {env_id}"
@@ -97,13 +102,14 @@ def load_genrl_settings(env_id: str) -> tuple[int, int, dict[str, Any]]:
         if key not in entry:
             raise ValueError(f"{name}: needs {key}")
     entry.pop("env_wrapper", None)  # rl-zoo3's latent-action wrapper (sb3_genrl.zoo): the package's runs build their own
+    callback = [{path: kwargs} for path, kwargs in callback_entries(entry.pop("callback", None), f"{name}: callback")]
     episodes, n_envs, n_steps = entry.pop("n_timesteps"), entry.pop("n_envs", 1), entry.pop("n_steps")
     for key, value, minimum in (("n_timesteps", episodes, 1), ("n_envs", n_envs, 1), ("n_steps", n_steps, 1)):
         if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
             raise ValueError(f"{name}: {key} must be an integer of at least {minimum}, got {value!r}")
     if n_envs * n_steps < 2:
         raise ValueError(f"{name}: n_envs x n_steps, the episodes per iteration, must be at least 2")
-    return episodes, n_envs * n_steps, check_genrl_settings(entry, name)
+    return episodes, n_envs * n_steps, check_genrl_settings(entry, name) | ({"callback": callback} if callback else {})
 
 
 def parse_kwargs(value: Any, name: str = "kwargs") -> dict[str, Any]:

@@ -192,6 +192,45 @@ def test_the_cached_generator_is_the_quickstarts():
     assert recorded["seed"] == defaults["seed"].default == stage["seed"]
 
 
+def test_a_demonstration_callback_gets_the_cached_generators_demonstrations(monkeypatch, tmp_path, hockey_generator):
+    import shutil
+
+    from gymnasium import spaces
+
+    from sb3_genrl.data import write_dataset
+    from sb3_genrl.genrl.demonstrations import DEMONSTRATION_CALLBACK, DemonstrationCallback
+    from sb3_genrl.study.state import dataset_fingerprint
+    from sb3_genrl.zoo.experiment import WRAPPER, resolved_callback, resolved_wrapper
+    from sb3_genrl.zoo.generators import default_demonstrations, default_generator
+
+    monkeypatch.setenv("SB3_GENRL_CACHE", str(tmp_path))
+    default_generator(ENV_ID).parent.mkdir(parents=True)
+    shutil.copy(hockey_generator, default_generator(ENV_ID))  # the cached generator, made before
+    wrapper = resolved_wrapper(WRAPPER, ENV_ID, "cpu")
+    callback = [{DEMONSTRATION_CALLBACK: {"fit_steps": 10}}]
+    with pytest.raises(FileNotFoundError, match=r"the cached generator's demonstrations .*generators/hockey/"
+                                                r"demonstrations are missing"):
+        resolved_callback(callback, wrapper, ENV_ID)
+    n, t = 3, 69
+    arrays = {"observations": np.zeros((n, t + 1, 2), np.float32), "actions": np.zeros((n, t, 7), np.float32),
+              "rewards": np.zeros((n, t)), "terminations": np.ones((n, t), bool), "truncations": np.zeros((n, t), bool),
+              "reached": np.zeros((n, 2)), "sampled_goals": np.zeros((n, 2))}
+    dataset = write_dataset(default_demonstrations(ENV_ID), arrays, dataset_id="genrl/hockey-v0",
+                            genrl={"task": "hockey", "horizon": t}, observation_space=spaces.Box(-1, 1, (2,), np.float32),
+                            action_space=spaces.Box(-0.5, 0.5, (7,), np.float32))
+    (resolved,) = resolved_callback(callback, wrapper, ENV_ID)
+    assert resolved == {DEMONSTRATION_CALLBACK: {"fit_steps": 10, "dataset": str(dataset.resolve()),
+                                                 "dataset_fingerprint": dataset_fingerprint(dataset)}}
+    assert DemonstrationCallback(**resolved[DEMONSTRATION_CALLBACK]).dataset == str(dataset.resolve())
+    with pytest.raises(ValueError, match="are not the ones this run was trained with"):
+        DemonstrationCallback(**resolved[DEMONSTRATION_CALLBACK] | {"dataset_fingerprint": "0" * 16})
+    other = resolved_wrapper([{WRAPPER: {"generator": hockey_generator}}], ENV_ID, "cpu")
+    with pytest.raises(ValueError, match="is not the cached one, whose demonstrations are known: give the generator's"):
+        resolved_callback(callback, other, ENV_ID)
+    given = [{DEMONSTRATION_CALLBACK: {"dataset": "D"}}]  # a callback that names its dataset keeps it
+    assert resolved_callback(given, other, ENV_ID) == given
+
+
 def test_every_task_entry_lies_in_the_search_space():
     from sb3_genrl.hyperparams import known_env_ids
     from sb3_genrl.zoo.sampler import convert_genrl_params, entry_params

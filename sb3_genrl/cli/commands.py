@@ -72,7 +72,7 @@ def train_policy_command(args: argparse.Namespace) -> int:
     result = train_policy(args.task, str(args.generator), episodes=args.episodes, seed=args.seed, out_dir=args.out,
                           n_envs=args.n_envs, device=args.device, progress_bar=not args.no_progress_bar,
                           checkpoint_every=args.checkpoint_every or None, overwrite=args.overwrite,
-                          **policy_arguments(args))
+                          demonstrations=args.data and str(args.data), **policy_arguments(args))
     print(f"GenRL on {args.task}: {result['episodes']} episodes, {result['iterations']} iterations, mean reward "
           f"final {result['final_mean_reward']:.4g}, best {result['best_mean_reward']:.4g} -> {result['model_path']}")
     return 0
@@ -81,8 +81,10 @@ def train_policy_command(args: argparse.Namespace) -> int:
 def policy_arguments(args: argparse.Namespace) -> dict:
     """``genrl train-policy``'s GenRL settings: the task's entry in ``hyperparams/genrl.yml`` (or GenRL's defaults,
     ``--library-defaults``) with ``--e-step``, ``--batch-episodes`` and ``--genrl-kwargs`` laid over it, checked by
-    :func:`sb3_genrl.genrl.check_genrl_settings` before any work."""
+    :func:`sb3_genrl.genrl.check_genrl_settings` before any work; the entry's ``callback`` (``--genrl-kwargs
+    '{"callback": null}'``: none) is checked by :func:`sb3_genrl.genrl.demonstrations.callback_entries`."""
     from sb3_genrl.genrl import check_genrl_settings
+    from sb3_genrl.genrl.demonstrations import callback_entries
     from sb3_genrl.hyperparams import lay_over
     from sb3_genrl.study.quickstart import task_settings
 
@@ -94,9 +96,12 @@ def policy_arguments(args: argparse.Namespace) -> dict:
     source = "GenRL's defaults" if args.library_defaults else f"{args.task}'s entry in hyperparams/genrl.yml"
     name = f"argument --e-step/--genrl-kwargs: {source}, --e-step {args.e_step}" + (
         ", --genrl-kwargs" if args.genrl_kwargs else "")
+    callback = genrl_kwargs.pop("callback", None)
     genrl_kwargs = check_genrl_settings(genrl_kwargs, name)
+    callback_entries(callback, f"{name}: callback")
     batch_episodes = args.batch_episodes or batch_episodes
-    return genrl_kwargs | ({} if batch_episodes is None else {"batch_episodes": batch_episodes})
+    return genrl_kwargs | ({} if batch_episodes is None else {"batch_episodes": batch_episodes}) | (
+        {} if callback is None else {"callback": callback})
 
 
 def baseline_command(args: argparse.Namespace) -> int:

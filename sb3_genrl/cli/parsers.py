@@ -141,6 +141,10 @@ def add_train_policy(sub: argparse._SubParsersAction) -> None:
     policy = sub.add_parser("train-policy", help="train a GenRL policy over a generator's latent space (Algorithm 1)")
     _task_option(policy)
     policy.add_argument("--generator", required=True, type=EXISTING, help="file of a trained generator")
+    policy.add_argument("--data", type=EXISTING, default=None,
+                        help="the demonstration dataset, for a task whose settings learn from demonstrations (the "
+                             "Fetch tasks': their callback sb3_genrl.genrl.demonstrations.DemonstrationCallback); the "
+                             "generator's own dataset, as genrl demos wrote it")
     policy.add_argument("--episodes", type=EPISODES, required=True, help="episodes (trajectories played) in total")
     _seed_option(policy)
     policy.add_argument("--out", required=True, type=OUT_DIR, help="output folder (model, learning curve, logs)")

@@ -92,6 +92,7 @@ class HindsightRelabelling:
         self.pull_infos: list[list[dict[str, Any]]] = []  # the infos of the rollout's pulls, step by step
         # (contexts, latent actions, rewards) relabelled in the last `history` batches
         self.memory: collections.deque[tuple[th.Tensor, th.Tensor, th.Tensor]] = collections.deque(maxlen=self.history)
+        self.kept_pulls: tuple[th.Tensor, th.Tensor, th.Tensor] | None = None  # kept for the whole run (keep_pulls)
         # Adam over the policy's mean; it keeps its moments from iteration to iteration (and is saved with the model)
         self.optimizer = th.optim.Adam(mean_parameters(policy), lr=regression_lr) if self.regression_steps else None
 
@@ -144,9 +145,23 @@ class HindsightRelabelling:
         for group in self.optimizer.param_groups if self.optimizer is not None else ():
             group["lr"] = self.regression_lr
 
+    def keep_pulls(self, contexts: th.Tensor, actions: th.Tensor, rewards: th.Tensor) -> None:
+        """Keep these pulls (contexts, latent actions, rewards; demonstrations, :mod:`sb3_genrl.genrl.demonstrations`)
+        for the whole run: after the last ``history`` batches' relabelled pulls, in every E-step's batch and every
+        regression, never aged out. They are saved in the run's checkpoints (not in the model's zip)."""
+        space, n = self.policy.observation_space, len(rewards)
+        shapes = (tuple(contexts.shape), tuple(actions.shape), tuple(rewards.shape))
+        if shapes != ((n, *space.shape), (n, *self.policy.action_space.shape), (n,)):
+            raise ValueError(f"keep_pulls: contexts, actions and rewards of shapes {shapes}, expected "
+                             f"(n, *{space.shape}), (n, *{self.policy.action_space.shape}) and (n,)")
+        device = self.policy.device
+        self.kept_pulls = (contexts.to(device, th.float32), actions.to(device, th.float32), rewards.to(device, th.float32))
+
     def _kept(self) -> tuple[th.Tensor, th.Tensor, th.Tensor]:
-        """The kept relabelled pulls, oldest batch first: contexts, latent actions, rewards."""
-        return tuple(th.cat(part) for part in zip(*self.memory, strict=True))  # type: ignore[return-value]
+        """The kept relabelled pulls, oldest batch first, then those kept for the whole run: contexts, latent actions,
+        rewards."""
+        batches = [*self.memory, *([] if self.kept_pulls is None else [self.kept_pulls])]
+        return tuple(th.cat(part) for part in zip(*batches, strict=True))  # type: ignore[return-value]
 
     def _relabel(self, buffer: RolloutBuffer) -> tuple[th.Tensor, th.Tensor, th.Tensor]:
         """This rollout's relabelled pulls: contexts, latent actions, rewards."""

@@ -14,6 +14,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from stable_baselines3.common.callbacks import CallbackList
 
 from sb3_genrl.checks import (
     check_device,
@@ -35,6 +36,7 @@ from sb3_genrl.curves import (
 )
 from sb3_genrl.generative.base import TrajectoryGenerator
 from sb3_genrl.genrl.checkpoint import CHECKPOINT_EVERY, GenRLCheckpoint, RandomStateRecorder, resume_genrl, resume_state
+from sb3_genrl.genrl.demonstrations import DemonstrationCallback, build_callbacks, callback_entries
 from sb3_genrl.genrl.generator_files import generator_digest
 from sb3_genrl.genrl.genrl import EStep, GenRL
 from sb3_genrl.genrl.policies import MlpPolicy
@@ -81,6 +83,7 @@ def train_policy(task: str, generator: TrajectoryGenerator | str, *, episodes: i
                  out_dir: str | os.PathLike, e_step: EStep = "trpo", batch_episodes: int = 64, n_envs: int = 1,
                  device: str = "auto", progress_bar: bool = False, verbose: int = 0,
                  checkpoint_every: int | None = CHECKPOINT_EVERY, overwrite: bool = False, n_threads: int | None = None,
+                 demonstrations: str | os.PathLike | None = None, callback: Any = None,
                  **genrl_kwargs: Any) -> dict[str, Any]:
     """Train a GenRL policy for ``episodes`` episodes on ``task`` and write everything to ``out_dir``.
 
@@ -111,6 +114,12 @@ def train_policy(task: str, generator: TrajectoryGenerator | str, *, episodes: i
         bit for bit (:mod:`sb3_genrl.genrl.checkpoint`)
     :param overwrite: replace a run already in ``out_dir`` (its files only) instead of refusing or resuming it
     :param n_threads: simulation threads of the batched fast path (default: all cores)
+    :param demonstrations: the dataset of the settings' :class:`~sb3_genrl.genrl.demonstrations.DemonstrationCallback`
+        (settings that learn from demonstrations, such as the Fetch tasks' entries, need it; others refuse it); its
+        fingerprint is part of the run's recorded settings
+    :param callback: the run's callbacks in rl-zoo3's form (a task's entry's ``callback``, which
+        :func:`~sb3_genrl.study.quickstart.task_settings` puts among the settings; see
+        :func:`~sb3_genrl.genrl.demonstrations.build_callbacks`), built and checked before any work
     :param genrl_kwargs: further :class:`~sb3_genrl.GenRL` arguments
     :return: paths of the outputs and a summary (``episodes``, ``iterations``, ``final_mean_reward``,
         ``best_mean_reward``, ``genrl_settings``: every GenRL hyperparameter in effect, see :func:`genrl_settings`)
@@ -119,6 +128,7 @@ def train_policy(task: str, generator: TrajectoryGenerator | str, *, episodes: i
     _check_arguments(episodes, batch_episodes, n_envs, seed, device, checkpoint_every, n_threads,
                      {"e_step": e_step, **genrl_kwargs})
     out = check_output_dir(out_dir)
+    callbacks = build_callbacks(callback, demonstrations=demonstrations, what=f"the settings of {task_name}", task=task)
     # Built first: a generator that does not fit the task is refused before anything is written.
     env = LatentActionWrapper(gym.make(env_id), _as_generator(generator))
     batch_size = min(batch_episodes, genrl_kwargs.pop("batch_size", 64))
@@ -126,7 +136,15 @@ def train_policy(task: str, generator: TrajectoryGenerator | str, *, episodes: i
                  "device": device, "verbose": verbose, **genrl_kwargs}
     identity = {"algorithm": "genrl", "task": task_name, "episodes": int(episodes), "seed": seed, "n_envs": n_envs,
                 "batch_episodes": batch_episodes, "generator_sha256": generator_digest(env.generator),
-                "genrl_settings": genrl_settings(arguments)}
+                "genrl_settings": genrl_settings(arguments), **_callback_identity(callback, callbacks, env, arguments)}
+    return _open_and_run(env, generator, out, identity, arguments, checkpoint_every, progress_bar, env_id, n_threads,
+                         callbacks, overwrite)
+
+
+def _open_and_run(env: LatentActionWrapper, generator: TrajectoryGenerator | str, out: pathlib.Path,
+                  identity: dict[str, Any], arguments: dict[str, Any], checkpoint_every: int | None, progress_bar: bool,
+                  env_id: str, n_threads: int | None, callbacks: list[Any], overwrite: bool) -> dict[str, Any]:
+    """:func:`_run` in ``out``, locked, unless ``out`` holds another run (refused) or this one finished (its summary)."""
     with folder_lock(out):  # one run at a time in out; another run's files are refused, never mixed in
         try:
             finished = open_run(out, identity, OUTPUTS, overwrite=overwrite)
@@ -136,19 +154,44 @@ def train_policy(task: str, generator: TrajectoryGenerator | str, *, episodes: i
         if finished is not None:  # this very run, finished: nothing to do
             env.close()
             return finished
-        return _run(env, generator, out, identity, arguments, checkpoint_every, progress_bar, env_id, n_threads)
+        return _run(env, generator, out, identity, arguments, checkpoint_every, progress_bar, env_id, n_threads,
+                    callbacks)
+
+
+def _callback_identity(callback: Any, callbacks: list[Any], env: LatentActionWrapper,
+                       arguments: dict[str, Any]) -> dict[str, Any]:
+    """What the run's callbacks add to its recorded settings (nothing without any): their settings and the
+    fingerprints of their demonstrations, which are checked against the env and the settings first (``env`` is closed
+    when they are refused)."""
+    if callback is None:
+        return {}
+    from sb3_genrl.study.state import dataset_fingerprint
+
+    settings = genrl_settings(arguments)
+    datasets = []
+    for demonstrations in (item for item in callbacks if isinstance(item, DemonstrationCallback)):
+        try:
+            demonstrations.check(env.generator, env.observation_space, settings["latent_clip"],
+                                 settings.get("hindsight_kwargs") is not None)
+        except ValueError:
+            env.close()
+            raise
+        datasets.append(dataset_fingerprint(demonstrations.dataset))
+    return {"callback": _json_value([{path: {key: value for key, value in kwargs.items() if key != "dataset"}}
+                                     for path, kwargs in callback_entries(callback)]), "demonstrations": datasets}
 
 
 def _run(env: LatentActionWrapper, generator: TrajectoryGenerator | str, out: pathlib.Path, identity: dict[str, Any],
          arguments: dict[str, Any], checkpoint_every: int | None, progress_bar: bool, env_id: str,
-         n_threads: int | None = None) -> dict[str, Any]:
-    """Train the run ``identity`` in ``out`` (from its checkpoint when it has one); its summary, written last."""
+         n_threads: int | None = None, callbacks: list[Any] | None = None) -> dict[str, Any]:
+    """Train the run ``identity`` in ``out`` (from its checkpoint when it has one) with ``callbacks``; its summary,
+    written last."""
     state = resume_state(out / CHECKPOINT_DIR, identity)  # this unfinished run's checkpoint, if any
     if state is not None:
         keep_episodes(out, state["episodes"])
     checkpointing = None if checkpoint_every is None else (int(checkpoint_every), identity)
     model = _train(_training_env(env, identity["n_envs"], out, append=state is not None, n_threads=n_threads), generator,
-                   identity["episodes"], out, progress_bar, arguments, state, checkpointing)
+                   identity["episodes"], out, progress_bar, arguments, state, checkpointing, callbacks or [])
     curve = write_learning_curve(out / MONITOR_FILE, out, window=identity["batch_episodes"],
                                  title=f"GenRL on {env_id} (seed {identity['seed']})")
     result = {key: identity[key] for key in ("algorithm", "task", "seed", "n_envs")} | _output_paths(out) | {
@@ -168,9 +211,10 @@ OUTPUTS = ("genrl_policy.zip", "genrl_policy.generator.pt", "learning_curve.csv"
 
 
 def _train(env: Any, generator: TrajectoryGenerator | str, episodes: int, out: pathlib.Path, progress_bar: bool,
-           genrl_kwargs: dict[str, Any], state: dict[str, Any] | None, checkpointing: tuple[int, dict] | None) -> GenRL:
-    """Train GenRL on ``env`` with SB3's logger in ``out``, from the checkpoint ``state`` (``None``: from the start),
-    checkpointing every ``checkpointing[0]`` episodes; save it there, and close ``env``."""
+           genrl_kwargs: dict[str, Any], state: dict[str, Any] | None, checkpointing: tuple[int, dict] | None,
+           callbacks: list[Any]) -> GenRL:
+    """Train GenRL on ``env`` with SB3's logger in ``out`` and ``callbacks``, from the checkpoint ``state`` (``None``:
+    from the start), checkpointing every ``checkpointing[0]`` episodes; save it there, and close ``env``."""
     try:
         logger = training_logger(out, genrl_kwargs["verbose"])
         if state is None:
@@ -178,9 +222,10 @@ def _train(env: Any, generator: TrajectoryGenerator | str, episodes: int, out: p
             model.set_logger(logger)
         else:
             model = resume_genrl(state, env, generator, genrl_kwargs["device"], logger)
-        callback = None if checkpointing is None else GenRLCheckpoint(out / CHECKPOINT_DIR, *checkpointing, state)
+        if checkpointing is not None:  # after the others: a checkpoint saves what they set at the same call
+            callbacks = [*callbacks, GenRLCheckpoint(out / CHECKPOINT_DIR, *checkpointing, state)]
         model.learn(total_timesteps=episodes - model.num_timesteps, progress_bar=progress_bar, tb_log_name="GenRL",
-                    reset_num_timesteps=state is None, callback=callback)
+                    reset_num_timesteps=state is None, callback=CallbackList(callbacks) if callbacks else None)
         model.logger.dump(model.num_timesteps)  # SB3 dumps before each update: this writes the last one's logs
         model.logger.close()
         model.save(out / "genrl_policy.zip")
@@ -208,6 +253,9 @@ genrl_kwargs_override_argument = genrl_kwargs_argument
 
 def make_genrl(env: Any, generator: TrajectoryGenerator | str | None = None, **genrl_kwargs: Any) -> GenRL:
     """``GenRL`` with settings that may name the policy (``"policy"``, as a task's ``genrl_kwargs`` may)."""
+    if "callback" in genrl_kwargs:  # a task's entry that names callbacks (task_settings puts them among its settings)
+        raise ValueError("callback is not a GenRL setting but learn()'s: build the callbacks with "
+                         "sb3_genrl.genrl.demonstrations.build_callbacks and give them to learn(callback=...)")
     policy = genrl_kwargs.pop("policy", "MlpPolicy")
     return GenRL(policy, env, generator, **genrl_kwargs)
 
@@ -308,7 +356,8 @@ def genrl_settings(genrl_kwargs: dict[str, Any] | None = None) -> dict[str, Any]
     """Every GenRL hyperparameter in effect with ``genrl_kwargs``: GenRL's defaults, updated with them (those a JSON
     file can hold). Recorded by the runs and the stages that train GenRL, so that a change of a default is seen when
     a stage is resumed, not silently mixed with results made under the old one. The policy is named only when it is
-    not the default ``"MlpPolicy"`` (the records of runs with the default policy do not name it)."""
+    not the default ``"MlpPolicy"`` (the records of runs with the default policy do not name it). A task entry's
+    ``callback`` is not a GenRL setting and is left out."""
     import inspect
 
     defaults = {name: parameter.default for name, parameter in inspect.signature(GenRL.__init__).parameters.items()
@@ -317,7 +366,7 @@ def genrl_settings(genrl_kwargs: dict[str, Any] | None = None) -> dict[str, Any]
     policy = settings.pop("policy", "MlpPolicy")
     if policy not in ("MlpPolicy", MlpPolicy):
         settings["policy"] = policy if isinstance(policy, str) else f"{policy.__module__}.{policy.__qualname__}"
-    return _json_settings({name: value for name, value in settings.items() if name not in NOT_SETTINGS})
+    return _json_settings({name: value for name, value in settings.items() if name not in (*NOT_SETTINGS, "callback")})
 
 
 def _output_paths(out: pathlib.Path) -> dict[str, str]:

@@ -166,6 +166,7 @@ def _run_stages(out: pathlib.Path, settings: dict[str, dict[str, Any]], device: 
     from sb3_genrl.envs.demonstrations import make_demonstrations
     from sb3_genrl.generative import train_generator
     from sb3_genrl.genrl import train_policy
+    from sb3_genrl.genrl.demonstrations import uses_demonstrations
     from sb3_genrl.metrics import evaluate_generators
 
     dataset, model_path, policy = out / "demonstrations", out / "vae.pt", out / "policy"
@@ -199,10 +200,13 @@ def _run_stages(out: pathlib.Path, settings: dict[str, dict[str, Any]], device: 
     stage("evaluation", made_from, lambda: evaluate_generators(
         {generator["preset"]: model_path}, dataset, n=evaluation["n"], k=evaluation["k"], dwpr_n=evaluation["dwpr_n"],
         interventions=evaluation["interventions"], seed=evaluation["seed"], out_dir=out / "evaluation", device=device))
-    stage("policy", {"generator": made_from["generator"]}, lambda: train_policy(
+    policy_made_from, demonstrations = {"generator": made_from["generator"]}, None
+    if uses_demonstrations(policy_stage["genrl_kwargs"].get("callback")):  # (the Fetch tasks') the generator's own
+        policy_made_from["dataset"], demonstrations = made_from["dataset"], dataset
+    stage("policy", policy_made_from, lambda: train_policy(
         policy_stage["task"], str(model_path), episodes=policy_stage["episodes"],
         batch_episodes=policy_stage["batch_episodes"], n_envs=policy_stage["n_envs"], seed=policy_stage["seed"],
-        out_dir=policy, device=device,
+        out_dir=policy, device=device, demonstrations=demonstrations,
         progress_bar=progress_bar, **policy_stage["genrl_kwargs"]))
     if "video" in settings:
         from sb3_genrl.video import record_video
@@ -283,7 +287,8 @@ def task_settings(task: str) -> tuple[int, int, dict[str, Any]]:
 
     :param task: a task name from :data:`sb3_genrl.envs.TASKS` or its Gymnasium id
     :return: ``(episodes, batch_episodes, genrl_kwargs)``: the budget of episodes, the episodes per EM iteration and
-        the further GenRL arguments (``policy`` among them)
+        the further GenRL arguments (``policy`` among them, and the entry's ``callback`` where it has one, which
+        :func:`~sb3_genrl.genrl.train_policy` takes: the Fetch tasks' learning from demonstrations)
     """
     from sb3_genrl.envs import get_task
     from sb3_genrl.hyperparams import known_env_ids, load_genrl_settings

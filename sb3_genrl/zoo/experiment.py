@@ -4,7 +4,9 @@ Three things differ from rl-zoo3's own manager, for ``--algo genrl`` only:
 
 - the env wrapper's generator is resolved before any env is made (the task's quickstart generator is made into the
   cache when missing, :mod:`sb3_genrl.zoo.generators`), and the run's ``config.yml`` records its file and content
-  digest, so that ``enjoy`` and ``record_video`` play the policy with the generator it was trained with;
+  digest, so that ``enjoy`` and ``record_video`` play the policy with the generator it was trained with; a
+  :class:`~sb3_genrl.genrl.demonstrations.DemonstrationCallback` without a dataset (the Fetch tasks' entries) gets the
+  demonstrations that generator was trained on, recorded in ``config.yml`` with their fingerprint;
 - every evaluation env (``EvalCallback`` while training, the trials' evaluations with ``-optimize``) draws its goals
   from :data:`~sb3_genrl.hyperparams.TUNING_GOAL_SEED` afresh at each evaluation, the same goals each time and never
   the held-out ones (:data:`~sb3_genrl.hyperparams.EVAL_GOAL_SEED`);
@@ -54,6 +56,9 @@ class GenRLExperimentManager(ExperimentManager):
         if self.algo == "genrl":
             wrapper = resolved_wrapper(hyperparams.get("env_wrapper"), self.env_name.gym_id, self.device)
             hyperparams["env_wrapper"] = saved["env_wrapper"] = wrapper
+            if hyperparams.get("callback") is not None:
+                callback = resolved_callback(hyperparams["callback"], wrapper, self.env_name.gym_id)
+                hyperparams["callback"] = saved["callback"] = callback
         return hyperparams, saved
 
     def create_envs(self, n_envs: int, eval_env: bool = False, no_log: bool = False) -> VecEnv:
@@ -114,3 +119,26 @@ def resolved_wrapper(env_wrapper: Any, env_id: str, device: Any = "auto") -> Any
     if WRAPPER not in [next(iter(w)) if isinstance(w, dict) else w for w in resolved]:
         raise ValueError(f"--algo genrl needs the env wrapper {WRAPPER} in the settings of {env_id} (env_wrapper)")
     return resolved
+
+
+def resolved_callback(callback: Any, wrapper: list[Any], env_id: str) -> list[dict[str, Any]]:
+    """The entry's ``callback`` with the dataset of a :class:`~sb3_genrl.genrl.demonstrations.DemonstrationCallback`
+    that names none filled in: the cached quickstart demonstrations that the wrapper's generator (the cached one) was
+    trained on, with their fingerprint; another generator needs the callback's dataset given."""
+    from sb3_genrl.genrl.demonstrations import DEMONSTRATION_CALLBACK, callback_entries, with_dataset
+    from sb3_genrl.study.state import dataset_fingerprint
+    from sb3_genrl.zoo.generators import default_demonstrations, default_generator
+
+    entries = callback_entries(callback, f"{env_id}: callback")
+    if not any(path == DEMONSTRATION_CALLBACK and kwargs.get("dataset") is None for path, kwargs in entries):
+        return [{path: kwargs} for path, kwargs in entries]
+    generator = next(item[WRAPPER]["generator"] for item in wrapper if isinstance(item, dict) and WRAPPER in item)
+    if generator != str(default_generator(env_id).resolve()):
+        raise ValueError(f"{env_id}: the settings learn from demonstrations ({DEMONSTRATION_CALLBACK}) and the "
+                         f"generator {generator} is not the cached one, whose demonstrations are known: give the "
+                         f"generator's dataset, -params \"callback:[{{'{DEMONSTRATION_CALLBACK}': {{'dataset': 'DIR'}}}}]\"")
+    dataset = default_demonstrations(env_id)
+    if not (dataset.is_dir() and any(dataset.iterdir())):
+        raise FileNotFoundError(f"{env_id}: the cached generator's demonstrations {dataset} are missing: remove "
+                                f"{dataset.parent} to make both again")
+    return with_dataset(callback, str(dataset.resolve()), dataset_fingerprint(dataset))

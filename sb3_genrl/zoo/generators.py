@@ -32,6 +32,11 @@ def default_generator(task: str) -> pathlib.Path:
     return cache_folder() / "generators" / get_task(task).name / "vae.pt"
 
 
+def default_demonstrations(task: str) -> pathlib.Path:
+    """The demonstrations the task's cached generator (:func:`default_generator`) was trained on."""
+    return default_generator(task).parent / "demonstrations"
+
+
 def generator_settings(task: str) -> dict[str, object]:
     """What the cached generator of ``task`` is made with (recorded beside it)."""
     import sb3_genrl
@@ -63,7 +68,7 @@ def build_default_generator(task: str, *, device: str = "auto", progress_bar: bo
         check_and_record(folder / "stage.json", settings, output_exists=path.exists(), folder=folder)
         if path.exists():
             return path
-        dataset = folder / "demonstrations"
+        dataset = default_demonstrations(task)
         if not (dataset.is_dir() and any(dataset.iterdir())):
             log(f"{settings['task']}: no generator in {folder} yet; making the quickstart's: {DEMO_EPISODES} "
                 "demonstrations")
