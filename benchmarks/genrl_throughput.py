@@ -10,12 +10,17 @@ cores: the episodes GenRL played (a sample of them) and the scripted ones of ``b
 played in one ``play_trajectories`` call on every core (best of ``--repeats``). Writes JSON with the load average.
 
     python benchmarks/genrl_throughput.py --generator hockey=quickstart/vae.pt --generator basketball=qs_b/vae.pt
+
+With ``--update``, the runs measured replace those of the same task and ``n_envs`` in ``--out`` and the others are
+kept, each run with the command and the load average of its own invocation: a benchmark too long for one quiet
+window on a shared machine is measured in parts (``--generator basketball=... --n-envs N --update``).
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import json
 import os
 import platform
 import tempfile
@@ -120,6 +125,17 @@ def measure_task(task: str, generator_path: str, args: argparse.Namespace, work:
     return rows
 
 
+def updated_runs(path: str, rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """``rows``, and the runs in the JSON at ``path`` (if any) of the tasks and ``n_envs`` not among them; in the order
+    of :data:`EPISODES`' tasks, then of ``n_envs``."""
+    measured = {(row["task"], row["n_envs"]) for row in rows}
+    kept = []
+    if os.path.exists(path):
+        with open(path) as file:
+            kept = [row for row in json.load(file)["runs"] if (row["task"], row["n_envs"]) not in measured]
+    return sorted(kept + rows, key=lambda row: (list(EPISODES).index(row["task"]), row["n_envs"]))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--generator", action="append", required=True, metavar="TASK=PATH",
@@ -130,6 +146,7 @@ def main() -> None:
     parser.add_argument("--bound-episodes", type=COUNT, default=256)
     parser.add_argument("--repeats", type=COUNT, default=2)
     parser.add_argument("--out", type=JSON_OUT, default="benchmarks/results/genrl_throughput.json")
+    parser.add_argument("--update", action="store_true", help="keep --out's runs of other tasks and n_envs")
     args = parser.parse_args()
     generators = dict(item.split("=", 1) if "=" in item else (item, "") for item in args.generator)
     for task, path in generators.items():
@@ -137,17 +154,21 @@ def main() -> None:
             parser.error(f"--generator {task}=...: the tasks measured are {', '.join(EPISODES)}")
         check_input_path(path, "--generator")
     torch.set_num_threads(1)  # as the quickstart: the models are small, one thread is as fast
+    command = "python benchmarks/genrl_throughput.py " + " ".join(f"--generator {task}=..." for task in generators) + (
+        f" --n-envs {' '.join(args.n_envs)} --update" if args.update else "")
     load_before = os.getloadavg()
     with tempfile.TemporaryDirectory() as work:
         rows = [row for task, path in generators.items() for row in measure_task(task, path, args, work)]
+    for row in rows:
+        row.update(command=command, load_average_before=load_before, load_average_after=os.getloadavg())
+    rows = updated_runs(args.out, rows) if args.update else rows
     header = ("task", "n_envs", "episodes/s", "bound", "share", "simulation", "decoding", "updates", "other")
     print(markdown_table(header, [[r["task"], r["n_envs"], f"{r['episodes_per_second']:.1f}", f"{r['open_loop_bound']:.1f}",
                                    f"{r['share_of_bound']:.2f}", *(f"{r[f'{k}_share']:.0%}" for k in (
                                        "simulation", "decoding", "updates", "other"))] for r in rows]))
-    atomic_write_json(args.out, {"command": "python benchmarks/genrl_throughput.py " + " ".join(
-        f"--generator {task}=..." for task in generators), "machine": platform.processor() or platform.machine(),
-        "cores": default_threads(), "load_average_before": load_before, "load_average_after": os.getloadavg(),
-        "runs": rows})
+    atomic_write_json(args.out, {"command": command, "machine": platform.processor() or platform.machine(),
+                                 "cores": default_threads(), "load_average_before": load_before,
+                                 "load_average_after": os.getloadavg(), "runs": rows})
     print(f"wrote {args.out}")
 
 
