@@ -79,8 +79,8 @@ class GenRL(OnPolicyAlgorithm):
     :param e_step_learning_rate: Adam learning rate of the KL-penalty E-step (default 3e-3)
     :param normalize_advantage: standardise a batch's advantages before the E-step (default True)
     :param max_log_std_change: the most the log standard deviation may change per iteration, in each latent
-        dimension and, with ``ContextStdPolicy``, for every context (default None: only ``target_kl`` bounds it; see
-        :func:`~sb3_genrl.genrl.policies.limit_log_std_change`)
+        dimension and, with ``ContextStdPolicy``, for every context (default None: only ``target_kl`` bounds it; 0: the
+        spread stays at ``log_std_init``; see :func:`~sb3_genrl.genrl.policies.limit_log_std_change`)
     :param value_history: batches the value function is fitted on: the current one and those before it (default 1)
     :param policy_averaging: decay of a moving average of the policy's weights, with which ``predict`` acts
         (default None: none; see :mod:`sb3_genrl.genrl.averaging`)

@@ -56,8 +56,9 @@ def _check_values(*, e_step: str, n_em_iterations: int, value_history: int, batc
     for key, value in (("n_em_iterations", n_em_iterations), ("value_history", value_history), ("batch_size", batch_size)):
         if isinstance(value, bool) or int(value) != value or value < 1:
             raise ValueError(f"{key} must be a positive integer, got {value!r}")
-    if max_log_std_change is not None and not max_log_std_change > 0:
-        raise ValueError(f"max_log_std_change must be positive or None, got {max_log_std_change!r}")
+    if max_log_std_change is not None and not max_log_std_change >= 0:
+        raise ValueError(f"max_log_std_change must be >= 0 (0: the spread stays as it starts) or None, got "
+                         f"{max_log_std_change!r}")
     if policy_averaging is not None and not 0 < policy_averaging < 1:
         raise ValueError(f"policy_averaging must be between 0 and 1 (exclusive) or None, got {policy_averaging!r}")
     if hindsight_kwargs is None:

@@ -48,7 +48,7 @@ class _LogStdRecorder(Recorder):
 @pytest.mark.parametrize("e_step", ["trpo", "kl_penalty"])
 def test_spread_moves_at_most_max_log_std_change_per_iteration(e_step):
     changes = {}
-    for bound in (None, 0.01):
+    for bound in (None, 0.01, 0.0):
         recorder = _LogStdRecorder()
         GenRL(FastReachEnv(), LinearGenerator(), e_step=e_step, seed=0, n_steps=32,
               max_log_std_change=bound).learn(8 * 32, callback=recorder)
@@ -57,8 +57,10 @@ def test_spread_moves_at_most_max_log_std_change_per_iteration(e_step):
     assert changes[None].max() > 0.02  # unbounded, the spread moves faster than the bound allows
     assert changes[0.01].max() <= 0.01 + 1e-6
     assert changes[0.01].min() >= 0.01 - 1e-6  # and here the spread shrinks as fast as the bound lets it
-    with pytest.raises(ValueError, match="max_log_std_change must be positive or None, got 0"):
-        GenRL(FastReachEnv(), LinearGenerator(), max_log_std_change=0)
+    assert changes[0.0].max() == 0.0  # 0: the spread stays at log_std_init
+    with pytest.raises(ValueError, match=r"max_log_std_change must be >= 0 \(0: the spread stays as it starts\) or "
+                                         r"None, got -0.1"):
+        GenRL(FastReachEnv(), LinearGenerator(), max_log_std_change=-0.1)
 
 
 def test_limit_log_std_change_is_the_largest_change_over_the_box_by_brute_force():
