@@ -76,8 +76,8 @@ class FlatAdam:
         if len(groups) != 1 or not ids <= {id(p) for p in groups[0]["params"]}:
             return None
         group = groups[0]
-        if (group["weight_decay"] or group["amsgrad"] or group["maximize"] or group["capturable"] or group["fused"]
-                or group["differentiable"] or isinstance(group["lr"], th.Tensor)
+        if (any(group.get(key) for key in ("weight_decay", "amsgrad", "maximize", "capturable", "fused", "differentiable"))
+                or isinstance(group["lr"], th.Tensor)
                 or any(isinstance(beta, th.Tensor) for beta in group["betas"])):
             return None
         states = [optimizer.state.get(parameter, {}) for parameter in parameters]
