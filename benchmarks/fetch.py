@@ -10,12 +10,13 @@ after a stop resumes where it stopped (a run's settings are recorded and checked
 3. the generator's own limit: ``--limit-states`` held-out initial states x ``--prior-draws`` draws from its prior
    (100 x 100 = 10^4 by default), the share of states that some draw solves (and the best of 1 and 10 draws),
    measured after the first seed of stage 4;
-4. GenRL with the task's entry in ``hyperparams/genrl.yml``, one run per seed, its policy's mean first fitted to the
-   demonstrations' latent codes (``--demo-init-steps``, 0: not; ``fetch_seed.fit_mean_to_demonstrations``): at
-   episode 0, every ``--eval-every`` episodes (at the start of an iteration, after its update) and at the end, the
-   deterministic policy plays ``--eval-states`` held-out initial states (reset seeds from
-   :data:`~sb3_genrl.hyperparams.EVAL_GOAL_SEED`, never used in tuning); the curve is against episodes and
-   environment steps (50 per episode). Each seed checkpoints at every evaluation
+4. GenRL with the task's entry in ``hyperparams/genrl.yml``, one run per seed, learning from the demonstrations as the
+   entry's callback says (:class:`~sb3_genrl.genrl.demonstrations.DemonstrationCallback`: the policy's mean first
+   fitted to their latent codes, and the demonstrations kept among the hindsight pulls; ``--no-demonstrations``: the
+   entry without it, for the comparison): at episode 0 (after the fit), every ``--eval-every`` episodes (at the
+   start of an iteration, after its update) and at the end, the deterministic policy plays ``--eval-states``
+   held-out initial states (reset seeds from :data:`~sb3_genrl.hyperparams.EVAL_GOAL_SEED`, never used in tuning);
+   the curve is against episodes and environment steps (50 per episode). Each seed checkpoints at every evaluation
    (:mod:`sb3_genrl.genrl.checkpoint`) and resumes from it.
 
 The JSON (default ``benchmarks/results/fetch_TASK.json``) says ``"complete": false`` and how far each seed got until
@@ -73,12 +74,9 @@ def arguments(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--threads", type=COUNT, default=1, help="worker processes playing episodes (default 1)")
     parser.add_argument("--work", default=None, help="folder of the stages' files (default: runs/fetch/TASK)")
     parser.add_argument("--out", type=JSON_OUT, default=None, help="JSON output (default: results/fetch_TASK.json)")
-    parser.add_argument("--demo-init-steps", type=int, default=4000,
-                        help="Adam steps fitting the policy's mean to the demonstrations' latent codes before GenRL "
-                             "(0: none; default 4000)")
-    parser.add_argument("--demo-memory", action="store_true",
-                        help="keep the demonstrations in GenRL's hindsight memory for the whole run "
-                             "(fetch_seed.DemonstrationMemory)")
+    parser.add_argument("--no-demonstrations", action="store_true",
+                        help="GenRL without the entry's learning from demonstrations (its callback "
+                             "sb3_genrl.genrl.demonstrations.DemonstrationCallback), for the comparison")
     parser.add_argument("--overwrite", action="store_true", help="start again instead of resuming --out")
     parser.add_argument("--new-runs", action="store_true",
                         help="keep --out's demonstrations, generator and its measures, and start its GenRL runs again "
@@ -86,11 +84,10 @@ def arguments(argv: list[str] | None = None) -> argparse.Namespace:
     args = parser.parse_args(argv)
     args.out = args.out or os.path.join(RESULTS, f"fetch_{args.task}.json")
     args.work = os.path.abspath(args.work or os.path.join(ROOT, "runs", "fetch", args.task))
-    args.dataset = args.data or os.path.join(args.work, "demonstrations")  # the warm start's demonstrations
-    if args.demo_init_steps < 0:
-        parser.error("--demo-init-steps must be >= 0")
-    if (args.demo_init_steps or args.demo_memory) and args.generator is not None and args.data is None:
-        parser.error("--demo-init-steps needs the demonstrations: give --data with --generator (or --demo-init-steps 0)")
+    args.dataset = args.data or os.path.join(args.work, "demonstrations")  # the demonstrations GenRL learns from
+    if not args.no_demonstrations and args.generator is not None and args.data is None:
+        parser.error("the task's settings learn from demonstrations: give the generator's dataset as --data with "
+                     "--generator (or --no-demonstrations)")
     episodes, batch_episodes, _ = task_settings(args.task)
     args.episodes = args.episodes or episodes
     args.eval_every = args.eval_every or max(batch_episodes, round(args.episodes / 6 / batch_episodes) * batch_episodes)
@@ -109,11 +106,11 @@ def settings_of(args: argparse.Namespace) -> dict[str, object]:
             "generator": "trained" if args.generator is None else os.path.abspath(args.generator),
             "preset": quickstart_preset(args.task), "epochs": args.epochs, "recon_demos": args.recon_demos,
             "limit_states": args.limit_states, "prior_draws": args.prior_draws,
-            "demo_init_steps": args.demo_init_steps, "demo_memory": args.demo_memory}
+            "demonstration_callback": None if args.no_demonstrations else genrl_kwargs.get("callback")}
 
 
-RUN_SETTINGS = ("episodes", "batch_episodes", "genrl_settings", "seeds", "eval_every", "eval_states", "demo_init_steps",
-                "demo_memory")
+RUN_SETTINGS = ("episodes", "batch_episodes", "genrl_settings", "seeds", "eval_every", "eval_states",
+                "demonstration_callback")
 
 
 def start(args: argparse.Namespace) -> dict[str, object]:

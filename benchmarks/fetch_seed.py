@@ -25,10 +25,12 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from sb3_genrl.curves import monitor_episodes, training_logger
 from sb3_genrl.generative import load
 from sb3_genrl.genrl.checkpoint import GenRLCheckpoint, RandomStateRecorder, resume_genrl, resume_state
+from sb3_genrl.genrl.demonstrations import DemonstrationCallback, build_callbacks
 from sb3_genrl.genrl.generator_files import generator_digest
 from sb3_genrl.genrl.train import genrl_settings, make_genrl
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED
 from sb3_genrl.study.quickstart import task_settings
+from sb3_genrl.study.state import dataset_fingerprint
 from sb3_genrl.wrappers import LatentActionWrapper
 
 CURVE = ("curve_episodes", "curve_env_steps", "curve_success")
@@ -36,14 +38,23 @@ CURVE = ("curve_episodes", "curve_env_steps", "curve_success")
 
 class SuccessCurve(BaseCallback):
     """Every ``every`` episodes, at the start of an iteration (after the update): the deterministic policy's success
-    rate on ``states`` held-out initial states, appended to ``row`` and written."""
+    rate on ``states`` held-out initial states, appended to ``row`` and written; with ``demonstrations`` (the run's
+    :class:`~sb3_genrl.genrl.demonstrations.DemonstrationCallback`, before this one), also at the start of a fresh run,
+    after the policy's mean was fitted to them (the fit's losses as ``row["demo_init"]``)."""
 
-    def __init__(self, task: str, every: int, states: int, row: dict, write: Callable[[], None]) -> None:
+    def __init__(self, task: str, every: int, states: int, row: dict, write: Callable[[], None],
+                 demonstrations: DemonstrationCallback | None = None) -> None:
         super().__init__()
         self.task, self.every, self.states, self.row, self.write = task, every, states, row, write
+        self.demonstrations = demonstrations
 
     def _on_step(self) -> bool:
         return True
+
+    def _on_training_start(self) -> None:
+        if self.demonstrations is not None and self.demonstrations.fit:  # fitted at this fresh start
+            self.row["demo_init"] = dict(self.demonstrations.fit)
+            self.evaluate()  # the policy before its first episode
 
     def _on_rollout_start(self) -> None:
         episodes = int(self.num_timesteps)
@@ -65,68 +76,20 @@ class SuccessCurve(BaseCallback):
         print(f"  seed {self.row['seed']}, {episodes} episodes: success {result['success_rate']:.3f}", flush=True)
 
 
-def fit_mean_to_demonstrations(model: Any, generator: Any, dataset: str, steps: int) -> dict[str, float]:
-    """Start GenRL's policy from the demonstrations: fit its mean, by ``steps`` Adam steps (learning rate 1e-3,
-    minibatches of 256) of the regression that GenRL's hindsight component uses, to each demonstration's posterior
-    mean at its context (its reset observation with the goal it reached, as the dataset stores it at step 0: the
-    context its hindsight relabelling would give), the latent codes clipped to GenRL's ``latent_clip``."""
-    import numpy as np
-    import torch as th
-
-    from sb3_genrl.data import load_arrays
-    from sb3_genrl.genrl.regression import mean_parameters, regress_mean
-
-    arrays = load_arrays(dataset)
-    contexts = th.as_tensor(arrays["observations"][:, 0], dtype=th.float32)
-    latents = np.clip(generator.encode(arrays["actions"])[0], -model.latent_clip, model.latent_clip)
-    optimizer = th.optim.Adam(mean_parameters(model.policy), lr=1e-3)
-    losses = regress_mean(model.policy, optimizer, contexts, th.as_tensor(latents), steps=steps, batch_size=256)
-    return {"demonstrations": len(latents), "steps": steps, "first_loss": float(losses[0]),
-            "last_loss": float(np.mean(losses[-100:]))}
-
-
-class DemonstrationMemory(BaseCallback):
-    """Keep the demonstrations in GenRL's hindsight memory for the whole run, as one batch of relabelled pulls
-    (context, posterior mean, reward 0: each reached the goal of its context) that the E-step and the regression of
-    the mean use as they use the kept pulls: at the start of every iteration the batch is put back as the newest, so
-    it never ages out of the last ``history`` batches (as the demonstrations stay in SAC+HER's buffer)."""
-
-    def __init__(self, generator: Any, dataset: str, latent_clip: float) -> None:
-        super().__init__()
-        import numpy as np
-        import torch as th
-
-        from sb3_genrl.data import load_arrays
-
-        arrays = load_arrays(dataset)
-        latents = np.clip(generator.encode(arrays["actions"])[0], -latent_clip, latent_clip)
-        self.batch = (th.as_tensor(arrays["observations"][:, 0], dtype=th.float32), th.as_tensor(latents),
-                      th.zeros(len(latents)))
-
-    def _on_step(self) -> bool:
-        return True
-
-    def _on_rollout_start(self) -> None:
-        import torch as th
-
-        memory, contexts = self.model.hindsight.memory, self.batch[0]
-        kept = [entry for entry in memory  # (a resumed run's memory holds the checkpoint's copy of the batch)
-                if not (entry[0].shape == contexts.shape and th.equal(entry[0], contexts))]
-        memory.clear()
-        memory.extend(kept[-(memory.maxlen - 1):] if memory.maxlen > 1 else [])
-        memory.append(self.batch)
-
-
 def train_seed(task: str, generator_path: str, seed: int, args: argparse.Namespace, row: dict,
                write: Callable[[], None]) -> None:
     """Train (or resume) GenRL with one seed to ``args.episodes``, evaluating on the way and at the end (into ``row``)."""
     _, batch_episodes, genrl_kwargs = task_settings(task)
+    callback = None if args.no_demonstrations else genrl_kwargs.get("callback")
+    genrl_kwargs.pop("callback", None)
+    demonstrations = build_callbacks(callback, demonstrations=args.dataset if callback else None,
+                                     what=f"the entry of {task} in hyperparams/genrl.yml", task=task)
     folder = pathlib.Path(args.work) / f"seed_{seed}"
     generator = load(generator_path, device="cpu")
     identity = {"algorithm": "genrl", "task": task, "episodes": int(args.episodes), "seed": seed,
                 "batch_episodes": batch_episodes, "generator_sha256": generator_digest(generator),
-                "genrl_settings": genrl_settings(genrl_kwargs), "demo_init_steps": args.demo_init_steps,
-                "demo_memory": args.demo_memory}
+                "genrl_settings": genrl_settings(genrl_kwargs), "demonstration_callback": callback,
+                "demonstrations": [dataset_fingerprint(item.dataset) for item in demonstrations]}
     state = resume_state(folder / "checkpoint", identity)
     if state is None:  # from the start: what an earlier unfinished try left is dropped
         shutil.rmtree(folder, ignore_errors=True)
@@ -139,19 +102,14 @@ def train_seed(task: str, generator_path: str, seed: int, args: argparse.Namespa
     env = monitor_episodes(RandomStateRecorder(LatentActionWrapper(gym.make(get_task(task).env_id), generator)),
                            folder, append=state is not None)
     logger = training_logger(folder)
-    curve = SuccessCurve(task, args.eval_every, args.eval_states, row, write)
+    curve = SuccessCurve(task, args.eval_every, args.eval_states, row, write, *demonstrations[:1])
     if state is None:
         model = make_genrl(env, generator, seed=seed, device="cpu", n_steps=batch_episodes, **genrl_kwargs)
         model.set_logger(logger)
-        if args.demo_init_steps:
-            row["demo_init"] = fit_mean_to_demonstrations(model, generator, args.dataset, args.demo_init_steps)
-            curve.evaluate(model)  # the policy before its first episode
     else:
         model = resume_genrl(state, env, generator, "cpu", logger)
     checkpoint = GenRLCheckpoint(folder / "checkpoint", args.eval_every, identity, state)
-    callbacks = [curve, checkpoint]
-    if args.demo_memory:  # before the checkpoint's save in the same call: saved with the batch in place
-        callbacks.insert(1, DemonstrationMemory(generator, args.dataset, model.latent_clip))
+    callbacks = [*demonstrations, curve, checkpoint]  # the fit before the curve's first point, the kept pulls saved
     begin = time.perf_counter()
     model.learn(int(args.episodes) - model.num_timesteps, callback=CallbackList(callbacks),
                 reset_num_timesteps=state is None)

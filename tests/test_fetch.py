@@ -70,12 +70,12 @@ def test_the_scripted_experts_solve_random_initial_states_open_loop(task, least)
     assert expert_success(task, 10, seed=777)["success_rate"] >= least
 
 
-def test_demonstrations_generator_and_genrl_on_fetch_push(tmp_path):
+def test_demonstrations_generator_and_genrl_on_fetch_push(tmp_path, cli):
     from sb3_genrl.envs.demonstrations import make_demonstrations
 
     from sb3_genrl.data import dataset_info, load_arrays
     from sb3_genrl.generative import train_generator
-    from sb3_genrl.genrl import GenRL, train_policy
+    from sb3_genrl.genrl import GenRL
 
     dataset = make_demonstrations("fetch-push", 12, tmp_path / "demos", seed=3, n_threads=1, progress_bar=False)
     arrays = load_arrays(dataset)
@@ -100,18 +100,36 @@ def test_demonstrations_generator_and_genrl_on_fetch_push(tmp_path):
     assert np.all(episodes["rewards"][:, -1] == 0.0) and np.any(episodes["rewards"] == -1.0)
 
     generator = train_generator(dataset, preset="VAE-FETCH", epochs=2, seed=0, out=tmp_path / "vae.pt", progress_bar=False)
-    result = train_policy("fetch-push", generator, episodes=32, batch_episodes=16, out_dir=tmp_path / "policy",
-                          hindsight_kwargs={"history": 2, "regression_steps": 4}, device="cpu")
-    model = GenRL.load(result["model_path"], generator=generator, device="cpu")
-    # the benchmark's warm start: the mean fitted to each demonstration's posterior mean at its context
-    from sb3_genrl.benchmarks.fetch_seed import fit_mean_to_demonstrations
+    # the task's entry learns from demonstrations: refused without them, before any work, saying how to make them
+    policy = ["train-policy", "--task", "fetch-push", "--generator", tmp_path / "vae.pt", "--episodes", 32,
+              "--batch-episodes", 16, "--device", "cpu", "--no-progress-bar", "--out", tmp_path / "policy"]
+    code, _, err = cli(*policy)
+    assert code == 2 and "--data DIR" in err and "`genrl demos --task fetch-push --episodes 4000 --out DIR`" in err
+    assert not (tmp_path / "policy").exists()
+    small = {"hindsight_kwargs": {"history": 2, "regression_steps": 4},
+             "callback": [{"sb3_genrl.genrl.demonstrations.DemonstrationCallback": {"fit_steps": 300}}]}
+    code, _, err = cli(*policy, "--data", dataset, "--genrl-kwargs", json.dumps(small))
+    assert code == 0, err
+    from sb3_genrl.study.state import dataset_fingerprint
+
+    record = json.loads((tmp_path / "policy" / "run_record.json").read_text())
+    assert dataset_fingerprint(dataset) in json.dumps(record)  # the demonstrations are part of the run's identity
+    model = GenRL.load(tmp_path / "policy" / "genrl_policy.zip", generator=generator, device="cpu")
+    # the fit of the mean to each demonstration's posterior mean at its context
+    from sb3_genrl.genrl.demonstrations import DemonstrationCallback, fit_mean_to_demonstrations
 
     contexts = arrays["observations"][:, 0]
     latents = generator.encode(arrays["actions"])[0]
-    before = np.mean((model.predict(contexts, deterministic=True)[0] - latents) ** 2)
-    fitted = fit_mean_to_demonstrations(model, generator, dataset, steps=300)
-    after = np.mean((model.predict(contexts, deterministic=True)[0] - latents) ** 2)
-    assert fitted["demonstrations"] == 12 and after < 0.2 * before and fitted["last_loss"] < fitted["first_loss"]
+    fresh = GenRL(gym.make("FetchPush-v4"), generator, seed=0, device="cpu")
+
+    def error(genrl):
+        return np.mean((genrl.predict(contexts, deterministic=True)[0] - latents) ** 2)
+
+    before = error(fresh)
+    assert error(model) < 0.5 * before  # the run's own fit and kept demonstrations
+    pulls = DemonstrationCallback(dataset).pulls(generator, fresh.observation_space, fresh.latent_clip)
+    fitted = fit_mean_to_demonstrations(fresh.policy, *pulls, steps=300)
+    assert fitted["demonstrations"] == 12 and error(fresh) < 0.2 * before and fitted["last_loss"] < fitted["first_loss"]
     evaluation = get_task("fetch-push").evaluate(model, "fetch-push", episodes=3, seed=5)
     assert evaluation["success_rate"] == np.mean(evaluation["successes"]) and len(evaluation["distances"]) == 3
     assert all((d < 0.05) == s for d, s in zip(evaluation["distances"], evaluation["successes"], strict=True))
