@@ -172,3 +172,18 @@ def test_missing_or_unfitting_demonstrations_are_refused_before_any_work(fast_re
         build_callbacks([{DEMONSTRATION_CALLBACK: {"fit_step": 10}}], demonstrations=dataset)
     with pytest.raises(ValueError, match="fit_steps must be an integer >= 0"):
         build_callbacks([{DEMONSTRATION_CALLBACK: {"fit_steps": -1}}], demonstrations=dataset)
+
+
+def test_the_fetch_entries_name_the_callback_and_a_bad_one_is_refused():
+    from sb3_genrl.genrl.demonstrations import callback_entries, uses_demonstrations
+    from sb3_genrl.hyperparams import load_genrl_settings
+
+    for env_id in ("FetchReach-v4", "FetchPush-v4", "FetchPickAndPlace-v4", "FetchSlide-v4"):
+        callback = load_genrl_settings(env_id)[2]["callback"]
+        assert callback == [{DEMONSTRATION_CALLBACK: {"fit_steps": 4000, "keep": True}}] and uses_demonstrations(callback)
+    assert "callback" not in load_genrl_settings("GenRL/Hockey-v0")[2]
+    assert callback_entries(DEMONSTRATION_CALLBACK) == [(DEMONSTRATION_CALLBACK, {})]  # rl-zoo3's other forms
+    with pytest.raises(ValueError, match="expected a callback class path or"):
+        callback_entries([{"a": {}, "b": {}}])
+    with pytest.raises(ValueError, match="would not use the demonstrations"):
+        callback_entries([{DEMONSTRATION_CALLBACK: {"fit_steps": 0, "keep": False}}])
