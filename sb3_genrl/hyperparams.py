@@ -15,8 +15,8 @@ import pathlib
 from importlib import resources
 from typing import Any
 
-__all__ = ["EVAL_GOAL_SEED", "PRIOR_ROLLOUT_SEED", "TUNING_GOAL_SEED", "hyperparams_file", "known_algos", "known_env_ids",
-           "lay_over", "load_genrl_settings", "load_hyperparams", "parse_kwargs"]
+__all__ = ["EVAL_GOAL_SEED", "PRIOR_ROLLOUT_SEED", "TUNING_GOAL_SEED", "changed_settings", "hyperparams_file", "known_algos",
+           "known_env_ids", "lay_over", "load_genrl_settings", "load_hyperparams", "parse_kwargs"]
 
 EVAL_GOAL_SEED = 12345  # the held-out goals of every final evaluation (never used for tuning)
 TUNING_GOAL_SEED = 777  # the goals settings are chosen on (never used for evaluation)
@@ -110,6 +110,55 @@ def load_genrl_settings(env_id: str) -> tuple[int, int, dict[str, Any]]:
     if n_envs * n_steps < 2:
         raise ValueError(f"{name}: n_envs x n_steps, the episodes per iteration, must be at least 2")
     return episodes, n_envs * n_steps, check_genrl_settings(entry, name) | ({"callback": callback} if callback else {})
+
+
+# SB3's ActorCriticPolicy's own networks, and GenRL's spread for a normal prior (policies.default_log_std_init)
+_POLICY_DEFAULTS = {"net_arch": {"pi": [64, 64], "vf": [64, 64]}, "log_std_init": 0.0}
+
+
+def changed_settings(env_id: str) -> list[str]:
+    """The GenRL settings of ``env_id``'s entry in ``genrl.yml`` that differ from GenRL's defaults, by name.
+
+    Counted: the episodes per iteration (``n_steps``), each :class:`~sb3_genrl.GenRL` argument, each key of
+    ``policy_kwargs`` (against SB3's networks and GenRL's spread for a normal prior), ``hindsight_kwargs`` (switched on)
+    and each of its keys that differs from :class:`~sb3_genrl.genrl.hindsight.HindsightRelabelling`'s defaults, and
+    each callback (``callback: DemonstrationCallback``) with each argument that differs from its defaults. Not
+    counted: the budget (``n_timesteps``) and rl-zoo3's ``env_wrapper``.
+    """
+    import inspect
+
+    from sb3_genrl.genrl import GenRL
+    from sb3_genrl.genrl.demonstrations import callback_entries
+    from sb3_genrl.genrl.hindsight import DEFAULTS as HINDSIGHT_DEFAULTS
+
+    _, batch_episodes, settings = load_genrl_settings(env_id)
+    defaults = {name: parameter.default for name, parameter in inspect.signature(GenRL.__init__).parameters.items()}
+    changed = ["n_steps"] if batch_episodes != defaults["n_steps"] else []
+    for key, value in settings.items():
+        if key == "policy_kwargs":
+            changed += [f"policy_kwargs.{name}" for name, given in value.items() if _POLICY_DEFAULTS.get(name) != given]
+        elif key == "hindsight_kwargs":
+            changed += ["hindsight_kwargs"] * (value is not None)
+            changed += [f"hindsight_kwargs.{name}" for name, given in (value or {}).items()
+                        if HINDSIGHT_DEFAULTS[name] != given]
+        elif key == "callback":
+            for path, kwargs in callback_entries(value, f"{env_id}: callback"):
+                cls = _import_class(path)
+                own = {name: parameter.default for name, parameter in inspect.signature(cls.__init__).parameters.items()}
+                changed += [f"callback: {cls.__name__}"]
+                changed += [f"{cls.__name__}.{name}" for name, given in kwargs.items() if own.get(name) != given]
+        elif key == "policy":
+            changed += ["policy"] * (value != "MlpPolicy")
+        elif defaults.get(key, inspect.Parameter.empty) != value:
+            changed.append(key)
+    return changed
+
+
+def _import_class(path: str) -> type:
+    import importlib
+
+    module, _, name = path.rpartition(".")
+    return getattr(importlib.import_module(module), name)
 
 
 def parse_kwargs(value: Any, name: str = "kwargs") -> dict[str, Any]:

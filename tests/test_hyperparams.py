@@ -125,3 +125,18 @@ def test_the_goal_seeds_are_named_once():
              for path in sorted((ROOT / folder).rglob("*.py"))
              if path.name != "hyperparams.py" and pattern.search(path.read_text())]
     assert found == []
+
+
+def test_changed_settings_names_each_setting_that_differs_from_genrls_defaults(monkeypatch):
+    import sb3_genrl.hyperparams as hyperparams
+
+    settings = {"policy": "MlpPolicy", "batch_size": 64, "target_kl": 0.03,  # batch_size 64 is GenRL's default
+                "policy_kwargs": {"net_arch": {"pi": [64, 64], "vf": [64, 64]}, "log_std_init": -2.0},
+                "hindsight_kwargs": {"history": 1, "regression_steps": 64},  # history 1 is the default
+                "callback": [{"sb3_genrl.genrl.demonstrations.DemonstrationCallback": {"fit_steps": 100, "keep": True}}]}
+    monkeypatch.setattr(hyperparams, "load_genrl_settings", lambda env_id: (3000, 32, settings))
+    assert hyperparams.changed_settings("Any-v0") == [
+        "n_steps", "target_kl", "policy_kwargs.log_std_init", "hindsight_kwargs", "hindsight_kwargs.regression_steps",
+        "callback: DemonstrationCallback", "DemonstrationCallback.fit_steps"]
+    monkeypatch.setattr(hyperparams, "load_genrl_settings", lambda env_id: (3000, 64, {"policy": "ContextStdPolicy"}))
+    assert hyperparams.changed_settings("Any-v0") == ["policy"]
