@@ -18,6 +18,9 @@ after a stop resumes where it stopped (a run's settings are recorded and checked
    held-out initial states (reset seeds from :data:`~sb3_genrl.hyperparams.EVAL_GOAL_SEED`, never used in tuning);
    the curve is against episodes and environment steps (50 per episode). Each seed checkpoints at every evaluation
    (:mod:`sb3_genrl.genrl.checkpoint`) and resumes from it.
+5. the generator's limit near the first seed's final policy: on the same ``--limit-states`` held-out states, the share
+   its deterministic action solves and the share that one of ``--near-draws`` draws from the policy's own spread
+   solves (``fetch_demonstrations.policy_neighbourhood_success``): a gap says the search, not the generator, limits.
 
 The JSON (default ``benchmarks/results/fetch_TASK.json``) says ``"complete": false`` and how far each seed got until
 every stage is done.
@@ -40,7 +43,11 @@ from sb3_genrl.benchmarks.fetch_results import seed_row, write_result
 from sb3_genrl.benchmarks.fetch_seed import train_seed
 from sb3_genrl.benchmarks.genrl import make_generator
 from sb3_genrl.envs import TASKS, get_task
-from sb3_genrl.envs.fetch_demonstrations import prior_best_success, reconstruction_success
+from sb3_genrl.envs.fetch_demonstrations import (
+    policy_neighbourhood_success,
+    prior_best_success,
+    reconstruction_success,
+)
 
 from sb3_genrl import __version__
 from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, SEED
@@ -71,6 +78,9 @@ def arguments(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--recon-demos", type=COUNT, default=200, help="new demonstrations reconstructed (default 200)")
     parser.add_argument("--limit-states", type=COUNT, default=100, help="held-out states of the generator's limit")
     parser.add_argument("--prior-draws", type=COUNT, default=100, help="prior draws per state of the generator's limit")
+    parser.add_argument("--near-draws", type=COUNT, default=16,
+                        help="draws from the first seed's final policy per held-out state of the generator's limit near "
+                             "it (default 16)")
     parser.add_argument("--threads", type=COUNT, default=1, help="worker processes playing episodes (default 1)")
     parser.add_argument("--work", default=None, help="folder of the stages' files (default: runs/fetch/TASK)")
     parser.add_argument("--out", type=JSON_OUT, default=None, help="JSON output (default: results/fetch_TASK.json)")
@@ -168,6 +178,23 @@ def generator_limit(args: argparse.Namespace, generator: object, result: dict, w
           f"{args.limit_states} held-out states", flush=True)
 
 
+def neighbourhood_limit(args: argparse.Namespace, generator: object, seed: int, result: dict, write) -> None:
+    """What the generator allows near the first seed's final policy (stage 5), unless the JSON has it."""
+    if "policy_neighbourhood" not in result:
+        from sb3_genrl.genrl import GenRL
+
+        begin = time.perf_counter()
+        model = GenRL.load(os.path.join(args.work, f"seed_{seed}", "genrl_policy.zip"), generator=generator, device="cpu")
+        result["policy_neighbourhood"] = policy_neighbourhood_success(model, args.task, args.limit_states,
+                                                                      args.near_draws, EVAL_GOAL_SEED, args.threads)
+        result["policy_neighbourhood"].update(policy_seed=seed, seconds=time.perf_counter() - begin)
+        write()
+    near = result["policy_neighbourhood"]
+    print(f"near seed {near['policy_seed']}'s final policy: its mean solves {near['deterministic_success']:.3f} of "
+          f"{near['states']} held-out states, the best of {near['draws_per_state']} draws from it "
+          f"{near['best_of_draws']:.3f}", flush=True)
+
+
 def main(argv: list[str] | None = None) -> None:
     args = arguments(argv)
     torch.set_num_threads(1)
@@ -189,8 +216,9 @@ def main(argv: list[str] | None = None) -> None:
         if not row["finished"]:
             train_seed(args.task, generator_path, seed, args, row, write)
         print(f"seed {seed}: success {row['final_success']:.3f} after {row['curve_episodes'][-1]} episodes", flush=True)
-        if index == 0:  # after the first seed: its result comes first, the generator's limit next
+        if index == 0:  # after the first seed: its result comes first, the generator's limits next
             generator_limit(args, generator, result, write)
+            neighbourhood_limit(args, generator, seed, result, write)
     result["complete"] = True
     write()
     print(f"GenRL on {args.task}: {result['final_success_mean']:.3f} mean final success; wrote {args.out}")

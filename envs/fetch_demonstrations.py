@@ -233,3 +233,40 @@ def prior_best_success(generator: Any, task: str | TaskSpec, states: int, draws:
     return {"states": states, "prior_draws_per_state": draws, "seed": seed, "success_rate": best_of(draws),
             "best_of": {str(k): best_of(k) for k in (1, 10, 100) if k <= draws}, "solving_draws": solved.tolist()}
 
+
+
+def policy_neighbourhood_success(model: Any, task: str | TaskSpec, states: int, draws: int, seed: int,
+                                 n_threads: int = 1) -> dict[str, Any]:
+    """What the generator allows near a trained GenRL policy: for each of ``states`` initial states (reset seeds
+    ``seed, seed + 1, ...``), the policy's deterministic latent action and ``draws`` latent actions from the policy's
+    own distribution at that state (clipped to the latent box), decoded and played open-loop. Returns the share of
+    states the deterministic action solves, the share that at least one draw solves (best of ``draws``), the mean
+    success of one draw (the stochastic policy's), and the counts per state. A gap between the first two says that
+    solving latent actions lie within the policy's spread, so that the search, not the generator, limits it."""
+    import torch as th
+
+    from sb3_genrl.wrappers import LatentActionWrapper
+
+    spec = get_task(task)
+    fix_joint_helpers()
+    env = LatentActionWrapper(gym.make(spec.env_id), model.generator)
+    contexts = np.stack([env.reset(seed=seed + i)[0] for i in range(states)])
+    env.close()
+    rng = th.Generator().manual_seed(seed)
+    with th.no_grad():
+        distribution = model.policy.get_distribution(th.as_tensor(contexts, device=model.device)).distribution
+        mean, std = distribution.mean.cpu(), distribution.stddev.cpu()
+        noise = th.randn((states, draws, mean.shape[1]), generator=rng)
+        alphas = th.cat([mean[:, None], mean[:, None] + std[:, None] * noise], dim=1).numpy()
+    low, high = env.action_space.low, env.action_space.high
+    deterministic = np.stack([model.predict(context, deterministic=True)[0] for context in contexts])
+    alphas[:, 0] = deterministic  # predict's action (the moving average of the weights, where GenRL keeps one)
+    alphas = np.clip(alphas, low, high).reshape(states * (draws + 1), -1).astype(np.float32)
+    actions = np.clip(model.generator.decode(alphas), -1.0, 1.0).astype(np.float32)
+    rows = _replay(spec.env_id, actions, [seed + i // (draws + 1) for i in range(len(actions))], [None] * len(actions),
+                   n_threads)
+    solved = np.array([success for success, _ in rows], dtype=bool).reshape(states, draws + 1)
+    return {"states": states, "draws_per_state": draws, "seed": seed, "deterministic_success": float(solved[:, 0].mean()),
+            "best_of_draws": float(solved[:, 1:].any(axis=1).mean()), "draw_success": float(solved[:, 1:].mean()),
+            "spread": float(std.mean()), "deterministic_solved": solved[:, 0].astype(float).tolist(),
+            "solving_draws": solved[:, 1:].sum(axis=1).tolist()}

@@ -133,6 +133,12 @@ def test_demonstrations_generator_and_genrl_on_fetch_push(tmp_path, cli):
     evaluation = get_task("fetch-push").evaluate(model, "fetch-push", episodes=3, seed=5)
     assert evaluation["success_rate"] == np.mean(evaluation["successes"]) and len(evaluation["distances"]) == 3
     assert all((d < 0.05) == s for d, s in zip(evaluation["distances"], evaluation["successes"], strict=True))
+    # near the policy: its deterministic actions replayed open-loop solve what the wrapper's step path solved
+    from sb3_genrl.envs.fetch_demonstrations import policy_neighbourhood_success
+
+    near = policy_neighbourhood_success(model, "fetch-push", 3, 2, 5)
+    assert near["deterministic_solved"] == evaluation["successes"] and len(near["solving_draws"]) == 3
+    assert near["spread"] == pytest.approx(float(model.policy.log_std.exp().mean()), rel=1e-5)
 
 
 def test_the_generators_limit_counts_the_draws_that_solve_each_state():
