@@ -82,13 +82,17 @@ def row(task: str, result: dict) -> list:
     start_cell = f"{np.mean(start):.3f} ({len(start)} seeds)" if start else "-"
     target, budget = TARGETS[task]
     pending = "not yet measured"
+    near = result.get("policy_neighbourhood")
+    near_cell = (f"{near['deterministic_success']:.3f} / {near['best_of_draws']:.3f} ({near['draws_per_state']})"
+                 if near else pending)
     return [task, demos, recon, limit.get("best_of", {}).get("1", pending), limit.get("success_rate", pending),
-            start_cell, success, result["settings"]["episodes"], f">= {target} in {budget}", status(result)]
+            near_cell, start_cell, success, result["settings"]["episodes"], f">= {target} in {budget}", status(result)]
 
 
 def table(found: dict[str, dict], tqc_logs: str | None = None) -> str:
     header = ["task", "demonstrations", "reconstructions reach their aims", "one prior draw solves",
-              "best of 100 prior draws", "GenRL at episode 0 (mean fitted to the demonstrations)",
+              "best of 100 prior draws", "first seed's final policy: its mean / best of its draws",
+              "GenRL at episode 0 (mean fitted to the demonstrations)",
               "GenRL held-out success (final, mean ± std)", "GenRL episodes", "target",
               "run"]
     lines = [markdown_table(header, [row(task, result) for task, result in found.items()])]
