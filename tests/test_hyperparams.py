@@ -140,3 +140,13 @@ def test_changed_settings_names_each_setting_that_differs_from_genrls_defaults(m
         "callback: DemonstrationCallback", "DemonstrationCallback.fit_steps"]
     monkeypatch.setattr(hyperparams, "load_genrl_settings", lambda env_id: (3000, 64, {"policy": "ContextStdPolicy"}))
     assert hyperparams.changed_settings("Any-v0") == ["policy"]
+
+
+def test_the_readme_counts_the_settings_each_task_changes():
+    readme = (Path(__file__).parents[1] / "README.md").read_text()
+    rows = [line for line in readme.splitlines() if line.startswith("| ") and re.search(r"\| \d+: ", line)]
+    counted = {}
+    for line in rows:
+        ids, count = re.findall(r"`([^`]+)`", line.split("|")[2]), int(re.search(r"\| (\d+): ", line).group(1))
+        counted |= dict.fromkeys(ids, count)
+    assert counted == {env_id: len(hyperparams.changed_settings(env_id)) for env_id in hyperparams.known_env_ids("genrl")}
