@@ -22,6 +22,10 @@ from sb3_genrl.genrl.fisher import gaussian_fisher
 from sb3_genrl.genrl.policies import actor_parameters
 
 Batch = tuple[th.Tensor, th.Tensor, th.Tensor, th.Tensor]  # observations, actions, log pi(actions), advantages
+# The analytic Fisher-vector product (sb3_genrl.genrl.fisher) halves the E-step's time and equals autograd's to
+# rounding, but rounding that differs changes a run after a few iterations: it stays off until the task benchmarks'
+# seeds are rerun with it, so that the committed results remain this version's.
+ANALYTIC_FISHER = False
 
 
 def variational_copy(policy: ActorCriticPolicy, previous: ActorCriticPolicy | None) -> ActorCriticPolicy:
@@ -115,10 +119,12 @@ def trpo_e_step(q: ActorCriticPolicy, pi: ActorCriticPolicy, batch: Batch, *, ta
 def kl_hessian_product(q: ActorCriticPolicy, observations: th.Tensor, pi_distribution: Distribution, kl: th.Tensor,
                        ) -> tuple[list[th.nn.Parameter], Callable[[th.Tensor], th.Tensor]]:
     """The parameters the KL depends on (``q``'s actor's, in order), and ``v -> H v`` for ``H`` the KL's Hessian in
-    them at ``q = pi``: the analytic Fisher-vector product of a diagonal Gaussian (:mod:`sb3_genrl.genrl.fisher`) where
-    the policy's structure is a known one, else the double backward pass through autograd's graph of ``kl``."""
+    them at ``q = pi``: with :data:`ANALYTIC_FISHER`, the analytic Fisher-vector product of a diagonal Gaussian
+    (:mod:`sb3_genrl.genrl.fisher`) where the policy's structure is a known one, else the double backward pass
+    through autograd's graph of ``kl``."""
     named = actor_parameters(q)
-    fisher = gaussian_fisher(q, observations, pi_distribution.distribution.stddev, named)  # type: ignore[attr-defined]
+    fisher = (gaussian_fisher(q, observations, pi_distribution.distribution.stddev, named)  # type: ignore[attr-defined]
+              if ANALYTIC_FISHER else None)
     if fisher is not None:
         return named, fisher
     grads_kl = th.autograd.grad(kl, named, create_graph=True, allow_unused=True)

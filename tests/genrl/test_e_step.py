@@ -103,7 +103,8 @@ def test_trpo_e_step_with_the_analytic_product_takes_the_double_backward_step(mo
     batch = (data.observations, data.actions, data.old_log_prob, advantages / advantages.std())
     results = []
     for analytic in (True, False):
-        if not analytic:
+        monkeypatch.setattr(e_step, "ANALYTIC_FISHER", analytic)
+        if not analytic:  # and were it on, the autograd product all the same
             monkeypatch.setattr(e_step, "gaussian_fisher", lambda *args: None)
         q = copy.deepcopy(model.policy)
         th.manual_seed(0)
@@ -116,3 +117,14 @@ def test_trpo_e_step_with_the_analytic_product_takes_the_double_backward_step(mo
     np.testing.assert_allclose(stats["step_size"], expected_stats["step_size"], rtol=1e-4)
     start = th.nn.utils.parameters_to_vector(actor_parameters(model.policy)).detach()
     assert ((phi - expected_phi).norm() / (expected_phi - start).norm()).item() < 1e-4
+
+
+def test_the_e_step_takes_autograds_product_unless_the_analytic_one_is_switched_on(monkeypatch):
+    from sb3_genrl.genrl import e_step
+
+    def refuse(*args):
+        raise AssertionError("the analytic product was used")
+
+    assert e_step.ANALYTIC_FISHER is False  # the committed results were made with autograd's product
+    monkeypatch.setattr(e_step, "gaussian_fisher", refuse)
+    GenRL(FastReachEnv(), LinearGenerator(), seed=0, n_steps=32).learn(64)
