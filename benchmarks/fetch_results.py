@@ -89,7 +89,7 @@ def row(task: str, result: dict) -> list:
             near_cell, start_cell, success, result["settings"]["episodes"], f">= {target} in {budget}", status(result)]
 
 
-def table(found: dict[str, dict], tqc_logs: str | None = None) -> str:
+def table(found: dict[str, dict], tqc_logs: str | None = None, results: str | None = None) -> str:
     header = ["task", "demonstrations", "reconstructions reach their aims", "one prior draw solves",
               "best of 100 prior draws", "first seed's final policy: its mean / best of its draws",
               "GenRL at episode 0 (mean fitted to the demonstrations)",
@@ -99,12 +99,35 @@ def table(found: dict[str, dict], tqc_logs: str | None = None) -> str:
     zoo = [[task, f"{ret:.2f}", steps, steps // 50] for task, (ret, steps) in ZOO_TQC.items()]
     lines += ["", "rl-zoo3's published TQC+HER (benchmark.md, one seed; mean return, -1 per step away from the goal):", "",
               markdown_table(["task", "mean return", "env steps", "episodes"], zoo)]
+    sac = sac_her_rows(results) if results else []
+    if sac:
+        lines += ["", "SAC+HER here (SB3's SAC and HerReplayBuffer, `benchmarks/fetch_sac_her.py`; the same held-out "
+                  "states):", "", markdown_table(["task", "demonstrations in the buffer", "held-out success (final, "
+                                                  "mean ± std)", "episodes", "run"], sac)]
     progress = tqc_progress(tqc_logs) if tqc_logs else []
     if progress:
         lines += ["", "TQC+HER here (rl-zoo3's entry point and stock settings, `benchmarks/tqc_fetch.sh`; running, "
                   "partial):", "", markdown_table(["run", "episodes", "env steps",
                                                    "success, rl-zoo3's last evaluation"], progress)]
     return "\n".join(lines) + "\n"
+
+
+def sac_her_rows(results: str) -> list[list]:
+    """One row per ``fetch_sac_her_TASK_VARIANT.json`` in ``results`` (``benchmarks/fetch_sac_her.py``)."""
+    rows = []
+    for task in TASKS:
+        for variant in ("demos", "none"):
+            path = os.path.join(results, f"fetch_sac_her_{task}_{variant}.json")
+            if not os.path.exists(path):
+                continue
+            with open(path) as file:
+                result = json.load(file)
+            finished = [run["final_success"] for run in result["runs"] if run.get("finished")]
+            success = f"{np.mean(finished):.3f} ± {np.std(finished):.3f} ({len(finished)} seeds)" if finished else "-"
+            demos = result.get("demonstrations", "") if variant == "demos" else 0
+            episodes = result["settings"]["n_timesteps"] // 50
+            rows.append([task, demos, success, episodes, status(result)])
+    return rows
 
 
 def tqc_progress(logs: str) -> list[list]:
@@ -160,7 +183,7 @@ def main(argv: list[str] | None = None) -> None:
     if not found:
         raise SystemExit(f"no fetch_TASK.json in {args.results}")
     out = args.out or args.results
-    text = table(found, args.tqc)
+    text = table(found, args.tqc, args.results)
     atomic_write_text(os.path.join(out, "fetch.md"), text)
     plot(found, os.path.join(out, "fetch_curves.png"))
     print(text)
