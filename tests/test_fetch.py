@@ -180,3 +180,11 @@ def test_the_results_table_labels_a_partial_run_with_the_episodes_reached(tmp_pa
     line = next(line for line in (tmp_path / "fetch.md").read_text().splitlines() if line.startswith("| fetch-push"))
     assert "partial: seed 0: 1024 (running), seed 1: 1024" in line and "0.400 ± 0.000 (1 seeds)" in line
     assert (tmp_path / "fetch_curves.png").stat().st_size > 0
+    # SAC+HER's JSON (benchmarks/fetch_sac_her.py): its finished seeds' mean, the buffer's demonstrations, the budget
+    sac = {"settings": {"n_timesteps": 25600}, "demonstrations": 4000, "complete": False,
+           "runs": [done, dict(done, seed=2, final_success=0.8), run]}
+    (tmp_path / "fetch_sac_her_fetch-push_demos.json").write_text(json.dumps(sac))
+    main(["--results", str(tmp_path)])
+    text = (tmp_path / "fetch.md").read_text()
+    assert "| fetch-push | 4000 | 0.600 ± 0.200 (2 seeds) | 512 | partial: seed 1: 1024, seed 2: 1024, seed 0: 1024 " \
+           "(running) |" in text
