@@ -184,7 +184,6 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         """Reset the wrapped task (``options``, e.g. ``{"goal": xy}``, are passed on when given) and observe its context."""
         obs, info = self.env.reset(seed=seed) if options is None else self.env.reset(seed=seed, options=options)
         self._context = self._observe(obs)
-        # a goal env's achieved goal at the start: a pull whose trajectory leaves it where it was is not relabelled
         self._start_achieved = copy.deepcopy(obs["achieved_goal"]) if self._context_source == "goal" else None
         self._needs_reset = False
         self._prepared = None
@@ -300,9 +299,8 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
             return None
         new_goal = goal_steps[-1][0]
         compute_reward = self.env.unwrapped.compute_reward
-        # A trajectory that leaves the achieved goal where it started (its start already earns the reward of its end,
-        # e.g. a push that misses the object) solves its relabelled goal whatever it does: such a pull teaches the
-        # policy nothing about reaching goals, and is not relabelled.
+        # a trajectory that leaves the achieved goal where it started (a push that misses the object) solves its
+        # relabelled goal whatever it does: such a pull teaches nothing about reaching goals
         last_info = goal_steps[-1][1]
         if (float(np.asarray(compute_reward(self._start_achieved, new_goal, last_info)).item())
                 >= float(np.asarray(compute_reward(new_goal, new_goal, last_info)).item())):

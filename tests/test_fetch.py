@@ -70,6 +70,19 @@ def test_the_scripted_experts_solve_random_initial_states_open_loop(task, least)
     assert expert_success(task, 10, seed=777)["success_rate"] >= least
 
 
+def check_her_episodes(arrays):
+    """As SAC+HER's demonstrations: the achieved goal read from the observation is the env's own (the stored
+    reached point is the env's achieved_goal at the end), the desired goal the aim, the rewards the env's compute_reward."""
+    from sb3_genrl.baselines.her import fetch_goal_episodes
+
+    episodes = fetch_goal_episodes("fetch-push", arrays)
+    np.testing.assert_allclose(episodes["achieved_goal"][:, -1], arrays["reached"], rtol=1e-6)
+    np.testing.assert_allclose(episodes["desired_goal"][:, 0], arrays["sampled_goals"], rtol=1e-6)
+    distances = np.linalg.norm(episodes["achieved_goal"][:, 1:] - episodes["desired_goal"][:, 1:], axis=-1)
+    np.testing.assert_array_equal(episodes["rewards"], -(distances > 0.05).astype(float))
+    assert np.all(episodes["rewards"][:, -1] == 0.0) and np.any(episodes["rewards"] == -1.0)
+
+
 def test_demonstrations_generator_and_genrl_on_fetch_push(tmp_path, cli):
     from sb3_genrl.envs.demonstrations import make_demonstrations
 
@@ -88,16 +101,7 @@ def test_demonstrations_generator_and_genrl_on_fetch_push(tmp_path, cli):
     again = load_arrays(make_demonstrations("fetch-push", 12, tmp_path / "again", seed=3, n_threads=2,
                                             progress_bar=False))
     np.testing.assert_array_equal(again["actions"], arrays["actions"])
-    # as SAC+HER's demonstrations: the achieved goal read from the observation is the env's own (the stored reached
-    # point is the env's achieved_goal at the end), the desired goal the aim, the rewards the env's compute_reward
-    from sb3_genrl.baselines.her import fetch_goal_episodes
-
-    episodes = fetch_goal_episodes("fetch-push", arrays)
-    np.testing.assert_allclose(episodes["achieved_goal"][:, -1], arrays["reached"], rtol=1e-6)
-    np.testing.assert_allclose(episodes["desired_goal"][:, 0], arrays["sampled_goals"], rtol=1e-6)
-    distances = np.linalg.norm(episodes["achieved_goal"][:, 1:] - episodes["desired_goal"][:, 1:], axis=-1)
-    np.testing.assert_array_equal(episodes["rewards"], -(distances > 0.05).astype(float))
-    assert np.all(episodes["rewards"][:, -1] == 0.0) and np.any(episodes["rewards"] == -1.0)
+    check_her_episodes(arrays)
 
     generator = train_generator(dataset, preset="VAE-FETCH", epochs=2, seed=0, out=tmp_path / "vae.pt", progress_bar=False)
     # the task's entry learns from demonstrations: refused without them, before any work, saying how to make them
