@@ -234,7 +234,6 @@ def prior_best_success(generator: Any, task: str | TaskSpec, states: int, draws:
             "best_of": {str(k): best_of(k) for k in (1, 10, 100) if k <= draws}, "solving_draws": solved.tolist()}
 
 
-
 def policy_neighbourhood_success(model: Any, task: str | TaskSpec, states: int, draws: int, seed: int,
                                  n_threads: int = 1) -> dict[str, Any]:
     """What the generator allows near a trained GenRL policy: for each of ``states`` initial states (reset seeds
@@ -256,12 +255,11 @@ def policy_neighbourhood_success(model: Any, task: str | TaskSpec, states: int, 
     with th.no_grad():
         distribution = model.policy.get_distribution(th.as_tensor(contexts, device=model.device)).distribution
         mean, std = distribution.mean.cpu(), distribution.stddev.cpu()
-        noise = th.randn((states, draws, mean.shape[1]), generator=rng)
-        alphas = th.cat([mean[:, None], mean[:, None] + std[:, None] * noise], dim=1).numpy()
-    low, high = env.action_space.low, env.action_space.high
-    deterministic = np.stack([model.predict(context, deterministic=True)[0] for context in contexts])
-    alphas[:, 0] = deterministic  # predict's action (the moving average of the weights, where GenRL keeps one)
-    alphas = np.clip(alphas, low, high).reshape(states * (draws + 1), -1).astype(np.float32)
+        drawn = (mean[:, None] + std[:, None] * th.randn((states, draws, mean.shape[1]), generator=rng)).numpy()
+    # first per state: predict's action (with the moving average of the weights, where GenRL keeps one)
+    alphas = np.concatenate([model.predict(contexts, deterministic=True)[0][:, None], drawn], axis=1)
+    alphas = np.clip(alphas, env.action_space.low, env.action_space.high).reshape(states * (draws + 1), -1)
+    alphas = alphas.astype(np.float32)
     actions = np.clip(model.generator.decode(alphas), -1.0, 1.0).astype(np.float32)
     rows = _replay(spec.env_id, actions, [seed + i // (draws + 1) for i in range(len(actions))], [None] * len(actions),
                    n_threads)

@@ -128,7 +128,7 @@ def changed_settings(env_id: str) -> list[str]:
     import inspect
 
     from sb3_genrl.genrl import GenRL
-    from sb3_genrl.genrl.demonstrations import callback_entries
+    from sb3_genrl.genrl.demonstrations import callback_class, callback_entries
     from sb3_genrl.genrl.hindsight import DEFAULTS as HINDSIGHT_DEFAULTS
 
     _, batch_episodes, settings = load_genrl_settings(env_id)
@@ -143,7 +143,7 @@ def changed_settings(env_id: str) -> list[str]:
                         if HINDSIGHT_DEFAULTS[name] != given]
         elif key == "callback":
             for path, kwargs in callback_entries(value, f"{env_id}: callback"):
-                cls = _import_class(path)
+                cls = callback_class(path, f"{env_id}: callback")
                 own = {name: parameter.default for name, parameter in inspect.signature(cls.__init__).parameters.items()}
                 changed += [f"callback: {cls.__name__}"]
                 changed += [f"{cls.__name__}.{name}" for name, given in kwargs.items() if own.get(name) != given]
@@ -152,13 +152,6 @@ def changed_settings(env_id: str) -> list[str]:
         elif defaults.get(key, inspect.Parameter.empty) != value:
             changed.append(key)
     return changed
-
-
-def _import_class(path: str) -> type:
-    import importlib
-
-    module, _, name = path.rpartition(".")
-    return getattr(importlib.import_module(module), name)
 
 
 def parse_kwargs(value: Any, name: str = "kwargs") -> dict[str, Any]:

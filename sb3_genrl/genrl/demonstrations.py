@@ -228,10 +228,14 @@ def build_callbacks(spec: Any, *, demonstrations: str | os.PathLike | None = Non
     for path, kwargs in callback_entries(spec):
         if path == DEMONSTRATION_CALLBACK and kwargs.get("dataset") is None:
             raise ValueError(f"{what} " + NO_DATASET.format(name=DEMONSTRATION_CALLBACK, task=task))
-        module, _, name = path.rpartition(".")
-        try:
-            cls = getattr(importlib.import_module(module), name)
-        except (ImportError, AttributeError, ValueError) as error:
-            raise ValueError(f"{what}: no callback class {path!r} ({error})") from None
-        callbacks.append(cls(**kwargs))
+        callbacks.append(callback_class(path, what)(**kwargs))
     return callbacks
+
+
+def callback_class(path: str, what: str = "these settings") -> type:
+    """The class a callback setting names by its path (``sb3_genrl.genrl.demonstrations.DemonstrationCallback``)."""
+    module, _, name = path.rpartition(".")
+    try:
+        return getattr(importlib.import_module(module), name)
+    except (ImportError, AttributeError, ValueError) as error:
+        raise ValueError(f"{what}: no callback class {path!r} ({error})") from None
