@@ -5,7 +5,8 @@ task: the demonstrations, the generator's two measures, GenRL's held-out success
 and ``fetch_curves.png`` (each seed's held-out success against episodes and environment steps). A run that has not
 finished every stage is labelled partial, with the episodes its seeds reached; its numbers are never the final ones.
 rl-zoo3's published TQC+HER results are the anchor rows (its ``benchmark.md``: mean return of one seed, -1 per step
-away from the goal, 50 steps per episode).
+away from the goal, 50 steps per episode). With ``--tqc``, TQC+HER's progress read from ``benchmarks/tqc_fetch.sh``'s
+logs is kept in ``fetch_tqc_progress.json`` beside the JSON files, and shown from there where the logs are not.
 
     python benchmarks/fetch_results.py                      # benchmarks/results/fetch_*.json
     python benchmarks/fetch_results.py --results runs/fetch --out runs/fetch
@@ -29,6 +30,9 @@ TARGETS = {"fetch-reach": (0.99, 500), "fetch-push": (0.95, 3000), "fetch-pick-a
 # rl-zoo3's benchmark.md, TQC+HER, one seed: mean return and the environment steps of its run
 ZOO_TQC = {"fetch-reach": (-1.66, 20_000), "fetch-push": (-8.80, 1_000_000), "fetch-pick-and-place": (-9.33, 1_000_000),
            "fetch-slide": (-29.2, 3_000_000)}
+# TQC+HER's progress as last read from benchmarks/tqc_fetch.sh's logs (--tqc), kept beside the JSON files
+TQC_PROGRESS = "fetch_tqc_progress.json"
+TQC_COLUMNS = ["run", "episodes", "env steps", "success, rl-zoo3's last evaluation"]
 
 
 def seed_row(result: dict, seed: int) -> dict:
@@ -105,10 +109,15 @@ def table(found: dict[str, dict], tqc_logs: str | None = None, results: str | No
                   "states):", "", markdown_table(["task", "demonstrations in the buffer", "held-out success (final, "
                                                   "mean ± std)", "episodes", "run"], sac)]
     progress = tqc_progress(tqc_logs) if tqc_logs else []
+    kept = os.path.join(results, TQC_PROGRESS) if results else None
+    if progress and kept:
+        atomic_write_json(kept, {"columns": TQC_COLUMNS, "rows": progress})
+    elif kept and os.path.exists(kept):  # the logs are not on this machine: the progress last read from them
+        with open(kept) as file:
+            progress = json.load(file)["rows"]
     if progress:
         lines += ["", "TQC+HER here (rl-zoo3's entry point and stock settings, `benchmarks/tqc_fetch.sh`; running, "
-                  "partial):", "", markdown_table(["run", "episodes", "env steps",
-                                                   "success, rl-zoo3's last evaluation"], progress)]
+                  "partial):", "", markdown_table(TQC_COLUMNS, progress)]
     return "\n".join(lines) + "\n"
 
 

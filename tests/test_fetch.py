@@ -192,3 +192,23 @@ def test_the_results_table_labels_a_partial_run_with_the_episodes_reached(tmp_pa
     text = (tmp_path / "fetch.md").read_text()
     assert "| fetch-push | 4000 | 0.600 ± 0.200 (2 seeds) | 512 | partial: seed 1: 1024, seed 2: 1024, seed 0: 1024 " \
            "(running) |" in text
+
+
+def test_tqc_progress_read_from_the_logs_is_kept_for_a_machine_without_them(tmp_path):
+    from sb3_genrl.benchmarks.fetch_results import main
+
+    result = {"settings": {"episodes": 3000}, "complete": False, "runs": [], "reconstruction": {"success_rate": 0.6}}
+    (tmp_path / "fetch_fetch-push.json").write_text(json.dumps(result))
+    logs = tmp_path / "tqc"
+    run = logs / "FetchPush-v4_seed0" / "segment_1"
+    run.mkdir(parents=True)
+    np.savez(run / "evaluations.npz", successes=np.array([[0.0, 0.0], [1.0, 0.0]]))
+    (logs / "FetchPush-v4_seed0_segments.csv").write_text(f"folder,env_steps_total\n{run},5000\n")
+    main(["--results", str(tmp_path), "--tqc", str(logs)])
+    row = "| FetchPush-v4_seed0 | 100 | 5000 | 0.500 |"  # the last evaluation: 1 of 2 episodes
+    assert row in (tmp_path / "fetch.md").read_text()
+    import shutil
+
+    shutil.rmtree(logs)  # a fresh clone: the logs are gone, the kept progress is shown
+    main(["--results", str(tmp_path)])
+    assert row in (tmp_path / "fetch.md").read_text()
