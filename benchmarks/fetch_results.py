@@ -93,7 +93,7 @@ def row(task: str, result: dict) -> list:
             near_cell, start_cell, success, result["settings"]["episodes"], f">= {target} in {budget}", status(result)]
 
 
-def table(found: dict[str, dict], tqc_logs: str | None = None, results: str | None = None) -> str:
+def table(found: dict[str, dict], progress: list[list] | None = None, results: str | None = None) -> str:
     header = ["task", "demonstrations", "reconstructions reach their aims", "one prior draw solves",
               "best of 100 prior draws", "first seed's final policy: its mean / best of its draws",
               "GenRL at episode 0 (mean fitted to the demonstrations)",
@@ -108,13 +108,6 @@ def table(found: dict[str, dict], tqc_logs: str | None = None, results: str | No
         lines += ["", "SAC+HER here (SB3's SAC and HerReplayBuffer, `benchmarks/fetch_sac_her.py`; the same held-out "
                   "states):", "", markdown_table(["task", "demonstrations in the buffer", "held-out success (final, "
                                                   "mean ± std)", "episodes", "run"], sac)]
-    progress = tqc_progress(tqc_logs) if tqc_logs else []
-    kept = os.path.join(results, TQC_PROGRESS) if results else None
-    if progress and kept:
-        atomic_write_json(kept, {"columns": TQC_COLUMNS, "rows": progress})
-    elif kept and os.path.exists(kept):  # the logs are not on this machine: the progress last read from them
-        with open(kept) as file:
-            progress = json.load(file)["rows"]
     if progress:
         lines += ["", "TQC+HER here (rl-zoo3's entry point and stock settings, `benchmarks/tqc_fetch.sh`; running, "
                   "partial):", "", markdown_table(TQC_COLUMNS, progress)]
@@ -160,6 +153,19 @@ def tqc_progress(logs: str) -> list[list]:
     return rows
 
 
+def kept_tqc_progress(logs: str | None, results: str) -> list[list]:
+    """TQC+HER's progress: read from ``logs`` (:func:`tqc_progress`) and kept in ``results``' ``fetch_tqc_progress.json``,
+    or, without logs here, the progress last kept there (none: ``[]``)."""
+    kept = os.path.join(results, TQC_PROGRESS)
+    progress = tqc_progress(logs) if logs else []
+    if progress:
+        atomic_write_json(kept, {"columns": TQC_COLUMNS, "rows": progress})
+    elif os.path.exists(kept):
+        with open(kept) as file:
+            progress = json.load(file)["rows"]
+    return progress
+
+
 def plot(found: dict[str, dict], path: str) -> None:
     import matplotlib
 
@@ -192,7 +198,7 @@ def main(argv: list[str] | None = None) -> None:
     if not found:
         raise SystemExit(f"no fetch_TASK.json in {args.results}")
     out = args.out or args.results
-    text = table(found, args.tqc, args.results)
+    text = table(found, kept_tqc_progress(args.tqc, args.results), args.results)
     atomic_write_text(os.path.join(out, "fetch.md"), text)
     plot(found, os.path.join(out, "fetch_curves.png"))
     print(text)
