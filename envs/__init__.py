@@ -12,7 +12,6 @@ With the optional extra ``robotics``, Gymnasium-Robotics' Fetch tasks join them 
 from __future__ import annotations
 
 import importlib.util
-import sys
 from typing import Any
 
 from gymnasium.envs.registration import register, registry
@@ -84,13 +83,14 @@ def make_task(name: str, **kwargs: Any):
 
 
 def register_envs() -> None:
-    """Register the package's tasks (idempotent). Called through the ``gymnasium.envs`` entry point."""
+    """Register the package's tasks (idempotent). Called on import, and through the ``gymnasium.envs`` entry point by
+    Gymnasium releases that load plugins."""
     for spec in _BUILT_IN:
         register_task(spec)
-    if ROBOTICS and "gymnasium_robotics" in sys.modules:  # imported first: its own Fetch ids stay, fixed here
-        from sb3_genrl.envs.fetch_mujoco import fix_joint_helpers
+    if ROBOTICS:  # Gymnasium-Robotics' joint helpers fixed now if it is imported, else as soon as it is
+        from sb3_genrl.envs.fetch_mujoco import fix_on_import
 
-        fix_joint_helpers()
+        fix_on_import(fetch.FETCH_IDS)
 
 
 register_envs()

@@ -10,12 +10,16 @@ enums compare equal to such an integer (``joint_type == mjJNT_HINGE`` is True) b
 
 :func:`fix_joint_helpers` replaces those four helpers with the same functions comparing the joint type as an integer,
 and only when the upstream test fails under the MuJoCo in use (on a MuJoCo where it works, nothing is replaced). It
-runs when a Fetch task is made through this package (:func:`robotics_env_class`), never on ``import sb3_genrl``.
+runs when Gymnasium-Robotics is imported, by whoever imports it: by this package when a Fetch task is made
+(:func:`robotics_env_class`), or by the user's own ``import gymnasium_robotics`` after ``import sb3_genrl`` (a finder
+on ``sys.meta_path``, :func:`fix_on_import`, installed by :mod:`sb3_genrl.envs`, runs it then). ``import sb3_genrl``
+alone neither imports Gymnasium-Robotics nor changes it.
 """
 
 from __future__ import annotations
 
 import importlib
+import importlib.abc
 import sys
 from collections.abc import Callable
 from typing import Any
@@ -78,6 +82,61 @@ def fix_joint_helpers() -> bool:
     return True
 
 
+def _set_aside(own_ids: tuple[str, ...]) -> dict[str, Any]:
+    """Remove from Gymnasium's registry those of ``own_ids`` that this package registered; return them."""
+    from gymnasium.envs.registration import registry
+
+    return {env_id: registry.pop(env_id) for env_id in own_ids if env_id in registry
+            and str(getattr(registry[env_id], "entry_point", "")).startswith("sb3_genrl.")}
+
+
+class _FixOnImport(importlib.abc.MetaPathFinder):
+    """Finds ``gymnasium_robotics`` through the other finders and wraps its import: this package's Fetch ids set aside
+    while it registers its own (no override warning; ours are put back), its joint helpers fixed right after."""
+
+    def __init__(self, own_ids: tuple[str, ...]) -> None:
+        self.own_ids = own_ids
+
+    def find_spec(self, name: str, path: Any = None, target: Any = None) -> Any:
+        if name != "gymnasium_robotics":
+            return None
+        for finder in sys.meta_path:
+            if finder is self or not hasattr(finder, "find_spec"):
+                continue
+            spec = finder.find_spec(name, path, target)
+            if spec is not None:
+                break
+        else:
+            return None
+        if spec.loader is None or not hasattr(spec.loader, "exec_module"):
+            return spec
+        run, own_ids = spec.loader.exec_module, self.own_ids
+
+        def exec_module(module: Any) -> None:
+            from gymnasium.envs.registration import registry
+
+            own = _set_aside(own_ids)
+            try:
+                run(module)
+            finally:
+                registry.update(own)
+            fix_joint_helpers()
+
+        spec.loader.exec_module = exec_module  # a loader instance of this one spec
+        return spec
+
+
+def fix_on_import(own_ids: tuple[str, ...] = ()) -> None:
+    """Fix Gymnasium-Robotics' joint helpers now if it is imported, else as soon as anything imports it (idempotent).
+
+    :param own_ids: this package's ids of the Fetch tasks, kept over the ones Gymnasium-Robotics registers
+    """
+    if "gymnasium_robotics" in sys.modules:
+        fix_joint_helpers()
+    elif not any(isinstance(finder, _FixOnImport) for finder in sys.meta_path):
+        sys.meta_path.insert(0, _FixOnImport(own_ids))
+
+
 def import_robotics(own_ids: tuple[str, ...] = ()) -> Any:
     """Import Gymnasium-Robotics (which registers its env ids) and fix its joint helpers; return the module.
 
@@ -87,10 +146,7 @@ def import_robotics(own_ids: tuple[str, ...] = ()) -> Any:
     """
     from gymnasium.envs.registration import registry
 
-    own = {}
-    if "gymnasium_robotics" not in sys.modules:
-        own = {env_id: registry.pop(env_id) for env_id in own_ids if env_id in registry
-               and str(getattr(registry[env_id], "entry_point", "")).startswith("sb3_genrl.")}
+    own = _set_aside(own_ids) if "gymnasium_robotics" not in sys.modules else {}
     try:
         module = importlib.import_module("gymnasium_robotics")
     except ImportError as error:

@@ -65,6 +65,20 @@ def test_every_fetch_task_resets_and_steps_through_its_own_id(task):
     assert np.all(spec.in_goal_region(goals))
 
 
+@pytest.mark.parametrize("order", ["sb3_genrl.envs, gymnasium_robotics", "gymnasium_robotics, sb3_genrl.envs"])
+def test_fetch_ids_reset_whichever_of_the_two_packages_is_imported_first(order):
+    # a fresh interpreter: Gymnasium-Robotics imported after sb3_genrl registers its own, unfixed entry points again
+    import subprocess
+    import sys
+
+    code = (f"import {order}\nimport gymnasium as gym\nenv = gym.make('FetchPush-v4')\nenv.reset(seed=0)\n"
+            "print(type(env.unwrapped).__module__)")
+    result = subprocess.run([sys.executable, "-W", "always", "-c", code], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip().splitlines()[-1] == "gymnasium_robotics.envs.fetch.push"
+    assert "Overriding environment" not in result.stderr
+
+
 @pytest.mark.parametrize(("task", "least"), [("fetch-reach", 1.0), ("fetch-push", 0.8), ("fetch-pick-and-place", 1.0)])
 def test_the_scripted_experts_solve_random_initial_states_open_loop(task, least):
     assert expert_success(task, 10, seed=777)["success_rate"] >= least
