@@ -138,7 +138,7 @@ def start(args: argparse.Namespace) -> dict[str, object]:
             for run in result["runs"]:
                 shutil.rmtree(os.path.join(args.work, f"seed_{run['seed']}"), ignore_errors=True)
             result.update(settings=settings, runs=[], complete=False)
-            for key in ("final_success_mean", "final_success_std", "finished_seeds"):
+            for key in ("final_success_mean", "final_success_std", "finished_seeds", "policy_neighbourhood"):
                 result.pop(key, None)
         return result
     return {"benchmark": f"fetch_{args.task}", "settings": settings, "complete": False, "runs": []}
