@@ -110,7 +110,8 @@ def settings_of(args: argparse.Namespace) -> dict[str, object]:
     """What the run is: compared with the JSON's on resume."""
     _, batch_episodes, genrl_kwargs = task_settings(args.task)
     return {"task": args.task, "env_id": get_task(args.task).env_id, "episodes": args.episodes,
-            "batch_episodes": batch_episodes, "genrl_settings": genrl_settings(genrl_kwargs),
+            "batch_episodes": batch_episodes,
+            "genrl_settings": genrl_settings(genrl_kwargs | {"n_steps": batch_episodes}),
             "seeds": list(args.seeds), "eval_every": args.eval_every, "eval_states": args.eval_states,
             "eval_seed": EVAL_GOAL_SEED, "demonstrations": args.demos if args.data is None else os.path.abspath(args.data),
             "generator": "trained" if args.generator is None else os.path.abspath(args.generator),

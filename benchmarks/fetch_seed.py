@@ -88,7 +88,7 @@ def train_seed(task: str, generator_path: str, seed: int, args: argparse.Namespa
     generator = load(generator_path, device="cpu")
     identity = {"algorithm": "genrl", "task": task, "episodes": int(args.episodes), "seed": seed,
                 "batch_episodes": batch_episodes, "generator_sha256": generator_digest(generator),
-                "genrl_settings": genrl_settings(genrl_kwargs), "demonstration_callback": callback,
+                "genrl_settings": genrl_settings(genrl_kwargs | {"n_steps": batch_episodes}), "demonstration_callback": callback,
                 "demonstrations": [dataset_fingerprint(item.dataset) for item in demonstrations]}
     state = resume_state(folder / "checkpoint", identity)
     if state is None:  # from the start: what an earlier unfinished try left is dropped

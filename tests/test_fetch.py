@@ -226,3 +226,28 @@ def test_tqc_progress_read_from_the_logs_is_kept_for_a_machine_without_them(tmp_
     shutil.rmtree(logs)  # a fresh clone: the logs are gone, the kept progress is shown
     main(["--results", str(tmp_path)])
     assert row in (tmp_path / "fetch.md").read_text()
+
+
+def test_new_runs_keep_the_generator_stages_and_drop_what_the_old_runs_measured(tmp_path):
+    from sb3_genrl.benchmarks.fetch import arguments, settings_of, start
+
+    out, work = tmp_path / "fetch_fetch-push.json", tmp_path / "work"
+    args = arguments(["--task", "fetch-push", "--out", str(out), "--work", str(work)])
+    settings = settings_of(args)
+    # the recorded settings are those the runs use: the entry's episodes per iteration as n_steps
+    assert settings["genrl_settings"]["n_steps"] == settings["batch_episodes"] == 32
+    old = dict(settings, genrl_settings=dict(settings["genrl_settings"], hindsight_kwargs={"history": 60,
+                                                                                           "regression_steps": 64}))
+    measures = {"generator": {"generator": "vae.pt"}, "reconstruction": {"success_rate": 0.7},
+                "generator_limit": {"success_rate": 0.9}}
+    out.write_text(json.dumps({"settings": old, "runs": [{"seed": 0, "finished": True}], "complete": True,
+                               "policy_neighbourhood": {"policy_seed": 0}, "final_success_mean": 0.8, **measures}))
+    (work / "seed_0").mkdir(parents=True)
+    with pytest.raises(SystemExit, match="differs in genrl_settings"):
+        start(args)
+    args.new_runs = True
+    result = start(args)
+    assert result["runs"] == [] and result["complete"] is False and result["settings"] == settings
+    assert {key: result[key] for key in measures} == measures  # the generator's stages are kept
+    assert "policy_neighbourhood" not in result and "final_success_mean" not in result  # measured on the old runs
+    assert not (work / "seed_0").exists()
