@@ -87,11 +87,11 @@ def make_generator(task: str, preset: str, args: argparse.Namespace, work: str, 
 
         data = os.path.join(work, "demonstrations")
         start = time.perf_counter()
-        make_demonstrations(task, args.demos, data, seed=0, n_threads=threads, progress_bar=False)
+        make_demonstrations(task, args.demos, data, seed=0, n_threads=threads, progress_bar=True)
         print(f"{args.demos} demonstrations in {time.perf_counter() - start:.0f} s", flush=True)
     path = os.path.join(work, "vae.pt")
     start = time.perf_counter()
-    vae = train_generator(data, preset=preset, epochs=args.epochs, seed=0, out=path, progress_bar=False)
+    vae = train_generator(data, preset=preset, epochs=args.epochs, seed=0, out=path, progress_bar=True)
     seconds = time.perf_counter() - start
     print(f"{preset}: best checkpoint at epoch {vae.best_epoch} of {args.epochs} ({seconds:.0f} s)", flush=True)
     return path, {"demonstrations": args.demos if args.data is None else os.path.abspath(args.data),
