@@ -3,8 +3,12 @@
 Stages, each kept in ``--work`` (default ``runs/fetch/TASK``) and in the JSON as it finishes, so that the same command
 after a stop resumes where it stopped (a run's settings are recorded and checked on resume):
 
-1. ``--demos`` demonstrations (seed 0; or ``--data``) and the task's generator recipe (``TaskSpec.generator_preset``,
-   ``--epochs``);
+1. ``--demos`` demonstrations (seed 0; or ``--data``) and ``--generator-seeds`` generators of the task's recipe
+   (``TaskSpec.generator_preset``, ``--epochs``; seeds 0, 1, ...), of which the one is kept whose fit of GenRL's mean
+   to the demonstrations (the entry's ``DemonstrationCallback`` fit, before any episode) solves the most of
+   ``--selection-states`` tuning initial states (reset seeds from
+   :data:`~sb3_genrl.hyperparams.TUNING_GOAL_SEED`): that fit varies by about 0.1 of success with the generator's
+   training seed, and it is where GenRL starts;
 2. the generator's reconstructions of ``--recon-demos`` new demonstrations (seed 1, not trained on), replayed from
    their own initial states: the share that reach their own aims;
 3. the generator's own limit: ``--limit-states`` held-out initial states x ``--prior-draws`` draws from its prior
@@ -40,9 +44,9 @@ import time
 
 import torch
 from sb3_genrl.benchmarks.fetch_results import seed_row, write_result
-from sb3_genrl.benchmarks.fetch_seed import train_seed
-from sb3_genrl.benchmarks.genrl import make_generator
+from sb3_genrl.benchmarks.fetch_seed import fitted_mean_success, train_seed
 from sb3_genrl.envs import TASKS, get_task
+from sb3_genrl.envs.demonstrations import make_demonstrations
 from sb3_genrl.envs.fetch_demonstrations import (
     policy_neighbourhood_success,
     prior_best_success,
@@ -51,9 +55,9 @@ from sb3_genrl.envs.fetch_demonstrations import (
 
 from sb3_genrl import __version__
 from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, SEED
-from sb3_genrl.generative import load
+from sb3_genrl.generative import load, train_generator
 from sb3_genrl.genrl.train import genrl_settings
-from sb3_genrl.hyperparams import EVAL_GOAL_SEED
+from sb3_genrl.hyperparams import EVAL_GOAL_SEED, TUNING_GOAL_SEED
 from sb3_genrl.study.quickstart import quickstart_preset, task_settings
 
 RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
@@ -69,6 +73,11 @@ def arguments(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--generator", type=EXISTING, default=None, help="a trained generator")
     parser.add_argument("--demos", type=COUNT, default=4000, help="demonstrations to make (default 4000)")
     parser.add_argument("--epochs", type=COUNT, default=300, help="generator epochs (default 300)")
+    parser.add_argument("--generator-seeds", type=COUNT, default=4,
+                        help="generators trained (seeds 0, 1, ...); the one whose fitted mean solves the most tuning "
+                             "initial states is kept (default 4)")
+    parser.add_argument("--selection-states", type=COUNT, default=100,
+                        help="tuning initial states (reset seeds from TUNING_GOAL_SEED) that choose the generator")
     parser.add_argument("--episodes", type=COUNT, default=None, help="GenRL episodes (default: the task's)")
     parser.add_argument("--seeds", type=SEED, nargs="+", default=[0, 1, 2])
     parser.add_argument("--eval-every", type=COUNT, default=None,
@@ -115,7 +124,9 @@ def settings_of(args: argparse.Namespace) -> dict[str, object]:
             "seeds": list(args.seeds), "eval_every": args.eval_every, "eval_states": args.eval_states,
             "eval_seed": EVAL_GOAL_SEED, "demonstrations": args.demos if args.data is None else os.path.abspath(args.data),
             "generator": "trained" if args.generator is None else os.path.abspath(args.generator),
-            "preset": quickstart_preset(args.task), "epochs": args.epochs, "recon_demos": args.recon_demos,
+            "preset": quickstart_preset(args.task), "epochs": args.epochs,
+            "generator_seeds": None if args.generator else args.generator_seeds,
+            "selection_states": None if args.generator else args.selection_states, "recon_demos": args.recon_demos,
             "limit_states": args.limit_states, "prior_draws": args.prior_draws,
             "demonstration_callback": None if args.no_demonstrations else genrl_kwargs.get("callback")}
 
@@ -146,23 +157,46 @@ def start(args: argparse.Namespace) -> dict[str, object]:
 
 
 def generator_stage(args: argparse.Namespace, result: dict, write) -> str:
-    """The generator: the one in ``--work`` if the JSON records it, else made (demonstrations, training)."""
+    """The generator: ``--generator``, the one in ``--work`` if the JSON records it, else made (demonstrations, then
+    ``--generator-seeds`` trainings, each scored as it finishes, the best kept)."""
     os.makedirs(args.work, exist_ok=True)
     path = os.path.join(args.work, "vae.pt")
-    if "generator" in result and (args.generator is not None or os.path.exists(path)):
-        return args.generator or path
+    if args.generator is not None:
+        if "generator" not in result:
+            result["generator"] = {"generator": os.path.abspath(args.generator)}
+            write()
+        return args.generator
+    if "kept_seed" in result.get("generator", {}) and os.path.exists(path):
+        return path
     data = os.path.join(args.work, "demonstrations")
     if args.data is None and os.path.isdir(data) and os.listdir(data):
         args.data = data  # made before the stop (a dataset folder is written as one unit)
-    start_time = time.perf_counter()
-    path, record = make_generator(args.task, quickstart_preset(args.task), args, args.work, threads=args.threads)
-    if args.data == data:
-        record["demonstrations"] = args.demos
-    if args.generator is None or args.data is not None:
-        from sb3_genrl.data import dataset_info
+    if args.data is None:
+        start_time = time.perf_counter()
+        make_demonstrations(args.task, args.demos, data, seed=0, n_threads=args.threads, progress_bar=True)
+        print(f"{args.demos} demonstrations in {time.perf_counter() - start_time:.0f} s", flush=True)
+        args.data = data
+    from sb3_genrl.data import dataset_info
 
-        record["demonstration_info"] = dataset_info(args.data or data)
-    result["generator"] = record | {"seconds": time.perf_counter() - start_time}
+    record = result.setdefault("generator", {})
+    record.update(demonstrations=args.demos if args.data == data else os.path.abspath(args.data),
+                  preset=quickstart_preset(args.task), epochs=args.epochs, demonstration_info=dataset_info(args.data))
+    candidates = record.setdefault("candidates", [])
+    for seed in range(len(candidates), args.generator_seeds):
+        start_time = time.perf_counter()
+        candidate = os.path.join(args.work, f"vae_seed{seed}.pt")
+        vae = train_generator(args.data, preset=quickstart_preset(args.task), epochs=args.epochs, seed=seed,
+                              out=candidate, progress_bar=True)
+        success = fitted_mean_success(args.task, candidate, args.dataset, args.selection_states, TUNING_GOAL_SEED)
+        candidates.append({"seed": seed, "best_epoch": vae.best_epoch, "fitted_mean_tuning_success": success,
+                           "seconds": time.perf_counter() - start_time})
+        print(f"generator seed {seed}: the mean fitted to the demonstrations solves {success:.3f} of "
+              f"{args.selection_states} tuning initial states", flush=True)
+        write()
+    best = max(candidates, key=lambda candidate: candidate["fitted_mean_tuning_success"])  # the first of equals
+    shutil.copyfile(os.path.join(args.work, f"vae_seed{best['seed']}.pt"), path + ".tmp")
+    os.replace(path + ".tmp", path)
+    record.update(kept_seed=best["seed"], best_epoch=best["best_epoch"])
     write()
     return path
 

@@ -2,8 +2,7 @@
 # GenRL's part of the Fetch benchmark (benchmarks/fetch.py) on the given Fetch tasks in turn (default: all four),
 # each with its entry in hyperparams/genrl.yml; rerun the same command to resume. JSON: runs/fetch/fetch_TASK.json,
 # copied into benchmarks/results/ when a task is published. A task whose JSON holds runs of other GenRL settings
-# starts its runs again (--new-runs) and keeps its demonstrations, generator and their measures. FetchPush takes the
-# generator (VAE-FETCH, seed 0, 300 epochs) and the demonstrations it was trained on from runs/fetch/fetch-push.
+# starts its runs again (--new-runs) and keeps its demonstrations, generator and their measures.
 #
 #   bash benchmarks/fetch_all.sh [TASK ...]
 cd "$(dirname "$0")/.."
@@ -12,11 +11,7 @@ tasks=("$@")
 [ ${#tasks[@]} -gt 0 ] || tasks=(fetch-push fetch-reach fetch-pick-and-place fetch-slide)
 for task in "${tasks[@]}"; do
   echo "=== $task $(date -u)"
-  extra=()
-  if [ "$task" = fetch-push ] && [ -f runs/fetch/fetch-push/vae_fetch_seed0.pt ]; then
-    extra=(--generator runs/fetch/fetch-push/vae_fetch_seed0.pt --data runs/fetch/fetch-push/demonstrations)
-  fi
-  .venv/bin/python benchmarks/fetch.py --task "$task" --out "runs/fetch/fetch_$task.json" --new-runs "${extra[@]}" \
+  .venv/bin/python benchmarks/fetch.py --task "$task" --out "runs/fetch/fetch_$task.json" --new-runs \
     || echo "=== $task failed (exit $?)"
 done
 echo "=== done $(date -u)"

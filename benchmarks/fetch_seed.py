@@ -25,7 +25,7 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from sb3_genrl.curves import monitor_episodes, training_logger
 from sb3_genrl.generative import load
 from sb3_genrl.genrl.checkpoint import GenRLCheckpoint, RandomStateRecorder, resume_genrl, resume_state
-from sb3_genrl.genrl.demonstrations import DemonstrationCallback, build_callbacks
+from sb3_genrl.genrl.demonstrations import DemonstrationCallback, build_callbacks, fit_mean_to_demonstrations
 from sb3_genrl.genrl.generator_files import generator_digest
 from sb3_genrl.genrl.train import genrl_settings, make_genrl
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED
@@ -76,6 +76,25 @@ class SuccessCurve(BaseCallback):
         print(f"  seed {self.row['seed']}, {episodes} episodes: success {result['success_rate']:.3f}", flush=True)
 
 
+def fitted_mean_success(task: str, generator_path: str, dataset: str, states: int, seed: int) -> float:
+    """The success rate on ``states`` initial states (reset seeds from ``seed``) of GenRL's policy mean (policy seed 0,
+    the task's entry) fitted to the demonstrations ``dataset`` as the entry's ``DemonstrationCallback`` fits it,
+    before any episode: what a generator gives GenRL to start from."""
+    _, batch_episodes, genrl_kwargs = task_settings(task)
+    callback = genrl_kwargs.pop("callback", None)
+    fit = next((item for item in build_callbacks(callback, demonstrations=dataset, task=task)
+                if isinstance(item, DemonstrationCallback)), None)
+    if fit is None or not fit.fit_steps:
+        raise ValueError(f"the entry of {task} in hyperparams/genrl.yml fits no demonstrations")
+    generator = load(generator_path, device="cpu")
+    model = make_genrl(LatentActionWrapper(gym.make(get_task(task).env_id), generator), generator, seed=0, device="cpu",
+                       n_steps=batch_episodes, **genrl_kwargs)
+    pulls = fit.pulls(generator, model.observation_space, model.latent_clip)
+    fit_mean_to_demonstrations(model.policy, *pulls, steps=fit.fit_steps, learning_rate=fit.learning_rate,
+                               batch_size=fit.batch_size)
+    return float(evaluate_success(model, task, episodes=states, seed=seed)["success_rate"])
+
+
 def train_seed(task: str, generator_path: str, seed: int, args: argparse.Namespace, row: dict,
                write: Callable[[], None]) -> None:
     """Train (or resume) GenRL with one seed to ``args.episodes``, evaluating on the way and at the end (into ``row``)."""
@@ -88,7 +107,8 @@ def train_seed(task: str, generator_path: str, seed: int, args: argparse.Namespa
     generator = load(generator_path, device="cpu")
     identity = {"algorithm": "genrl", "task": task, "episodes": int(args.episodes), "seed": seed,
                 "batch_episodes": batch_episodes, "generator_sha256": generator_digest(generator),
-                "genrl_settings": genrl_settings(genrl_kwargs | {"n_steps": batch_episodes}), "demonstration_callback": callback,
+                "genrl_settings": genrl_settings(genrl_kwargs | {"n_steps": batch_episodes}),
+                "demonstration_callback": callback,
                 "demonstrations": [dataset_fingerprint(item.dataset) for item in demonstrations]}
     state = resume_state(folder / "checkpoint", identity)
     if state is None:  # from the start: what an earlier unfinished try left is dropped

@@ -3,6 +3,7 @@ the workflow (demonstrations, a generator, GenRL, the success rate) on tiny size
 
 import importlib
 import json
+import os
 
 import gymnasium as gym
 import mujoco
@@ -251,3 +252,33 @@ def test_new_runs_keep_the_generator_stages_and_drop_what_the_old_runs_measured(
     assert {key: result[key] for key in measures} == measures  # the generator's stages are kept
     assert "policy_neighbourhood" not in result and "final_success_mean" not in result  # measured on the old runs
     assert not (work / "seed_0").exists()
+
+
+def test_the_benchmark_keeps_the_generator_whose_fitted_mean_solves_the_most_tuning_states(tmp_path, monkeypatch):
+    from sb3_genrl.benchmarks import fetch
+
+    scores = {"vae_seed0.pt": 0.25, "vae_seed1.pt": 0.75, "vae_seed2.pt": 0.5}
+    scored = []
+
+    def score(task, path, dataset, states, seed):  # the fit is tested above; here: which file is kept
+        scored.append((os.path.basename(path), states, seed))
+        return scores[os.path.basename(path)]
+
+    monkeypatch.setattr(fetch, "fitted_mean_success", score)
+    out, work = tmp_path / "fetch.json", tmp_path / "work"
+    argv = ["--task", "fetch-push", "--demos", "6", "--epochs", "1", "--generator-seeds", "3", "--selection-states", "4",
+            "--out", str(out), "--work", str(work)]
+    args = fetch.arguments(argv)
+    result = fetch.start(args)
+    path = fetch.generator_stage(args, result, lambda: fetch.write_result(str(out), result))
+    from sb3_genrl.hyperparams import TUNING_GOAL_SEED
+
+    assert scored == [(f"vae_seed{seed}.pt", 4, TUNING_GOAL_SEED) for seed in range(3)]
+    record = json.loads(out.read_text())["generator"]
+    assert record["kept_seed"] == 1 and [c["fitted_mean_tuning_success"] for c in record["candidates"]] == [0.25, 0.75, 0.5]
+    assert (work / "vae.pt").read_bytes() == (work / "vae_seed1.pt").read_bytes() and path == str(work / "vae.pt")
+    assert record["demonstration_info"]["episodes"] == 6
+    # resumed: nothing is trained or scored again
+    scored.clear()
+    args = fetch.arguments(argv)
+    assert fetch.generator_stage(args, fetch.start(args), lambda: None) == path and scored == []
