@@ -64,8 +64,28 @@ def read(results: str) -> dict[str, dict]:
     return found
 
 
-def status(result: dict) -> str:
-    """``complete``, or ``partial`` with the episodes each seed reached."""
+def former_settings(task: str, result: dict) -> list[str]:
+    """The GenRL settings in which ``result``'s runs differ from the task's entry in ``hyperparams/genrl.yml`` now
+    (the episodes per iteration compared as ``batch_episodes``: older JSON files record GenRL's default ``n_steps``)."""
+    from sb3_genrl.genrl.train import genrl_settings
+    from sb3_genrl.study.quickstart import task_settings
+
+    settings = result.get("settings", {})
+    if "genrl_settings" not in settings:
+        return []
+    _, batch_episodes, genrl_kwargs = task_settings(task)
+    now = genrl_settings(genrl_kwargs | {"n_steps": batch_episodes})
+    differ = sorted(key for key in now.keys() | settings["genrl_settings"].keys()
+                    if key != "n_steps" and now.get(key) != settings["genrl_settings"].get(key))
+    return differ + (["batch_episodes"] if settings.get("batch_episodes", batch_episodes) != batch_episodes else [])
+
+
+def status(result: dict, task: str | None = None) -> str:
+    """``complete``, or ``partial`` with the episodes each seed reached; with ``task``, also whether the runs used
+    other GenRL settings than the task's entry has now."""
+    differ = former_settings(task, result) if task is not None else []
+    if differ:
+        return f"{status(result)}; former GenRL settings ({', '.join(differ)} differ)"
     if result.get("complete"):
         return "complete"
     reached = [f"seed {run['seed']}: {run['curve_episodes'][-1] if run['curve_episodes'] else 0}"
@@ -90,7 +110,7 @@ def row(task: str, result: dict) -> list:
     near_cell = (f"{near['deterministic_success']:.3f} / {near['best_of_draws']:.3f} ({near['draws_per_state']})"
                  if near else pending)
     return [task, demos, recon, limit.get("best_of", {}).get("1", pending), limit.get("success_rate", pending),
-            near_cell, start_cell, success, result["settings"]["episodes"], f">= {target} in {budget}", status(result)]
+            near_cell, start_cell, success, result["settings"]["episodes"], f">= {target} in {budget}", status(result, task)]
 
 
 def table(found: dict[str, dict], progress: list[list] | None = None, results: str | None = None) -> str:

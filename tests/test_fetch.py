@@ -282,3 +282,19 @@ def test_the_benchmark_keeps_the_generator_whose_fitted_mean_solves_the_most_tun
     scored.clear()
     args = fetch.arguments(argv)
     assert fetch.generator_stage(args, fetch.start(args), lambda: None) == path and scored == []
+
+
+def test_the_results_table_says_which_runs_used_former_genrl_settings():
+    from sb3_genrl.benchmarks.fetch_results import status
+
+    from sb3_genrl.genrl.train import genrl_settings
+    from sb3_genrl.study.quickstart import task_settings
+
+    _, batch_episodes, genrl_kwargs = task_settings("fetch-push")
+    now = genrl_settings(genrl_kwargs | {"n_steps": batch_episodes})
+    result = {"complete": True, "runs": [], "settings": {"batch_episodes": batch_episodes, "genrl_settings": now}}
+    assert status(result, "fetch-push") == "complete"
+    result["settings"]["genrl_settings"] = dict(now, n_steps=64)  # as older files record it: not a difference
+    assert status(result, "fetch-push") == "complete"
+    result["settings"]["genrl_settings"] = dict(now, hindsight_kwargs={"history": 60, "regression_steps": 64})
+    assert status(result, "fetch-push") == "complete; former GenRL settings (hindsight_kwargs differ)"
