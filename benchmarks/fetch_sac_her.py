@@ -45,6 +45,8 @@ from sb3_genrl.hyperparams import EVAL_GOAL_SEED, parse_kwargs
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 SETTINGS = os.path.join(HERE, "sac_her_fetch.yml")
+# what a resumed JSON must share with the run that continues it
+RESUME_KEYS = ("benchmark", "settings", "demonstrations", "eval_states", "eval_seed", "eval_every")
 ZOO_ONLY = ("n_timesteps", "policy", "normalize", "replay_buffer_class", "replay_buffer_kwargs", "policy_kwargs")
 
 
@@ -166,9 +168,13 @@ def main(argv: list[str] | None = None) -> None:
               "demonstrations": int(len(episodes_data["rewards"])) if args.variant == "demos" else 0,
               "eval_states": args.eval_states, "eval_seed": EVAL_GOAL_SEED, "eval_every": args.eval_every,
               "complete": False, "runs": []}
-    if os.path.exists(args.out):
+    if os.path.exists(args.out):  # resumed: only a run of the same settings
         with open(args.out) as file:
-            result = json.load(file) | {"complete": False}
+            kept = json.load(file)
+        differ = sorted(key for key in RESUME_KEYS if kept.get(key) != result[key])
+        if differ:
+            raise SystemExit(f"{args.out} holds another run (it differs in {', '.join(differ)}): give another --out")
+        result = kept | {"complete": False}
 
     def write() -> None:
         write_result(args.out, result)

@@ -298,3 +298,16 @@ def test_the_results_table_says_which_runs_used_former_genrl_settings():
     assert status(result, "fetch-push") == "complete"
     result["settings"]["genrl_settings"] = dict(now, hindsight_kwargs={"history": 60, "regression_steps": 64})
     assert status(result, "fetch-push") == "complete; former GenRL settings (hindsight_kwargs differ)"
+
+
+def test_sac_her_resumes_only_a_run_of_the_same_settings(tmp_path):
+    from sb3_genrl.benchmarks import fetch_sac_her
+    from sb3_genrl.envs.demonstrations import make_demonstrations
+
+    data = make_demonstrations("fetch-reach", 4, tmp_path / "demos", seed=3, n_threads=1, progress_bar=False)
+    out = tmp_path / "sac.json"
+    out.write_text(json.dumps({"benchmark": "fetch_sac_her_fetch-reach_demos", "eval_states": 7, "runs": []}))
+    with pytest.raises(SystemExit, match="differs in demonstrations, eval_every, eval_seed, eval_states, settings"):
+        fetch_sac_her.main(["--task", "fetch-reach", "--variant", "demos", "--data", str(data), "--out", str(out),
+                            "--work", str(tmp_path / "work")])
+    assert not (tmp_path / "work").exists() and json.loads(out.read_text())["eval_states"] == 7  # nothing touched
