@@ -47,10 +47,12 @@ def one_at_a_time(model: GenRL, goals: int, seed: int) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def trained(tmp_path_factory: pytest.TempPathFactory, hockey_generator: str) -> Path:
-    """A zoo run of one iteration (16 episodes) of the file's hockey settings, in rl-zoo3's ``logs/`` layout."""
+    """A zoo run of one iteration (16 episodes) of the file's hockey settings, in rl-zoo3's ``logs/`` layout, on one
+    torch thread as ``genrl`` runs (another thread count rounds differently)."""
     logs = tmp_path_factory.mktemp("zoo") / "logs"
     zoo("train", "--algo", "genrl", "--env", ENV_ID, "-n", 16, "--seed", 3, "--eval-freq", -1, "-f", logs,
-        "--save-freq", 16, "-tb", logs.parent / "tensorboard", "--device", "cpu", *with_generator(hockey_generator))
+        "--save-freq", 16, "-tb", logs.parent / "tensorboard", "--device", "cpu", "--num-threads", 1,
+        *with_generator(hockey_generator))
     return logs
 
 
