@@ -44,9 +44,9 @@ import time
 
 import torch
 from sb3_genrl.benchmarks.fetch_results import seed_row, write_result
-from sb3_genrl.benchmarks.fetch_seed import fitted_mean_success, train_seed
+from sb3_genrl.benchmarks.fetch_seed import fitted_mean_success, recorded_genrl_settings, train_seed
+from sb3_genrl.benchmarks.genrl import make_benchmark_demonstrations
 from sb3_genrl.envs import TASKS, get_task
-from sb3_genrl.envs.demonstrations import make_demonstrations
 from sb3_genrl.envs.fetch_demonstrations import (
     policy_neighbourhood_success,
     prior_best_success,
@@ -56,7 +56,6 @@ from sb3_genrl.envs.fetch_demonstrations import (
 from sb3_genrl import __version__
 from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, SEED
 from sb3_genrl.generative import load, train_generator
-from sb3_genrl.genrl.train import genrl_settings
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED, TUNING_GOAL_SEED
 from sb3_genrl.study.quickstart import quickstart_preset, task_settings
 
@@ -119,8 +118,7 @@ def settings_of(args: argparse.Namespace) -> dict[str, object]:
     """What the run is: compared with the JSON's on resume."""
     _, batch_episodes, genrl_kwargs = task_settings(args.task)
     return {"task": args.task, "env_id": get_task(args.task).env_id, "episodes": args.episodes,
-            "batch_episodes": batch_episodes,
-            "genrl_settings": genrl_settings(genrl_kwargs | {"n_steps": batch_episodes}),
+            "batch_episodes": batch_episodes, "genrl_settings": recorded_genrl_settings(args.task),
             "seeds": list(args.seeds), "eval_every": args.eval_every, "eval_states": args.eval_states,
             "eval_seed": EVAL_GOAL_SEED, "demonstrations": args.demos if args.data is None else os.path.abspath(args.data),
             "generator": "trained" if args.generator is None else os.path.abspath(args.generator),
@@ -171,11 +169,7 @@ def generator_stage(args: argparse.Namespace, result: dict, write) -> str:
     data = os.path.join(args.work, "demonstrations")
     if args.data is None and os.path.isdir(data) and os.listdir(data):
         args.data = data  # made before the stop (a dataset folder is written as one unit)
-    if args.data is None:
-        start_time = time.perf_counter()
-        make_demonstrations(args.task, args.demos, data, seed=0, n_threads=args.threads, progress_bar=True)
-        print(f"{args.demos} demonstrations in {time.perf_counter() - start_time:.0f} s", flush=True)
-        args.data = data
+    args.data = args.data or make_benchmark_demonstrations(args.task, args.demos, args.work, args.threads)
     from sb3_genrl.data import dataset_info
 
     record = result.setdefault("generator", {})

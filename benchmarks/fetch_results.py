@@ -67,14 +67,13 @@ def read(results: str) -> dict[str, dict]:
 def former_settings(task: str, result: dict) -> list[str]:
     """The GenRL settings in which ``result``'s runs differ from the task's entry in ``hyperparams/genrl.yml`` now
     (the episodes per iteration compared as ``batch_episodes``: older JSON files record GenRL's default ``n_steps``)."""
-    from sb3_genrl.genrl.train import genrl_settings
-    from sb3_genrl.study.quickstart import task_settings
+    from sb3_genrl.benchmarks.fetch_seed import recorded_genrl_settings
 
     settings = result.get("settings", {})
     if "genrl_settings" not in settings:
         return []
-    _, batch_episodes, genrl_kwargs = task_settings(task)
-    now = genrl_settings(genrl_kwargs | {"n_steps": batch_episodes})
+    now = recorded_genrl_settings(task)
+    batch_episodes = now["n_steps"]
     differ = sorted(key for key in now.keys() | settings["genrl_settings"].keys()
                     if key != "n_steps" and now.get(key) != settings["genrl_settings"].get(key))
     return differ + (["batch_episodes"] if settings.get("batch_episodes", batch_episodes) != batch_episodes else [])

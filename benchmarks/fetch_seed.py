@@ -76,6 +76,13 @@ class SuccessCurve(BaseCallback):
         print(f"  seed {self.row['seed']}, {episodes} episodes: success {result['success_rate']:.3f}", flush=True)
 
 
+def recorded_genrl_settings(task: str) -> dict[str, Any]:
+    """Every GenRL setting the task's entry runs with, its episodes per iteration as ``n_steps`` (the runs are made
+    with ``n_steps=batch_episodes``): what the benchmark's JSON and each run's checkpoint record."""
+    _, batch_episodes, genrl_kwargs = task_settings(task)
+    return genrl_settings(genrl_kwargs | {"n_steps": batch_episodes})
+
+
 def fitted_mean_success(task: str, generator_path: str, dataset: str, states: int, seed: int) -> float:
     """The success rate on ``states`` initial states (reset seeds from ``seed``) of GenRL's policy mean (policy seed 0,
     the task's entry) fitted to the demonstrations ``dataset`` as the entry's ``DemonstrationCallback`` fits it,
@@ -107,8 +114,7 @@ def train_seed(task: str, generator_path: str, seed: int, args: argparse.Namespa
     generator = load(generator_path, device="cpu")
     identity = {"algorithm": "genrl", "task": task, "episodes": int(args.episodes), "seed": seed,
                 "batch_episodes": batch_episodes, "generator_sha256": generator_digest(generator),
-                "genrl_settings": genrl_settings(genrl_kwargs | {"n_steps": batch_episodes}),
-                "demonstration_callback": callback,
+                "genrl_settings": recorded_genrl_settings(task), "demonstration_callback": callback,
                 "demonstrations": [dataset_fingerprint(item.dataset) for item in demonstrations]}
     state = resume_state(folder / "checkpoint", identity)
     if state is None:  # from the start: what an earlier unfinished try left is dropped

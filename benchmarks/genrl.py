@@ -75,20 +75,25 @@ class Setting:
         return 100.0 if self.unit == "cm" else 1.0
 
 
+def make_benchmark_demonstrations(task: str, episodes: int, work: str, threads: int | None = 1) -> str:
+    """``episodes`` new demonstrations of ``task`` (seed 0, on ``threads`` threads) in ``work/demonstrations``; its
+    path."""
+    from sb3_genrl.envs.demonstrations import make_demonstrations
+
+    data = os.path.join(work, "demonstrations")
+    start = time.perf_counter()
+    make_demonstrations(task, episodes, data, seed=0, n_threads=threads, progress_bar=True)
+    print(f"{episodes} demonstrations in {time.perf_counter() - start:.0f} s", flush=True)
+    return data
+
+
 def make_generator(task: str, preset: str, args: argparse.Namespace, work: str, threads: int | None = 1
                    ) -> tuple[str, dict[str, object]]:
     """The generator to benchmark: ``--generator``, or the ``preset`` trained on ``--data`` or on ``--demos`` new
     demonstrations (made on ``threads`` threads), with its record."""
     if args.generator is not None:
         return args.generator, {"generator": os.path.abspath(args.generator)}
-    data = args.data
-    if data is None:
-        from sb3_genrl.envs.demonstrations import make_demonstrations
-
-        data = os.path.join(work, "demonstrations")
-        start = time.perf_counter()
-        make_demonstrations(task, args.demos, data, seed=0, n_threads=threads, progress_bar=True)
-        print(f"{args.demos} demonstrations in {time.perf_counter() - start:.0f} s", flush=True)
+    data = args.data or make_benchmark_demonstrations(task, args.demos, work, threads)
     path = os.path.join(work, "vae.pt")
     start = time.perf_counter()
     vae = train_generator(data, preset=preset, epochs=args.epochs, seed=0, out=path, progress_bar=True)
