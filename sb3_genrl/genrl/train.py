@@ -131,9 +131,8 @@ def train_policy(task: str, generator: TrajectoryGenerator | str, *, episodes: i
     callbacks = build_callbacks(callback, demonstrations=demonstrations, what=f"the settings of {task_name}", task=task)
     # Built first: a generator that does not fit the task is refused before anything is written.
     env = LatentActionWrapper(gym.make(env_id), _as_generator(generator))
-    batch_size = min(batch_episodes, genrl_kwargs.pop("batch_size", 64))
-    arguments = {"e_step": e_step, "n_steps": batch_episodes // n_envs, "batch_size": batch_size, "seed": seed,
-                 "device": device, "verbose": verbose, **genrl_kwargs}
+    arguments = {"e_step": e_step, "seed": seed, "device": device, "verbose": verbose,
+                 **run_settings(genrl_kwargs, batch_episodes, n_envs)}
     identity = {"algorithm": "genrl", "task": task_name, "episodes": int(episodes), "seed": seed, "n_envs": n_envs,
                 "batch_episodes": batch_episodes, "generator_sha256": generator_digest(env.generator),
                 "genrl_settings": genrl_settings(arguments), **_callback_identity(callback, callbacks, env, arguments)}
@@ -350,6 +349,15 @@ def _json_value(value: Any) -> Any:
         items = {key: _json_value(item) for key, item in value.items()}
         return _UNREPRESENTABLE if any(item is _UNREPRESENTABLE for item in items.values()) else items
     return _UNREPRESENTABLE
+
+
+def run_settings(genrl_kwargs: dict[str, Any], batch_episodes: int, n_envs: int) -> dict[str, Any]:
+    """The GenRL arguments :func:`train_policy` runs with for ``batch_episodes`` episodes per iteration on ``n_envs``
+    envs: ``genrl_kwargs`` with ``n_steps = batch_episodes / n_envs`` and their ``batch_size`` (default 64) capped at
+    ``batch_episodes``. What a stage that calls it records, through :func:`genrl_settings`."""
+    settings = dict(genrl_kwargs)
+    batch_size = min(batch_episodes, settings.pop("batch_size", 64))
+    return {"n_steps": batch_episodes // n_envs, "batch_size": batch_size, **settings}
 
 
 def genrl_settings(genrl_kwargs: dict[str, Any] | None = None) -> dict[str, Any]:

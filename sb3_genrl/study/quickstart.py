@@ -115,7 +115,7 @@ def _stage_settings(task: str, demo_episodes: int, epochs: int, policy_episodes:
                     video: bool) -> dict[str, dict[str, Any]]:
     """What each stage is made with: recorded beside its output, and compared with the record on a rerun."""
     import sb3_genrl
-    from sb3_genrl.genrl.train import genrl_settings
+    from sb3_genrl.genrl.train import genrl_settings, run_settings
 
     return {
         "demonstrations": {"task": task, "episodes": demo_episodes, "seed": seed, "version": sb3_genrl.__version__},
@@ -125,7 +125,8 @@ def _stage_settings(task: str, demo_episodes: int, epochs: int, policy_episodes:
         "evaluation": {"n": min(pr_samples, demo_episodes), "dwpr_n": dwpr_samples, "k": 3, "interventions": 5, "seed": seed},
         "policy": {"task": task, "episodes": policy_episodes, "batch_episodes": batch_episodes,
                    "n_envs": QUICKSTART_ENVS, "seed": seed, "genrl_kwargs": genrl_kwargs,
-                   "genrl": genrl_settings(genrl_kwargs)},  # every GenRL setting in effect, defaults included
+                   # every GenRL setting in effect, defaults included, as train_policy runs them
+                   "genrl": genrl_settings(run_settings(genrl_kwargs, batch_episodes, QUICKSTART_ENVS))},
         **({"video": {**VIDEO, "seed": sub_seed(seed, 1)}} if video else {})}
 
 
