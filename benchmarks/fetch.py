@@ -56,6 +56,7 @@ from sb3_genrl.envs.fetch_demonstrations import (
 from sb3_genrl import __version__
 from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, SEED
 from sb3_genrl.generative import load, train_generator
+from sb3_genrl.generative.presets import resolve_generator_spec
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED, TUNING_GOAL_SEED
 from sb3_genrl.study.quickstart import quickstart_preset, task_settings
 
@@ -122,7 +123,8 @@ def settings_of(args: argparse.Namespace) -> dict[str, object]:
             "seeds": list(args.seeds), "eval_every": args.eval_every, "eval_states": args.eval_states,
             "eval_seed": EVAL_GOAL_SEED, "demonstrations": args.demos if args.data is None else os.path.abspath(args.data),
             "generator": "trained" if args.generator is None else os.path.abspath(args.generator),
-            "preset": quickstart_preset(args.task), "epochs": args.epochs,
+            "preset": quickstart_preset(args.task), "generator_recipe": resolve_generator_spec(quickstart_preset(args.task)),
+            "epochs": args.epochs,
             "generator_seeds": None if args.generator else args.generator_seeds,
             "selection_states": None if args.generator else args.selection_states, "recon_demos": args.recon_demos,
             "limit_states": args.limit_states, "prior_draws": args.prior_draws,

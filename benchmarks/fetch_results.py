@@ -64,10 +64,18 @@ def read(results: str) -> dict[str, dict]:
     return found
 
 
+# VAE-FETCH's recipe when the JSON files did not record it yet (they record the preset's name only)
+UNRECORDED_RECIPE = {"model": "vae", "latent_dim": 10, "beta": 0.001}
+
+
 def former_settings(task: str, result: dict) -> list[str]:
-    """The GenRL settings in which ``result``'s runs differ from the task's entry in ``hyperparams/genrl.yml`` now
-    (the episodes per iteration compared as ``batch_episodes``: older JSON files record GenRL's default ``n_steps``)."""
+    """The settings in which ``result``'s runs differ from those the benchmark would use now: GenRL's (the task's entry
+    in ``hyperparams/genrl.yml``; the episodes per iteration compared as ``batch_episodes``: older JSON files record
+    GenRL's default ``n_steps``), and the recipe of the generator it trains (``generator recipe``)."""
     from sb3_genrl.benchmarks.fetch_seed import recorded_genrl_settings
+
+    from sb3_genrl.generative.presets import resolve_generator_spec
+    from sb3_genrl.study.quickstart import quickstart_preset
 
     settings = result.get("settings", {})
     if "genrl_settings" not in settings:
@@ -76,7 +84,12 @@ def former_settings(task: str, result: dict) -> list[str]:
     batch_episodes = now["n_steps"]
     differ = sorted(key for key in now.keys() | settings["genrl_settings"].keys()
                     if key != "n_steps" and now.get(key) != settings["genrl_settings"].get(key))
-    return differ + (["batch_episodes"] if settings.get("batch_episodes", batch_episodes) != batch_episodes else [])
+    differ += ["batch_episodes"] if settings.get("batch_episodes", batch_episodes) != batch_episodes else []
+    preset = quickstart_preset(task)
+    if settings.get("generator") == "trained" and settings.get("preset") == preset:
+        recorded = settings.get("generator_recipe", UNRECORDED_RECIPE if preset == "VAE-FETCH" else None)
+        differ += ["generator recipe"] if recorded is not None and recorded != resolve_generator_spec(preset) else []
+    return differ
 
 
 def status(result: dict, task: str | None = None) -> str:
@@ -84,7 +97,7 @@ def status(result: dict, task: str | None = None) -> str:
     other GenRL settings than the task's entry has now."""
     differ = former_settings(task, result) if task is not None else []
     if differ:
-        return f"{status(result)}; former GenRL settings ({', '.join(differ)} differ)"
+        return f"{status(result)}; former settings ({', '.join(differ)} differ)"
     if result.get("complete"):
         return "complete"
     reached = [f"seed {run['seed']}: {run['curve_episodes'][-1] if run['curve_episodes'] else 0}"

@@ -284,7 +284,7 @@ def test_the_benchmark_keeps_the_generator_whose_fitted_mean_solves_the_most_tun
     assert fetch.generator_stage(args, fetch.start(args), lambda: None) == path and scored == []
 
 
-def test_the_results_table_says_which_runs_used_former_genrl_settings():
+def test_the_results_table_says_which_runs_used_former_settings():
     from sb3_genrl.benchmarks.fetch_results import status
 
     from sb3_genrl.genrl.train import genrl_settings
@@ -297,7 +297,16 @@ def test_the_results_table_says_which_runs_used_former_genrl_settings():
     result["settings"]["genrl_settings"] = dict(now, n_steps=64)  # as older files record it: not a difference
     assert status(result, "fetch-push") == "complete"
     result["settings"]["genrl_settings"] = dict(now, hindsight_kwargs={"history": 60, "regression_steps": 64})
-    assert status(result, "fetch-push") == "complete; former GenRL settings (hindsight_kwargs differ)"
+    assert status(result, "fetch-push") == "complete; former settings (hindsight_kwargs differ)"
+    # the generator's recipe: the one recorded (or, for files that record only the preset's name, the former one)
+    from sb3_genrl.generative.presets import resolve_generator_spec
+
+    result["settings"] |= {"genrl_settings": now, "generator": "trained", "preset": "VAE-FETCH"}
+    assert status(result, "fetch-push") == "complete; former settings (generator recipe differ)"
+    result["settings"]["generator_recipe"] = resolve_generator_spec("VAE-FETCH")
+    assert status(result, "fetch-push") == "complete"
+    result["settings"]["generator_recipe"] = dict(resolve_generator_spec("VAE-FETCH"), path_weight=1.0)
+    assert status(result, "fetch-push") == "complete; former settings (generator recipe differ)"
 
 
 def test_sac_her_resumes_only_a_run_of_the_same_settings(tmp_path):

@@ -419,3 +419,37 @@ def test_fit_keeps_the_device_the_model_was_built_on(monkeypatch):
     model = BetaVAE(6, 2, 2, beta=0.01, device="cpu").fit(data, epochs=1, batch_size=32, seed=0, progress_bar=False)
     assert model.device.type == "cpu" and model.action_mean.device.type == "cpu"
     assert all(p.device.type == "cpu" for p in model.networks.parameters())
+
+
+def test_path_error_matches_a_brute_force_running_sum(tmp_path):
+    """BetaVAE's path term: the running sum of the raw per-step errors, per joint in units of its time-averaged
+    normalisation std, over sqrt(T), squared and averaged; saved with the model, absent from eq. 9's models' files."""
+    horizon, joints = 6, 3
+    rng = np.random.default_rng(0)
+    vae = BetaVAE(horizon, joints, 2, beta=0.01, path_weight=2.5, device="cpu")
+    vae.action_std = torch.as_tensor(rng.uniform(0.5, 2.0, (horizon, joints)), dtype=torch.float32)
+    reconstruction, batch = (torch.as_tensor(rng.normal(size=(4, horizon * joints)), dtype=torch.float32)
+                             for _ in range(2))
+    raw = (reconstruction - batch).numpy().reshape(4, horizon, joints) * vae.action_std.numpy()
+    sigma = vae.action_std.numpy().mean(axis=0)
+    expected = np.mean([(sum(raw[b, s, j] for s in range(t + 1)) / (sigma[j] * np.sqrt(horizon))) ** 2
+                        for b in range(4) for t in range(horizon) for j in range(joints)])
+    np.testing.assert_allclose(vae.path_error(reconstruction, batch).item(), expected, rtol=1e-5)
+    assert vae.config()["path_weight"] == 2.5 and "path_weight" not in BetaVAE(horizon, joints, 2, beta=0.01).config()
+    fetch = make_generator("VAE-FETCH", horizon=horizon, action_dim=joints, device="cpu")
+    assert (fetch.latent_dim, fetch.beta, fetch.path_weight) == (10, 0.001, 4.0)
+    with pytest.raises(ValueError, match="path_weight"):
+        BetaVAE(horizon, joints, 2, beta=0.01, path_weight=-1.0)
+
+
+def test_path_weight_trains_a_model_that_saves_and_loads_with_it(family, tmp_path):
+    trajectories, _ = family
+    models = [BetaVAE(trajectories.shape[1], trajectories.shape[2], 2, beta=0.01, path_weight=weight, device="cpu")
+              .fit(trajectories[:200], epochs=3, seed=0, eval_every=3) for weight in (0.0, 4.0)]
+    assert "path" in models[1].history[-1] and "path" not in models[0].history[-1]
+    latents = np.zeros((1, 2), dtype=np.float32)
+    assert not np.allclose(models[0].decode(latents), models[1].decode(latents))  # the term changes the training
+    models[1].save(tmp_path / "path.pt")
+    loaded = load(tmp_path / "path.pt", device="cpu")
+    assert loaded.path_weight == 4.0
+    np.testing.assert_array_equal(loaded.decode(latents), models[1].decode(latents))

@@ -31,26 +31,38 @@ class BetaVAE(TorchTrajectoryGenerator):
     dimensions. Relative to a summed Gaussian log-likelihood this ``beta`` therefore equals ``beta_summed / (T * M)``.
     ``alpha`` is drawn with the reparameterisation trick; :meth:`decode` uses the decoder only.
 
+    With ``path_weight > 0`` (not in the paper) the loss also weighs the error of the trajectory's running sum::
+
+        + path_weight * mean_{t, j} (sum_{s <= t} (tau_hat[s, j] - tau[s, j]) / (sigma_j * sqrt(T)))^2
+
+    in raw units, ``sigma_j`` joint ``j``'s normalisation std averaged over time. Where actions are displacements or
+    velocity commands (the Fetch tasks' end-effector moves), the running sum is the path the robot takes: a small
+    error repeated at every step moves the path's end far, and the per-step error alone hardly sees it.
+
     :param horizon: number of time steps ``T``
     :param action_dim: number of joints ``M``
     :param latent_dim: ``N_alpha`` (paper: 2, 3 or 6)
     :param beta: weight of the KL term (paper: 0.01, 0.005 or 0.001)
     :param std_floor: floor of each normalisation std, a fraction of the largest (see :class:`TorchTrajectoryGenerator`)
+    :param path_weight: weight of the running sum's error (default 0: eq. 9 alone)
     :param device: torch device or ``"auto"``
     """
 
     decoder_name = "decoder"
 
     def __init__(self, horizon: int, action_dim: int, latent_dim: int, *, beta: float,
-                 std_floor: float = STD_FLOOR, device: torch.device | str = "auto") -> None:
+                 std_floor: float = STD_FLOOR, path_weight: float = 0.0, device: torch.device | str = "auto") -> None:
         if not 0 <= beta < math.inf:
             raise ValueError(f"beta must be non-negative and finite, got {beta}")
-        self.beta = float(beta)
+        if not 0 <= path_weight < math.inf:
+            raise ValueError(f"path_weight must be non-negative and finite, got {path_weight}")
+        self.beta, self.path_weight = float(beta), float(path_weight)
         super().__init__(horizon=horizon, action_dim=action_dim, latent_dim=latent_dim, prior="normal",
                          std_floor=std_floor, device=device)
 
     def _hyperparameters(self) -> dict[str, Any]:
-        return {"beta": self.beta}
+        # (path_weight only where set: the files of eq. 9's models stay as they were)
+        return {"beta": self.beta} | ({"path_weight": self.path_weight} if self.path_weight else {})
 
     def _build_networks(self) -> nn.ModuleDict:
         trajectory_size = self.horizon * self.action_dim
@@ -84,7 +96,19 @@ class BetaVAE(TorchTrajectoryGenerator):
         reconstruction_loss = (reconstruction - batch).pow(2).mean(dim=1).mean()
         kl = gaussian_kl_to_standard_normal(mean, log_std).mean()
         loss = reconstruction_loss + self.beta * kl
+        path = {}
+        if self.path_weight:
+            path_loss = self.path_error(reconstruction, batch)
+            loss = loss + self.path_weight * path_loss
+            path = {"path": path_loss.item()}
         optimizer.zero_grad()
         loss.backward()
         optimizer.step()
-        return {"loss": loss.item(), "reconstruction": reconstruction_loss.item(), "kl": kl.item()}
+        return {"loss": loss.item(), "reconstruction": reconstruction_loss.item(), "kl": kl.item(), **path}
+
+    def path_error(self, reconstruction: torch.Tensor, batch: torch.Tensor) -> torch.Tensor:
+        """The running sum's squared error of normalised, flattened ``(B, T*M)`` trajectories (see the class doc),
+        averaged over the batch, the time steps and the joints."""
+        std = self.action_std.reshape(self.horizon, self.action_dim)
+        error = (reconstruction - batch).view(-1, self.horizon, self.action_dim) * std  # raw units
+        return (torch.cumsum(error, dim=1) / (std.mean(dim=0) * self.horizon**0.5)).pow(2).mean()
