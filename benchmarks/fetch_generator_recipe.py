@@ -20,7 +20,7 @@ import torch
 from sb3_genrl.benchmarks.fetch_seed import fitted_mean_success
 from sb3_genrl.envs.fetch_demonstrations import reconstruction_success
 
-from sb3_genrl.checks import EXISTING, JSON_OUT, SEED
+from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, SEED
 from sb3_genrl.data import load_actions
 from sb3_genrl.generative.presets import resolve_generator_spec
 from sb3_genrl.generative.vae import BetaVAE
@@ -36,8 +36,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--data", type=EXISTING, default=None, help="demonstrations (default runs/fetch/TASK/demonstrations)")
     parser.add_argument("--weights", type=float, nargs="+", default=[0.0, 1.0, 4.0])
     parser.add_argument("--seeds", type=SEED, nargs="+", default=[3])
-    parser.add_argument("--epochs", type=int, default=300)
-    parser.add_argument("--states", type=int, default=200)
+    parser.add_argument("--epochs", type=COUNT, default=300)
+    parser.add_argument("--states", type=COUNT, default=200)
     parser.add_argument("--out", type=JSON_OUT, default="runs/fetch_generator_recipe.json")
     args = parser.parse_args(argv)
     data = args.data or os.path.join("runs", "fetch", args.task, "demonstrations")

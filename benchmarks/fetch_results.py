@@ -94,7 +94,7 @@ def former_settings(task: str, result: dict) -> list[str]:
 
 def status(result: dict, task: str | None = None) -> str:
     """``complete``, or ``partial`` with the episodes each seed reached; with ``task``, also whether the runs used
-    other GenRL settings than the task's entry has now."""
+    former settings (:func:`former_settings`)."""
     differ = former_settings(task, result) if task is not None else []
     if differ:
         return f"{status(result)}; former settings ({', '.join(differ)} differ)"

@@ -27,7 +27,7 @@ from sb3_genrl.generative import load
 from sb3_genrl.genrl.checkpoint import GenRLCheckpoint, RandomStateRecorder, resume_genrl, resume_state
 from sb3_genrl.genrl.demonstrations import DemonstrationCallback, build_callbacks, fit_mean_to_demonstrations
 from sb3_genrl.genrl.generator_files import generator_digest
-from sb3_genrl.genrl.train import genrl_settings, make_genrl
+from sb3_genrl.genrl.train import genrl_settings, make_genrl, run_settings
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED
 from sb3_genrl.study.quickstart import task_settings
 from sb3_genrl.study.state import dataset_fingerprint
@@ -80,7 +80,7 @@ def recorded_genrl_settings(task: str) -> dict[str, Any]:
     """Every GenRL setting the task's entry runs with, its episodes per iteration as ``n_steps`` (the runs are made
     with ``n_steps=batch_episodes``): what the benchmark's JSON and each run's checkpoint record."""
     _, batch_episodes, genrl_kwargs = task_settings(task)
-    return genrl_settings(genrl_kwargs | {"n_steps": batch_episodes})
+    return genrl_settings(run_settings(genrl_kwargs, batch_episodes, n_envs=1))
 
 
 def fitted_mean_success(task: str, generator_path: str, dataset: str, states: int, seed: int) -> float:
