@@ -32,7 +32,7 @@ RECONSTRUCTION_SEED = 1  # as benchmarks/fetch.py: demonstrations the generator 
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--task", required=True, choices=("fetch-push", "fetch-pick-and-place", "fetch-slide"))
+    parser.add_argument("--task", required=True, choices=("fetch-reach", "fetch-push", "fetch-pick-and-place", "fetch-slide"))
     parser.add_argument("--data", type=EXISTING, default=None, help="demonstrations (default runs/fetch/TASK/demonstrations)")
     parser.add_argument("--weights", type=float, nargs="+", default=[0.0, 1.0, 4.0])
     parser.add_argument("--seeds", type=SEED, nargs="+", default=[3])
