@@ -305,7 +305,7 @@ def test_the_results_table_says_which_runs_used_former_settings():
     assert status(result, "fetch-push") == "complete; former settings (generator recipe differ)"
     result["settings"]["generator_recipe"] = resolve_generator_spec("VAE-FETCH")
     assert status(result, "fetch-push") == "complete"
-    result["settings"]["generator_recipe"] = dict(resolve_generator_spec("VAE-FETCH"), path_weight=1.0)
+    result["settings"]["generator_recipe"] = dict(resolve_generator_spec("VAE-FETCH"), path_weight=4.0)
     assert status(result, "fetch-push") == "complete; former settings (generator recipe differ)"
 
 

@@ -437,7 +437,7 @@ def test_path_error_matches_a_brute_force_running_sum(tmp_path):
     np.testing.assert_allclose(vae.path_error(reconstruction, batch).item(), expected, rtol=1e-5)
     assert vae.config()["path_weight"] == 2.5 and "path_weight" not in BetaVAE(horizon, joints, 2, beta=0.01).config()
     fetch = make_generator("VAE-FETCH", horizon=horizon, action_dim=joints, device="cpu")
-    assert (fetch.latent_dim, fetch.beta, fetch.path_weight) == (10, 0.001, 4.0)
+    assert (fetch.latent_dim, fetch.beta, fetch.path_weight) == (10, 0.001, 1.0)
     with pytest.raises(ValueError, match="path_weight"):
         BetaVAE(horizon, joints, 2, beta=0.01, path_weight=-1.0)
 
