@@ -179,9 +179,14 @@ def test_baselines_run_end_to_end(algorithm, demos, tmp_path):
     health = summary["training_health"]  # from the run's own SB3 logs (SAC without prefill is still warming up)
     assert ("approx_kl_median" in health) == (algorithm == "ppo")
     assert ("critic_loss_max" in health) == (algorithm in ("sac", "sac-her"))
-    # (batched and single forward passes differ in float32 rounding, which 69 closed-loop steps and the puck's
-    # contacts carry on: a 1% tolerance; another goal, observation or env would be metres off)
-    assert final["mean_distance"] == pytest.approx(np.mean([d for d, _ in distances]), rel=1e-2)
+    # The summary's mean is that of the batched evaluation's goals, each of which the goal stepped alone matches:
+    # batched and single forward passes differ in float32 rounding, which 69 closed-loop steps, the stick's hit and
+    # the table contacts amplify (up to 2% here, a 5% tolerance); another goal, observation or env would be metres off.
+    batched = -np.asarray(evaluate_feedback_policy(model, "hockey", goals=2, seed=EVAL_GOAL_SEED,
+                                                   goal_conditioned=algorithm == "sac-her")["rewards"], dtype=float)
+    assert final["mean_distance"] == pytest.approx(float(np.mean(batched)), rel=1e-9)
+    for (distance, _), together in zip(distances, batched, strict=True):
+        assert distance == pytest.approx(together, rel=5e-2)
     assert abs(final["table_contacts"] - np.mean([c for _, c in distances])) <= 1 and final["unstable"] == unstable
     assert final["object_unmoved"] == unmoved
     if algorithm == "ppo":
