@@ -54,8 +54,8 @@ def test_genrl_settings_of_the_tasks():
         "policy": "MlpPolicy", "batch_size": 16, "hindsight_kwargs": {"history": 120, "regression_steps": 512},
         "policy_kwargs": {"net_arch": {"pi": [64, 64, 64], "vf": [64, 64]}}})
     episodes, batch_episodes, kwargs = load_genrl_settings("GenRL/Basketball-v0")
-    assert (episodes, batch_episodes, kwargs["policy"], kwargs["hindsight_kwargs"]) == (20000, 32, "ContextStdPolicy",
-                                                                                         {"history": 60})
+    assert (episodes, batch_episodes, kwargs["policy"], kwargs["hindsight_kwargs"]) == (
+        20000, 16, "ContextStdPolicy", {"history": 60, "regression_steps": 512})
 
 
 @pytest.mark.parametrize(("entry", "message"), [
