@@ -148,7 +148,7 @@ def test_task_settings_come_from_genrl_yml(reach_task):
 
     entry = load_hyperparams("genrl", "GenRL/Basketball-v0")
     episodes, batch_episodes, kwargs = task_settings("basketball")
-    assert (episodes, batch_episodes) == (entry["n_timesteps"], entry["n_steps"]) == (20000, 32)
+    assert (episodes, batch_episodes) == (entry["n_timesteps"], entry["n_steps"]) == (20000, 16)
     assert kwargs == {key: value for key, value in entry.items() if key not in ("n_timesteps", "n_steps", "env_wrapper")}
     assert task_settings("GenRL/Basketball-v0") == task_settings("basketball")  # by name or Gymnasium id
     # a task of its own without an entry: GenRL's defaults (the paper's 3000 episodes, 64 per iteration)
