@@ -23,9 +23,8 @@ from sb3_genrl.genrl.policies import actor_parameters
 
 Batch = tuple[th.Tensor, th.Tensor, th.Tensor, th.Tensor]  # observations, actions, log pi(actions), advantages
 # The analytic Fisher-vector product (sb3_genrl.genrl.fisher) halves the E-step's time and equals autograd's to
-# rounding, but rounding that differs changes a run after a few iterations: it stays off until the task benchmarks'
-# seeds are rerun with it, so that the committed results remain this version's.
-ANALYTIC_FISHER = False
+# rounding; False takes autograd's double backward pass for every policy (the product of runs made before it).
+ANALYTIC_FISHER = True
 
 
 def variational_copy(policy: ActorCriticPolicy, previous: ActorCriticPolicy | None) -> ActorCriticPolicy:

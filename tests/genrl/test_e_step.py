@@ -119,12 +119,19 @@ def test_trpo_e_step_with_the_analytic_product_takes_the_double_backward_step(mo
     assert ((phi - expected_phi).norm() / (expected_phi - start).norm()).item() < 1e-4
 
 
-def test_the_e_step_takes_autograds_product_unless_the_analytic_one_is_switched_on(monkeypatch):
+def test_the_e_step_takes_the_analytic_product_unless_it_is_switched_off(monkeypatch):
     from sb3_genrl.genrl import e_step
+
+    calls = []
+    analytic = e_step.gaussian_fisher
+    monkeypatch.setattr(e_step, "gaussian_fisher", lambda *args: calls.append(1) or analytic(*args))
+    assert e_step.ANALYTIC_FISHER is True
+    GenRL(FastReachEnv(), LinearGenerator(), seed=0, n_steps=32).learn(64)
+    assert len(calls) == 6  # 2 iterations of 3 E-steps (n_em_iterations)
 
     def refuse(*args):
         raise AssertionError("the analytic product was used")
 
-    assert e_step.ANALYTIC_FISHER is False  # the committed results were made with autograd's product
+    monkeypatch.setattr(e_step, "ANALYTIC_FISHER", False)
     monkeypatch.setattr(e_step, "gaussian_fisher", refuse)
     GenRL(FastReachEnv(), LinearGenerator(), seed=0, n_steps=32).learn(64)
