@@ -121,3 +121,29 @@ def test_genrl_learns_from_the_sparse_reward_and_logs_the_success_rate(tmp_path)
         successes.append(env.step(alpha)[4]["is_success"])
         assert np.linalg.norm(R @ alpha + C - (env.unwrapped.goal - env.unwrapped.start)) < 1.0
     assert np.mean(successes) >= 0.8
+
+
+def test_the_prior_rollout_plays_a_goal_env_through_the_step_path_from_each_contexts_reset():
+    from sb3_genrl.metrics.prior_rollout import prior_rollout
+
+    generator, seed, contexts, draws = LinearGenerator(), 5, 8, 60
+    result = prior_rollout(generator, PointGoalEnv(), contexts=contexts, draws=draws, seed=seed)
+    # independently: each context is the reset of seed + g, each draw's end point is start + the sum of its actions
+    alphas = np.clip(generator.sample_prior(contexts * draws, np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0])),
+                     -3, 3)  # GenRL's action box
+    task, best, solved = PointGoalEnv(), [], []
+    for g in range(contexts):
+        task.reset(seed=seed + g)
+        ends = task.start + np.array([generator.decode(alpha[None])[0].astype(np.float64).sum(axis=0)
+                                      for alpha in alphas[g * draws:(g + 1) * draws]])
+        hit = np.linalg.norm(ends - task.goal, axis=1) <= THRESHOLD
+        best.append(0.0 if hit.any() else -1.0)
+        solved.append(bool(hit.any()))
+    assert 0 < sum(solved) < contexts  # both kinds of context, so that the comparison means something
+    np.testing.assert_array_equal(result.best, best)
+    np.testing.assert_array_equal(result.solved, solved)
+    summary = result.summary()
+    assert summary["prior_success"] == np.mean(solved) and summary["prior_episodes"] == contexts * draws
+    assert summary["prior_mean"] == np.mean(best)
+    with pytest.raises(ValueError, match="contexts must be a count"):
+        prior_rollout(generator, PointGoalEnv(), contexts=np.zeros((2, 2)), draws=2)

@@ -469,8 +469,9 @@ def test_prior_rollout_on_hockey_plays_the_held_out_goals_of_its_seed_one_trajec
     for g, goal in enumerate(held_out_goals("hockey", 2, PRIOR_ROLLOUT_SEED)):
         expected.append(max(env.play_trajectory(trajectories[i], goal)[0] for i in (2 * g, 2 * g + 1)))
     np.testing.assert_allclose(result.best, expected, atol=1e-6)
-    with pytest.raises(ValueError, match="needs a task with the fast path"):
-        prior_rollout(generator, gym.make("Pendulum-v1"), contexts=1, draws=1)
+    assert result.solved is None and "prior_success" not in result.summary()  # hockey reports no success
+    with pytest.raises(ValueError, match="contexts must be a count or goals of shape"):
+        prior_rollout(generator, "hockey", contexts=np.zeros(2), draws=1)
 
 
 def test_scorecard_ranks_converged_models_by_the_prior_rollout_and_sets_apart_the_untrained() -> None:
@@ -490,6 +491,11 @@ def test_scorecard_ranks_converged_models_by_the_prior_rollout_and_sets_apart_th
     without_prior = [{key: value for key, value in r.items() if not key.startswith("prior")} for r in rows]
     assert rank_key(without_prior) == "precision"
     assert [r["model"] for r in ranked(without_prior)] == ["A", "C", "D", "B"]
+    # a sparse 0/-1 reward: equal medians, ranked by the mean (the share solved), its success column shown
+    sparse = [row("E", 0.9, -1.0) | {"prior_mean": -0.9, "prior_success": 0.1},
+              row("F", 0.9, -1.0) | {"prior_mean": -0.6, "prior_success": 0.4}]
+    assert [r["model"] for r in ranked(sparse)] == ["F", "E"]
+    assert "| prior success |" in scorecard_markdown(sparse) and "prior success" not in scorecard_markdown(rows)
 
 
 def test_genrl_evaluate_with_a_task_prints_the_ranked_scorecard_with_the_prior_rollout(tmp_path, cli,
@@ -514,10 +520,19 @@ def test_genrl_evaluate_with_a_task_prints_the_ranked_scorecard_with_the_prior_r
         assert result["prior_episodes"] == 6 and len(result["prior_best"]) == 3
     assert "Ranked by the prior rollout" in out and f"| {expected['prior_median']:.3f} |" in out
     assert (tmp_path / "eval" / "scorecard.md").read_text().strip() in out
-    # A task without the fast path: the other measures, and a line saying the prior rollout is skipped.
-    code, out, err = cli("evaluate", hockey_generator, "--data", tmp_path / "real.npy", "--n", 40, "--dwpr-n", 8,
-                         "--interventions", 2, "--task", "fetch-reach", "--out", tmp_path / "fetch", "--device", "cpu")
+    # A task without the fast path (a Fetch task): the prior rollout through the step path, with its success.
+    from sb3_genrl.generative import make_generator
+
+    fetch = make_generator("VAE-FETCH", horizon=50, action_dim=4, device="cpu")
+    fetch.save(str(tmp_path / "fetch.pt"))
+    np.save(tmp_path / "fetch_real.npy", fetch.decode(fetch.sample_prior(60, np.random.default_rng(0))))
+    code, out, err = cli("evaluate", tmp_path / "fetch.pt", "--data", tmp_path / "fetch_real.npy", "--n", 40,
+                         "--dwpr-n", 8, "--interventions", 2, "--task", "fetch-reach", "--contexts", 3, "--draws", 2,
+                         "--prior-seed", 11, "--out", tmp_path / "fetch", "--device", "cpu")
     assert code == 0, err
-    assert "fetch-reach has no fast path (play_trajectories): the prior rollout is skipped" in out
-    assert "Ranked by precision" in out and "prior_median" not in json.loads((tmp_path / "fetch" / "results.json")
-                                                                              .read_text())[0]
+    assert "fetch-reach has no fast path (play_trajectories): the prior rollout plays its 3 x 2 episodes" in out
+    rollout = prior_rollout(fetch, "fetch-reach", contexts=3, draws=2, seed=11)
+    result = json.loads((tmp_path / "fetch" / "results.json").read_text())[0]
+    assert result["prior_best"] == rollout.best.tolist() and result["prior_episodes"] == 6
+    assert result["prior_success"] == rollout.summary()["prior_success"] == np.mean(rollout.best == 0.0)
+    assert "Ranked by the prior rollout" in out and "prior success" in out

@@ -54,8 +54,8 @@ def evaluate_command(args: argparse.Namespace) -> int:
 
     task = args.task
     if task is not None and not hasattr(get_task(task).env_class, "play_trajectories"):
-        print(f"{task} has no fast path (play_trajectories): the prior rollout is skipped")
-        task = None
+        print(f"{task} has no fast path (play_trajectories): the prior rollout plays its "
+              f"{args.contexts} x {args.draws} episodes through the step path")
     evaluations = evaluate_generators(args.models, args.data, n=args.n, k=args.k, dwpr_n=args.dwpr_n,
                                       interventions=args.interventions, seed=args.seed, out_dir=args.out,
                                       device=args.device, task=task, contexts=args.contexts, draws=args.draws,

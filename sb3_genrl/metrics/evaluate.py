@@ -1,6 +1,6 @@
 """Evaluation of trained generators (paper section 6.1.2): precision/recall against demonstrations and DwPR, and
-beyond the paper density and coverage (Naeem et al., 2020) from the same samples and, for a task with the fast path,
-the prior rollout (:mod:`sb3_genrl.metrics.prior_rollout`).
+beyond the paper density and coverage (Naeem et al., 2020) from the same samples and, given a task, the prior rollout
+(:mod:`sb3_genrl.metrics.prior_rollout`).
 
 Results are written after each model, so an interrupted evaluation keeps every model it finished.
 """
@@ -41,7 +41,9 @@ DEFAULT_SAMPLES = 15000
 # The paper's measures, then density and coverage (not part of the paper's correlation analysis).
 TABLE_COLUMNS = ("model", *MEASURES, "density", "coverage")
 # The prior rollout's columns, after those when a task was given.
-PRIOR_COLUMNS = ("prior_median", "prior_q25", "prior_q75", "prior_episodes", "prior_seconds")
+PRIOR_COLUMNS = ("prior_median", "prior_q25", "prior_q75", "prior_mean", "prior_episodes", "prior_seconds")
+# ... and the share of goals some draw solves, where every model's env reports success (info["is_success"])
+PRIOR_SUCCESS = "prior_success"
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -66,7 +68,8 @@ class GeneratorEvaluation:
         prior rollout's :data:`PRIOR_COLUMNS` when there is one."""
         values = (self.precision_recall.precision, self.precision_recall.recall, self.dwpr.delta_1, self.dwpr.delta_2,
                   self.dwpr.mean_delta)
-        prior = {} if self.prior is None else {key: self.prior.summary()[key] for key in PRIOR_COLUMNS}
+        summary = {} if self.prior is None else self.prior.summary()
+        prior = {key: summary[key] for key in (*PRIOR_COLUMNS, PRIOR_SUCCESS) if key in summary}
         return {"model": self.name, **dict(zip(MEASURES, values, strict=True)),
                 "density": self.density_coverage.density, "coverage": self.density_coverage.coverage, **prior}
 
@@ -111,6 +114,8 @@ def write_results(evaluations: Sequence[GeneratorEvaluation], out_dir: str | os.
     out = Path(out_dir)
     rows = [evaluation.row() for evaluation in evaluations]
     columns = TABLE_COLUMNS + (PRIOR_COLUMNS if all(evaluation.prior for evaluation in evaluations) else ())
+    if columns[-1] == PRIOR_COLUMNS[-1] and all(PRIOR_SUCCESS in row for row in rows):
+        columns += (PRIOR_SUCCESS,)
     table = io.StringIO()
     writer = csv.DictWriter(table, fieldnames=columns)
     writer.writeheader()
@@ -168,7 +173,7 @@ def evaluate_generator(generator: TrajectoryGenerator, real: np.ndarray, *, n: i
     :param name: the model's name in the result
     :param device: torch device for the distances; ``"auto"`` uses a GPU when there is one
     :param batch_size: edge length of the distance blocks (default: from the memory budget)
-    :param task: a task with the fast path (hockey, basketball) for the prior rollout (None: none)
+    :param task: a task for the prior rollout (None: none)
     :param contexts: the prior rollout's goals
     :param draws: its prior draws per goal
     :param prior_seed: seed of its goals (:data:`~sb3_genrl.metrics.prior_rollout.PRIOR_ROLLOUT_SEED`)
@@ -216,7 +221,7 @@ def evaluate_generators(models: Sequence[str | os.PathLike | TrajectoryGenerator
     :param out_dir: output folder (created)
     :param device: torch device for loading and distances; ``"auto"`` uses a GPU when there is one
     :param batch_size: edge length of the distance blocks (default: from the memory budget)
-    :param task: a task with the fast path for the prior rollout (None: none)
+    :param task: a task for the prior rollout (None: none)
     :param contexts: the prior rollout's goals
     :param draws: its prior draws per goal
     :param prior_seed: seed of its goals
@@ -247,16 +252,13 @@ def evaluate_generators(models: Sequence[str | os.PathLike | TrajectoryGenerator
 
 
 def _check_prior_task(task: str, contexts: int, draws: int, prior_seed: int) -> None:
-    """Refuse a task without the fast path, or bad prior-rollout sizes, before any work."""
+    """Refuse an unknown task, or bad prior-rollout sizes, before any work."""
     from sb3_genrl.envs import get_task
 
     check_positive_int(contexts, "contexts")
     check_positive_int(draws, "draws")
     check_seed(prior_seed)
-    spec = get_task(task)  # raises, naming the registered tasks
-    if not hasattr(spec.env_class, "play_trajectories"):
-        raise ValueError(f"the prior rollout needs a task with the fast path play_trajectories() (hockey, basketball); "
-                         f"{task} has none: evaluate it without --task")
+    get_task(task)  # raises, naming the registered tasks
 
 
 def _check_sample_sizes(real: np.ndarray, n: int, dwpr_n: int, interventions: int) -> None:

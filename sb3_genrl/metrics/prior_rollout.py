@@ -12,6 +12,12 @@ final evaluations' :data:`~sb3_genrl.hyperparams.EVAL_GOAL_SEED` nor the tuning'
 :data:`~sb3_genrl.hyperparams.TUNING_GOAL_SEED`, so the measure never sees the goals a policy is judged on. The latent
 actions are drawn from a seed of their own spawned from ``seed``; they are clipped to GenRL's action box and played
 through :meth:`sb3_genrl.wrappers.LatentActionWrapper.play_batch`, the fast path GenRL itself uses.
+
+A task without the fast path (any episodic Gymnasium env that :class:`~sb3_genrl.wrappers.LatentActionWrapper` takes:
+Gymnasium-Robotics' Fetch tasks, Reacher) is played through the wrapper's step path instead: its contexts are its reset
+states of the seeds ``seed, seed + 1, ...``, and each draw is one episode from the reset of its context's seed. Where
+the env reports ``info["is_success"]`` (the goal-conditioned envs), the share of contexts that some draw solves is
+reported too: with a sparse 0/-1 reward, the best reward's median says little and that share says it all.
 """
 
 from __future__ import annotations
@@ -40,6 +46,7 @@ class PriorRollout:
     :param episodes: episodes played (``contexts x draws``)
     :param seconds: wall-clock seconds of the decoding and playing
     :param cpu_seconds: CPU seconds of this process for the same
+    :param solved: per goal, whether some draw solved it (``info["is_success"]``); None where the env does not say
     """
 
     best: np.ndarray
@@ -48,14 +55,17 @@ class PriorRollout:
     episodes: int
     seconds: float
     cpu_seconds: float
+    solved: np.ndarray | None = None
 
     def summary(self) -> dict[str, Any]:
-        """Median, quartiles and mean of the best reward per goal, with the sizes and the cost (JSON-ready)."""
+        """Median, quartiles and mean of the best reward per goal, with the sizes and the cost, and the share of goals
+        solved by some draw where the env reports success (JSON-ready)."""
         q25, median, q75 = np.percentile(self.best, [25, 50, 75])
+        success = {} if self.solved is None else {"prior_success": float(np.mean(self.solved))}
         return {"prior_median": float(median), "prior_q25": float(q25), "prior_q75": float(q75),
-                "prior_mean": float(np.mean(self.best)), "prior_contexts": len(self.best), "prior_draws": self.draws,
-                "prior_seed": self.seed, "prior_episodes": self.episodes, "prior_seconds": self.seconds,
-                "prior_cpu_seconds": self.cpu_seconds}
+                "prior_mean": float(np.mean(self.best)), **success, "prior_contexts": len(self.best),
+                "prior_draws": self.draws, "prior_seed": self.seed, "prior_episodes": self.episodes,
+                "prior_seconds": self.seconds, "prior_cpu_seconds": self.cpu_seconds}
 
 
 def _latent_env(task: str | gym.Env, generator: TrajectoryGenerator) -> Any:
@@ -67,10 +77,6 @@ def _latent_env(task: str | gym.Env, generator: TrajectoryGenerator) -> Any:
         from sb3_genrl.envs import get_task
 
         env = gym.make(get_task(task).env_id)
-    if not hasattr(env.unwrapped, "play_trajectories"):
-        name = task if isinstance(task, str) else type(env.unwrapped).__name__
-        env.close()
-        raise ValueError(f"the prior rollout needs a task with the fast path play_trajectories(); {name} has none")
     return LatentActionWrapper(env, generator)
 
 
@@ -79,11 +85,13 @@ def prior_rollout(generator: TrajectoryGenerator, task: str | gym.Env, *, contex
     """The best reward that ``draws`` prior draws reach for each goal (see the module's description).
 
     :param generator: the trained generator
-    :param task: a task name or Gymnasium id of a task with ``play_trajectories`` (hockey, basketball), or such an env
-    :param contexts: how many goals to draw (the task's ``sample_goal``), or the goals themselves ``(G, goal_dim)``
+    :param task: a task name or Gymnasium id, or an env (with ``play_trajectories``: the fast path; else the step
+        path, see the module's description)
+    :param contexts: how many goals to draw (the task's ``sample_goal``; the step path: reset seeds), or the goals
+        themselves ``(G, goal_dim)`` (the fast path only)
     :param draws: prior draws per goal
     :param seed: seed of the goals; the draws come from a seed spawned from it
-    :param n_threads: simulation threads
+    :param n_threads: simulation threads of the fast path (the step path plays in this process)
     :return: a :class:`PriorRollout`
     """
     from sb3_genrl.checks import check_positive_int, check_seed
@@ -92,6 +100,8 @@ def prior_rollout(generator: TrajectoryGenerator, task: str | gym.Env, *, contex
     check_seed(seed)
     env = _latent_env(task, generator)
     try:
+        if not env.use_fast_path:
+            return _step_path_rollout(env, generator, contexts, draws, seed)
         if np.ndim(contexts) == 0:
             check_positive_int(contexts, "contexts")
             rng = np.random.default_rng(seed)
@@ -109,3 +119,26 @@ def prior_rollout(generator: TrajectoryGenerator, task: str | gym.Env, *, contex
                             time.process_time() - cpu)
     finally:
         env.close()
+
+
+def _step_path_rollout(env: Any, generator: TrajectoryGenerator, contexts: Any, draws: int, seed: int) -> PriorRollout:
+    """:func:`prior_rollout` through ``env``'s step path: goal ``g`` is the reset state of seed ``seed + g``."""
+    from sb3_genrl.checks import check_positive_int
+
+    if np.ndim(contexts) != 0:
+        raise ValueError(f"{type(env.unwrapped).__name__} has no fast path: its contexts are reset states, so contexts "
+                         f"must be a count, got an array of shape {np.shape(contexts)}")
+    count = check_positive_int(contexts, "contexts")
+    wall, cpu = time.perf_counter(), time.process_time()
+    latent_rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0])
+    alphas = generator.sample_prior(count * draws, latent_rng)  # goal g plays draws g*draws .. (g+1)*draws-1
+    alphas = np.clip(alphas, env.action_space.low, env.action_space.high)
+    rewards, successes = np.empty(count * draws), []
+    for index, alpha in enumerate(alphas):
+        env.reset(seed=seed + index // draws)
+        _, rewards[index], _, _, info = env.step(alpha)
+        successes.append(info.get("is_success"))
+    best = rewards.reshape(count, draws).max(axis=1)
+    solved = (None if any(success is None for success in successes)
+              else np.asarray(successes, dtype=float).reshape(count, draws).max(axis=1) > 0)
+    return PriorRollout(best, draws, seed, count * draws, time.perf_counter() - wall, time.process_time() - cpu, solved)
