@@ -320,3 +320,47 @@ def test_sac_her_resumes_only_a_run_of_the_same_settings(tmp_path):
         fetch_sac_her.main(["--task", "fetch-reach", "--variant", "demos", "--data", str(data), "--out", str(out),
                             "--work", str(tmp_path / "work")])
     assert not (tmp_path / "work").exists() and json.loads(out.read_text())["eval_states"] == 7  # nothing touched
+
+
+def test_the_scorecard_benchmark_scores_each_generator_then_trains_genrl_on_it_and_resumes(tmp_path, monkeypatch):
+    from sb3_genrl.benchmarks import fetch_scorecard
+    from sb3_genrl.envs.demonstrations import make_demonstrations
+    from scipy import stats
+
+    from sb3_genrl.generative import load
+    from sb3_genrl.metrics.prior_rollout import prior_rollout
+
+    data, work, out = tmp_path / "demos", tmp_path / "work", tmp_path / "scorecard.json"
+    make_demonstrations("fetch-reach", 6, str(data), seed=0, n_threads=1, progress_bar=False)
+    argv = ["--task", "fetch-reach", "--data", str(data), "--variants", "", "latent_dim=3", "path_weight=0,beta=0.01",
+            "--epochs", "1", "--episodes", "32", "--eval-states", "2", "--tuning-states", "2", "--contexts", "2",
+            "--draws", "2", "--pr-samples", "6", "--dwpr-samples", "4", "--work", str(work), "--out", str(out)]
+    fetch_scorecard.main(argv)
+    result = json.loads(out.read_text())
+    rows = {row["variant"]: row for row in result["rows"]}
+    assert list(rows) == ["", "latent_dim=3", "path_weight=0,beta=0.01"]
+    assert rows["latent_dim=3"]["spec"] == {"latent_dim": 3, "beta": 0.001, "path_weight": 1.0}
+    assert rows["path_weight=0,beta=0.01"]["spec"] == {"latent_dim": 10, "beta": 0.01, "path_weight": 0.0}
+    small = load(str(work / "latent_dim-3" / "vae.pt"), device="cpu")
+    assert small.latent_dim == 3
+    expected = prior_rollout(small, "fetch-reach", contexts=2, draws=2).summary()["prior_success"]
+    assert rows["latent_dim=3"]["prior_success"] == expected
+    assert all(row["episodes"] == 32 and 0 <= row["final_success"] <= 1 for row in rows.values())
+    assert len(result["correlation"]) == len(fetch_scorecard.MEASURES)  # one group (ALL), every measure
+    # resumed: nothing is trained again; other settings are refused
+    monkeypatch.setattr(fetch_scorecard, "generator_row", lambda *a: pytest.fail("a finished generator was redone"))
+    fetch_scorecard.main(argv)
+    assert json.loads(out.read_text())["rows"] == result["rows"]
+    with pytest.raises(SystemExit, match="episodes differ"):
+        fetch_scorecard.main([*argv[:-2], "--episodes", "64", "--out", str(out)])
+    # the correlations, against scipy on rows whose success differs
+    args = fetch_scorecard.arguments(argv)
+    synthetic = [{**row, "model": name, "final_success": success, "recall": recall}
+                 for row, name, success, recall in zip(result["rows"] * 2, "ABCDEF", (0.1, 0.5, 0.3, 0.9, 0.2, 0.6),
+                                                        (0.2, 0.6, 0.5, 0.8, 0.1, 0.7), strict=False)]
+    fetch_scorecard.write(args, {**result, "rows": synthetic})
+    recall = next(row for row in json.loads(out.read_text())["correlation"] if row["measure"] == "recall")
+    success, values = [row["final_success"] for row in synthetic], [row["recall"] for row in synthetic]
+    assert recall["pearson_r"] == pytest.approx(stats.pearsonr(values, success)[0])
+    assert recall["spearman_rho"] == pytest.approx(stats.spearmanr(values, success)[0])
+    assert "| ALL | recall | 6 |" in out.with_suffix(".md").read_text()
