@@ -43,7 +43,7 @@ from sb3_genrl.data import load_actions
 from sb3_genrl.generative import load
 from sb3_genrl.generative.presets import resolve_generator_spec
 from sb3_genrl.generative.vae import BetaVAE
-from sb3_genrl.genrl import train_policy
+from sb3_genrl.genrl import GenRL, train_policy
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED, TUNING_GOAL_SEED
 from sb3_genrl.markdown import markdown_table
 from sb3_genrl.metrics import correlation_table, evaluate_generator, real_subset
@@ -131,11 +131,9 @@ def generator_row(args: argparse.Namespace, variant: str, actions: np.ndarray) -
                                contexts=args.contexts, draws=args.draws, prior_seed=PRIOR_ROLLOUT_SEED)
     fitted = fitted_mean_success(args.task, path, args.data, args.tuning_states, TUNING_GOAL_SEED)
     scored = time.perf_counter()
+    _, batch_episodes, genrl_kwargs = task_settings(args.task)
     run = train_policy(args.task, path, episodes=args.episodes, seed=0, out_dir=os.path.join(folder, "genrl"),
-                       batch_episodes=task_settings(args.task)[1], demonstrations=args.data, device="cpu",
-                       **task_settings(args.task)[2])
-    from sb3_genrl.genrl import GenRL
-
+                       batch_episodes=batch_episodes, demonstrations=args.data, device="cpu", **genrl_kwargs)
     model = GenRL.load(run["model_path"], generator=generator, device="cpu")
     success = evaluate_success(model, args.task, episodes=args.eval_states, seed=EVAL_GOAL_SEED)["success_rate"]
     row = score.row()

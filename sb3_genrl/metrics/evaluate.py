@@ -113,9 +113,9 @@ def write_results(evaluations: Sequence[GeneratorEvaluation], out_dir: str | os.
 
     out = Path(out_dir)
     rows = [evaluation.row() for evaluation in evaluations]
-    columns = TABLE_COLUMNS + (PRIOR_COLUMNS if all(evaluation.prior for evaluation in evaluations) else ())
-    if columns[-1] == PRIOR_COLUMNS[-1] and all(PRIOR_SUCCESS in row for row in rows):
-        columns += (PRIOR_SUCCESS,)
+    columns = TABLE_COLUMNS
+    if all(evaluation.prior for evaluation in evaluations):
+        columns += PRIOR_COLUMNS + ((PRIOR_SUCCESS,) if all(PRIOR_SUCCESS in row for row in rows) else ())
     table = io.StringIO()
     writer = csv.DictWriter(table, fieldnames=columns)
     writer.writeheader()
