@@ -184,8 +184,8 @@ def mean_std_over_seeds(curves: Sequence[dict[str, np.ndarray]], key: str = "mea
 
 
 def plot_curves(series: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray | None]], path: str | os.PathLike, *,
-                ylabel: str, title: str = "", xlabel: str = "episodes") -> pathlib.Path:
-    """One line per series (x, mean, std or None), a shaded band of +- std where given."""
+                ylabel: str, title: str = "", xlabel: str = "episodes", log_y: bool = False) -> pathlib.Path:
+    """One line per series (x, mean, std or None), a shaded band of +- std where given; ``log_y``: a log y-axis."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -198,6 +198,8 @@ def plot_curves(series: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray | Non
             ax.fill_between(x, mean - std, mean + std, color=line.get_color(), alpha=0.2)
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
+    if log_y:
+        ax.set_yscale("log")
     if title:
         ax.set_title(title)
     if len(series) > 1:

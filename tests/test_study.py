@@ -291,7 +291,7 @@ def _study_row(name: str, precision: float, score: float, half: float, final: fl
     return {"model": name, "type": name[:3], "latent_dim": 2, "beta": 0.01, "info_weight": 0.1, "precision": precision,
             "recall": 0.5 + score / 10, "delta_1": 0.5, "delta_2": 0.4, "mean_delta": 0.45 - half / 10,
             "density": 1.0 + final, "coverage": 0.5, "prior_median": prior, "prior_q25": prior - 0.1,
-            "prior_q75": prior + 0.1, "best_epoch": 4, "selection": [[2, 0.5], [4, 0.2], [6, 0.3]],
+            "prior_q75": prior + 0.1, "best_epoch": 4, "selection": [[2, 5e-4], [4, 2e-5], [6, 3e-5]],
             "rewards": [score, score - 0.1], "score": score, "half_rewards": [half], "half_score": half,
             "final_rewards": [final], "final": final,
             "cpu_seconds": {"generator": 3600.0, "evaluation": 36.0, "genrl": 7200.0}}
@@ -327,7 +327,9 @@ def test_the_report_leaves_unconverged_generators_out_of_the_correlations_and_st
         spearmanr([r["prior_median"] for r in ranked], [r["final"] for r in ranked]).statistic, abs=1e-12)
     assert {row["group"] for row in final.values()} == {"ALL"}
     selection = {row["model"]: row for row in _csv_rows(tmp_path / "tables" / "selection.csv")}
-    assert selection["GAN4"]["status"] == "not converged" and float(selection["VAE1"]["selection MSE kept"]) == 0.2
+    assert selection["GAN4"]["status"] == "not converged" and float(selection["VAE1"]["selection MSE kept"]) == 2e-5
+    # errors far below 0.001 keep their digits in the Markdown table, which other tables round to 3 decimals
+    assert "| VAE1 | 3 | 0.0005 | 2e-05 | 4 | 3e-05 | 0.900 | ok |" in (tmp_path / "tables" / "selection.md").read_text()
     for name in ("selection_vae", "selection_gan"):
         assert (tmp_path / "plots" / f"{name}.png").stat().st_size > 1000
 

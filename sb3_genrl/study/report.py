@@ -53,7 +53,8 @@ def _write_plots(task: str, rows: list[dict[str, Any]], root: pathlib.Path, plot
                   for r in rows if r["type"] == kind and r["selection"]}
         if series:
             plot_curves(series, plots / f"selection_{kind.lower()}.png", xlabel="epoch",
-                        ylabel="model-selection MSE (held-out)", title=f"{task}: each {kind}'s training")
+                        ylabel="model-selection MSE (held-out)", title=f"{task}: each {kind}'s training",
+                        log_y=True)
     names = [r["model"] for r in rows]
     labelled_scatter([r["precision"] for r in rows], [r["recall"] for r in rows], names, plots / "precision_recall.png",
                      xlabel="precision", ylabel="recall", title=f"{task}: precision and recall")
@@ -77,6 +78,7 @@ def write_task_report(task: str, rows: list[dict[str, Any]], task_dir: str | pat
     for name, (header, table) in parts.items():
         _write_csv(tables / f"{name}.csv", header, table)
     markdown = {name: markdown_table(header, table) for name, (header, table) in parts.items()}
+    markdown["selection"] = markdown_table(*_significant(*parts["selection"], "selection MSE"))
     tables23, by_best, by_final = correlations(rows), predictions(rows, "score"), predictions(rows, "final")
     for name, table in (("correlation", tables23), ("prediction_best", by_best), ("prediction_final", by_final)):
         table.to_csv(tables / f"{name}.csv")
@@ -89,6 +91,14 @@ def write_task_report(task: str, rows: list[dict[str, Any]], task_dir: str | pat
     report = root / "report.md"
     atomic_write_text(report, "\n".join(_report_lines(task, rows, scale, markdown, steady, comparison, root)))
     return report
+
+
+def _significant(header: list[str], table: list[list[Any]], prefix: str) -> tuple[list[str], list[list[Any]]]:
+    """The table with the float cells of the columns named ``prefix...`` given to 3 significant digits: errors
+    far below 0.001 would otherwise all read 0.000."""
+    columns = {i for i, name in enumerate(header) if name.startswith(prefix)}
+    return header, [[f"{v:.3g}" if i in columns and isinstance(v, float) else v for i, v in enumerate(row)]
+                    for row in table]
 
 
 def _report_lines(task: str, rows: list[dict[str, Any]], scale: dict[str, Any], markdown: dict[str, str],
