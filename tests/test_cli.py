@@ -85,6 +85,7 @@ def test_help_lists_the_commands_in_workflow_order_and_version(cli):
      "argument --out: 'FILE' is a file"),
     (("evaluate", "GEN", "--data", "D0", "--n", "0", "--out", "D"), "argument --n: must be an integer >= 1, got 0"),
     (("evaluate", "GEN", "--data", "D0", "--out", "FILE"), "argument --out: 'FILE' is a file"),
+    (("evaluate", "GEN", "--data", "D0", "--rank-by", "fid", "--out", "D"), "argument --rank-by: invalid choice: 'fid'"),
     (("compare", "--runs", "D0", "--out", "FILE"), "argument --out: 'FILE' is a file"),
     (("study", "--workers", "0", "--out", "D"), "argument --workers: must be an integer >= 1, got 0"),
     (("study", "--models", "VAE10", "--out", "D"), "argument --models: invalid choice: 'VAE10'"),
@@ -104,6 +105,16 @@ def test_arguments_and_paths_are_checked_before_any_work(tmp_path, monkeypatch, 
     assert code == 2 and message in err and printed == ""
     assert err.splitlines()[-1].startswith(f"genrl {argv[0]}: error: argument ")  # argparse's one line, no traceback
     assert sorted(p.name for p in tmp_path.iterdir()) == ["D0", "FILE", "GEN"]  # nothing was written
+
+
+def test_ranking_by_the_prior_rollout_without_a_task_is_refused_before_any_work(tmp_path, monkeypatch, cli):
+    monkeypatch.chdir(tmp_path)
+    Path("GEN").write_text("")
+    Path("D0").mkdir()
+    code, printed, err = cli("evaluate", "GEN", "--data", "D0", "--rank-by", "prior_median", "--out", "D")
+    assert code == 2 and printed == ""
+    assert err.strip() == "genrl evaluate: error: rank_by='prior_median' needs a task: the prior rollout runs only with one"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["D0", "GEN"]
 
 
 def test_an_mp4_without_imageio_ffmpeg_is_refused_before_rendering(tmp_path, monkeypatch, cli):

@@ -496,6 +496,14 @@ def test_scorecard_ranks_converged_models_by_the_prior_rollout_and_sets_apart_th
               row("F", 0.9, -1.0) | {"prior_mean": -0.6, "prior_success": 0.4}]
     assert [r["model"] for r in ranked(sparse)] == ["F", "E"]
     assert "| prior success |" in scorecard_markdown(sparse) and "prior success" not in scorecard_markdown(rows)
+    # ranked by another measure: the order follows it, the rule line names it, unconverged models still come last
+    rows[0]["mean_delta"], rows[2]["mean_delta"], rows[1]["mean_delta"] = 0.1, 0.3, 0.9
+    assert [r["model"] for r in ranked(rows, "mean_delta")] == ["D", "C", "A", "B"]
+    assert scorecard_markdown(rows, "mean_delta").startswith("Ranked by mean_delta (higher is better)")
+    with pytest.raises(ValueError, match="cannot rank by 'fid'"):
+        ranked(rows, "fid")
+    with pytest.raises(ValueError, match="cannot rank by 'prior_median': A, B, C, D lack it"):
+        ranked(without_prior, "prior_median")
 
 
 def test_genrl_evaluate_with_a_task_prints_the_ranked_scorecard_with_the_prior_rollout(tmp_path, cli,

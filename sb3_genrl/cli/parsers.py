@@ -24,6 +24,7 @@ from sb3_genrl.checks import (
     option,
 )
 from sb3_genrl.cli import commands
+from sb3_genrl.metrics.scorecard import RANK_MEASURES
 
 
 def _task_option(parser: argparse.ArgumentParser, *, required: bool = True, default: str | None = None,
@@ -132,6 +133,8 @@ def add_evaluate(sub: argparse._SubParsersAction) -> None:
     evaluate.add_argument("--draws", type=COUNT, default=16, help="prior rollout: prior draws per goal (16)")
     evaluate.add_argument("--prior-seed", type=SEED, default=4242,
                           help="prior rollout: seed of its goals (4242: neither the final evaluations' nor the tuning's)")
+    evaluate.add_argument("--rank-by", default=None, choices=RANK_MEASURES,
+                          help="the measure the scorecard ranks by (default: prior_median with --task, else precision)")
     evaluate.set_defaults(func=commands.evaluate_command)
 
 

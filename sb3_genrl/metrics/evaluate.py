@@ -106,9 +106,11 @@ def _as_generator(model: str | os.PathLike | TrajectoryGenerator, device: torch.
     return load(model, device=device)
 
 
-def write_results(evaluations: Sequence[GeneratorEvaluation], out_dir: str | os.PathLike) -> None:
-    """Write ``results.csv``, ``results.md``, the two scatter plots and, last, ``results.json`` into ``out_dir``
-    (each file atomically)."""
+def write_results(evaluations: Sequence[GeneratorEvaluation], out_dir: str | os.PathLike,
+                  rank_by: str | None = None) -> None:
+    """Write ``results.csv``, ``results.md``, ``scorecard.md`` (ranked by ``rank_by``,
+    :func:`~sb3_genrl.metrics.scorecard.rank_key`), the two scatter plots and, last, ``results.json`` into
+    ``out_dir`` (each file atomically)."""
     from sb3_genrl.metrics.scorecard import scorecard_markdown
 
     out = Path(out_dir)
@@ -125,7 +127,7 @@ def write_results(evaluations: Sequence[GeneratorEvaluation], out_dir: str | os.
     markdown = markdown_table(columns, [[row[column] for column in columns] for row in rows],
                               align="l" + "r" * (len(columns) - 1))
     atomic_write_text(out / "results.md", markdown + "\n")
-    atomic_write_text(out / "scorecard.md", scorecard_markdown(rows) + "\n")
+    atomic_write_text(out / "scorecard.md", scorecard_markdown(rows, rank_by) + "\n")
     labels = [str(row["model"]) for row in rows]
     labelled_scatter([row["precision"] for row in rows], [row["recall"] for row in rows], labels,
                      out / "precision_recall.png", xlabel="precision", ylabel="recall", title="Precision and recall")
@@ -197,7 +199,8 @@ def evaluate_generators(models: Sequence[str | os.PathLike | TrajectoryGenerator
                         k: int = 3, dwpr_n: int = DEFAULT_DWPR_SAMPLES, interventions: int = DEFAULT_INTERVENTIONS,
                         seed: int = 0, out_dir: str | os.PathLike, device: torch.device | str = "auto",
                         batch_size: int | None = None, task: str | None = None, contexts: int = DEFAULT_CONTEXTS,
-                        draws: int = DEFAULT_DRAWS, prior_seed: int = PRIOR_ROLLOUT_SEED) -> list[GeneratorEvaluation]:
+                        draws: int = DEFAULT_DRAWS, prior_seed: int = PRIOR_ROLLOUT_SEED,
+                        rank_by: str | None = None) -> list[GeneratorEvaluation]:
     """Precision/recall, density/coverage against real trajectories and DwPR of each generator, written as each
     model completes.
 
@@ -225,6 +228,8 @@ def evaluate_generators(models: Sequence[str | os.PathLike | TrajectoryGenerator
     :param contexts: the prior rollout's goals
     :param draws: its prior draws per goal
     :param prior_seed: seed of its goals
+    :param rank_by: the measure ``scorecard.md`` ranks by (None: the prior rollout's median with ``task``, else
+        precision; :data:`~sb3_genrl.metrics.scorecard.RANK_MEASURES`)
     :return: the evaluations, in model order
     """
     named = _named_generators(models)
@@ -236,6 +241,7 @@ def evaluate_generators(models: Sequence[str | os.PathLike | TrajectoryGenerator
     check_device(device)
     if task is not None:
         _check_prior_task(task, contexts, draws, prior_seed)
+    _check_rank_by(rank_by, task)
     out = check_output_dir(out_dir)
     real = load_trajectories(data)
     _check_sample_sizes(real, n, dwpr_n, interventions)
@@ -247,8 +253,18 @@ def evaluate_generators(models: Sequence[str | os.PathLike | TrajectoryGenerator
                                               interventions=interventions, seed=seed, name=name, device=device,
                                               batch_size=batch_size, task=task, contexts=contexts, draws=draws,
                                               prior_seed=prior_seed))
-        write_results(evaluations, out)
+        write_results(evaluations, out, rank_by)
     return evaluations
+
+
+def _check_rank_by(rank_by: str | None, task: str | None) -> None:
+    """Refuse a measure the scorecard cannot rank by, before any work."""
+    from sb3_genrl.metrics.scorecard import RANK_MEASURES
+
+    if rank_by is not None and rank_by not in RANK_MEASURES:
+        raise ValueError(f"rank_by must be one of {', '.join(RANK_MEASURES)}, got {rank_by!r}")
+    if rank_by == "prior_median" and task is None:
+        raise ValueError("rank_by='prior_median' needs a task: the prior rollout runs only with one")
 
 
 def _check_prior_task(task: str, contexts: int, draws: int, prior_seed: int) -> None:

@@ -1,7 +1,8 @@
 """The generator scorecard: every measure of each generator in one table, ranked, with untrained models set apart.
 
-The rows are ranked by the prior rollout's median best reward when it was measured (the measure grounded in the
-task: higher is better; ties, as a sparse 0/-1 reward gives them, broken by its mean), else by precision. A model
+By default the rows are ranked by the prior rollout's median best reward when it was measured (the measure grounded
+in the task: higher is better; ties, as a sparse 0/-1 reward gives them, broken by its mean), else by precision;
+``by`` ranks by any other measure (which one predicts GenRL best differs between tasks: the study measures it). A model
 whose precision is below :data:`NOT_CONVERGED_PRECISION` generates almost nothing that looks like a demonstration:
 it is marked "not converged" and ranked after the others (the study also keeps such models out of its
 correlations), since its other measures then describe an untrained model rather than its family.
@@ -26,14 +27,27 @@ def converged(row: Mapping[str, Any]) -> bool:
     return math.isfinite(precision) and precision >= NOT_CONVERGED_PRECISION
 
 
-def rank_key(rows: Sequence[Mapping[str, Any]]) -> str:
-    """The column the scorecard ranks by: ``prior_median`` when every row has it, else ``precision``."""
-    return "prior_median" if rows and all("prior_median" in row for row in rows) else "precision"
+# prior_success needs no entry: on a 0/-1 reward the median's ties are broken by the mean, i.e. by the share solved
+RANK_MEASURES = (*_COLUMNS, "prior_median")
 
 
-def ranked(rows: Sequence[Mapping[str, Any]]) -> list[Mapping[str, Any]]:
-    """The rows, converged models first, each part by :func:`rank_key` from best to worst (ties in given order)."""
-    key = rank_key(rows)
+def rank_key(rows: Sequence[Mapping[str, Any]], by: str | None = None) -> str:
+    """The column the scorecard ranks by: ``by`` when given (one of :data:`RANK_MEASURES`, which every row must
+    have), else ``prior_median`` when every row has it, else ``precision``."""
+    if by is None:
+        return "prior_median" if rows and all("prior_median" in row for row in rows) else "precision"
+    if by not in RANK_MEASURES:
+        raise ValueError(f"cannot rank by {by!r}: choose one of {', '.join(RANK_MEASURES)}")
+    missing = [str(row.get("model", "?")) for row in rows if by not in row]
+    if missing:
+        raise ValueError(f"cannot rank by {by!r}: {', '.join(missing)} lack it (the prior rollout runs only with a task)")
+    return by
+
+
+def ranked(rows: Sequence[Mapping[str, Any]], by: str | None = None) -> list[Mapping[str, Any]]:
+    """The rows, converged models first, each part by :func:`rank_key` from best to worst (ties in given order;
+    the prior rollout's ties broken by its mean)."""
+    key = rank_key(rows, by)
 
     def descending(value: Any) -> float:
         value = float(value)
@@ -46,22 +60,26 @@ def ranked(rows: Sequence[Mapping[str, Any]]) -> list[Mapping[str, Any]]:
     return sorted(rows, key=order)
 
 
-def scorecard_markdown(rows: Sequence[Mapping[str, Any]]) -> str:
-    """The ranked scorecard as a Markdown table (no final newline), with a line saying how it is ranked."""
-    key = rank_key(rows)
-    prior = key == "prior_median"
+def scorecard_markdown(rows: Sequence[Mapping[str, Any]], by: str | None = None) -> str:
+    """The ranked scorecard as a Markdown table (no final newline), with a line saying how it is ranked.
+
+    :param rows: one mapping per generator (``GeneratorEvaluation.row()``)
+    :param by: the measure to rank by (:func:`rank_key`)
+    """
+    key = rank_key(rows, by)
+    prior = bool(rows) and all("prior_median" in row for row in rows)
     success = prior and all("prior_success" in row for row in rows)  # an env that reports info["is_success"]
     header = ["rank", "model", *_COLUMNS, *(("prior median", "prior quartiles") if prior else ()),
               *(("prior success",) if success else ()), *(("prior cost",) if prior else ()), "status"]
     table = []
-    for index, row in enumerate(ranked(rows), start=1):
+    for index, row in enumerate(ranked(rows, key), start=1):
         cells: list[Any] = [index, row["model"], *(row[column] for column in _COLUMNS)]
         if prior:
             cells += [row["prior_median"], f"{row['prior_q25']:.3f} .. {row['prior_q75']:.3f}",
                       *([row["prior_success"]] if success else []),
                       f"{row['prior_episodes']} episodes, {row['prior_seconds']:.1f} s"]
         table.append([*cells, "ok" if converged(row) else "not converged"])
-    by = "the prior rollout: the median over goals of the best reward of the prior draws" if prior else "precision"
+    by = "the prior rollout: the median over goals of the best reward of the prior draws" if key == "prior_median" else key
     rule = (f"Ranked by {by} (higher is better); a model with precision below {NOT_CONVERGED_PRECISION} is not "
             "converged and ranked last.")
     return rule + "\n\n" + markdown_table(header, table, align="rl" + "r" * (len(header) - 3) + "l")
