@@ -334,6 +334,35 @@ def test_the_report_leaves_unconverged_generators_out_of_the_correlations_and_st
         assert (tmp_path / "plots" / f"{name}.png").stat().st_size > 1000
 
 
+def test_the_index_pools_the_tasks_as_paper_table_6_once_both_have_finished(tmp_path):
+    from scipy.stats import pearsonr, spearmanr
+
+    from sb3_genrl.study.runner import _write_index
+
+    rng = np.random.default_rng(1)
+    rows = {task: [_study_row(f"VAE{i}", 0.9, *rng.normal(size=4)) for i in range(1, 5)]
+            + [_study_row("GAN1", 0.1, 9.0, 9.0, 9.0, 9.0)] for task in ("hockey", "basketball")}  # GAN1: not converged
+    (tmp_path / "hockey").mkdir()
+    (tmp_path / "hockey" / "results.json").write_text(json.dumps(rows["hockey"]))
+    (tmp_path / "hockey" / "report.md").write_text("# hockey\n")
+    _write_index(tmp_path)  # basketball has not finished: no pooled table
+    assert (tmp_path / "report.md").read_text() == "# GenRL study\n\n- [hockey](hockey/report.md)\n"
+    assert not (tmp_path / "all_tasks.md").exists()
+    (tmp_path / "basketball").mkdir()
+    (tmp_path / "basketball" / "results.json").write_text(json.dumps(rows["basketball"]))
+    (tmp_path / "basketball" / "report.md").write_text("# basketball\n")
+    index = _write_index(tmp_path).read_text()
+    assert "- [all tasks](all_tasks.md): paper table 6" in index and "- [basketball](basketball/report.md)" in index
+    pooled = [r for task in ("hockey", "basketball") for r in rows[task][:4]]
+    table = {row["measure"]: row for row in _csv_rows(tmp_path / "all_tasks.csv")}
+    assert {row["group"] for row in table.values()} == {"ALL"} and int(table["recall"]["num_models"]) == 8
+    for measure in ("recall", "mean_delta"):
+        x, y = [r[measure] for r in pooled], [r["score"] for r in pooled]
+        assert float(table[measure]["pearson_r"]) == pytest.approx(pearsonr(x, y).statistic, abs=1e-12)
+        assert float(table[measure]["spearman_rho"]) == pytest.approx(spearmanr(x, y).statistic, abs=1e-12)
+    assert "(hockey 4, basketball 4)" in (tmp_path / "all_tasks.md").read_text()
+
+
 def test_half_budget_best_reads_the_iterations_within_half_the_episodes():
     from sb3_genrl.study.jobs import half_budget_best
 

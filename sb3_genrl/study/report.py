@@ -12,8 +12,10 @@ from typing import Any
 from sb3_genrl.curves import mean_std_over_seeds, plot_curves, read_curve
 from sb3_genrl.markdown import markdown_table
 from sb3_genrl.metrics import labelled_scatter
+from sb3_genrl.metrics.scorecard import converged
 from sb3_genrl.study.report_tables import (
     SCORECARD_MEASURES,  # noqa: F401 (the job's row holds these measures)
+    all_tasks_correlations,
     correlations,
     cpu_line,
     excluded_line,
@@ -91,6 +93,23 @@ def write_task_report(task: str, rows: list[dict[str, Any]], task_dir: str | pat
     report = root / "report.md"
     atomic_write_text(report, "\n".join(_report_lines(task, rows, scale, markdown, steady, comparison, root)))
     return report
+
+
+def write_all_tasks_report(rows_by_task: dict[str, list[dict[str, Any]]], out_dir: str | pathlib.Path) -> pathlib.Path:
+    """Paper table 6 (:func:`~sb3_genrl.study.report_tables.all_tasks_correlations`) as ``all_tasks.csv`` and
+    ``all_tasks.md`` in ``out_dir``; returns the Markdown file."""
+    out = pathlib.Path(out_dir)
+    table = all_tasks_correlations(rows_by_task)
+    table.to_csv(out / "all_tasks.csv")
+    counts = ", ".join(f"{task} {sum(converged(r) for r in rows)}" for task, rows in rows_by_task.items())
+    path = out / "all_tasks.md"
+    atomic_write_text(path, "\n".join([
+        "# GenRL study: all tasks (paper table 6)", "",
+        f"Each measure against GenRL's best reward over the converged generators of every task together ({counts}), "
+        "pooled as the paper pools them: each task's own rewards, so a difference between the tasks' rewards and "
+        "measures is part of each coefficient. Each coefficient has its 95% percentile bootstrap interval over the "
+        "models.", "", table.to_markdown().rstrip("\n"), ""]))
+    return path
 
 
 def _significant(header: list[str], table: list[list[Any]], prefix: str) -> tuple[list[str], list[list[Any]]]:

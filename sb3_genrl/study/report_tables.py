@@ -89,6 +89,14 @@ def predictions(rows: list[dict[str, Any]], score_key: str):
                              score_key=score_key, type_key="_no_type")
 
 
+def all_tasks_correlations(rows_by_task: dict[str, list[dict[str, Any]]]):
+    """Paper table 6: each paper measure against the best reward over the converged models of every task together,
+    pooled as the paper pools them (each task's own rewards)."""
+    pooled = [{**r, "model": f"{task}/{r['model']}"} for task, rows in rows_by_task.items() for r in rows
+              if converged(r)]
+    return correlation_table(pooled, measure_names=list(MEASURES), score_key="score", type_key="_no_type")
+
+
 def excluded_line(rows: list[dict[str, Any]]) -> str:
     names = [f"{r['model']} ({r['precision']:.3f})" for r in rows if not converged(r)]
     rule = (f"A generator whose precision is below {NOT_CONVERGED_PRECISION} is reported as not converged and left "

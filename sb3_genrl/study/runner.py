@@ -7,6 +7,7 @@ before any work, with the stage folders and settings named. The reports read the
 
 from __future__ import annotations
 
+import json
 import os
 import pathlib
 from collections.abc import Callable
@@ -26,7 +27,7 @@ from sb3_genrl.study.jobs import (
     generator_job,
     task_genrl_kwargs,
 )
-from sb3_genrl.study.report import write_task_report
+from sb3_genrl.study.report import write_all_tasks_report, write_task_report
 from sb3_genrl.study.scales import SCALES, StudyScale, task_scale
 from sb3_genrl.study.state import (
     STAGE_FILE,
@@ -94,11 +95,22 @@ def run_study(task: str, scale: str | StudyScale, out_dir: str | os.PathLike, *,
         atomic_write_json(out / "study.json", {"task": task, "scale": "custom" if isinstance(scale, StudyScale) else scale,
                                         **settings})
         reports = [_run_task(name, task_scale(settings, name), out / name, run, models, device, log) for name in tasks]
-    if len(reports) == 1:
-        return reports[0]
+        index = _write_index(out)
+    return reports[0] if len(reports) == 1 else index
+
+
+def _write_index(out: pathlib.Path) -> pathlib.Path:
+    """``report.md`` linking each task's report in ``out``, and, once every arm task has finished (in this run or an
+    earlier one into the same folder), the pooled table over the tasks (paper table 6)."""
+    from sb3_genrl.envs import arm_tasks
+
+    finished = {name: out / name / "results.json" for name in arm_tasks() if (out / name / "report.md").is_file()}
+    lines = ["# GenRL study", "", *(f"- [{name}]({name}/report.md)" for name in finished)]
+    if len(finished) == len(arm_tasks()):
+        rows = {name: json.loads(path.read_text()) for name, path in finished.items()}
+        lines.append(f"- [all tasks]({write_all_tasks_report(rows, out).name}): paper table 6, the tasks pooled")
     index = out / "report.md"
-    atomic_write_text(index, "# GenRL study\n\n" + "\n".join(f"- [{p.parent.name}]({p.parent.name}/report.md)"
-                                                         for p in reports) + "\n")
+    atomic_write_text(index, "\n".join(lines) + "\n")
     return index
 
 
