@@ -474,27 +474,29 @@ def test_prior_rollout_on_hockey_plays_the_held_out_goals_of_its_seed_one_trajec
         prior_rollout(generator, "hockey", contexts=np.zeros(2), draws=1)
 
 
-def test_scorecard_ranks_converged_models_by_the_prior_rollout_and_sets_apart_the_untrained() -> None:
+def test_scorecard_ranks_converged_models_by_recall_or_a_measure_given_and_sets_apart_the_untrained() -> None:
     from sb3_genrl.metrics.scorecard import NOT_CONVERGED_PRECISION, rank_key, ranked, scorecard_markdown
 
-    def row(name, precision, prior):
-        return {"model": name, "precision": precision, "recall": 0.5, "density": 1.0, "coverage": 0.5,
+    def row(name, precision, recall, prior):
+        return {"model": name, "precision": precision, "recall": recall, "density": 1.0, "coverage": 0.5,
                 "delta_1": 0.5, "mean_delta": 0.4, "prior_median": prior, "prior_q25": prior - 0.1,
                 "prior_q75": prior + 0.1, "prior_episodes": 8, "prior_seconds": 0.5}
 
-    rows = [row("A", 0.9, -0.3), row("B", NOT_CONVERGED_PRECISION - 0.01, -0.01), row("C", 0.5, -0.1),
-            row("D", NOT_CONVERGED_PRECISION, -0.2)]
-    assert rank_key(rows) == "prior_median" and [r["model"] for r in ranked(rows)] == ["C", "D", "A", "B"]
+    rows = [row("A", 0.9, 0.2, -0.3), row("B", NOT_CONVERGED_PRECISION - 0.01, 0.9, -0.01), row("C", 0.5, 0.4, -0.1),
+            row("D", NOT_CONVERGED_PRECISION, 0.6, -0.2)]
+    assert rank_key(rows) == "recall" and [r["model"] for r in ranked(rows)] == ["D", "C", "A", "B"]
     lines = scorecard_markdown(rows).splitlines()
-    assert lines[0].startswith("Ranked by the prior rollout") and lines[-1].startswith("| 4 | B |")
+    assert lines[0].startswith("Ranked by recall (higher is better)") and lines[-1].startswith("| 4 | B |")
     assert lines[-1].endswith("| not converged |") and lines[-2].endswith("| ok |")
+    assert [r["model"] for r in ranked(rows, "prior_median")] == ["C", "D", "A", "B"]
+    assert scorecard_markdown(rows, "prior_median").startswith("Ranked by the prior rollout")
     without_prior = [{key: value for key, value in r.items() if not key.startswith("prior")} for r in rows]
-    assert rank_key(without_prior) == "precision"
-    assert [r["model"] for r in ranked(without_prior)] == ["A", "C", "D", "B"]
+    assert [r["model"] for r in ranked(without_prior)] == ["D", "C", "A", "B"]
+    assert "prior median" not in scorecard_markdown(without_prior)
     # a sparse 0/-1 reward: equal medians, ranked by the mean (the share solved), its success column shown
-    sparse = [row("E", 0.9, -1.0) | {"prior_mean": -0.9, "prior_success": 0.1},
-              row("F", 0.9, -1.0) | {"prior_mean": -0.6, "prior_success": 0.4}]
-    assert [r["model"] for r in ranked(sparse)] == ["F", "E"]
+    sparse = [row("E", 0.9, 0.5, -1.0) | {"prior_mean": -0.9, "prior_success": 0.1},
+              row("F", 0.9, 0.5, -1.0) | {"prior_mean": -0.6, "prior_success": 0.4}]
+    assert [r["model"] for r in ranked(sparse, "prior_median")] == ["F", "E"]
     assert "| prior success |" in scorecard_markdown(sparse) and "prior success" not in scorecard_markdown(rows)
     # ranked by another measure: the order follows it, the rule line names it, unconverged models still come last
     rows[0]["mean_delta"], rows[2]["mean_delta"], rows[1]["mean_delta"] = 0.1, 0.3, 0.9
@@ -526,7 +528,7 @@ def test_genrl_evaluate_with_a_task_prints_the_ranked_scorecard_with_the_prior_r
     for result in results:
         assert result["prior_median"] == pytest.approx(expected["prior_median"], abs=1e-9)
         assert result["prior_episodes"] == 6 and len(result["prior_best"]) == 3
-    assert "Ranked by the prior rollout" in out and f"| {expected['prior_median']:.3f} |" in out
+    assert "Ranked by recall" in out and f"| {expected['prior_median']:.3f} |" in out
     assert (tmp_path / "eval" / "scorecard.md").read_text().strip() in out
     # A task without the fast path (a Fetch task): the prior rollout through the step path, with its success.
     from sb3_genrl.generative import make_generator
@@ -543,4 +545,4 @@ def test_genrl_evaluate_with_a_task_prints_the_ranked_scorecard_with_the_prior_r
     result = json.loads((tmp_path / "fetch" / "results.json").read_text())[0]
     assert result["prior_best"] == rollout.best.tolist() and result["prior_episodes"] == 6
     assert result["prior_success"] == rollout.summary()["prior_success"] == np.mean(rollout.best == 0.0)
-    assert "Ranked by the prior rollout" in out and "prior success" in out
+    assert "Ranked by recall" in out and "prior success" in out

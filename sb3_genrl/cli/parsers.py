@@ -134,7 +134,7 @@ def add_evaluate(sub: argparse._SubParsersAction) -> None:
     evaluate.add_argument("--prior-seed", type=SEED, default=4242,
                           help="prior rollout: seed of its goals (4242: neither the final evaluations' nor the tuning's)")
     evaluate.add_argument("--rank-by", default=None, choices=RANK_MEASURES,
-                          help="the measure the scorecard ranks by (default: prior_median with --task, else precision)")
+                          help="the measure the scorecard ranks by (default: recall)")
     evaluate.set_defaults(func=commands.evaluate_command)
 
 

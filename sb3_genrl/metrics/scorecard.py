@@ -1,8 +1,9 @@
 """The generator scorecard: every measure of each generator in one table, ranked, with untrained models set apart.
 
-By default the rows are ranked by the prior rollout's median best reward when it was measured (the measure grounded
-in the task: higher is better; ties, as a sparse 0/-1 reward gives them, broken by its mean), else by precision;
-``by`` ranks by any other measure (which one predicts GenRL best differs between tasks: the study measures it). A model
+By default the rows are ranked by recall, the one measure whose correlation with GenRL's result was positive on
+every task measured (hockey's 18 study generators, five generators on each Fetch task; docs/guide/evaluation.md);
+``by`` ranks by any other (on hockey the disentanglement predicts best, on FetchReach the prior rollout). Ranked by
+the prior rollout's median best reward, its ties (as a sparse 0/-1 reward gives them) are broken by its mean. A model
 whose precision is below :data:`NOT_CONVERGED_PRECISION` generates almost nothing that looks like a demonstration:
 it is marked "not converged" and ranked after the others (the study also keeps such models out of its
 correlations), since its other measures then describe an untrained model rather than its family.
@@ -29,13 +30,14 @@ def converged(row: Mapping[str, Any]) -> bool:
 
 # prior_success needs no entry: on a 0/-1 reward the median's ties are broken by the mean, i.e. by the share solved
 RANK_MEASURES = (*_COLUMNS, "prior_median")
+DEFAULT_RANK = "recall"
 
 
 def rank_key(rows: Sequence[Mapping[str, Any]], by: str | None = None) -> str:
     """The column the scorecard ranks by: ``by`` when given (one of :data:`RANK_MEASURES`, which every row must
-    have), else ``prior_median`` when every row has it, else ``precision``."""
+    have), else :data:`DEFAULT_RANK`."""
     if by is None:
-        return "prior_median" if rows and all("prior_median" in row for row in rows) else "precision"
+        return DEFAULT_RANK
     if by not in RANK_MEASURES:
         raise ValueError(f"cannot rank by {by!r}: choose one of {', '.join(RANK_MEASURES)}")
     missing = [str(row.get("model", "?")) for row in rows if by not in row]
