@@ -17,6 +17,7 @@ from collections.abc import Callable
 from typing import Any
 
 import gymnasium as gym
+import torch as th
 from sb3_genrl.envs import get_task
 from sb3_genrl.envs.fetch import FETCH_HORIZON
 from sb3_genrl.envs.fetch_demonstrations import evaluate_success
@@ -24,6 +25,7 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
 from sb3_genrl.curves import monitor_episodes, training_logger
 from sb3_genrl.generative import load
+from sb3_genrl.genrl import GenRL
 from sb3_genrl.genrl.checkpoint import GenRLCheckpoint, RandomStateRecorder, resume_genrl, resume_state
 from sb3_genrl.genrl.demonstrations import DemonstrationCallback, build_callbacks, fit_mean_to_demonstrations
 from sb3_genrl.genrl.generator_files import generator_digest
@@ -83,10 +85,11 @@ def recorded_genrl_settings(task: str) -> dict[str, Any]:
     return genrl_settings(run_settings(genrl_kwargs, batch_episodes, n_envs=1))
 
 
-def fitted_mean_success(task: str, generator_path: str, dataset: str, states: int, seed: int) -> float:
-    """The success rate on ``states`` initial states (reset seeds from ``seed``) of GenRL's policy mean (policy seed 0,
-    the task's entry) fitted to the demonstrations ``dataset`` as the entry's ``DemonstrationCallback`` fits it,
-    before any episode: what a generator gives GenRL to start from."""
+def fitted_policy(task: str, generator_path: str, dataset: str, fit_steps: int | None = None,
+                  ) -> tuple[GenRL, DemonstrationCallback, tuple[th.Tensor, th.Tensor]]:
+    """GenRL with the task's entry (policy seed 0) and its mean fitted to the demonstrations ``dataset`` as the entry's
+    ``DemonstrationCallback`` fits them (``fit_steps``: another number of Adam steps; 0: no fit), before any episode.
+    Returns the model, the entry's callback and the demonstrations as pulls (contexts, latent actions)."""
     _, batch_episodes, genrl_kwargs = task_settings(task)
     callback = genrl_kwargs.pop("callback", None)
     fit = next((item for item in build_callbacks(callback, demonstrations=dataset, task=task)
@@ -97,8 +100,18 @@ def fitted_mean_success(task: str, generator_path: str, dataset: str, states: in
     model = make_genrl(LatentActionWrapper(gym.make(get_task(task).env_id), generator), generator, seed=0, device="cpu",
                        n_steps=batch_episodes, **genrl_kwargs)
     pulls = fit.pulls(generator, model.observation_space, model.latent_clip)
-    fit_mean_to_demonstrations(model.policy, *pulls, steps=fit.fit_steps, learning_rate=fit.learning_rate,
-                               batch_size=fit.batch_size)
+    steps = fit.fit_steps if fit_steps is None else fit_steps
+    if steps:
+        fit_mean_to_demonstrations(model.policy, *pulls, steps=steps, learning_rate=fit.learning_rate,
+                                   batch_size=fit.batch_size)
+    return model, fit, pulls
+
+
+def fitted_mean_success(task: str, generator_path: str, dataset: str, states: int, seed: int) -> float:
+    """The success rate on ``states`` initial states (reset seeds from ``seed``) of GenRL's policy mean (policy seed 0,
+    the task's entry) fitted to the demonstrations ``dataset`` as the entry's ``DemonstrationCallback`` fits it,
+    before any episode: what a generator gives GenRL to start from."""
+    model, _, _ = fitted_policy(task, generator_path, dataset)
     return float(evaluate_success(model, task, episodes=states, seed=seed)["success_rate"])
 
 

@@ -212,6 +212,15 @@ def reconstruction_success(generator: Any, task: str | TaskSpec, episodes: int, 
             "median_miss_m": float(np.median(misses))}
 
 
+def replay_success(generator: Any, task: str | TaskSpec, latents: np.ndarray, reset_seeds: list[int],
+                   n_threads: int = 1) -> np.ndarray:
+    """Whether each latent action, decoded (clipped to the action box) and played open-loop from its reset seed,
+    solves the env's goal (``info["is_success"]`` of the last step)."""
+    actions = np.clip(generator.decode(np.asarray(latents, dtype=np.float32)), -1.0, 1.0).astype(np.float32)
+    rows = _replay(get_task(task).env_id, actions, list(reset_seeds), [None] * len(actions), n_threads)
+    return np.array([success for success, _ in rows], dtype=bool)
+
+
 def prior_best_success(generator: Any, task: str | TaskSpec, states: int, draws: int, seed: int,
                        n_threads: int = 1) -> dict[str, Any]:
     """The generator's own limit: for each of ``states`` initial states (reset seeds ``seed, seed + 1, ...``),

@@ -364,3 +364,45 @@ def test_the_scorecard_benchmark_scores_each_generator_then_trains_genrl_on_it_a
     assert recall["pearson_r"] == pytest.approx(stats.pearsonr(values, success)[0])
     assert recall["spearman_rho"] == pytest.approx(stats.spearmanr(values, success)[0])
     assert "| ALL | recall | 6 |" in out.with_suffix(".md").read_text()
+
+
+def test_the_fit_limit_benchmark_picks_each_states_nearest_solving_draw_and_replays_as_the_step_path_plays():
+    import gymnasium as gym
+    from sb3_genrl.benchmarks.fetch_fit_limit import solving_targets
+    from sb3_genrl.envs.fetch_demonstrations import replay_success
+
+    from sb3_genrl.generative import make_generator
+    from sb3_genrl.wrappers import LatentActionWrapper
+
+    rng = np.random.default_rng(0)
+    drawn, mean = rng.normal(size=(4, 5, 3)), rng.normal(size=(4, 3))
+    solved = rng.random((4, 5)) < 0.5
+    solved[2] = False  # a state no draw solves is left out
+    solved[3] = [False, True, False, False, False]
+    nearest, average = solving_targets(drawn, solved, mean)
+    states = [i for i in range(4) if solved[i].any()]
+    assert len(nearest) == len(average) == len(states)
+    for row, i in enumerate(states):  # brute force
+        candidates = [j for j in range(5) if solved[i, j]]
+        best = min(candidates, key=lambda j: float(np.sum((drawn[i, j] - mean[i]) ** 2)))
+        np.testing.assert_allclose(nearest[row], drawn[i, best], rtol=1e-6)
+        np.testing.assert_allclose(average[row], drawn[i, candidates].mean(axis=0), rtol=1e-6)
+    np.testing.assert_allclose(nearest[-1], drawn[3, 1], rtol=1e-6)
+    # replay_success plays what the wrapper's step path plays from the same reset seeds: the same end, the same success
+    from sb3_genrl.envs.fetch_demonstrations import _replay
+
+    generator = make_generator("VAE-FETCH", horizon=50, action_dim=4, device="cpu")
+    env = LatentActionWrapper(gym.make("FetchReach-v4"), generator)
+    latents = np.clip(rng.normal(size=(3, generator.latent_dim)), env.action_space.low,
+                      env.action_space.high).astype(np.float32)
+    stepped, distances = [], []
+    for i, latent in enumerate(latents):
+        env.reset(seed=20 + i)
+        stepped.append(bool(env.step(latent)[4]["is_success"]))
+        task = env.unwrapped
+        distances.append(float(np.linalg.norm(task._get_obs()["achieved_goal"] - task.goal)))
+    env.close()
+    assert replay_success(generator, "fetch-reach", latents, [20, 21, 22]).tolist() == stepped
+    actions = np.clip(generator.decode(latents), -1.0, 1.0).astype(np.float32)
+    replayed = [distance for _, distance in _replay("FetchReach-v4", actions, [20, 21, 22], [None] * 3, 1)]
+    np.testing.assert_allclose(replayed, distances, atol=1e-9)

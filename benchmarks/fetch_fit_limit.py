@@ -1,0 +1,170 @@
+"""How far can GenRL's policy mean get on a Fetch task if the search found a solving latent action for every state?
+
+GenRL's deterministic policy is its mean, an MLP of the context fitted by regression (to the demonstrations, then by
+the E- and M-steps). This benchmark separates what the search finds from what the mean can hold:
+
+1. the fitted start: the mean fitted to the demonstrations as the task's entry fits it (policy seed 0), its success on
+   ``--tuning-states`` tuning states (:data:`~sb3_genrl.hyperparams.TUNING_GOAL_SEED`) and on the first
+   ``--fit-states`` of the collection states;
+2. the collection: ``--states`` initial states (reset seeds from ``--collection-seed``, neither the tuning's nor the
+   evaluation's), ``--draws`` latent actions each from the policy's own spread around the fitted mean, played; per
+   state the solving draw nearest the mean, and the mean of its solving draws;
+3. the targets themselves, played again at the first ``--fit-states`` collection states: what the mean would solve
+   there if it reproduced them exactly (the best a search around the fitted start can give);
+4. the mean fitted from scratch (the entry's fit: its steps, learning rate and batch size) to each state's nearest
+   solving draw, and to those plus the demonstrations: its residual error and its success on the same
+   ``--fit-states`` states (which it was fitted to) and on the tuning states.
+
+A gap between 3 and 4 on the states the mean was fitted to says that the mean cannot represent the solving latent
+actions, whatever search finds them. The held-out evaluation states are never used.
+
+    python benchmarks/fetch_fit_limit.py --task fetch-push --generator GEN.pt --data DEMOS
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+import gymnasium as gym
+import numpy as np
+import torch as th
+from sb3_genrl.benchmarks.fetch_seed import fitted_policy
+from sb3_genrl.envs import get_task
+from sb3_genrl.envs.fetch_demonstrations import evaluate_success, replay_success
+
+from sb3_genrl import __version__
+from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, SEED
+from sb3_genrl.genrl.demonstrations import fit_mean_to_demonstrations
+from sb3_genrl.genrl.regression import policy_mean
+from sb3_genrl.hyperparams import TUNING_GOAL_SEED
+from sb3_genrl.markdown import markdown_table
+from sb3_genrl.utils import atomic_write_json, atomic_write_text
+from sb3_genrl.wrappers import LatentActionWrapper
+
+COLLECTION_SEED = 950000  # reset seeds of the collection states: neither TUNING_GOAL_SEED's nor EVAL_GOAL_SEED's
+
+
+def arguments(argv: list[str] | None = None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--task", default="fetch-push",
+                        choices=("fetch-reach", "fetch-push", "fetch-pick-and-place", "fetch-slide"))
+    parser.add_argument("--generator", type=EXISTING, required=True, help="a VAE of the Fetch recipe")
+    parser.add_argument("--data", type=EXISTING, required=True, help="the demonstrations it was trained on")
+    parser.add_argument("--states", type=COUNT, default=2000, help="collection states (default 2000)")
+    parser.add_argument("--draws", type=COUNT, default=4, help="draws per collection state (default 4)")
+    parser.add_argument("--fit-states", type=COUNT, default=300,
+                        help="collection states the fitted means are scored on (default 300)")
+    parser.add_argument("--tuning-states", type=COUNT, default=200, help="tuning states (default 200)")
+    parser.add_argument("--collection-seed", type=SEED, default=COLLECTION_SEED)
+    parser.add_argument("--fit-steps", type=COUNT, default=None, help="Adam steps of each fit (default: the entry's)")
+    parser.add_argument("--out", type=JSON_OUT, default=None,
+                        help="JSON (default benchmarks/results/fetch_fit_limit_TASK.json; Markdown beside it)")
+    args = parser.parse_args(argv)
+    if args.fit_states > args.states:
+        parser.error(f"--fit-states {args.fit_states} is more than the {args.states} collection states")
+    here = os.path.dirname(os.path.abspath(__file__))
+    args.out = args.out or os.path.join(here, "results", f"fetch_fit_limit_{args.task}.json")
+    return args
+
+
+def solving_targets(drawn: np.ndarray, solved: np.ndarray, mean: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For each state with a solving draw (in order), the solving draw nearest the mean, and the mean of its solving
+    draws.
+
+    :param drawn: draws, ``(states, draws, latent_dim)``
+    :param solved: whether each solved its state, ``(states, draws)``
+    :param mean: the policy's mean at each state, ``(states, latent_dim)``
+    """
+    has = solved.any(axis=1)
+    distance = np.linalg.norm(drawn - mean[:, None], axis=2) + np.where(solved, 0.0, np.inf)
+    nearest = drawn[has, distance[has].argmin(axis=1)]
+    average = np.stack([drawn[i][solved[i]].mean(axis=0) for i in np.flatnonzero(has)])
+    return nearest.astype(np.float32), average.astype(np.float32)
+
+
+def main(argv: list[str] | None = None) -> dict:
+    args = arguments(argv)
+    th.set_num_threads(1)
+    begin = time.perf_counter()
+    model, fit, pulls = fitted_policy(args.task, args.generator, args.data, fit_steps=args.fit_steps)
+    steps = fit.fit_steps
+    generator, spec = model.generator, get_task(args.task)
+
+    def scored(candidate) -> dict[str, float]:
+        return {"tuning": evaluate_success(candidate, args.task, args.tuning_states, TUNING_GOAL_SEED)["success_rate"],
+                "fit_states": evaluate_success(candidate, args.task, args.fit_states,
+                                               args.collection_seed)["success_rate"]}
+
+    rows = [{"policy": "the fitted start (the demonstrations)", "pairs": len(pulls[1]), **scored(model)}]
+    print(rows[-1], flush=True)
+
+    # 2. the collection around the fitted mean
+    env = LatentActionWrapper(gym.make(spec.env_id), generator)
+    seeds = [args.collection_seed + i for i in range(args.states)]
+    contexts = np.stack([env.reset(seed=seed)[0] for seed in seeds]).astype(np.float32)
+    low, high = env.action_space.low, env.action_space.high
+    env.close()
+    with th.no_grad():
+        distribution = model.policy.get_distribution(th.as_tensor(contexts)).distribution
+        mean, spread = distribution.mean.numpy(), distribution.stddev.numpy()
+    rng = np.random.default_rng(args.collection_seed)
+    drawn = np.clip(mean[:, None] + spread[:, None] * rng.standard_normal((args.states, args.draws, mean.shape[1])),
+                    low, high).astype(np.float32)
+    solved = replay_success(generator, args.task, drawn.reshape(-1, mean.shape[1]),
+                            [seed for seed in seeds for _ in range(args.draws)]).reshape(args.states, args.draws)
+    has = solved.any(axis=1)
+    collection = {"states": args.states, "draws": args.draws, "spread": float(spread.mean()),
+                  "draw_success": float(solved.mean()), "states_with_a_solving_draw": float(has.mean())}
+    print(collection, flush=True)
+    if not has.any():
+        raise SystemExit(f"no draw solved any of the {args.states} collection states: nothing to fit the mean to "
+                         "(more --states or --draws, or a generator whose fitted start solves some states)")
+    nearest, average = solving_targets(drawn, solved, mean)
+
+    # 3. the targets played again at the first fit states (a state without a solving draw counts as unsolved)
+    first = np.flatnonzero(has[:args.fit_states])
+    for name, targets in (("nearest solving draw", nearest), ("mean of the solving draws", average)):
+        hits = replay_success(generator, args.task, targets[:len(first)], [seeds[i] for i in first])
+        rows.append({"policy": f"each state's {name}, played (no fit)", "pairs": len(targets),
+                     "tuning": None, "fit_states": float(hits.sum() / args.fit_states)})
+        print(rows[-1], flush=True)
+
+    # 4. the mean fitted from scratch to the nearest solving draws (and to those with the demonstrations)
+    found = (th.as_tensor(contexts[has]), th.as_tensor(nearest))
+    for name, (pair_contexts, pair_latents) in (
+            ("the mean fitted to the nearest solving draws", found),
+            ("the mean fitted to them and the demonstrations", tuple(th.cat(p) for p in zip(pulls, found, strict=True)))):
+        fresh, _, _ = fitted_policy(args.task, args.generator, args.data, fit_steps=0)
+        fit_mean_to_demonstrations(fresh.policy, pair_contexts, pair_latents, steps=steps,
+                                   learning_rate=fit.learning_rate, batch_size=fit.batch_size)
+        with th.no_grad():
+            residual = float((policy_mean(fresh.policy, found[0]) - found[1]).pow(2).mean())
+        rows.append({"policy": name, "pairs": len(pair_latents), **scored(fresh), "residual_mse": residual})
+        print(rows[-1], flush=True)
+
+    result = {"benchmark": f"fetch_fit_limit_{args.task}", "command": "python " + " ".join(
+                  ["benchmarks/fetch_fit_limit.py", *(argv if argv is not None else sys.argv[1:])]),
+              "sb3_genrl": __version__, "task": args.task, "generator": os.path.abspath(args.generator),
+              "data": os.path.abspath(args.data), "fit_steps": steps, "tuning_states": args.tuning_states,
+              "tuning_seed": TUNING_GOAL_SEED, "fit_states": args.fit_states,
+              "collection_seed": args.collection_seed, "collection": collection, "rows": rows,
+              "seconds": time.perf_counter() - begin}
+    atomic_write_json(args.out, result)
+    table = markdown_table(["policy", "pairs", f"success, {args.fit_states} collection states",
+                            f"success, {args.tuning_states} tuning states", "residual MSE on the solving draws"],
+                           [[r["policy"], r["pairs"], r["fit_states"], "" if r["tuning"] is None else r["tuning"],
+                             f"{r['residual_mse']:.4f}" if "residual_mse" in r else ""] for r in rows], align="lrrrr")
+    atomic_write_text(os.path.splitext(args.out)[0] + ".md", "\n".join([
+        f"# What GenRL's mean can hold on {args.task}", "", f"`{result['command']}`", "",
+        f"{args.states} collection states x {args.draws} draws from the fitted mean's spread "
+        f"({collection['spread']:.3f}): one draw solves {collection['draw_success']:.3f}, some draw solves "
+        f"{collection['states_with_a_solving_draw']:.3f} of the states.", "", table, ""]))
+    print(table)
+    return result
+
+
+if __name__ == "__main__":
+    main()
