@@ -93,6 +93,13 @@ def check_non_negative_float(value: Any, name: str) -> float:
     return float(value)
 
 
+def check_fraction(value: Any, name: str) -> float:
+    """A number in [0, 1] (a share, a threshold on a share)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not 0 <= value <= 1:
+        raise ValueError(_named(name, f"must be a number in [0, 1], got {value!r}"))
+    return float(value)
+
+
 def check_device(device: Any, name: str = "device") -> Any:
     """``"auto"``, or a torch device (``"cpu"``, ``"cuda"``, ``"cuda:1"``, ``"mps"``, a ``torch.device``) that exists
     on this machine. Unlike SB3, which quietly falls back to the CPU, an unavailable GPU is an error here.

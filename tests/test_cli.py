@@ -86,6 +86,8 @@ def test_help_lists_the_commands_in_workflow_order_and_version(cli):
     (("evaluate", "GEN", "--data", "D0", "--n", "0", "--out", "D"), "argument --n: must be an integer >= 1, got 0"),
     (("evaluate", "GEN", "--data", "D0", "--out", "FILE"), "argument --out: 'FILE' is a file"),
     (("evaluate", "GEN", "--data", "D0", "--rank-by", "fid", "--out", "D"), "argument --rank-by: invalid choice: 'fid'"),
+    (("evaluate", "GEN", "--data", "D0", "--min-precision", "1.5", "--out", "D"),
+     "argument --min-precision: must be a number in [0, 1], got 1.5"),
     (("compare", "--runs", "D0", "--out", "FILE"), "argument --out: 'FILE' is a file"),
     (("study", "--workers", "0", "--out", "D"), "argument --workers: must be an integer >= 1, got 0"),
     (("study", "--models", "VAE10", "--out", "D"), "argument --models: invalid choice: 'VAE10'"),

@@ -506,6 +506,15 @@ def test_scorecard_ranks_converged_models_by_recall_or_a_measure_given_and_sets_
         ranked(rows, "fid")
     with pytest.raises(ValueError, match="cannot rank by 'prior_median': A, B, C, D lack it"):
         ranked(without_prior, "prior_median")
+    # another threshold: at 0 every model is ranked by the measure alone; above D's precision, D joins B at the end
+    assert [r["model"] for r in ranked(rows, min_precision=0)] == ["B", "D", "C", "A"]
+    assert "no precision threshold" in scorecard_markdown(rows, min_precision=0)
+    assert "not converged" not in scorecard_markdown(rows, min_precision=0).split("\n", 1)[1]
+    assert [r["model"] for r in ranked(rows, min_precision=0.4)] == ["C", "A", "B", "D"]
+    assert "precision below 0.4 is not converged" in scorecard_markdown(rows, min_precision=0.4)
+    for bad in (-0.1, 1.5, float("nan")):
+        with pytest.raises(ValueError, match="min_precision must be a number in"):
+            ranked(rows, min_precision=bad)
 
 
 def test_genrl_evaluate_with_a_task_prints_the_ranked_scorecard_with_the_prior_rollout(tmp_path, cli,

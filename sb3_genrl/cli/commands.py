@@ -59,8 +59,9 @@ def evaluate_command(args: argparse.Namespace) -> int:
     evaluations = evaluate_generators(args.models, args.data, n=args.n, k=args.k, dwpr_n=args.dwpr_n,
                                       interventions=args.interventions, seed=args.seed, out_dir=args.out,
                                       device=args.device, task=task, contexts=args.contexts, draws=args.draws,
-                                      prior_seed=args.prior_seed, rank_by=args.rank_by)
-    print(scorecard_markdown([evaluation.row() for evaluation in evaluations], args.rank_by))
+                                      prior_seed=args.prior_seed, rank_by=args.rank_by,
+                                      min_precision=args.min_precision)
+    print(scorecard_markdown([evaluation.row() for evaluation in evaluations], args.rank_by, args.min_precision))
     print(f"wrote {args.out}/scorecard.md, results.md, results.csv, results.json, precision_recall.png, "
           "disentanglement.png")
     return 0

@@ -15,6 +15,7 @@ from sb3_genrl.checks import (
     OUT_DIR,
     SEED,
     check_device,
+    check_fraction,
     check_int,
     check_non_negative_float,
     check_output_dir,
@@ -24,7 +25,7 @@ from sb3_genrl.checks import (
     option,
 )
 from sb3_genrl.cli import commands
-from sb3_genrl.metrics.scorecard import RANK_MEASURES
+from sb3_genrl.metrics.scorecard import NOT_CONVERGED_PRECISION, RANK_MEASURES
 
 
 def _task_option(parser: argparse.ArgumentParser, *, required: bool = True, default: str | None = None,
@@ -135,6 +136,9 @@ def add_evaluate(sub: argparse._SubParsersAction) -> None:
                           help="prior rollout: seed of its goals (4242: neither the final evaluations' nor the tuning's)")
     evaluate.add_argument("--rank-by", default=None, choices=RANK_MEASURES,
                           help="the measure the scorecard ranks by (default: recall)")
+    evaluate.add_argument("--min-precision", type=option(check_fraction, float), default=NOT_CONVERGED_PRECISION,
+                          help="precision below which a model is marked not converged and ranked last "
+                               f"(default: {NOT_CONVERGED_PRECISION}; 0: none, e.g. for a VAE with a small KL weight)")
     evaluate.set_defaults(func=commands.evaluate_command)
 
 

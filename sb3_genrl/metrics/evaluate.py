@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from sb3_genrl.checks import check_device, check_input_path, check_output_dir, check_positive_int, check_seed
+from sb3_genrl.checks import check_device, check_fraction, check_input_path, check_output_dir, check_positive_int, check_seed
 from sb3_genrl.data import load_trajectories
 from sb3_genrl.generative.base import TrajectoryGenerator
 from sb3_genrl.markdown import markdown_table
@@ -107,11 +107,14 @@ def _as_generator(model: str | os.PathLike | TrajectoryGenerator, device: torch.
 
 
 def write_results(evaluations: Sequence[GeneratorEvaluation], out_dir: str | os.PathLike,
-                  rank_by: str | None = None) -> None:
+                  rank_by: str | None = None, min_precision: float | None = None) -> None:
     """Write ``results.csv``, ``results.md``, ``scorecard.md`` (ranked by ``rank_by``,
-    :func:`~sb3_genrl.metrics.scorecard.rank_key`), the two scatter plots and, last, ``results.json`` into
-    ``out_dir`` (each file atomically)."""
-    from sb3_genrl.metrics.scorecard import scorecard_markdown
+    :func:`~sb3_genrl.metrics.scorecard.rank_key`, with models below ``min_precision`` last; None: the default
+    threshold), the two scatter plots and, last, ``results.json`` into ``out_dir`` (each file atomically)."""
+    from sb3_genrl.metrics.scorecard import NOT_CONVERGED_PRECISION, scorecard_markdown
+
+    if min_precision is None:
+        min_precision = NOT_CONVERGED_PRECISION
 
     out = Path(out_dir)
     rows = [evaluation.row() for evaluation in evaluations]
@@ -127,7 +130,7 @@ def write_results(evaluations: Sequence[GeneratorEvaluation], out_dir: str | os.
     markdown = markdown_table(columns, [[row[column] for column in columns] for row in rows],
                               align="l" + "r" * (len(columns) - 1))
     atomic_write_text(out / "results.md", markdown + "\n")
-    atomic_write_text(out / "scorecard.md", scorecard_markdown(rows, rank_by) + "\n")
+    atomic_write_text(out / "scorecard.md", scorecard_markdown(rows, rank_by, min_precision) + "\n")
     labels = [str(row["model"]) for row in rows]
     labelled_scatter([row["precision"] for row in rows], [row["recall"] for row in rows], labels,
                      out / "precision_recall.png", xlabel="precision", ylabel="recall", title="Precision and recall")
@@ -200,7 +203,7 @@ def evaluate_generators(models: Sequence[str | os.PathLike | TrajectoryGenerator
                         seed: int = 0, out_dir: str | os.PathLike, device: torch.device | str = "auto",
                         batch_size: int | None = None, task: str | None = None, contexts: int = DEFAULT_CONTEXTS,
                         draws: int = DEFAULT_DRAWS, prior_seed: int = PRIOR_ROLLOUT_SEED,
-                        rank_by: str | None = None) -> list[GeneratorEvaluation]:
+                        rank_by: str | None = None, min_precision: float | None = None) -> list[GeneratorEvaluation]:
     """Precision/recall, density/coverage against real trajectories and DwPR of each generator, written as each
     model completes.
 
@@ -228,8 +231,10 @@ def evaluate_generators(models: Sequence[str | os.PathLike | TrajectoryGenerator
     :param contexts: the prior rollout's goals
     :param draws: its prior draws per goal
     :param prior_seed: seed of its goals
-    :param rank_by: the measure ``scorecard.md`` ranks by (None: the prior rollout's median with ``task``, else
-        precision; :data:`~sb3_genrl.metrics.scorecard.RANK_MEASURES`)
+    :param rank_by: the measure ``scorecard.md`` ranks by (None: recall;
+        :data:`~sb3_genrl.metrics.scorecard.RANK_MEASURES`)
+    :param min_precision: ``scorecard.md`` marks a model below this precision not converged and ranks it last
+        (None: :data:`~sb3_genrl.metrics.scorecard.NOT_CONVERGED_PRECISION`; 0: no model)
     :return: the evaluations, in model order
     """
     named = _named_generators(models)
@@ -242,6 +247,8 @@ def evaluate_generators(models: Sequence[str | os.PathLike | TrajectoryGenerator
     if task is not None:
         _check_prior_task(task, contexts, draws, prior_seed)
     _check_rank_by(rank_by, task)
+    if min_precision is not None:
+        check_fraction(min_precision, "min_precision")
     out = check_output_dir(out_dir)
     real = load_trajectories(data)
     _check_sample_sizes(real, n, dwpr_n, interventions)
@@ -253,7 +260,7 @@ def evaluate_generators(models: Sequence[str | os.PathLike | TrajectoryGenerator
                                               interventions=interventions, seed=seed, name=name, device=device,
                                               batch_size=batch_size, task=task, contexts=contexts, draws=draws,
                                               prior_seed=prior_seed))
-        write_results(evaluations, out, rank_by)
+        write_results(evaluations, out, rank_by, min_precision)
     return evaluations
 
 
