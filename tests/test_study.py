@@ -35,7 +35,7 @@ def _csv_rows(path):
 
 
 @pytest.mark.slow
-def test_smoke_study_writes_every_table_and_plot_and_resumes(tmp_path, cli):
+def test_smoke_study_writes_every_table_and_plot_and_resumes(tmp_path, cli, monkeypatch):
     code, out, err = cli("study", "--task", "hockey", "--scale", "smoke", "--models", *SMOKE_MODELS, "--workers", "1",
                          "--device", "cpu", "--out", tmp_path)
     root = tmp_path / "hockey"
@@ -87,8 +87,20 @@ def test_smoke_study_writes_every_table_and_plot_and_resumes(tmp_path, cli):
     outputs = [*root.glob("policies/*/seed*/summary.json"), *root.glob("generators/*.pt"),
                *root.glob("evaluation/*.json"), *root.glob("comparison/*/summary.json"), root / "demonstrations"]
     stamps = {p: p.stat().st_mtime_ns for p in outputs}
+    correlation = (root / "tables" / "correlation.csv").read_text()
+    # ... and the jobs finishing in another order (as they do with workers) leaves the rows and intervals as they were
+    from sb3_genrl.study import runner
+
+    def reversed_map(workers):
+        def run(jobs):
+            yield from reversed([fn(*args) for fn, args in jobs])
+        return run
+
+    monkeypatch.setattr(runner, "_local_map", reversed_map)
     run_study("hockey", "smoke", tmp_path, workers=1, models=SMOKE_MODELS)
     assert stamps == {p: p.stat().st_mtime_ns for p in outputs}
+    assert [row["model"] for row in json.loads((root / "results.json").read_text())] == list(SMOKE_MODELS)
+    assert (root / "tables" / "correlation.csv").read_text() == correlation
 
     # Another scale into the same folder is refused before any work, naming the folders and settings that differ.
     with pytest.raises(SettingsConflictError) as error:

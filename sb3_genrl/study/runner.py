@@ -181,6 +181,8 @@ def _run_task(task: str, scale: dict[str, Any], task_dir: pathlib.Path, run, mod
         log(f"{task}: {row['model']} precision {row['precision']:.3f} recall {row['recall']:.3f} "
             f"mean delta {row['mean_delta']:.3f} coverage {row['coverage']:.3f} prior median {row['prior_median']:.3f} "
             f"best reward {row['score']:.3f} (half budget {row['half_score']:.3f}) final {row['final']:.3f}")
+    # the jobs finish in any order; the models' order makes the tables and the bootstrap intervals reproducible
+    rows.sort(key=lambda row: list(models).index(row["model"]))
     atomic_write_json(task_dir / "results.json", rows)
 
     comparison = None
