@@ -35,12 +35,12 @@ from sb3_genrl.benchmarks.fetch_seed import fitted_policy
 from sb3_genrl.envs import get_task
 from sb3_genrl.envs.fetch_demonstrations import evaluate_success, replay_success
 
-from sb3_genrl import __version__
 from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, SEED
 from sb3_genrl.genrl.demonstrations import fit_mean_to_demonstrations
 from sb3_genrl.genrl.regression import policy_mean
 from sb3_genrl.hyperparams import TUNING_GOAL_SEED
 from sb3_genrl.markdown import markdown_table
+from sb3_genrl.provenance import package_versions
 from sb3_genrl.utils import atomic_write_json, atomic_write_text
 from sb3_genrl.wrappers import LatentActionWrapper
 
@@ -147,7 +147,7 @@ def main(argv: list[str] | None = None) -> dict:
 
     result = {"benchmark": f"fetch_fit_limit_{args.task}", "command": "python " + " ".join(
                   ["benchmarks/fetch_fit_limit.py", *(argv if argv is not None else sys.argv[1:])]),
-              "sb3_genrl": __version__, "task": args.task, "generator": os.path.abspath(args.generator),
+              **package_versions(), "task": args.task, "generator": os.path.abspath(args.generator),
               "data": os.path.abspath(args.data), "fit_steps": steps, "tuning_states": args.tuning_states,
               "tuning_seed": TUNING_GOAL_SEED, "fit_states": args.fit_states,
               "collection_seed": args.collection_seed, "collection": collection, "rows": rows,

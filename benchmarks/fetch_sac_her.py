@@ -42,6 +42,7 @@ from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, SEED
 from sb3_genrl.curves import episode_info
 from sb3_genrl.data import load_arrays
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED, parse_kwargs
+from sb3_genrl.provenance import package_versions
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 SETTINGS = os.path.join(HERE, "sac_her_fetch.yml")
@@ -163,7 +164,8 @@ def main(argv: list[str] | None = None) -> None:
     args.eval_every = args.eval_every or max(32, round(episodes / 6 / 32) * 32)
     torch.set_num_threads(1)
     episodes_data = fetch_goal_episodes(args.task, load_arrays(data))
-    result = {"benchmark": f"fetch_sac_her_{args.task}_{args.variant}", "task": args.task, "variant": args.variant,
+    result = {**package_versions(), "benchmark": f"fetch_sac_her_{args.task}_{args.variant}", "task": args.task,
+              "variant": args.variant,
               "settings_file": "benchmarks/sac_her_fetch.yml", "settings": entry(get_task(args.task).env_id),
               "demonstrations": int(len(episodes_data["rewards"])) if args.variant == "demos" else 0,
               "eval_states": args.eval_states, "eval_seed": EVAL_GOAL_SEED, "eval_every": args.eval_every,

@@ -37,7 +37,6 @@ from sb3_genrl.benchmarks.fetch_seed import fitted_mean_success
 from sb3_genrl.envs import get_task
 from sb3_genrl.envs.fetch_demonstrations import evaluate_success
 
-from sb3_genrl import __version__
 from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, check_output_dir
 from sb3_genrl.data import load_actions
 from sb3_genrl.generative import load
@@ -48,6 +47,7 @@ from sb3_genrl.hyperparams import EVAL_GOAL_SEED, TUNING_GOAL_SEED
 from sb3_genrl.markdown import markdown_table
 from sb3_genrl.metrics import correlation_table, evaluate_generator, real_subset
 from sb3_genrl.metrics.prior_rollout import PRIOR_ROLLOUT_SEED
+from sb3_genrl.provenance import package_versions
 from sb3_genrl.study.quickstart import task_settings
 from sb3_genrl.utils import atomic_write_json, atomic_write_text
 
@@ -167,7 +167,7 @@ def main(argv: list[str] | None = None) -> None:
     settings = settings_of(args)
     result = {"benchmark": f"fetch_scorecard_{args.task}", "settings": settings, "rows": [],
               "command": "python benchmarks/fetch_scorecard.py " + " ".join(argv if argv is not None else sys.argv[1:]),
-              "sb3_genrl": __version__}
+              **package_versions()}
     if os.path.exists(args.out):
         with open(args.out) as file:
             result = json.load(file)

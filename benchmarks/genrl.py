@@ -33,13 +33,14 @@ from sb3_genrl.envs import get_task
 from stable_baselines3.common.callbacks import EvalCallback
 from stable_baselines3.common.monitor import Monitor
 
-from sb3_genrl import LatentActionWrapper, __version__
+from sb3_genrl import LatentActionWrapper
 from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, SEED, check_int, json_object_argument, option
 from sb3_genrl.generative import load, train_generator
 from sb3_genrl.generative.presets import PRESETS
 from sb3_genrl.genrl import check_genrl_settings, evaluate_on_goals
 from sb3_genrl.genrl.train import genrl_settings, make_genrl
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED, lay_over
+from sb3_genrl.provenance import package_versions
 from sb3_genrl.study.quickstart import task_settings
 from sb3_genrl.utils import atomic_path, atomic_write_json
 
@@ -233,7 +234,7 @@ def main(argv: list[str] | None = None) -> None:
     torch.set_num_threads(args.threads)
     os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
     result: dict[str, object] = {
-        "benchmark": f"genrl_{setting.task}", "sb3_genrl": __version__, "torch": torch.__version__,
+        "benchmark": f"genrl_{setting.task}", **package_versions(),
         "machine": platform.machine(), "processor": platform.processor(), "cpus": os.cpu_count(), "threads": args.threads,
         "episodes": args.episodes, "final_goals": args.final_goals, "final_goal_seed": EVAL_GOAL_SEED,
         "eval_goals": args.eval_goals, "target_m": setting.target_m, "genrl_kwargs": args.genrl_kwargs,

@@ -29,6 +29,8 @@ from sb3_genrl.envs.control import default_threads
 from sb3_genrl.envs.motions import bump
 from tqdm.auto import tqdm
 
+from sb3_genrl.provenance import package_versions
+
 ACTION_MARGIN = 0.95  # trajectories use at most this share of the action box
 JOINT_MARGIN = 0.05  # rad kept from each joint limit
 
@@ -192,7 +194,8 @@ def _make_demonstrations(spec: TaskSpec, episodes: int, out_dir: Path, seed: int
         details = {"observation": "goal xy, 7 joint positions, 7 joint velocities",
                    "max_joint_delta": env.max_joint_delta}
     genrl = {"task": task, "env_id": spec.env_id, "horizon": spec.horizon, "seed": int(seed),
-             "version": sb3_genrl.__version__, "episodes": int(episodes), "drawn": int(drawn),
+             "version": sb3_genrl.__version__, "mujoco": package_versions()["mujoco"], "episodes": int(episodes),
+             "drawn": int(drawn),
              "goal": "reached (hindsight: each demonstration's goal is the point it reached)", **details,
              "seconds": round(time.perf_counter() - began, 1)}
     return write_dataset(out_dir, arrays, dataset_id=f"genrl/{task}-v0", observation_space=observation_space,

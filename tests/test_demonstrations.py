@@ -90,6 +90,9 @@ def test_determinism_threads_and_seeds(hockey_dataset: Path, tmp_path: Path) -> 
     assert not np.array_equal(reference["actions"], load_arrays(other)["actions"])
     info = dataset_info(hockey_dataset)
     assert (info["task"], info["horizon"], info["seed"], info["episodes"]) == ("hockey", 69, 5, EPISODES)
+    import mujoco
+
+    assert info["mujoco"] == mujoco.__version__  # the simulator the demonstrations were played on
     with pytest.raises(ValueError, match="already exists"):
         make_demonstrations("hockey", 1, same, progress_bar=False)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["other", "same"]  # no temporary directories left

@@ -16,6 +16,7 @@ from typing import Any
 
 from sb3_genrl.baselines import BASELINES
 from sb3_genrl.checks import check_device, check_output_dir, check_positive_int
+from sb3_genrl.provenance import package_versions
 from sb3_genrl.study.cluster import DEFAULT_CONNECT_TIMEOUT
 from sb3_genrl.study.jobs import (
     EVALUATION_SEED,
@@ -93,7 +94,7 @@ def run_study(task: str, scale: str | StudyScale, out_dir: str | os.PathLike, *,
         run = _ray_map(address, connect_timeout) if executor == "ray" else \
             _local_map(workers or len(os.sched_getaffinity(0)))
         atomic_write_json(out / "study.json", {"task": task, "scale": "custom" if isinstance(scale, StudyScale) else scale,
-                                        **settings})
+                                        **settings, "packages": package_versions()})
         reports = [_run_task(name, task_scale(settings, name), out / name, run, models, device, log) for name in tasks]
         index = _write_index(out)
     return reports[0] if len(reports) == 1 else index
