@@ -55,7 +55,7 @@ class GenRL(OnPolicyAlgorithm):
     provides the generator when none is given. Logs (``train/``): ``mean_reward``, ``max_reward``, ``kl``,
     ``entropy``, ``std``, ``value_loss``, ``explained_variance``, ``policy_objective``; for the TRPO E-step
     ``line_search_success``, ``accepted_fraction``, ``step_size``; with hindsight ``hindsight_pulls`` and
-    ``hindsight_regression_loss``.
+    ``hindsight_regression_loss``, and at a refit ``refit_pairs`` and ``refit_loss``.
 
     :param policy: ``"MlpPolicy"`` (default; taken as ``"MultiInputPolicy"`` for a ``Dict`` context),
         ``"MultiInputPolicy"``, ``"ContextStdPolicy"`` (a spread that depends on the context,
@@ -88,7 +88,9 @@ class GenRL(OnPolicyAlgorithm):
         paper): the arguments of :class:`~sb3_genrl.genrl.hindsight.HindsightRelabelling` (``{}``: its defaults):
         ``history`` (batches whose relabelled pulls are kept, default 1), ``regression_steps`` (Adam steps per
         iteration fitting the policy's mean to them, default 0), ``regression_lr`` (1e-3), ``regression_batch_size``
-        (256), ``regression_weighted`` (False). Needs ``e_step="trpo"``, a Box context and ``info["hindsight"]``
+        (256), ``regression_weighted`` (False), ``refit_every`` (episodes between refits of the mean to the run's
+        pulls that solved their own context, default 0: none; needs ``info["is_success"]``), ``refit_start`` (the
+        episode of the first refit, default ``refit_every``), ``refit_steps`` (Adam steps of a refit, 4000). Needs ``e_step="trpo"``, a Box context and ``info["hindsight"]``
     :param latent_clip: half-width of the latent action box, in prior standard deviations, when a raw env is
         wrapped with a normal-prior generator (default 3)
     :param stats_window_size: episodes averaged in the ``rollout/`` logs (default 100)
@@ -218,6 +220,8 @@ class GenRL(OnPolicyAlgorithm):
             limit_log_std_change(self.policy, log_std_before, self.max_log_std_change)
 
         self.policy.set_training_mode(True)
+        if self.hindsight is not None:  # the mean refitted to the run's solving pulls, every refit_every episodes
+            stats.update(self.hindsight.refit(self.rollout_buffer, self.num_timesteps))
         if self.hindsight is not None and (losses := self.hindsight.regress()):  # the mean fitted to the kept pulls
             stats["hindsight_regression_loss"] = float(np.mean(losses))
         # Value function (Algorithm 1, last line): V = argmin_V' sum_i (V'(s_i) - r_i)^2, by Adam on minibatches.

@@ -9,7 +9,8 @@ env's own API: the last achieved goal as desired goal, the reward by ``compute_r
 so it stays inside the E-step's KL bound. Relabelled pulls remain true after the policy has moved on (the trajectory
 of ``alpha`` still reaches ``context'``), so those of the last ``history`` batches are kept and reweighed with the
 current policy and value function at every iteration. Optionally the policy's mean is also fitted to the kept pulls
-(:mod:`sb3_genrl.genrl.regression`). Under the KL-penalty E-step the ratio of a pull that ``pi`` makes unlikely at
+(:mod:`sb3_genrl.genrl.regression`), or refitted now and then to the run's own solving pulls (:meth:`HindsightRelabelling.refit`).
+Under the KL-penalty E-step the ratio of a pull that ``pi`` makes unlikely at
 its new context grows faster than the penalty, so relabelling needs the TRPO E-step.
 """
 
@@ -30,18 +31,22 @@ from sb3_genrl.genrl.value import use_foreach
 
 Batch = tuple[th.Tensor, th.Tensor, th.Tensor, th.Tensor]  # observations, actions, log pi(actions), advantages
 DEFAULTS: dict[str, Any] = {"history": 1, "regression_steps": 0, "regression_lr": 1e-3, "regression_batch_size": 256,
-                            "regression_weighted": False}
+                            "regression_weighted": False, "refit_every": 0, "refit_start": None,
+                            "refit_steps": 4000}
 NO_HINDSIGHT_INFO = ("hindsight_kwargs needs every pull's info['hindsight']: (context, reward) or None. "
                      "LatentActionWrapper reports it when the task defines hindsight(info) and the context is the task's "
                      "get_context(), and for any goal-conditioned env (a Dict observation with observation, achieved_goal "
                      "and desired_goal, and compute_reward); this env's info has no such key")
+NO_SUCCESS_INFO = ("hindsight_kwargs['refit_every'] refits the policy's mean to the pulls that solved their own context, "
+                   "which needs every pull's info['is_success'] (the goal-conditioned envs report it); this env's info "
+                   "has no such key")
 
 
 def check_hindsight_kwargs(hindsight_kwargs: Mapping[str, Any]) -> dict[str, Any]:
     """Refuse hindsight settings that :class:`HindsightRelabelling` would not take, naming the setting.
 
     :param hindsight_kwargs: some of ``history``, ``regression_steps``, ``regression_lr``, ``regression_batch_size``,
-        ``regression_weighted``
+        ``regression_weighted``, ``refit_every``, ``refit_start``, ``refit_steps``
     :return: a plain dict copy
     """
     if not isinstance(hindsight_kwargs, Mapping):
@@ -51,10 +56,16 @@ def check_hindsight_kwargs(hindsight_kwargs: Mapping[str, Any]) -> dict[str, Any
         raise ValueError(f"hindsight_kwargs: {', '.join(map(repr, unknown))} not among its settings "
                          f"({', '.join(DEFAULTS)})")
     settings = DEFAULTS | dict(hindsight_kwargs)
-    for key, minimum in (("history", 1), ("regression_steps", 0), ("regression_batch_size", 1)):
+    for key, minimum in (("history", 1), ("regression_steps", 0), ("regression_batch_size", 1), ("refit_every", 0),
+                         ("refit_steps", 1)):
         value = settings[key]
         if isinstance(value, bool) or int(value) != value or value < minimum:
             raise ValueError(f"hindsight_kwargs['{key}'] must be an integer >= {minimum}, got {value!r}")
+    start = settings["refit_start"]
+    if start is not None and (isinstance(start, bool) or int(start) != start or start < 1):
+        raise ValueError(f"hindsight_kwargs['refit_start'] must be an integer >= 1 or None, got {start!r}")
+    if start is not None and not settings["refit_every"]:
+        raise ValueError("hindsight_kwargs['refit_start'] is the episode of the first refit, which needs refit_every > 0")
     if not settings["regression_lr"] > 0:
         raise ValueError(f"hindsight_kwargs['regression_lr'] must be positive, got {settings['regression_lr']!r}")
     if not isinstance(settings["regression_weighted"], bool | np.bool_):
@@ -76,13 +87,19 @@ class HindsightRelabelling:
     :param regression_batch_size: pulls per step of the fit, drawn with replacement from the kept ones (default 256)
     :param regression_weighted: weight each pull's error by the policy's density at it relative to its mode
         (default False; see :func:`~sb3_genrl.genrl.regression.regress_mean`)
+    :param refit_every: episodes between refits of the policy's mean to the run's solving pulls (default 0: none;
+        see :meth:`refit`)
+    :param refit_start: the episode of the first refit (default None: ``refit_every``)
+    :param refit_steps: Adam steps of each refit (default 4000), with ``regression_lr`` and ``regression_batch_size``
     """
 
     def __init__(self, policy: ActorCriticPolicy, *, history: int = 1, regression_steps: int = 0,
-                 regression_lr: float = 1e-3, regression_batch_size: int = 256, regression_weighted: bool = False) -> None:
+                 regression_lr: float = 1e-3, regression_batch_size: int = 256, regression_weighted: bool = False,
+                 refit_every: int = 0, refit_start: int | None = None, refit_steps: int = 4000) -> None:
         check_hindsight_kwargs({"history": history, "regression_steps": regression_steps, "regression_lr": regression_lr,
                                 "regression_batch_size": regression_batch_size,
-                                "regression_weighted": regression_weighted})
+                                "regression_weighted": regression_weighted, "refit_every": refit_every,
+                                "refit_start": refit_start, "refit_steps": refit_steps})
         if not isinstance(policy.observation_space, spaces.Box):
             raise ValueError(f"hindsight_kwargs relabels Box contexts; this env's context space is "
                              f"{policy.observation_space}")
@@ -95,6 +112,13 @@ class HindsightRelabelling:
         self.kept_pulls: tuple[th.Tensor, th.Tensor, th.Tensor] | None = None  # kept for the whole run (keep_pulls)
         # Adam over the policy's mean; it keeps its moments from iteration to iteration (and is saved with the model)
         self.optimizer = th.optim.Adam(mean_parameters(policy), lr=regression_lr) if self.regression_steps else None
+        self.refit_every, self.refit_steps = int(refit_every), int(refit_steps)
+        self.refit_start = self.refit_every if refit_start is None else int(refit_start)
+        # (contexts, latent actions) of the pulls that solved their own context, one entry per batch, for the whole run
+        self.solved: list[tuple[th.Tensor, th.Tensor]] = []
+        # the weights of the policy's mean as it was made, from which every refit starts (None without refits)
+        self.initial_mean = ([parameter.detach().clone() for parameter in mean_parameters(policy)]
+                             if self.refit_every else None)
 
     def reset(self) -> None:
         """Forget the pull infos of the rollout before (a rollout starts)."""
@@ -104,6 +128,8 @@ class HindsightRelabelling:
         """Keep one step's infos of the rollout (one per env); refused at once when they cannot be relabelled."""
         if not all("hindsight" in info for info in infos):
             raise ValueError(NO_HINDSIGHT_INFO)
+        if self.refit_every and not all("is_success" in info for info in infos):
+            raise ValueError(NO_SUCCESS_INFO)
         self.pull_infos.append(infos)
 
     def extend_batch(self, batch: Batch, rollout_buffer: RolloutBuffer, advantage_mean: th.Tensor | float,
@@ -140,6 +166,43 @@ class HindsightRelabelling:
         return regress_mean(self.policy, self.optimizer, contexts, actions, steps=self.regression_steps,  # type: ignore[arg-type]
                             batch_size=self.regression_batch_size, weighted=self.regression_weighted)
 
+    def refit(self, rollout_buffer: RolloutBuffer, episodes: int) -> dict[str, float]:
+        """Keep this rollout's pulls that solved their own context (``info["is_success"]``); when the run's episode
+        count ``episodes`` has just reached ``refit_start``, or ``refit_start`` plus a multiple of ``refit_every``,
+        refit the policy's mean to all those kept so far: from its initial weights, by ``refit_steps`` steps of a new
+        Adam, as the demonstrations are fitted.
+
+        Each solving pull is an exact (context, latent action) pair of the map the mean should learn, as a
+        demonstration is. Fitted from its initial weights rather than moved a few steps from where it is, the mean
+        becomes the regression of what the run has found so far, without what earlier fits put in it (a fit
+        continued for long over-fits; :mod:`sb3_genrl.genrl.demonstrations`); between refits the E-step searches
+        around it. The latent actions are those played, clipped to the action space.
+
+        :param rollout_buffer: the rollout's buffer (after ``get()``)
+        :param episodes: the episodes played so far, this rollout's among them
+        :return: ``refit_pairs`` and ``refit_loss`` (the mean of the last 100 minibatches') when it refitted, else {}
+        """
+        if not self.refit_every:
+            return {}
+        self.solved.append(self._solving_pulls(rollout_buffer))
+        played = rollout_buffer.buffer_size * rollout_buffer.n_envs
+        if self._refits_due(episodes) == self._refits_due(episodes - played):
+            return {}
+        contexts, actions = (th.cat(part) for part in zip(*self.solved, strict=True))
+        if not len(actions):
+            return {"refit_pairs": 0.0}
+        with th.no_grad():
+            for parameter, initial in zip(mean_parameters(self.policy), self.initial_mean, strict=True):  # type: ignore[arg-type]
+                parameter.copy_(initial)
+        optimizer = th.optim.Adam(mean_parameters(self.policy), lr=self.regression_lr)
+        losses = regress_mean(self.policy, optimizer, contexts, actions, steps=self.refit_steps,
+                              batch_size=self.regression_batch_size)
+        return {"refit_pairs": float(len(actions)), "refit_loss": float(np.mean(losses[-100:]))}
+
+    def _refits_due(self, episodes: int) -> int:
+        """How many refits a run of ``episodes`` episodes has made (at ``refit_start``, then every ``refit_every``)."""
+        return 0 if episodes < self.refit_start else (episodes - self.refit_start) // self.refit_every + 1
+
     def set_learning_rate(self) -> None:
         """Give the regression's Adam this component's ``regression_lr`` (after loading a saved optimizer state)."""
         for group in self.optimizer.param_groups if self.optimizer is not None else ():
@@ -162,6 +225,16 @@ class HindsightRelabelling:
         rewards."""
         batches = [*self.memory, *([] if self.kept_pulls is None else [self.kept_pulls])]
         return tuple(th.cat(part) for part in zip(*batches, strict=True))  # type: ignore[return-value]
+
+    def _solving_pulls(self, buffer: RolloutBuffer) -> tuple[th.Tensor, th.Tensor]:
+        """This rollout's pulls that solved their own context: contexts and latent actions as played (clipped)."""
+        if len(self.pull_infos) != buffer.buffer_size or not buffer.generator_ready:
+            raise RuntimeError(f"hindsight: {len(self.pull_infos)} steps of infos for a rollout of {buffer.buffer_size}")
+        rows = [env_index * buffer.buffer_size + step for step, infos in enumerate(self.pull_infos)
+                for env_index, info in enumerate(infos) if info["is_success"]]  # as get() flattened the buffer
+        space, device = self.policy.action_space, self.policy.device
+        actions = np.clip(buffer.actions[rows], space.low, space.high).astype(np.float32)  # type: ignore[attr-defined]
+        return (th.as_tensor(buffer.observations[rows], device=device).float(), th.as_tensor(actions, device=device))
 
     def _relabel(self, buffer: RolloutBuffer) -> tuple[th.Tensor, th.Tensor, th.Tensor]:
         """This rollout's relabelled pulls: contexts, latent actions, rewards."""

@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 from conftest import LinearGenerator
-from genrl_test_helpers import HindsightReachEnv
+from genrl_test_helpers import SuccessReachEnv
 from test_train_policy import fast_reach_task  # noqa: F401 (the fixture)
 
 from sb3_genrl import GenRL
@@ -22,10 +22,10 @@ class _Killed(Exception):
 
 @pytest.fixture
 def hindsight_task(fast_reach_task):  # noqa: F811
-    """The registered toy task, its pulls relabelled with the point they reached."""
+    """The registered toy task, its pulls relabelled with the point they reached, with their success."""
     import gymnasium as gym
 
-    gym.registry[fast_reach_task.env_id].entry_point = HindsightReachEnv
+    gym.registry[fast_reach_task.env_id].entry_point = SuccessReachEnv
     yield fast_reach_task
 
 
@@ -41,7 +41,8 @@ def _parameters(path) -> dict[str, np.ndarray]:
 def test_a_stopped_run_resumed_with_the_same_command_ends_as_the_run_not_stopped(hindsight_task, tmp_path, monkeypatch,
                                                                                 n_envs):
     settings = {"episodes": 192, "seed": 3, "batch_episodes": 32, "n_envs": n_envs, "value_history": 2,
-                "policy_averaging": 0.9, "hindsight_kwargs": {"history": 2, "regression_steps": 4},
+                "policy_averaging": 0.9, "hindsight_kwargs": {"history": 2, "regression_steps": 4,
+                                                                  "refit_every": 64, "refit_start": 32, "refit_steps": 20},
                 "checkpoint_every": 64}
     whole = train_policy("fast-reach", LinearGenerator(), out_dir=tmp_path / "whole", **settings)
 

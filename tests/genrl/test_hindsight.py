@@ -11,11 +11,12 @@ from conftest import (
     LinearGenerator,
     optimal_latent,
 )
-from genrl_test_helpers import GOALS, EStepBatchRecorder, HindsightReachEnv
+from genrl_test_helpers import GOALS, EStepBatchRecorder, HindsightReachEnv, SuccessReachEnv
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from sb3_genrl import GenRL, LatentActionWrapper
 from sb3_genrl.genrl.hindsight import HindsightRelabelling
+from sb3_genrl.genrl.regression import mean_parameters, regress_mean
 
 
 def test_hindsight_relabels_each_pull_with_the_point_its_own_action_reached():
@@ -228,3 +229,67 @@ def test_infos_are_checked_and_reset(trained):
         hindsight.extend_batch(played, trained.rollout_buffer, 0.0, 1.0)
     hindsight.reset()
     assert hindsight.pull_infos == []
+
+
+SOLVED = [True, False, True, True, False, False, True, False]
+
+
+def _success_infos(solved):
+    """One step's infos (one env) per pull: nothing to relabel, and whether it solved its own context."""
+    return [[{"hindsight": None, "is_success": flag}] for flag in solved]
+
+
+def test_refit_fits_the_mean_from_its_initial_weights_to_the_solving_pulls_alone(trained):
+    import copy
+
+    policy, buffer = trained.policy, trained.rollout_buffer
+    hindsight = HindsightRelabelling(policy, refit_every=16, refit_start=8, refit_steps=50, regression_lr=1e-2,
+                                     regression_batch_size=4)
+    initial = [parameter.detach().clone() for parameter in mean_parameters(policy)]
+    rows = [i for i, flag in enumerate(SOLVED) if flag]
+    contexts = th.as_tensor(buffer.observations[rows]).float()
+    actions = th.as_tensor(np.clip(buffer.actions[rows], -3, 3)).float()
+    for episodes, refits in ((8, True), (16, False), (24, True), (32, False)):  # at 8, then every 16; 8 per batch
+        for parameter in mean_parameters(policy):  # the mean moves on between refits
+            parameter.data.add_(0.5)
+        hindsight.reset()
+        for infos in _success_infos(SOLVED):
+            hindsight.add_infos(infos)
+        before = [parameter.detach().clone() for parameter in mean_parameters(policy)]
+        if refits:  # recomputed here: the initial weights fitted by a new Adam to the solving pulls so far, as played
+            expected = copy.deepcopy(policy)
+            with th.no_grad():
+                for parameter, value in zip(mean_parameters(expected), initial, strict=True):
+                    parameter.copy_(value)
+            th.manual_seed(episodes)
+            losses = regress_mean(expected, th.optim.Adam(mean_parameters(expected), lr=1e-2),
+                                  th.cat([contexts] * (episodes // 8)), th.cat([actions] * (episodes // 8)), steps=50,
+                                  batch_size=4)
+            th.manual_seed(episodes)
+        stats = hindsight.refit(buffer, episodes)
+        assert len(hindsight.solved) == episodes // 8
+        if not refits:
+            assert stats == {}
+            for parameter, value in zip(mean_parameters(policy), before, strict=True):
+                th.testing.assert_close(parameter, value, rtol=0, atol=0)
+            continue
+        assert stats["refit_pairs"] == episodes // 8 * len(rows)
+        assert stats["refit_loss"] == pytest.approx(np.mean(losses[-100:]))
+        for parameter, value in zip(mean_parameters(policy), mean_parameters(expected), strict=True):
+            th.testing.assert_close(parameter, value, rtol=0, atol=0)
+        th.testing.assert_close(policy.log_std, expected.log_std, rtol=0, atol=0)  # the spread is left as it was
+    with pytest.raises(ValueError, match=r"info\['is_success'\]"):
+        hindsight.add_infos([{"hindsight": None}])
+    assert HindsightRelabelling(policy).refit(buffer, 16) == {} and HindsightRelabelling(policy).initial_mean is None
+
+
+def test_refit_inside_genrl_logs_its_pairs_and_brings_the_mean_to_the_solving_pulls():
+    model = GenRL(LatentActionWrapper(SuccessReachEnv(), LinearGenerator()), seed=0, n_steps=32, device="cpu",
+                  hindsight_kwargs={"refit_every": 64, "refit_steps": 300, "regression_lr": 1e-2})
+    model.learn(64)
+    pairs = model.logger.name_to_value["train/refit_pairs"]
+    contexts, actions = (th.cat(part) for part in zip(*model.hindsight.solved, strict=True))
+    assert pairs == len(actions) > 0 and len(model.hindsight.solved) == 2
+    with th.no_grad():
+        error = (model.policy.get_distribution(contexts).distribution.mean - actions).pow(2).mean().item()
+    assert error < 0.5 * actions.var(0).mean().item()  # closer to the pairs than their own spread

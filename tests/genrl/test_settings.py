@@ -65,13 +65,19 @@ def test_genrl_kwargs_argument_parses_and_checks_json():
     ({"regression_steps": 4, "regression_weighted": 1}, r"hindsight_kwargs\['regression_weighted'\] must be True or False"),
     ({"regression_weighted": True}, r"hindsight_kwargs\['regression_weighted'\] weights the regression's pulls, which "
                                     "needs regression_steps > 0"),
+    ({"refit_every": -64}, r"hindsight_kwargs\['refit_every'\] must be an integer >= 0, got -64"),
+    ({"refit_every": 64, "refit_steps": 0}, r"hindsight_kwargs\['refit_steps'\] must be an integer >= 1, got 0"),
+    ({"refit_every": 64, "refit_start": 0}, r"hindsight_kwargs\['refit_start'\] must be an integer >= 1 or None"),
+    ({"refit_start": 512}, r"hindsight_kwargs\['refit_start'\] is the episode of the first refit, which needs "
+                           "refit_every > 0"),
     ({"history": 0}, r"hindsight_kwargs\['history'\] must be an integer >= 1, got 0"),
     ({"history": 1.5}, r"hindsight_kwargs\['history'\] must be an integer >= 1"),
     ({"histroy": 2}, r"hindsight_kwargs: 'histroy' not among its settings \(history, regression_steps"),
     ("yes", "hindsight_kwargs must be a dict or None, got 'yes'"),
     (True, "hindsight_kwargs must be a dict or None, got True"),
 ], ids=["steps-negative", "steps-fraction", "steps-bool", "lr-zero", "batch-zero", "batch-bool", "weighted-int",
-        "weighted-without-steps", "history-zero", "history-fraction", "unknown-key", "string", "bool"])
+        "weighted-without-steps", "refit-negative", "refit-steps-zero", "refit-start-zero",
+        "refit-start-without-every", "history-zero", "history-fraction", "unknown-key", "string", "bool"])
 def test_hindsight_kwargs_are_checked(hindsight_kwargs, message):
     with pytest.raises(ValueError, match=message):
         GenRL(FastReachEnv(), LinearGenerator(), hindsight_kwargs=hindsight_kwargs)
