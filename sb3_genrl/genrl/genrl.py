@@ -90,7 +90,8 @@ class GenRL(OnPolicyAlgorithm):
         iteration fitting the policy's mean to them, default 0), ``regression_lr`` (1e-3), ``regression_batch_size``
         (256), ``regression_weighted`` (False), ``refit_every`` (episodes between refits of the mean to the run's
         pulls that solved their own context, default 0: none; needs ``info["is_success"]``), ``refit_start`` (the
-        episode of the first refit, default ``refit_every``), ``refit_steps`` (Adam steps of a refit, 4000). Needs ``e_step="trpo"``, a Box context and ``info["hindsight"]``
+        episode of the first refit, default ``refit_every``), ``refit_steps`` (Adam steps of a refit, 4000). Needs
+        ``e_step="trpo"``, a Box context and ``info["hindsight"]``
     :param latent_clip: half-width of the latent action box, in prior standard deviations, when a raw env is
         wrapped with a normal-prior generator (default 3)
     :param stats_window_size: episodes averaged in the ``rollout/`` logs (default 100)

@@ -9,8 +9,8 @@ env's own API: the last achieved goal as desired goal, the reward by ``compute_r
 so it stays inside the E-step's KL bound. Relabelled pulls remain true after the policy has moved on (the trajectory
 of ``alpha`` still reaches ``context'``), so those of the last ``history`` batches are kept and reweighed with the
 current policy and value function at every iteration. Optionally the policy's mean is also fitted to the kept pulls
-(:mod:`sb3_genrl.genrl.regression`), or refitted now and then to the run's own solving pulls (:meth:`HindsightRelabelling.refit`).
-Under the KL-penalty E-step the ratio of a pull that ``pi`` makes unlikely at
+(:mod:`sb3_genrl.genrl.regression`), or refitted now and then to the run's own solving pulls
+(:meth:`HindsightRelabelling.refit`). Under the KL-penalty E-step the ratio of a pull that ``pi`` makes unlikely at
 its new context grows faster than the penalty, so relabelling needs the TRPO E-step.
 """
 
