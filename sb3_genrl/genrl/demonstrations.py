@@ -37,7 +37,7 @@ from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.policies import ActorCriticPolicy
 
-from sb3_genrl.genrl.regression import mean_parameters, regress_mean
+from sb3_genrl.genrl.regression import fit_mean
 
 DEMONSTRATION_CALLBACK = "sb3_genrl.genrl.demonstrations.DemonstrationCallback"
 NO_DATASET = ("learn from demonstrations (the callback {name}) and need their dataset: give it "
@@ -133,18 +133,12 @@ class DemonstrationCallback(BaseCallback):
 def fit_mean_to_demonstrations(policy: ActorCriticPolicy, contexts: th.Tensor, latents: th.Tensor, *, steps: int,
                                learning_rate: float = 1e-3, batch_size: int = 256) -> dict[str, float]:
     """Fit the policy's mean to ``latents`` at ``contexts`` by ``steps`` steps of a new Adam over its mean's
-    parameters (:func:`~sb3_genrl.genrl.regression.regress_mean`), in training mode.
+    parameters (:func:`~sb3_genrl.genrl.regression.fit_mean`), in training mode.
 
     :return: ``demonstrations`` (pairs), ``steps``, ``first_loss`` (the first minibatch's mean squared error) and
         ``last_loss`` (the mean of the last 100 minibatches')
     """
-    optimizer = th.optim.Adam(mean_parameters(policy), lr=learning_rate)
-    training = policy.training
-    policy.set_training_mode(True)
-    try:
-        losses = regress_mean(policy, optimizer, contexts, latents, steps=steps, batch_size=batch_size)
-    finally:
-        policy.set_training_mode(training)
+    losses = fit_mean(policy, contexts, latents, steps=steps, learning_rate=learning_rate, batch_size=batch_size)
     return {"demonstrations": len(latents), "steps": int(steps), "first_loss": float(losses[0]),
             "last_loss": float(np.mean(losses[-100:]))}
 

@@ -85,13 +85,9 @@ class GenRL(OnPolicyAlgorithm):
     :param policy_averaging: decay of a moving average of the policy's weights, with which ``predict`` acts
         (default None: none; see :mod:`sb3_genrl.genrl.averaging`)
     :param hindsight_kwargs: relabel each pull with the context it solved (default None: no relabelling, as in the
-        paper): the arguments of :class:`~sb3_genrl.genrl.hindsight.HindsightRelabelling` (``{}``: its defaults):
-        ``history`` (batches whose relabelled pulls are kept, default 1), ``regression_steps`` (Adam steps per
-        iteration fitting the policy's mean to them, default 0), ``regression_lr`` (1e-3), ``regression_batch_size``
-        (256), ``regression_weighted`` (False), ``refit_every`` (episodes between refits of the mean to the run's
-        pulls that solved their own context, default 0: none; needs ``info["is_success"]``), ``refit_start`` (the
-        episode of the first refit, default ``refit_every``), ``refit_steps`` (Adam steps of a refit, 4000). Needs
-        ``e_step="trpo"``, a Box context and ``info["hindsight"]``
+        paper): the arguments of :class:`~sb3_genrl.genrl.hindsight.HindsightRelabelling` (``{}``: its defaults),
+        among them ``history``, ``regression_steps`` and ``refit_every``. Needs ``e_step="trpo"``, a Box context and
+        ``info["hindsight"]`` (the refits also ``info["is_success"]``)
     :param latent_clip: half-width of the latent action box, in prior standard deviations, when a raw env is
         wrapped with a normal-prior generator (default 3)
     :param stats_window_size: episodes averaged in the ``rollout/`` logs (default 100)
@@ -221,10 +217,10 @@ class GenRL(OnPolicyAlgorithm):
             limit_log_std_change(self.policy, log_std_before, self.max_log_std_change)
 
         self.policy.set_training_mode(True)
-        if self.hindsight is not None:  # the mean refitted to the run's solving pulls, every refit_every episodes
+        if self.hindsight is not None:  # the mean refitted to the run's solving pulls, then fitted to the kept pulls
             stats.update(self.hindsight.refit(self.rollout_buffer, self.num_timesteps))
-        if self.hindsight is not None and (losses := self.hindsight.regress()):  # the mean fitted to the kept pulls
-            stats["hindsight_regression_loss"] = float(np.mean(losses))
+            if losses := self.hindsight.regress():
+                stats["hindsight_regression_loss"] = float(np.mean(losses))
         # Value function (Algorithm 1, last line): V = argmin_V' sum_i (V'(s_i) - r_i)^2, by Adam on minibatches.
         value_losses = self._fit_value_function()
         self.policy.set_training_mode(False)

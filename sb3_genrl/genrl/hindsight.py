@@ -26,7 +26,7 @@ from gymnasium import spaces
 from stable_baselines3.common.buffers import RolloutBuffer
 from stable_baselines3.common.policies import ActorCriticPolicy
 
-from sb3_genrl.genrl.regression import mean_parameters, regress_mean
+from sb3_genrl.genrl.regression import fit_mean, mean_parameters, regress_mean
 from sb3_genrl.genrl.value import use_foreach
 
 Batch = tuple[th.Tensor, th.Tensor, th.Tensor, th.Tensor]  # observations, actions, log pi(actions), advantages
@@ -194,9 +194,8 @@ class HindsightRelabelling:
         with th.no_grad():
             for parameter, initial in zip(mean_parameters(self.policy), self.initial_mean, strict=True):  # type: ignore[arg-type]
                 parameter.copy_(initial)
-        optimizer = th.optim.Adam(mean_parameters(self.policy), lr=self.regression_lr)
-        losses = regress_mean(self.policy, optimizer, contexts, actions, steps=self.refit_steps,
-                              batch_size=self.regression_batch_size)
+        losses = fit_mean(self.policy, contexts, actions, steps=self.refit_steps, learning_rate=self.regression_lr,
+                          batch_size=self.regression_batch_size)
         return {"refit_pairs": float(len(actions)), "refit_loss": float(np.mean(losses[-100:]))}
 
     def _refits_due(self, episodes: int) -> int:
@@ -226,10 +225,14 @@ class HindsightRelabelling:
         batches = [*self.memory, *([] if self.kept_pulls is None else [self.kept_pulls])]
         return tuple(th.cat(part) for part in zip(*batches, strict=True))  # type: ignore[return-value]
 
-    def _solving_pulls(self, buffer: RolloutBuffer) -> tuple[th.Tensor, th.Tensor]:
-        """This rollout's pulls that solved their own context: contexts and latent actions as played (clipped)."""
+    def _check_rollout(self, buffer: RolloutBuffer) -> None:
+        """Refuse a buffer whose rollout the kept infos are not of (or one ``get()`` has not flattened yet)."""
         if len(self.pull_infos) != buffer.buffer_size or not buffer.generator_ready:
             raise RuntimeError(f"hindsight: {len(self.pull_infos)} steps of infos for a rollout of {buffer.buffer_size}")
+
+    def _solving_pulls(self, buffer: RolloutBuffer) -> tuple[th.Tensor, th.Tensor]:
+        """This rollout's pulls that solved their own context: contexts and latent actions as played (clipped)."""
+        self._check_rollout(buffer)
         rows = [env_index * buffer.buffer_size + step for step, infos in enumerate(self.pull_infos)
                 for env_index, info in enumerate(infos) if info["is_success"]]  # as get() flattened the buffer
         space, device = self.policy.action_space, self.policy.device
@@ -239,8 +242,7 @@ class HindsightRelabelling:
     def _relabel(self, buffer: RolloutBuffer) -> tuple[th.Tensor, th.Tensor, th.Tensor]:
         """This rollout's relabelled pulls: contexts, latent actions, rewards."""
         space, device = self.policy.observation_space, self.policy.device
-        if len(self.pull_infos) != buffer.buffer_size or not buffer.generator_ready:  # (train() has called get())
-            raise RuntimeError(f"hindsight: {len(self.pull_infos)} steps of infos for a rollout of {buffer.buffer_size}")
+        self._check_rollout(buffer)
         contexts, actions, rewards = [], [], []
         for step, infos in enumerate(self.pull_infos):
             for env_index, info in enumerate(infos):

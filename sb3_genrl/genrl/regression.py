@@ -80,6 +80,19 @@ def regress_mean(policy: ActorCriticPolicy, optimizer: th.optim.Optimizer, conte
     return th.stack(losses).tolist() if losses else []
 
 
+def fit_mean(policy: ActorCriticPolicy, contexts: th.Tensor, actions: th.Tensor, *, steps: int, learning_rate: float,
+             batch_size: int) -> list[float]:
+    """Fit the policy's mean to ``actions`` at ``contexts`` by ``steps`` steps of a new Adam over its mean
+    (:func:`regress_mean`), in training mode; the loss of every minibatch."""
+    optimizer = th.optim.Adam(mean_parameters(policy), lr=learning_rate)
+    training = policy.training
+    policy.set_training_mode(True)
+    try:
+        return regress_mean(policy, optimizer, contexts, actions, steps=steps, batch_size=batch_size)
+    finally:
+        policy.set_training_mode(training)
+
+
 def fused_mean(policy: ActorCriticPolicy, optimizer: th.optim.Optimizer) -> tuple[FlatMlp, FlatAdam] | None:
     """The policy's mean as a :class:`~sb3_genrl.genrl.fused.FlatMlp` with ``optimizer``'s update of it, or ``None``
     when its MLP or its optimizer is not one the fused steps know (then :func:`regress_mean` takes autograd's steps)."""

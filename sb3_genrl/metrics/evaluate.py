@@ -197,6 +197,23 @@ def evaluate_generator(generator: TrajectoryGenerator, real: np.ndarray, *, n: i
     return GeneratorEvaluation(name, pr, disentanglement, dc, prior)
 
 
+def _check_settings(named: list, *, n: int, k: int, dwpr_n: int, interventions: int, seed: int,
+                    device: torch.device | str, task: str | None, contexts: int, draws: int, prior_seed: int,
+                    rank_by: str | None, min_precision: float | None) -> None:
+    """Refuse :func:`evaluate_generators`' arguments before any work, naming the one at fault."""
+    if not named:
+        raise ValueError("no models given")
+    for name, value in (("n", n), ("k", k), ("dwpr_n", dwpr_n), ("interventions", interventions)):
+        check_positive_int(value, name)
+    check_seed(seed)
+    check_device(device)
+    if task is not None:
+        _check_prior_task(task, contexts, draws, prior_seed)
+    _check_rank_by(rank_by, task)
+    if min_precision is not None:
+        check_fraction(min_precision, "min_precision")
+
+
 def evaluate_generators(models: Sequence[str | os.PathLike | TrajectoryGenerator] | Mapping[str, str | os.PathLike
                         | TrajectoryGenerator], data: str | os.PathLike | np.ndarray, *, n: int = DEFAULT_SAMPLES,
                         k: int = 3, dwpr_n: int = DEFAULT_DWPR_SAMPLES, interventions: int = DEFAULT_INTERVENTIONS,
@@ -238,17 +255,8 @@ def evaluate_generators(models: Sequence[str | os.PathLike | TrajectoryGenerator
     :return: the evaluations, in model order
     """
     named = _named_generators(models)
-    if not named:
-        raise ValueError("no models given")
-    for name, value in (("n", n), ("k", k), ("dwpr_n", dwpr_n), ("interventions", interventions)):
-        check_positive_int(value, name)
-    check_seed(seed)
-    check_device(device)
-    if task is not None:
-        _check_prior_task(task, contexts, draws, prior_seed)
-    _check_rank_by(rank_by, task)
-    if min_precision is not None:
-        check_fraction(min_precision, "min_precision")
+    _check_settings(named, n=n, k=k, dwpr_n=dwpr_n, interventions=interventions, seed=seed, device=device, task=task,
+                    contexts=contexts, draws=draws, prior_seed=prior_seed, rank_by=rank_by, min_precision=min_precision)
     out = check_output_dir(out_dir)
     real = load_trajectories(data)
     _check_sample_sizes(real, n, dwpr_n, interventions)
