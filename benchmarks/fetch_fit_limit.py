@@ -3,22 +3,23 @@
 GenRL's deterministic policy is its mean, an MLP of the context fitted by regression (to the demonstrations, then by
 the E- and M-steps). This benchmark separates what the search finds from what the mean can hold:
 
-1. the fitted start: the mean fitted to the demonstrations as the task's entry fits it (policy seed 0), its success on
-   ``--tuning-states`` tuning states (:data:`~sb3_genrl.hyperparams.TUNING_GOAL_SEED`) and on the first
-   ``--fit-states`` of the collection states;
+1. the start: the mean fitted to the demonstrations as the task's entry fits it (policy seed 0), or with ``--policy``
+   a trained GenRL policy (a run's ``genrl_policy.zip``), its success on ``--tuning-states`` tuning states
+   (:data:`~sb3_genrl.hyperparams.TUNING_GOAL_SEED`) and on the first ``--fit-states`` of the collection states;
 2. the collection: ``--states`` initial states (reset seeds from ``--collection-seed``, neither the tuning's nor the
-   evaluation's), ``--draws`` latent actions each from the policy's own spread around the fitted mean, played; per
-   state the solving draw nearest the mean, and the mean of its solving draws;
+   evaluation's), ``--draws`` latent actions each from the start's own spread around its mean, played; per state the
+   solving draw nearest the mean, and the mean of its solving draws;
 3. the targets themselves, played again at the first ``--fit-states`` collection states: what the mean would solve
-   there if it reproduced them exactly (the best a search around the fitted start can give);
-4. the mean fitted from scratch (the entry's fit: its steps, learning rate and batch size) to each state's nearest
-   solving draw, and to those plus the demonstrations: its residual error and its success on the same
-   ``--fit-states`` states (which it was fitted to) and on the tuning states.
+   there if it reproduced them exactly (the best a search around the start can give);
+4. the mean fitted from scratch (the entry's fit: its steps, learning rate and batch size; ``--net-arch``: other
+   hidden layers) to each state's nearest solving draw, and to those plus the demonstrations: its residual error and
+   its success on the same ``--fit-states`` states (which it was fitted to) and on the tuning states.
 
 A gap between 3 and 4 on the states the mean was fitted to says that the mean cannot represent the solving latent
 actions, whatever search finds them. The held-out evaluation states are never used.
 
     python benchmarks/fetch_fit_limit.py --task fetch-push --generator GEN.pt --data DEMOS
+    python benchmarks/fetch_fit_limit.py --task fetch-slide --generator GEN.pt --data DEMOS --policy RUN/genrl_policy.zip
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ import argparse
 import os
 import sys
 import time
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -36,6 +38,7 @@ from sb3_genrl.envs import get_task
 from sb3_genrl.envs.fetch_demonstrations import evaluate_success, replay_success
 
 from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, SEED
+from sb3_genrl.genrl import GenRL
 from sb3_genrl.genrl.demonstrations import fit_mean_to_demonstrations
 from sb3_genrl.genrl.regression import policy_mean
 from sb3_genrl.hyperparams import TUNING_GOAL_SEED
@@ -60,6 +63,10 @@ def arguments(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--tuning-states", type=COUNT, default=200, help="tuning states (default 200)")
     parser.add_argument("--collection-seed", type=SEED, default=COLLECTION_SEED)
     parser.add_argument("--fit-steps", type=COUNT, default=None, help="Adam steps of each fit (default: the entry's)")
+    parser.add_argument("--policy", type=EXISTING, default=None,
+                        help="a trained GenRL model (genrl_policy.zip) to collect around (default: the fitted start)")
+    parser.add_argument("--net-arch", type=COUNT, nargs="+", default=None,
+                        help="hidden layers of the means fitted in stage 4 (default: the entry's)")
     parser.add_argument("--out", type=JSON_OUT, default=None,
                         help="JSON (default benchmarks/results/fetch_fit_limit_TASK.json; Markdown beside it)")
     args = parser.parse_args(argv)
@@ -90,19 +97,37 @@ def main(argv: list[str] | None = None) -> dict:
     th.set_num_threads(1)
     begin = time.perf_counter()
     model, fit, pulls = fitted_policy(args.task, args.generator, args.data, fit_steps=args.fit_steps)
-    steps = fit.fit_steps
-    generator, spec = model.generator, get_task(args.task)
-
-    def scored(candidate) -> dict[str, float]:
-        return {"tuning": evaluate_success(candidate, args.task, args.tuning_states, TUNING_GOAL_SEED)["success_rate"],
-                "fit_states": evaluate_success(candidate, args.task, args.fit_states,
-                                               args.collection_seed)["success_rate"]}
-
-    rows = [{"policy": "the fitted start (the demonstrations)", "pairs": len(pulls[1]), **scored(model)}]
+    start = "the fitted start (the demonstrations)"
+    if args.policy is not None:  # the collection around a trained policy instead of the fitted start
+        model, start = GenRL.load(args.policy, device="cpu", generator=model.generator), f"the policy {args.policy}"
+    rows = [{"policy": start, "pairs": len(pulls[1]) if args.policy is None else "", **scored(model, args)}]
     print(rows[-1], flush=True)
+    collection, found = collect(model, args)
+    rows += replayed_targets(model.generator, found, args)
+    rows += fitted_means(found, pulls, fit, args)
+    result = {"benchmark": f"fetch_fit_limit_{args.task}", "command": "python " + " ".join(
+                  ["benchmarks/fetch_fit_limit.py", *(argv if argv is not None else sys.argv[1:])]),
+              **package_versions(), "task": args.task, "generator": os.path.abspath(args.generator),
+              "data": os.path.abspath(args.data), "policy": args.policy and os.path.abspath(args.policy),
+              "net_arch": args.net_arch, "fit_steps": fit.fit_steps if args.fit_steps is None else args.fit_steps,
+              "tuning_states": args.tuning_states, "tuning_seed": TUNING_GOAL_SEED, "fit_states": args.fit_states,
+              "collection_seed": args.collection_seed, "collection": collection, "rows": rows,
+              "seconds": time.perf_counter() - begin}
+    write_outputs(result, args)
+    return result
 
-    # 2. the collection around the fitted mean
-    env = LatentActionWrapper(gym.make(spec.env_id), generator)
+
+def scored(candidate: GenRL, args: argparse.Namespace) -> dict[str, float]:
+    """``candidate``'s success on the tuning states and on the first ``--fit-states`` collection states."""
+    return {"tuning": evaluate_success(candidate, args.task, args.tuning_states, TUNING_GOAL_SEED)["success_rate"],
+            "fit_states": evaluate_success(candidate, args.task, args.fit_states, args.collection_seed)["success_rate"]}
+
+
+def collect(model: GenRL, args: argparse.Namespace) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Stage 2: ``--draws`` draws from the policy's spread around its mean at each collection state, played. Returns
+    the collection's summary and what was found: the states' contexts and reset seeds, whether each has a solving
+    draw, and its nearest solving draw and mean of solving draws (:func:`solving_targets`)."""
+    env = LatentActionWrapper(gym.make(get_task(args.task).env_id), model.generator)
     seeds = [args.collection_seed + i for i in range(args.states)]
     contexts = np.stack([env.reset(seed=seed)[0] for seed in seeds]).astype(np.float32)
     low, high = env.action_space.low, env.action_space.high
@@ -113,7 +138,7 @@ def main(argv: list[str] | None = None) -> dict:
     rng = np.random.default_rng(args.collection_seed)
     drawn = np.clip(mean[:, None] + spread[:, None] * rng.standard_normal((args.states, args.draws, mean.shape[1])),
                     low, high).astype(np.float32)
-    solved = replay_success(generator, args.task, drawn.reshape(-1, mean.shape[1]),
+    solved = replay_success(model.generator, args.task, drawn.reshape(-1, mean.shape[1]),
                             [seed for seed in seeds for _ in range(args.draws)]).reshape(args.states, args.draws)
     has = solved.any(axis=1)
     collection = {"states": args.states, "draws": args.draws, "spread": float(spread.mean()),
@@ -121,49 +146,60 @@ def main(argv: list[str] | None = None) -> dict:
     print(collection, flush=True)
     if not has.any():
         raise SystemExit(f"no draw solved any of the {args.states} collection states: nothing to fit the mean to "
-                         "(more --states or --draws, or a generator whose fitted start solves some states)")
+                         "(more --states or --draws, or a policy that solves some states)")
     nearest, average = solving_targets(drawn, solved, mean)
+    return collection, {"contexts": contexts, "seeds": seeds, "has": has, "nearest": nearest, "average": average}
 
-    # 3. the targets played again at the first fit states (a state without a solving draw counts as unsolved)
-    first = np.flatnonzero(has[:args.fit_states])
-    for name, targets in (("nearest solving draw", nearest), ("mean of the solving draws", average)):
-        hits = replay_success(generator, args.task, targets[:len(first)], [seeds[i] for i in first])
-        rows.append({"policy": f"each state's {name}, played (no fit)", "pairs": len(targets),
-                     "tuning": None, "fit_states": float(hits.sum() / args.fit_states)})
+
+def replayed_targets(generator: Any, found: dict[str, Any], args: argparse.Namespace) -> list[dict[str, Any]]:
+    """Stage 3: the targets played again at the first ``--fit-states`` collection states (a state without a solving
+    draw counts as unsolved)."""
+    rows, first = [], np.flatnonzero(found["has"][:args.fit_states])
+    for name in ("nearest", "average"):
+        targets = found[name]
+        hits = replay_success(generator, args.task, targets[:len(first)], [found["seeds"][i] for i in first])
+        label = "nearest solving draw" if name == "nearest" else "mean of the solving draws"
+        rows.append({"policy": f"each state's {label}, played (no fit)", "pairs": len(targets), "tuning": None,
+                     "fit_states": float(hits.sum() / args.fit_states)})
         print(rows[-1], flush=True)
+    return rows
 
-    # 4. the mean fitted from scratch to the nearest solving draws (and to those with the demonstrations)
-    found = (th.as_tensor(contexts[has]), th.as_tensor(nearest))
+
+def fitted_means(found: dict[str, Any], pulls: tuple[th.Tensor, th.Tensor], fit: Any,
+                 args: argparse.Namespace) -> list[dict[str, Any]]:
+    """Stage 4: the mean fitted from scratch (the entry's fit, or ``--fit-steps``, on a mean of ``--net-arch``) to
+    the nearest solving draws, and to those with the demonstrations: its residual error and its success."""
+    steps = fit.fit_steps if args.fit_steps is None else args.fit_steps
+    pairs = (th.as_tensor(found["contexts"][found["has"]]), th.as_tensor(found["nearest"]))
+    rows = []
     for name, (pair_contexts, pair_latents) in (
-            ("the mean fitted to the nearest solving draws", found),
-            ("the mean fitted to them and the demonstrations", tuple(th.cat(p) for p in zip(pulls, found, strict=True)))):
-        fresh, _, _ = fitted_policy(args.task, args.generator, args.data, fit_steps=0)
+            ("the mean fitted to the nearest solving draws", pairs),
+            ("the mean fitted to them and the demonstrations", tuple(th.cat(p) for p in zip(pulls, pairs, strict=True)))):
+        fresh, _, _ = fitted_policy(args.task, args.generator, args.data, fit_steps=0, net_arch=args.net_arch)
         fit_mean_to_demonstrations(fresh.policy, pair_contexts, pair_latents, steps=steps,
                                    learning_rate=fit.learning_rate, batch_size=fit.batch_size)
         with th.no_grad():
-            residual = float((policy_mean(fresh.policy, found[0]) - found[1]).pow(2).mean())
-        rows.append({"policy": name, "pairs": len(pair_latents), **scored(fresh), "residual_mse": residual})
+            residual = float((policy_mean(fresh.policy, pairs[0]) - pairs[1]).pow(2).mean())
+        rows.append({"policy": name, "pairs": len(pair_latents), **scored(fresh, args), "residual_mse": residual})
         print(rows[-1], flush=True)
+    return rows
 
-    result = {"benchmark": f"fetch_fit_limit_{args.task}", "command": "python " + " ".join(
-                  ["benchmarks/fetch_fit_limit.py", *(argv if argv is not None else sys.argv[1:])]),
-              **package_versions(), "task": args.task, "generator": os.path.abspath(args.generator),
-              "data": os.path.abspath(args.data), "fit_steps": steps, "tuning_states": args.tuning_states,
-              "tuning_seed": TUNING_GOAL_SEED, "fit_states": args.fit_states,
-              "collection_seed": args.collection_seed, "collection": collection, "rows": rows,
-              "seconds": time.perf_counter() - begin}
+
+def write_outputs(result: dict[str, Any], args: argparse.Namespace) -> None:
+    """The JSON and, beside it, its Markdown table."""
     atomic_write_json(args.out, result)
+    rows, collection = result["rows"], result["collection"]
     table = markdown_table(["policy", "pairs", f"success, {args.fit_states} collection states",
                             f"success, {args.tuning_states} tuning states", "residual MSE on the solving draws"],
                            [[r["policy"], r["pairs"], r["fit_states"], "" if r["tuning"] is None else r["tuning"],
                              f"{r['residual_mse']:.4f}" if "residual_mse" in r else ""] for r in rows], align="lrrrr")
+    around = "the fitted mean" if args.policy is None else "the policy's mean"
     atomic_write_text(os.path.splitext(args.out)[0] + ".md", "\n".join([
         f"# What GenRL's mean can hold on {args.task}", "", f"`{result['command']}`", "",
-        f"{args.states} collection states x {args.draws} draws from the fitted mean's spread "
+        f"{args.states} collection states x {args.draws} draws from {around}'s spread "
         f"({collection['spread']:.3f}): one draw solves {collection['draw_success']:.3f}, some draw solves "
         f"{collection['states_with_a_solving_draw']:.3f} of the states.", "", table, ""]))
     print(table)
-    return result
 
 
 if __name__ == "__main__":

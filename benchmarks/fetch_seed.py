@@ -86,12 +86,17 @@ def recorded_genrl_settings(task: str) -> dict[str, Any]:
 
 
 def fitted_policy(task: str, generator_path: str, dataset: str, fit_steps: int | None = None,
-                  ) -> tuple[GenRL, DemonstrationCallback, tuple[th.Tensor, th.Tensor]]:
+                  net_arch: list[int] | None = None) -> tuple[GenRL, DemonstrationCallback, tuple[th.Tensor, th.Tensor]]:
     """GenRL with the task's entry (policy seed 0) and its mean fitted to the demonstrations ``dataset`` as the entry's
     ``DemonstrationCallback`` fits them (``fit_steps``: another number of Adam steps; 0: no fit), before any episode.
-    Returns the model, the entry's callback and the demonstrations as pulls (contexts, latent actions)."""
+    ``net_arch``: other hidden layers of the policy's mean. Returns the model, the entry's callback and the
+    demonstrations as pulls (contexts, latent actions)."""
     _, batch_episodes, genrl_kwargs = task_settings(task)
     callback = genrl_kwargs.pop("callback", None)
+    if net_arch is not None:
+        policy_kwargs = dict(genrl_kwargs.get("policy_kwargs") or {})
+        policy_kwargs["net_arch"] = {**dict(policy_kwargs.get("net_arch") or {}), "pi": list(net_arch)}
+        genrl_kwargs["policy_kwargs"] = policy_kwargs
     fit = next((item for item in build_callbacks(callback, demonstrations=dataset, task=task)
                 if isinstance(item, DemonstrationCallback)), None)
     if fit is None or not fit.fit_steps:
