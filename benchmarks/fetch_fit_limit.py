@@ -12,8 +12,11 @@ the E- and M-steps). This benchmark separates what the search finds from what th
 3. the targets themselves, played again at the first ``--fit-states`` collection states: what the mean would solve
    there if it reproduced them exactly (the best a search around the start can give);
 4. the mean fitted from scratch (the entry's fit: its steps, learning rate and batch size; ``--net-arch``: other
-   hidden layers) to each state's nearest solving draw, and to those plus the demonstrations: its residual error and
-   its success on the same ``--fit-states`` states (which it was fitted to) and on the tuning states.
+   hidden layers) to each state's nearest solving draw, and to those plus the demonstrations, and with each of
+   ``--variants`` (other widths, steps, learning rates, batch sizes) to the nearest solving draws: its residual error
+   and its success on the same ``--fit-states`` states (which it was fitted to) and on the tuning states.
+
+The collection is kept beside the output (``OUT_collection.npz``) and reused by a rerun of the same settings.
 
 A gap between 3 and 4 on the states the mean was fitted to says that the mean cannot represent the solving latent
 actions, whatever search finds them. The held-out evaluation states are never used.
@@ -25,6 +28,8 @@ actions, whatever search finds them. The held-out evaluation states are never us
 from __future__ import annotations
 
 import argparse
+import hashlib
+import json
 import os
 import sys
 import time
@@ -44,7 +49,7 @@ from sb3_genrl.genrl.regression import policy_mean
 from sb3_genrl.hyperparams import TUNING_GOAL_SEED
 from sb3_genrl.markdown import markdown_table
 from sb3_genrl.provenance import package_versions
-from sb3_genrl.utils import atomic_write_json, atomic_write_text
+from sb3_genrl.utils import atomic_path, atomic_write_json, atomic_write_text
 from sb3_genrl.wrappers import LatentActionWrapper
 
 COLLECTION_SEED = 950000  # reset seeds of the collection states: neither TUNING_GOAL_SEED's nor EVAL_GOAL_SEED's
@@ -67,6 +72,9 @@ def arguments(argv: list[str] | None = None) -> argparse.Namespace:
                         help="a trained GenRL model (genrl_policy.zip) to collect around (default: the fitted start)")
     parser.add_argument("--net-arch", type=COUNT, nargs="+", default=None,
                         help="hidden layers of the means fitted in stage 4 (default: the entry's)")
+    parser.add_argument("--variants", type=variants, default=[],
+                        help="more fits of stage 4 to the nearest solving draws, a JSON list of objects with some of "
+                             "net_arch, steps, learning_rate, batch_size (the others: the entry's)")
     parser.add_argument("--out", type=JSON_OUT, default=None,
                         help="JSON (default benchmarks/results/fetch_fit_limit_TASK.json; Markdown beside it)")
     args = parser.parse_args(argv)
@@ -75,6 +83,25 @@ def arguments(argv: list[str] | None = None) -> argparse.Namespace:
     here = os.path.dirname(os.path.abspath(__file__))
     args.out = args.out or os.path.join(here, "results", f"fetch_fit_limit_{args.task}.json")
     return args
+
+
+def variants(text: str) -> list[dict[str, Any]]:
+    """``--variants``: a JSON list of fit settings, each checked."""
+    keys = {"net_arch": list, "steps": int, "learning_rate": float, "batch_size": int}
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as error:
+        raise argparse.ArgumentTypeError(f"not JSON: {error}") from None
+    if not isinstance(value, list) or not all(isinstance(item, dict) and set(item) <= set(keys) for item in value):
+        raise argparse.ArgumentTypeError(f"a list of objects with some of {sorted(keys)}, got {text!r}")
+    for item in value:
+        for key, kind in keys.items():
+            if key in item and not (isinstance(item[key], kind) or kind is float and isinstance(item[key], int)):
+                raise argparse.ArgumentTypeError(f"{key} must be a {kind.__name__}, got {item[key]!r}")
+        if any(not isinstance(width, int) or width < 1 for width in item.get("net_arch", [])) or any(
+                item.get(key, 1) <= 0 for key in ("steps", "learning_rate", "batch_size")):
+            raise argparse.ArgumentTypeError(f"positive widths, steps, learning rate and batch size, got {item}")
+    return value
 
 
 def solving_targets(drawn: np.ndarray, solved: np.ndarray, mean: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -102,7 +129,7 @@ def main(argv: list[str] | None = None) -> dict:
         model, start = GenRL.load(args.policy, device="cpu", generator=model.generator), f"the policy {args.policy}"
     rows = [{"policy": start, "pairs": len(pulls[1]) if args.policy is None else "", **scored(model, args)}]
     print(rows[-1], flush=True)
-    collection, found = collect(model, args)
+    collection, found = collected(model, args)
     rows += replayed_targets(model.generator, found, args)
     rows += fitted_means(found, pulls, fit, args)
     result = {"benchmark": f"fetch_fit_limit_{args.task}", "command": "python " + " ".join(
@@ -121,6 +148,33 @@ def scored(candidate: GenRL, args: argparse.Namespace) -> dict[str, float]:
     """``candidate``'s success on the tuning states and on the first ``--fit-states`` collection states."""
     return {"tuning": evaluate_success(candidate, args.task, args.tuning_states, TUNING_GOAL_SEED)["success_rate"],
             "fit_states": evaluate_success(candidate, args.task, args.fit_states, args.collection_seed)["success_rate"]}
+
+
+def collected(model: GenRL, args: argparse.Namespace) -> tuple[dict[str, Any], dict[str, Any]]:
+    """:func:`collect`, kept beside the output (``OUT_collection.npz``, with the settings that made it) and reused by a
+    rerun with the same task, generator, start, states, draws and seed."""
+    path = os.path.splitext(args.out)[0] + "_collection.npz"
+    settings = {"task": args.task, "generator_sha256": file_digest(args.generator),
+                "policy_sha256": args.policy and file_digest(args.policy), "states": args.states, "draws": args.draws,
+                "collection_seed": args.collection_seed, "fit_steps_of_the_start": args.fit_steps}
+    if os.path.exists(path):
+        with np.load(path) as stored:
+            if json.loads(str(stored["settings"])) == settings:
+                print(f"the collection of {path} reused", flush=True)
+                found = {key: stored[key] for key in ("contexts", "seeds", "has", "nearest", "average")}
+                return json.loads(str(stored["collection"])), {**found, "seeds": found["seeds"].tolist()}
+        print(f"{path} holds a collection of other settings: collected again", flush=True)
+    collection, found = collect(model, args)
+    with atomic_path(path) as tmp, open(tmp, "wb") as file:
+        np.savez(file, settings=json.dumps(settings), collection=json.dumps(collection),
+                 **{key: np.asarray(value) for key, value in found.items()})
+    return collection, found
+
+
+def file_digest(path: str) -> str:
+    """The SHA-256 of a file's bytes."""
+    with open(path, "rb") as file:
+        return hashlib.file_digest(file, "sha256").hexdigest()
 
 
 def collect(model: GenRL, args: argparse.Namespace) -> tuple[dict[str, Any], dict[str, Any]]:
@@ -168,19 +222,26 @@ def replayed_targets(generator: Any, found: dict[str, Any], args: argparse.Names
 def fitted_means(found: dict[str, Any], pulls: tuple[th.Tensor, th.Tensor], fit: Any,
                  args: argparse.Namespace) -> list[dict[str, Any]]:
     """Stage 4: the mean fitted from scratch (the entry's fit, or ``--fit-steps``, on a mean of ``--net-arch``) to
-    the nearest solving draws, and to those with the demonstrations: its residual error and its success."""
-    steps = fit.fit_steps if args.fit_steps is None else args.fit_steps
+    the nearest solving draws, and to those with the demonstrations; then each of ``--variants`` to the nearest
+    solving draws: its residual error and its success."""
+    entry = {"net_arch": args.net_arch, "steps": fit.fit_steps if args.fit_steps is None else args.fit_steps,
+             "learning_rate": fit.learning_rate, "batch_size": fit.batch_size}
     pairs = (th.as_tensor(found["contexts"][found["has"]]), th.as_tensor(found["nearest"]))
+    with_demonstrations = tuple(th.cat(p) for p in zip(pulls, pairs, strict=True))
+    fits = [("the mean fitted to the nearest solving draws", pairs, entry),
+            ("the mean fitted to them and the demonstrations", with_demonstrations, entry),
+            *(("the mean fitted to the nearest solving draws, " + ", ".join(f"{key} {value}" for key, value in
+                                                                              variant.items()), pairs, {**entry, **variant})
+              for variant in args.variants)]
     rows = []
-    for name, (pair_contexts, pair_latents) in (
-            ("the mean fitted to the nearest solving draws", pairs),
-            ("the mean fitted to them and the demonstrations", tuple(th.cat(p) for p in zip(pulls, pairs, strict=True)))):
-        fresh, _, _ = fitted_policy(args.task, args.generator, args.data, fit_steps=0, net_arch=args.net_arch)
-        fit_mean_to_demonstrations(fresh.policy, pair_contexts, pair_latents, steps=steps,
-                                   learning_rate=fit.learning_rate, batch_size=fit.batch_size)
+    for name, (pair_contexts, pair_latents), settings in fits:
+        fresh, _, _ = fitted_policy(args.task, args.generator, args.data, fit_steps=0, net_arch=settings["net_arch"])
+        fit_mean_to_demonstrations(fresh.policy, pair_contexts, pair_latents, steps=settings["steps"],
+                                   learning_rate=settings["learning_rate"], batch_size=settings["batch_size"])
         with th.no_grad():
             residual = float((policy_mean(fresh.policy, pairs[0]) - pairs[1]).pow(2).mean())
-        rows.append({"policy": name, "pairs": len(pair_latents), **scored(fresh, args), "residual_mse": residual})
+        rows.append({"policy": name, "pairs": len(pair_latents), **scored(fresh, args), "residual_mse": residual,
+                     "fit": settings})
         print(rows[-1], flush=True)
     return rows
 

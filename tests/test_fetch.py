@@ -406,3 +406,16 @@ def test_the_fit_limit_benchmark_picks_each_states_nearest_solving_draw_and_repl
     actions = np.clip(generator.decode(latents), -1.0, 1.0).astype(np.float32)
     replayed = [distance for _, distance in _replay("FetchReach-v4", actions, [20, 21, 22], [None] * 3, 1)]
     np.testing.assert_allclose(replayed, distances, atol=1e-9)
+
+
+def test_the_fit_limit_benchmark_checks_its_fit_variants_before_any_work():
+    import argparse
+
+    from sb3_genrl.benchmarks.fetch_fit_limit import variants
+
+    assert variants('[{"steps": 8000}, {"net_arch": [128, 128], "learning_rate": 1}]') == [
+        {"steps": 8000}, {"net_arch": [128, 128], "learning_rate": 1}]
+    for bad in ('{"steps": 8000}', '[{"step": 8000}]', '[{"steps": 0}]', '[{"net_arch": [0]}]', '[{"steps": 1.5}]',
+                '[{"batch_size": "256"}]', "[{steps: 1}]"):
+        with pytest.raises(argparse.ArgumentTypeError):
+            variants(bad)
