@@ -11,10 +11,10 @@ the E- and M-steps). This benchmark separates what the search finds from what th
    solving draw nearest the mean, and the mean of its solving draws;
 3. the targets themselves, played again at the first ``--fit-states`` collection states: what the mean would solve
    there if it reproduced them exactly (the best a search around the start can give);
-4. the mean fitted from scratch (the entry's fit: its steps, learning rate and batch size; ``--net-arch``: other
-   hidden layers) to each state's nearest solving draw, and to those plus the demonstrations, and with each of
-   ``--variants`` (other widths, steps, learning rates, batch sizes) to the nearest solving draws: its residual error
-   and its success on the same ``--fit-states`` states (which it was fitted to) and on the tuning states.
+4. the mean fitted from scratch (the entry's fit: its width, steps, learning rate and batch size) to each state's
+   nearest solving draw, and to those plus the demonstrations, and with each of ``--variants`` (other widths, steps,
+   learning rates, batch sizes) to the nearest solving draws: its residual error and its success on the same
+   ``--fit-states`` states (which it was fitted to) and on the tuning states.
 
 The collection is kept beside the output (``OUT_collection.npz``) and reused by a rerun of the same settings.
 
@@ -28,7 +28,6 @@ actions, whatever search finds them. The held-out evaluation states are never us
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import os
 import sys
@@ -49,6 +48,7 @@ from sb3_genrl.genrl.regression import policy_mean
 from sb3_genrl.hyperparams import TUNING_GOAL_SEED
 from sb3_genrl.markdown import markdown_table
 from sb3_genrl.provenance import package_versions
+from sb3_genrl.study.state import file_fingerprint
 from sb3_genrl.utils import atomic_path, atomic_write_json, atomic_write_text
 from sb3_genrl.wrappers import LatentActionWrapper
 
@@ -70,8 +70,6 @@ def arguments(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--fit-steps", type=COUNT, default=None, help="Adam steps of each fit (default: the entry's)")
     parser.add_argument("--policy", type=EXISTING, default=None,
                         help="a trained GenRL model (genrl_policy.zip) to collect around (default: the fitted start)")
-    parser.add_argument("--net-arch", type=COUNT, nargs="+", default=None,
-                        help="hidden layers of the means fitted in stage 4 (default: the entry's)")
     parser.add_argument("--variants", type=variants, default=[],
                         help="more fits of stage 4 to the nearest solving draws, a JSON list of objects with some of "
                              "net_arch, steps, learning_rate, batch_size (the others: the entry's)")
@@ -136,7 +134,7 @@ def main(argv: list[str] | None = None) -> dict:
                   ["benchmarks/fetch_fit_limit.py", *(argv if argv is not None else sys.argv[1:])]),
               **package_versions(), "task": args.task, "generator": os.path.abspath(args.generator),
               "data": os.path.abspath(args.data), "policy": args.policy and os.path.abspath(args.policy),
-              "net_arch": args.net_arch, "fit_steps": fit.fit_steps if args.fit_steps is None else args.fit_steps,
+              "fit_steps": fit.fit_steps if args.fit_steps is None else args.fit_steps,
               "tuning_states": args.tuning_states, "tuning_seed": TUNING_GOAL_SEED, "fit_states": args.fit_states,
               "collection_seed": args.collection_seed, "collection": collection, "rows": rows,
               "seconds": time.perf_counter() - begin}
@@ -154,9 +152,9 @@ def collected(model: GenRL, args: argparse.Namespace) -> tuple[dict[str, Any], d
     """:func:`collect`, kept beside the output (``OUT_collection.npz``, with the settings that made it) and reused by a
     rerun with the same task, generator, start, states, draws and seed."""
     path = os.path.splitext(args.out)[0] + "_collection.npz"
-    settings = {"task": args.task, "generator_sha256": file_digest(args.generator),
-                "policy_sha256": args.policy and file_digest(args.policy), "states": args.states, "draws": args.draws,
-                "collection_seed": args.collection_seed, "fit_steps_of_the_start": args.fit_steps}
+    settings = {"task": args.task, "generator_fingerprint": file_fingerprint(args.generator),
+                "policy_fingerprint": args.policy and file_fingerprint(args.policy), "states": args.states,
+                "draws": args.draws, "collection_seed": args.collection_seed, "fit_steps_of_the_start": args.fit_steps}
     if os.path.exists(path):
         with np.load(path) as stored:
             if json.loads(str(stored["settings"])) == settings:
@@ -169,12 +167,6 @@ def collected(model: GenRL, args: argparse.Namespace) -> tuple[dict[str, Any], d
         np.savez(file, settings=json.dumps(settings), collection=json.dumps(collection),
                  **{key: np.asarray(value) for key, value in found.items()})
     return collection, found
-
-
-def file_digest(path: str) -> str:
-    """The SHA-256 of a file's bytes."""
-    with open(path, "rb") as file:
-        return hashlib.file_digest(file, "sha256").hexdigest()
 
 
 def collect(model: GenRL, args: argparse.Namespace) -> tuple[dict[str, Any], dict[str, Any]]:
@@ -221,10 +213,10 @@ def replayed_targets(generator: Any, found: dict[str, Any], args: argparse.Names
 
 def fitted_means(found: dict[str, Any], pulls: tuple[th.Tensor, th.Tensor], fit: Any,
                  args: argparse.Namespace) -> list[dict[str, Any]]:
-    """Stage 4: the mean fitted from scratch (the entry's fit, or ``--fit-steps``, on a mean of ``--net-arch``) to
+    """Stage 4: the mean fitted from scratch (the entry's fit, or ``--fit-steps``) to
     the nearest solving draws, and to those with the demonstrations; then each of ``--variants`` to the nearest
     solving draws: its residual error and its success."""
-    entry = {"net_arch": args.net_arch, "steps": fit.fit_steps if args.fit_steps is None else args.fit_steps,
+    entry = {"net_arch": None, "steps": fit.fit_steps if args.fit_steps is None else args.fit_steps,
              "learning_rate": fit.learning_rate, "batch_size": fit.batch_size}
     pairs = (th.as_tensor(found["contexts"][found["has"]]), th.as_tensor(found["nearest"]))
     with_demonstrations = tuple(th.cat(p) for p in zip(pulls, pairs, strict=True))
