@@ -12,9 +12,11 @@ the E- and M-steps). This benchmark separates what the search finds from what th
 3. the targets themselves, played again at the first ``--fit-states`` collection states: what the mean would solve
    there if it reproduced them exactly (the best a search around the start can give);
 4. the mean fitted from scratch (the entry's fit: its width, steps, learning rate and batch size) to each state's
-   nearest solving draw, and to those plus the demonstrations, and with each of ``--variants`` (other widths, steps,
-   learning rates, batch sizes) to the nearest solving draws: its residual error and its success on the same
-   ``--fit-states`` states (which it was fitted to) and on the tuning states.
+   nearest solving draw, to those plus the demonstrations, to the start's own mean at every collection state (can a
+   fit reproduce a map the network holds?), to the start's mean where it solves and the nearest solving draw
+   elsewhere, and with each of ``--variants`` (other widths, steps, learning rates, batch sizes) to the nearest
+   solving draws: its residual error and its success on the same ``--fit-states`` states (which it was fitted to)
+   and on the tuning states.
 
 The collection is kept beside the output (``OUT_collection.npz``) and reused by a rerun of the same settings.
 
@@ -117,6 +119,22 @@ def solving_targets(drawn: np.ndarray, solved: np.ndarray, mean: np.ndarray) -> 
     return nearest.astype(np.float32), average.astype(np.float32)
 
 
+def anchored_targets(has: np.ndarray, nearest: np.ndarray, mean: np.ndarray,
+                     solves: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The states that the start's mean solves or some draw solves, and at each the mean where it solves, else the
+    nearest solving draw.
+
+    :param has: whether each state has a solving draw, ``(states,)``
+    :param nearest: the nearest solving draw of each state that has one, in order, ``(has.sum(), latent_dim)``
+    :param mean: the start's mean at each state, ``(states, latent_dim)``
+    :param solves: whether the mean solves each state, ``(states,)``
+    """
+    draw = np.zeros_like(mean)
+    draw[has] = nearest
+    states = has | solves
+    return states, np.where(solves[:, None], mean, draw)[states].astype(np.float32)
+
+
 def main(argv: list[str] | None = None) -> dict:
     args = arguments(argv)
     th.set_num_threads(1)
@@ -129,7 +147,7 @@ def main(argv: list[str] | None = None) -> dict:
     print(rows[-1], flush=True)
     collection, found = collected(model, args)
     rows += replayed_targets(model.generator, found, args)
-    rows += fitted_means(found, pulls, fit, args)
+    rows += fitted_means(found, pulls, fit, args, own_mean(model, found, args))
     result = {"benchmark": f"fetch_fit_limit_{args.task}", "command": "python " + " ".join(
                   ["benchmarks/fetch_fit_limit.py", *(argv if argv is not None else sys.argv[1:])]),
               **package_versions(), "task": args.task, "generator": os.path.abspath(args.generator),
@@ -211,17 +229,33 @@ def replayed_targets(generator: Any, found: dict[str, Any], args: argparse.Names
     return rows
 
 
-def fitted_means(found: dict[str, Any], pulls: tuple[th.Tensor, th.Tensor], fit: Any,
-                 args: argparse.Namespace) -> list[dict[str, Any]]:
-    """Stage 4: the mean fitted from scratch (the entry's fit, or ``--fit-steps``) to
-    the nearest solving draws, and to those with the demonstrations; then each of ``--variants`` to the nearest
-    solving draws: its residual error and its success."""
+def own_mean(model: GenRL, found: dict[str, Any], args: argparse.Namespace) -> dict[str, np.ndarray]:
+    """The start's mean at every collection state (clipped to the action box) and whether it solves there."""
+    low, high = model.action_space.low, model.action_space.high
+    with th.no_grad():
+        mean = np.clip(policy_mean(model.policy, th.as_tensor(found["contexts"])).numpy(), low, high)
+    solves = replay_success(model.generator, args.task, mean.astype(np.float32), found["seeds"])
+    print(f"the start's mean solves {solves.mean():.3f} of the {len(solves)} collection states", flush=True)
+    return {"mean": mean.astype(np.float32), "solves": solves}
+
+
+def fitted_means(found: dict[str, Any], pulls: tuple[th.Tensor, th.Tensor], fit: Any, args: argparse.Namespace,
+                 start: dict[str, np.ndarray]) -> list[dict[str, Any]]:
+    """Stage 4: the mean fitted from scratch (the entry's fit, or ``--fit-steps``) to the nearest solving draws, to
+    those with the demonstrations, to the start's own mean at every state (whether a fit reproduces a mean that
+    the network can hold), and to the start's mean where it solves with the nearest solving draw elsewhere; then
+    each of ``--variants`` to the nearest solving draws: its residual error and its success."""
     entry = {"net_arch": None, "steps": fit.fit_steps if args.fit_steps is None else args.fit_steps,
              "learning_rate": fit.learning_rate, "batch_size": fit.batch_size}
     pairs = (th.as_tensor(found["contexts"][found["has"]]), th.as_tensor(found["nearest"]))
     with_demonstrations = tuple(th.cat(p) for p in zip(pulls, pairs, strict=True))
+    own = (th.as_tensor(found["contexts"]), th.as_tensor(start["mean"]))
+    states, targets = anchored_targets(found["has"], found["nearest"], start["mean"], start["solves"])
+    kept = (th.as_tensor(found["contexts"][states]), th.as_tensor(targets))
     fits = [("the mean fitted to the nearest solving draws", pairs, entry),
             ("the mean fitted to them and the demonstrations", with_demonstrations, entry),
+            ("the mean fitted to the start's own mean (a map the network holds)", own, entry),
+            ("the mean fitted to the start's mean where it solves, else the nearest solving draw", kept, entry),
             *(("the mean fitted to the nearest solving draws, " + ", ".join(f"{key} {value}" for key, value in
                                                                               variant.items()), pairs, {**entry, **variant})
               for variant in args.variants)]

@@ -368,7 +368,7 @@ def test_the_scorecard_benchmark_scores_each_generator_then_trains_genrl_on_it_a
 
 def test_the_fit_limit_benchmark_picks_each_states_nearest_solving_draw_and_replays_as_the_step_path_plays():
     import gymnasium as gym
-    from sb3_genrl.benchmarks.fetch_fit_limit import solving_targets
+    from sb3_genrl.benchmarks.fetch_fit_limit import anchored_targets, solving_targets
     from sb3_genrl.envs.fetch_demonstrations import replay_success
 
     from sb3_genrl.generative import make_generator
@@ -388,6 +388,15 @@ def test_the_fit_limit_benchmark_picks_each_states_nearest_solving_draw_and_repl
         np.testing.assert_allclose(nearest[row], drawn[i, best], rtol=1e-6)
         np.testing.assert_allclose(average[row], drawn[i, candidates].mean(axis=0), rtol=1e-6)
     np.testing.assert_allclose(nearest[-1], drawn[3, 1], rtol=1e-6)
+    # anchored: the mean where it solves (state 2 has no solving draw), else the nearest solving draw
+    solves = np.array([True, False, True, False])
+    kept, targets = anchored_targets(solved.any(axis=1), nearest, mean, solves)
+    expected = [mean[i] if solves[i] else nearest[states.index(i)] for i in range(4) if solves[i] or i in states]
+    assert kept.tolist() == [True, True, True, True] and len(targets) == len(expected)
+    np.testing.assert_allclose(targets, expected, rtol=1e-6)
+    kept, targets = anchored_targets(solved.any(axis=1), nearest, mean, np.zeros(4, dtype=bool))
+    assert kept.tolist() == [True, True, False, True]
+    np.testing.assert_allclose(targets, nearest, rtol=1e-6)
     # replay_success plays what the wrapper's step path plays from the same reset seeds: the same end, the same success
     from sb3_genrl.envs.fetch_demonstrations import _replay
 
