@@ -4,6 +4,7 @@
 # after any stop with the same command:
 #
 #   bash benchmarks/tqc_fetch.sh FetchPush-v4 [LOG_FOLDER] [SEED]     # default runs/tqc, seed 0
+#   TOTAL_STEPS=25000 THREADS=2 bash benchmarks/tqc_fetch.sh ...        # stop at 500 episodes; 2 torch threads
 #
 # rl-zoo3 saves the replay buffer (--save-replay-buffer) only when a training run ends (or on Ctrl-C), not with its
 # --save-freq checkpoints, so each segment is one rl-zoo3 run of SEGMENT_STEPS steps (-n, default 50 episodes), and
@@ -24,7 +25,8 @@ cd "$(dirname "$0")/.."
 # the entry's own budget (n_timesteps) unless TOTAL_STEPS is given
 TOTAL_STEPS=${TOTAL_STEPS:-$(.venv/bin/python -c "import sys, yaml; print(int(yaml.safe_load(open('benchmarks/tqc_fetch.yml'))[sys.argv[1]]['n_timesteps']))" "$ENV_ID")}
 EVAL_EPISODES=${EVAL_EPISODES:-50}
-export MUJOCO_GL=egl OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
+THREADS=${THREADS:-1}  # torch threads of each segment (rl-zoo3's --num-threads)
+export MUJOCO_GL=egl OMP_NUM_THREADS=$THREADS MKL_NUM_THREADS=$THREADS
 mkdir -p "$LOGS"
 LIST="$LOGS/${ENV_ID}_seed${SEED}_segments.csv"
 [ -f "$LIST" ] || echo "segment,folder,env_steps_total" > "$LIST"
@@ -39,7 +41,7 @@ while true; do
   before=$(ls -d "$LOGS/tqc/${ENV_ID}_"* 2>/dev/null | sort -V | tail -1 || true)
   echo "=== $ENV_ID segment $segment from ${last:-scratch} $(date -u)"
   .venv/bin/python -m rl_zoo3.train --algo tqc --env "$ENV_ID" -conf benchmarks/tqc_fetch.yml \
-    --gym-packages sb3_genrl.envs --seed $(( SEED * 100000 + segment )) --num-threads 1 -f "$LOGS" -n "$SEGMENT_STEPS" \
+    --gym-packages sb3_genrl.envs --seed $(( SEED * 100000 + segment )) --num-threads "$THREADS" -f "$LOGS" -n "$SEGMENT_STEPS" \
     --save-freq "$SEGMENT_STEPS" --save-replay-buffer --eval-freq "$SEGMENT_STEPS" --eval-episodes "$EVAL_EPISODES" "${resume[@]}"
   folder=$(ls -d "$LOGS/tqc/${ENV_ID}_"* | sort -V | tail -1)
   if [ "$folder" = "$before" ] || [ ! -f "$folder/$ENV_ID.zip" ] || [ ! -f "$folder/replay_buffer.pkl" ]; then
