@@ -233,10 +233,10 @@ def own_mean(model: GenRL, found: dict[str, Any], args: argparse.Namespace) -> d
     """The start's mean at every collection state (clipped to the action box) and whether it solves there."""
     low, high = model.action_space.low, model.action_space.high
     with th.no_grad():
-        mean = np.clip(policy_mean(model.policy, th.as_tensor(found["contexts"])).numpy(), low, high)
-    solves = replay_success(model.generator, args.task, mean.astype(np.float32), found["seeds"])
+        mean = np.clip(policy_mean(model.policy, th.as_tensor(found["contexts"])).numpy(), low, high).astype(np.float32)
+    solves = replay_success(model.generator, args.task, mean, found["seeds"])
     print(f"the start's mean solves {solves.mean():.3f} of the {len(solves)} collection states", flush=True)
-    return {"mean": mean.astype(np.float32), "solves": solves}
+    return {"mean": mean, "solves": solves}
 
 
 def fitted_means(found: dict[str, Any], pulls: tuple[th.Tensor, th.Tensor], fit: Any, args: argparse.Namespace,
