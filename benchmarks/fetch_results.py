@@ -6,7 +6,7 @@ and ``fetch_curves.png`` (each seed's held-out success against episodes and envi
 finished every stage is labelled partial, with the episodes its seeds reached; its numbers are never the final ones.
 rl-zoo3's published TQC+HER results are the anchor rows (its ``benchmark.md``: mean return of one seed, -1 per step
 away from the goal, 50 steps per episode). With ``--tqc``, TQC+HER's progress read from ``benchmarks/tqc_fetch.sh``'s
-logs is kept in ``fetch_tqc_progress.json`` beside the JSON files, and shown from there where the logs are not.
+logs is kept in ``fetch_tqc_progress.json`` beside the JSON files, each run as far as it got in any logs read.
 
     python benchmarks/fetch_results.py                      # benchmarks/results/fetch_*.json
     python benchmarks/fetch_results.py --results runs/fetch --out runs/fetch
@@ -186,15 +186,21 @@ def tqc_progress(logs: str) -> list[list]:
 
 
 def kept_tqc_progress(logs: str | None, results: str) -> list[list]:
-    """TQC+HER's progress: read from ``logs`` (:func:`tqc_progress`) and kept in ``results``' ``fetch_tqc_progress.json``,
-    or, without logs here, the progress last kept there (none: ``[]``)."""
-    kept = os.path.join(results, TQC_PROGRESS)
-    progress = tqc_progress(logs) if logs else []
-    if progress:
-        atomic_write_json(kept, {"columns": TQC_COLUMNS, "rows": progress})
-    elif os.path.exists(kept):
-        with open(kept) as file:
-            progress = json.load(file)["rows"]
+    """TQC+HER's progress: read from ``logs`` (:func:`tqc_progress`) and kept in ``results``' ``fetch_tqc_progress.json``.
+    Per run the furthest wins: a run the logs do not hold, or hold less far (a machine whose logs were lost, started
+    again), keeps its kept row; none anywhere: ``[]``."""
+    kept_path = os.path.join(results, TQC_PROGRESS)
+    kept: list[list] = []
+    if os.path.exists(kept_path):
+        with open(kept_path) as file:
+            kept = json.load(file)["rows"]
+    furthest = {row[0]: row for row in kept}
+    for row in tqc_progress(logs) if logs else []:
+        if row[0] not in furthest or row[2] >= furthest[row[0]][2]:
+            furthest[row[0]] = row
+    progress = [furthest[name] for name in sorted(furthest)]
+    if progress != kept:
+        atomic_write_json(kept_path, {"columns": TQC_COLUMNS, "rows": progress})
     return progress
 
 

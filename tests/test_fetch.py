@@ -227,6 +227,16 @@ def test_tqc_progress_read_from_the_logs_is_kept_for_a_machine_without_them(tmp_
     shutil.rmtree(logs)  # a fresh clone: the logs are gone, the kept progress is shown
     main(["--results", str(tmp_path)])
     assert row in (tmp_path / "fetch.md").read_text()
+    # a fresh machine's logs: Push started again (less far) and a new Slide run; Push keeps its furthest row
+    for name, steps in (("FetchPush-v4_seed0", 2500), ("FetchSlide-v4_seed0", 2500)):
+        run = logs / name / "segment_1"
+        run.mkdir(parents=True)
+        np.savez(run / "evaluations.npz", successes=np.array([[0.0, 0.0]]))
+        (logs / f"{name}_segments.csv").write_text(f"folder,env_steps_total\n{run},{steps}\n")
+    main(["--results", str(tmp_path), "--tqc", str(logs)])
+    text = (tmp_path / "fetch.md").read_text()
+    assert row in text and "| FetchSlide-v4_seed0 | 50 | 2500 | 0.000 |" in text
+    assert "FetchPush-v4_seed0 | 50 |" not in text
 
 
 def test_new_runs_keep_the_generator_stages_and_drop_what_the_old_runs_measured(tmp_path):
