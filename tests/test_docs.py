@@ -44,3 +44,11 @@ def test_docs_page_layout():
     page = (ROOT / "docs" / "modules" / "genrl.rst").read_text(encoding="utf-8")
     for section in ("Notes", "Can I use?", "Example", "Results", "How to replicate the results?", "Parameters"):
         assert f"\n{section}\n" in page, section
+
+
+def test_results_page_holds_the_fetch_tables_as_written():
+    """docs/results.md copies benchmarks/results/fetch.md's tables (written by benchmarks/fetch_results.py): every
+    row there must be on the page unchanged, so a hand edit cannot drift from the table."""
+    page = (ROOT / "docs" / "results.md").read_text(encoding="utf-8").splitlines()
+    rows = [line for line in (RESULTS / "fetch.md").read_text(encoding="utf-8").splitlines() if line.startswith("|")]
+    assert rows and [row for row in rows if row not in page] == []
