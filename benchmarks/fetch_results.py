@@ -105,6 +105,14 @@ def status(result: dict, task: str | None = None) -> str:
     return "partial: " + (", ".join(reached) if reached else "no GenRL episodes yet")
 
 
+def mean_of_seeds(values: list[float], spread: bool) -> str:
+    """A table cell: the mean (and standard deviation) over seeds, with how many; ``-`` for none."""
+    if not values:
+        return "-"
+    seeds = f"{len(values)} seed" + ("s" if len(values) > 1 else "")
+    return f"{np.mean(values):.3f}" + (f" ± {np.std(values):.3f}" if spread else "") + f" ({seeds})"
+
+
 def row(task: str, result: dict) -> list:
     generator = result.get("generator", {})
     demos = generator.get("demonstration_info", {}).get("episodes", generator.get("demonstrations"))
@@ -113,9 +121,9 @@ def row(task: str, result: dict) -> list:
     recon = result.get("reconstruction", {}).get("success_rate", "not yet measured")
     limit = result.get("generator_limit", {})
     finished = [run["final_success"] for run in result.get("runs", []) if run.get("finished")]
-    success = f"{np.mean(finished):.3f} ± {np.std(finished):.3f} ({len(finished)} seeds)" if finished else "-"
+    success = mean_of_seeds(finished, spread=True)
     start = [run["curve_success"][0] for run in result.get("runs", []) if run["curve_episodes"][:1] == [0]]
-    start_cell = f"{np.mean(start):.3f} ({len(start)} seeds)" if start else "-"
+    start_cell = mean_of_seeds(start, spread=False)
     target, budget = TARGETS[task]
     pending = "not yet measured"
     near = result.get("policy_neighbourhood")
@@ -157,7 +165,7 @@ def sac_her_rows(results: str) -> list[list]:
             with open(path) as file:
                 result = json.load(file)
             finished = [run["final_success"] for run in result["runs"] if run.get("finished")]
-            success = f"{np.mean(finished):.3f} ± {np.std(finished):.3f} ({len(finished)} seeds)" if finished else "-"
+            success = mean_of_seeds(finished, spread=True)
             demos = result.get("demonstrations", "") if variant == "demos" else 0
             episodes = result["settings"]["n_timesteps"] // 50
             rows.append([task, demos, success, episodes, status(result)])

@@ -197,7 +197,7 @@ def test_the_results_table_labels_a_partial_run_with_the_episodes_reached(tmp_pa
     (tmp_path / "fetch_fetch-push.json").write_text(json.dumps(result))
     main(["--results", str(tmp_path)])
     line = next(line for line in (tmp_path / "fetch.md").read_text().splitlines() if line.startswith("| fetch-push"))
-    assert "partial: seed 0: 1024 (running), seed 1: 1024" in line and "0.400 ± 0.000 (1 seeds)" in line
+    assert "partial: seed 0: 1024 (running), seed 1: 1024" in line and "0.400 ± 0.000 (1 seed)" in line
     assert (tmp_path / "fetch_curves.png").stat().st_size > 0
     # SAC+HER's JSON (benchmarks/fetch_sac_her.py): its finished seeds' mean, the buffer's demonstrations, the budget
     sac = {"settings": {"n_timesteps": 25600}, "demonstrations": 4000, "complete": False,
