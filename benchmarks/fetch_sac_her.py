@@ -7,8 +7,8 @@ dataset, ``runs/fetch/TASK/demonstrations``, at most 4000) into the buffer befor
 relabelled by HER like SAC's own (:func:`sb3_genrl.baselines.her.fetch_goal_episodes`); ``--variant none`` starts
 empty. Both normalise the observation with the demonstrations' fixed statistics. Every ``--eval-every`` episodes and
 at the end, the deterministic policy plays ``--eval-states`` initial states (reset seeds from
-:data:`~sb3_genrl.hyperparams.EVAL_GOAL_SEED`). Each seed checkpoints (model and buffer, as one unit) at every
-evaluation in ``--work`` and resumes from it; the JSON is written after every evaluation.
+:data:`~sb3_genrl.hyperparams.EVAL_GOAL_SEED`). Each seed checkpoints (model and buffer, as one unit) every
+``--checkpoint-every`` episodes in ``--work`` and resumes from it; the JSON is written after every evaluation.
 
     python benchmarks/fetch_sac_her.py --task fetch-reach --variant demos
     python benchmarks/fetch_sac_her.py --task fetch-push --variant none --seeds 0
@@ -126,7 +126,7 @@ def run_seed(args: argparse.Namespace, episodes_data: dict, seed: int, row: dict
         row.update({key: row[key][:kept] for key in ("curve_episodes", "curve_env_steps", "curve_success")})
         start = state
     curve = Curve(env_id, args.eval_every, args.eval_states, row, write)
-    checkpoint = EpisodeCheckpoint(folder / CHECKPOINT_DIR, args.eval_every, identity, start, {})
+    checkpoint = EpisodeCheckpoint(folder / CHECKPOINT_DIR, args.checkpoint_every, identity, start, {})
     begin = time.perf_counter()
     model.learn(steps - model.num_timesteps, callback=CallbackList([curve, checkpoint]),
                 reset_num_timesteps=state is None)
@@ -149,6 +149,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--seeds", type=SEED, nargs="+", default=[0, 1, 2])
     parser.add_argument("--eval-every", type=COUNT, default=None, help="episodes between evaluations (default: a sixth)")
     parser.add_argument("--eval-states", type=COUNT, default=500)
+    parser.add_argument("--checkpoint-every", type=COUNT, default=None,
+                        help="episodes between checkpoints (default: the evaluations', at most 250, as genrl baseline)")
     parser.add_argument("--steps", type=COUNT, default=None, help="environment steps (default: the entry's n_timesteps)")
     parser.add_argument("--work", default=None, help="run folders (default runs/fetch_sac_her/TASK)")
     parser.add_argument("--out", type=JSON_OUT, default=None,
@@ -162,6 +164,8 @@ def main(argv: list[str] | None = None) -> None:
     args.out = args.out or os.path.join(root, "fetch_sac_her", f"fetch_sac_her_{args.task}_{args.variant}.json")
     episodes = (args.steps or int(entry(get_task(args.task).env_id)["n_timesteps"])) // FETCH_HORIZON
     args.eval_every = args.eval_every or max(32, round(episodes / 6 / 32) * 32)
+    # a checkpoint does not change the run (it draws no random numbers); it bounds what a stopped run plays again
+    args.checkpoint_every = args.checkpoint_every or min(args.eval_every, 250)
     torch.set_num_threads(1)
     episodes_data = fetch_goal_episodes(args.task, load_arrays(data))
     result = {**package_versions(), "benchmark": f"fetch_sac_her_{args.task}_{args.variant}", "task": args.task,

@@ -332,6 +332,32 @@ def test_sac_her_resumes_only_a_run_of_the_same_settings(tmp_path):
     assert not (tmp_path / "work").exists() and json.loads(out.read_text())["eval_states"] == 7  # nothing touched
 
 
+def test_sac_her_checkpoints_between_evaluations_and_a_stopped_seed_resumes_from_there(tmp_path, monkeypatch):
+    from sb3_genrl.benchmarks import fetch_sac_her
+    from sb3_genrl.envs.demonstrations import make_demonstrations
+    from sb3_genrl.utils import read_checkpoint
+
+    data = make_demonstrations("fetch-reach", 2, tmp_path / "demos", seed=3, n_threads=1, progress_bar=False)
+    out, work = tmp_path / "sac.json", tmp_path / "work"
+    argv = ["--task", "fetch-reach", "--variant", "demos", "--data", str(data), "--out", str(out), "--work", str(work),
+            "--seeds", "0", "--steps", "150", "--eval-every", "3", "--eval-states", "2"]
+    fetch_sac_her.main(argv + ["--checkpoint-every", "1"])
+    # a checkpoint after each of the first two episodes (the run ends with the third), none at an evaluation
+    state = read_checkpoint(work / "demos_seed_0" / "checkpoint")
+    assert state["episodes"] == 2 and state["steps"] == 100
+    # as if stopped after episode 2: the seed resumes from that checkpoint, plays one episode, and evaluates it
+    result = json.loads(out.read_text())
+    result["runs"][0] |= {"finished": False, "curve_episodes": [], "curve_env_steps": [], "curve_success": []}
+    out.write_text(json.dumps(result))
+    loaded = []
+    load = fetch_sac_her.SAC.load
+    monkeypatch.setattr(fetch_sac_her.SAC, "load", lambda path, **kwargs: loaded.append(path) or load(path, **kwargs))
+    fetch_sac_her.main(argv)
+    row = json.loads(out.read_text())["runs"][0]
+    assert loaded == [state["paths"]["model"]]
+    assert row["finished"] and row["curve_episodes"] == [3] and row["env_steps"] == 150
+
+
 def test_the_scorecard_benchmark_scores_each_generator_then_trains_genrl_on_it_and_resumes(tmp_path, monkeypatch):
     from sb3_genrl.benchmarks import fetch_scorecard
     from sb3_genrl.envs.demonstrations import make_demonstrations
