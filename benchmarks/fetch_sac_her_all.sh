@@ -2,8 +2,8 @@
 # The package's SAC+HER part of the Fetch benchmark (benchmarks/fetch_sac_her.py): every task with and without the
 # demonstrations, 3 seeds each, in LANES parallel lanes (default 2, one core each), each lane running its share of the
 # runs in turn. Rerun the same command to resume: a finished seed is kept, an unfinished one continues from its last
-# evaluation's checkpoint. JSON: runs/fetch_sac_her/fetch_sac_her_TASK_VARIANT.json, one per task and variant, copied
-# into benchmarks/results/ when published; each lane's log: runs/fetch_sac_her/lane_K.log.
+# checkpoint (at most 250 episodes back). JSON: runs/fetch_sac_her/fetch_sac_her_TASK_VARIANT.json, one per task and
+# variant, copied into benchmarks/results/ when published; each lane's log: runs/fetch_sac_her/lane_K.log.
 #
 #   bash benchmarks/fetch_sac_her_all.sh [TASK:VARIANT ...]     # e.g. fetch-slide:demos fetch-slide:none
 cd "$(dirname "$0")/.."
