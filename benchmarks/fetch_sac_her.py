@@ -29,6 +29,7 @@ import yaml
 from sb3_genrl.baselines.checkpoint import CHECKPOINT_DIR, EpisodeCheckpoint, continue_clocks, resume_state
 from sb3_genrl.baselines.her import add_goal_demonstrations, fetch_goal_episodes, goal_statistics
 from sb3_genrl.baselines.normalization import NormalizedCombined
+from sb3_genrl.baselines.train import CHECKPOINT_EVERY
 from sb3_genrl.benchmarks.fetch_results import seed_row, write_result
 from sb3_genrl.envs import get_task
 from sb3_genrl.envs.fetch import FETCH_HORIZON
@@ -150,7 +151,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--eval-every", type=COUNT, default=None, help="episodes between evaluations (default: a sixth)")
     parser.add_argument("--eval-states", type=COUNT, default=500)
     parser.add_argument("--checkpoint-every", type=COUNT, default=None,
-                        help="episodes between checkpoints (default: the evaluations', at most 250, as genrl baseline)")
+                        help=f"episodes between checkpoints (default: the evaluations', at most {CHECKPOINT_EVERY}, "
+                             "as genrl baseline)")
     parser.add_argument("--steps", type=COUNT, default=None, help="environment steps (default: the entry's n_timesteps)")
     parser.add_argument("--work", default=None, help="run folders (default runs/fetch_sac_her/TASK)")
     parser.add_argument("--out", type=JSON_OUT, default=None,
@@ -165,7 +167,7 @@ def main(argv: list[str] | None = None) -> None:
     episodes = (args.steps or int(entry(get_task(args.task).env_id)["n_timesteps"])) // FETCH_HORIZON
     args.eval_every = args.eval_every or max(32, round(episodes / 6 / 32) * 32)
     # a checkpoint does not change the run (it draws no random numbers); it bounds what a stopped run plays again
-    args.checkpoint_every = args.checkpoint_every or min(args.eval_every, 250)
+    args.checkpoint_every = args.checkpoint_every or min(args.eval_every, CHECKPOINT_EVERY)
     torch.set_num_threads(1)
     episodes_data = fetch_goal_episodes(args.task, load_arrays(data))
     result = {**package_versions(), "benchmark": f"fetch_sac_her_{args.task}_{args.variant}", "task": args.task,
