@@ -27,7 +27,7 @@ after a stop resumes where it stopped (a run's settings are recorded and checked
    solves (``fetch_demonstrations.policy_neighbourhood_success``): a gap says the search, not the generator, limits.
 
 The JSON (default ``benchmarks/results/fetch_TASK.json``) says ``"complete": false`` and how far each seed got until
-every stage is done.
+every stage is done and seeds 0, 1 and 2 have finished (a run of other ``--seeds`` stays partial).
 
     python benchmarks/fetch.py --task fetch-push                   # 3 seeds x 3000 episodes, 500 held-out states
     python benchmarks/fetch.py --task fetch-reach --seeds 0 --eval-states 100
@@ -43,7 +43,7 @@ import shutil
 import time
 
 import torch
-from sb3_genrl.benchmarks.fetch_results import seed_row, write_result
+from sb3_genrl.benchmarks.fetch_results import BENCHMARK_SEEDS, all_seeds_finished, seed_row, write_result
 from sb3_genrl.benchmarks.fetch_seed import fitted_mean_success, recorded_genrl_settings, train_seed
 from sb3_genrl.benchmarks.genrl import make_benchmark_demonstrations
 from sb3_genrl.envs import TASKS, get_task
@@ -79,7 +79,7 @@ def arguments(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--selection-states", type=COUNT, default=100,
                         help="tuning initial states (reset seeds from TUNING_GOAL_SEED) that choose the generator")
     parser.add_argument("--episodes", type=COUNT, default=None, help="GenRL episodes (default: the task's)")
-    parser.add_argument("--seeds", type=SEED, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--seeds", type=SEED, nargs="+", default=list(BENCHMARK_SEEDS))
     parser.add_argument("--eval-every", type=COUNT, default=None,
                         help="episodes between evaluations, a multiple of the episodes per iteration (default: about "
                              "a sixth of the budget)")
@@ -250,7 +250,7 @@ def main(argv: list[str] | None = None) -> None:
         if index == 0:  # after the first seed: its result comes first, the generator's limits next
             generator_limit(args, generator, result, write)
             neighbourhood_limit(args, generator, seed, result, write)
-    result["complete"] = True
+    result["complete"] = all_seeds_finished(result)
     write()
     print(f"GenRL on {args.task}: {result['final_success_mean']:.3f} mean final success; wrote {args.out}")
 

@@ -8,7 +8,8 @@ relabelled by HER like SAC's own (:func:`sb3_genrl.baselines.her.fetch_goal_epis
 empty. Both normalise the observation with the demonstrations' fixed statistics. Every ``--eval-every`` episodes and
 at the end, the deterministic policy plays ``--eval-states`` initial states (reset seeds from
 :data:`~sb3_genrl.hyperparams.EVAL_GOAL_SEED`). Each seed checkpoints (model and buffer, as one unit) every
-``--checkpoint-every`` episodes in ``--work`` and resumes from it; the JSON is written after every evaluation.
+``--checkpoint-every`` episodes in ``--work`` and resumes from it; the JSON is written after every evaluation and says
+``"complete": true`` once seeds 0, 1 and 2 have finished, whichever runs wrote them.
 
     python benchmarks/fetch_sac_her.py --task fetch-reach --variant demos
     python benchmarks/fetch_sac_her.py --task fetch-push --variant none --seeds 0
@@ -30,7 +31,7 @@ from sb3_genrl.baselines.checkpoint import CHECKPOINT_DIR, EpisodeCheckpoint, co
 from sb3_genrl.baselines.her import add_goal_demonstrations, fetch_goal_episodes, goal_statistics
 from sb3_genrl.baselines.normalization import NormalizedCombined
 from sb3_genrl.baselines.train import CHECKPOINT_EVERY
-from sb3_genrl.benchmarks.fetch_results import seed_row, write_result
+from sb3_genrl.benchmarks.fetch_results import BENCHMARK_SEEDS, all_seeds_finished, seed_row, write_result
 from sb3_genrl.envs import get_task
 from sb3_genrl.envs.fetch import FETCH_HORIZON
 from sb3_genrl.envs.fetch_mujoco import fix_joint_helpers
@@ -147,7 +148,7 @@ def main(argv: list[str] | None = None) -> None:
                                                           "fetch-slide"))
     parser.add_argument("--variant", required=True, choices=("demos", "none"), help="demonstrations in the buffer")
     parser.add_argument("--data", type=EXISTING, default=None, help="the dataset (default runs/fetch/TASK/demonstrations)")
-    parser.add_argument("--seeds", type=SEED, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--seeds", type=SEED, nargs="+", default=list(BENCHMARK_SEEDS))
     parser.add_argument("--eval-every", type=COUNT, default=None, help="episodes between evaluations (default: a sixth)")
     parser.add_argument("--eval-states", type=COUNT, default=500)
     parser.add_argument("--checkpoint-every", type=COUNT, default=None,
@@ -191,9 +192,10 @@ def main(argv: list[str] | None = None) -> None:
         row = seed_row(result, seed)
         if not row["finished"]:
             run_seed(args, episodes_data, seed, row, write)
-    result["complete"] = True
+    result["complete"] = all_seeds_finished(result)
     write()
-    print(f"SAC+HER ({args.variant}) on {args.task}: {result['final_success_mean']:.3f}; wrote {args.out}")
+    print(f"SAC+HER ({args.variant}) on {args.task}: {result['final_success_mean']:.3f} over {result['finished_seeds']} "
+          f"seeds ({'complete' if result['complete'] else 'partial'}); wrote {args.out}")
 
 
 if __name__ == "__main__":

@@ -353,9 +353,17 @@ def test_sac_her_checkpoints_between_evaluations_and_a_stopped_seed_resumes_from
     load = fetch_sac_her.SAC.load
     monkeypatch.setattr(fetch_sac_her.SAC, "load", lambda path, **kwargs: loaded.append(path) or load(path, **kwargs))
     fetch_sac_her.main(argv)
-    row = json.loads(out.read_text())["runs"][0]
+    result = json.loads(out.read_text())
+    row = result["runs"][0]
     assert loaded == [state["paths"]["model"]]
     assert row["finished"] and row["curve_episodes"] == [3] and row["env_steps"] == 150
+    # one seed of the benchmark's three: the JSON stays partial, and the table says how far each seed got
+    from sb3_genrl.benchmarks.fetch_results import all_seeds_finished, status
+
+    assert result["complete"] is False and status(result) == "partial: seed 0: 3"
+    others = [dict(row, seed=seed) for seed in (1, 2)]
+    assert all_seeds_finished(dict(result, runs=[row, *others]))
+    assert not all_seeds_finished(dict(result, runs=[row, others[0], dict(others[1], finished=False)]))
 
 
 def test_the_scorecard_benchmark_scores_each_generator_then_trains_genrl_on_it_and_resumes(tmp_path, monkeypatch):
