@@ -5,7 +5,8 @@ Shares are of GenRL's loop (``learn``: collection and updates, without the run's
 trains GenRL with its settings (``hyperparams/genrl.yml``) for ``--episodes`` episodes through
 :func:`sb3_genrl.genrl.train_policy`, once per ``--n-envs`` (``2``: the quickstart's; ``N``: all of an iteration's
 episodes in one fast-path call), timing the fast path's ``play_trajectories`` calls (simulation), the generator's
-``decode`` calls (decoding) and GenRL's ``train`` (updates). In the same run it measures the open-loop bound on all
+``decode`` calls (decoding) and GenRL's ``train`` (updates), and within the updates each of :data:`UPDATE_PARTS`
+(their shares of the updates: ``update_parts_share``). In the same run it measures the open-loop bound on all
 cores: the episodes GenRL played (a sample of them) and the scripted ones of ``benchmarks/sim_throughput.py``, each
 played in one ``play_trajectories`` call on every core (best of ``--repeats``). Writes JSON with the load average.
 
@@ -37,7 +38,10 @@ from sb3_genrl.markdown import markdown_table
 from sb3_genrl.utils import atomic_write_json
 from sb3_genrl.vec_env import default_threads
 
-EPISODES = {"hockey": 960, "basketball": 1920}  # 60 iterations each of the tasks' 16 and 32 episodes
+# The parts of GenRL's update timed on their own: the kept relabelled pulls joining the batch, the E-step (the
+# conjugate gradient and the line search), the regression of the policy's mean on the kept pulls, the value fit
+UPDATE_PARTS = ("relabelled_pulls", "e_step", "regression", "value_fit")
+EPISODES = {"hockey": 960, "basketball": 1920}  # 60 and 120 iterations of the tasks' 16 episodes
 
 
 @contextlib.contextmanager
@@ -68,16 +72,20 @@ def run_genrl(task: str, generator_path: str, episodes: int, n_envs: int, thread
 
     from sb3_genrl.generative import load
     from sb3_genrl.genrl import GenRL, train_policy
+    from sb3_genrl.genrl.hindsight import HindsightRelabelling
     from sb3_genrl.study.quickstart import task_settings
 
     _, batch_episodes, genrl_kwargs = task_settings(task)
     generator = load(generator_path, device="cpu")
     task_class = type(get_task(task).make_env())
     seconds = {"simulation": 0.0, "decoding": 0.0, "updates": 0.0, "learn": 0.0}
+    parts = dict.fromkeys(UPDATE_PARTS, 0.0)  # the parts of the updates (inside GenRL.train)
     played: list[tuple[np.ndarray, np.ndarray]] = []
     with (timed(task_class, "play_trajectories", seconds, "simulation", played),
           timed(type(generator), "decode", seconds, "decoding"), timed(GenRL, "train", seconds, "updates"),
-          timed(GenRL, "learn", seconds, "learn")):
+          timed(GenRL, "learn", seconds, "learn"), timed(HindsightRelabelling, "extend_batch", parts, "relabelled_pulls"),
+          timed(GenRL, "_e_step", parts, "e_step"), timed(HindsightRelabelling, "regress", parts, "regression"),
+          timed(GenRL, "_fit_value_function", parts, "value_fit")):
         start = time.perf_counter()
         summary = train_policy(task, generator, episodes=episodes, batch_episodes=batch_episodes, n_envs=n_envs,
                                n_threads=threads, seed=0, out_dir=os.path.join(work, f"{task}_{n_envs}"), device="cpu",
@@ -89,7 +97,9 @@ def run_genrl(task: str, generator_path: str, episodes: int, n_envs: int, thread
            "episodes_per_second_with_set_up": summary["episodes"] / wall,
            **{f"{key}_seconds": value for key, value in seconds.items()},
            **{f"{key}_share": value / learn for key, value in seconds.items()},
-           "final_mean_reward": summary["final_mean_reward"]}
+           "final_mean_reward": summary["final_mean_reward"],
+           "updates_per_iteration_seconds": seconds["updates"] / summary["iterations"],
+           "update_parts_share": {key: value / seconds["updates"] for key, value in parts.items()}}
     row["other_share"] = 1.0 - sum(row[f"{key}_share"] for key in seconds)  # policy, SB3's loop, the wrappers
     return row | {"played": played}
 
@@ -119,7 +129,8 @@ def measure_task(task: str, generator_path: str, args: argparse.Namespace, work:
                    share_of_bound=row["episodes_per_second"] / bound,
                    collection_share_of_bound=row["episodes"] / (row["learn_seconds"] - row["updates_seconds"]) / bound)
         print(f"{task} n_envs={n_envs}: {row['episodes_per_second']:.1f} episodes/s, {row['share_of_bound']:.2f} of "
-              f"the bound ({bound:.1f}); updates {row['updates_share']:.0%}", flush=True)
+              f"the bound ({bound:.1f}); updates {row['updates_share']:.0%} ("
+              + ", ".join(f"{key} {share:.0%}" for key, share in row["update_parts_share"].items()) + ")", flush=True)
         rows.append(row)
     env.close()
     return rows
@@ -162,10 +173,13 @@ def main() -> None:
     for row in rows:
         row.update(command=command, load_average_before=load_before, load_average_after=os.getloadavg())
     rows = updated_runs(args.out, rows) if args.update else rows
-    header = ("task", "n_envs", "episodes/s", "bound", "share", "simulation", "decoding", "updates", "other")
+    header = ("task", "n_envs", "episodes/s", "bound", "share", "simulation", "decoding", "updates", "other",
+              "of the updates: " + " / ".join(UPDATE_PARTS))
     print(markdown_table(header, [[r["task"], r["n_envs"], f"{r['episodes_per_second']:.1f}", f"{r['open_loop_bound']:.1f}",
                                    f"{r['share_of_bound']:.2f}", *(f"{r[f'{k}_share']:.0%}" for k in (
-                                       "simulation", "decoding", "updates", "other"))] for r in rows]))
+                                       "simulation", "decoding", "updates", "other")),
+                                   " / ".join(f"{r['update_parts_share'][k]:.0%}" for k in UPDATE_PARTS)
+                                   if "update_parts_share" in r else "not measured"] for r in rows]))
     atomic_write_json(args.out, {"command": command, "machine": platform.processor() or platform.machine(),
                                  "cores": default_threads(), "load_average_before": load_before,
                                  "load_average_after": os.getloadavg(), "runs": rows})
