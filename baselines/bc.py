@@ -82,8 +82,9 @@ def behaviour_cloning(
     if len(dones) != len(observations):
         raise ValueError(f"dones must have length {len(observations)}, got {len(dones)}")
     train, heldout = split_episodes(dones, holdout, seed)
-    record = fit_actor(policy, (observations[train], actions[train]), (observations[heldout], actions[heldout]),
-                       seed=seed, **fit_kwargs)
+    record = fit_actor(
+        policy, (observations[train], actions[train]), (observations[heldout], actions[heldout]), seed=seed, **fit_kwargs
+    )
     dones = np.asarray(dones, dtype=bool)
     return record | {"train_episodes": int(dones[train].sum()), "heldout_episodes": int(dones[heldout].sum())}
 
@@ -141,12 +142,22 @@ def fit_actor(
     action_std = np.clip(residual_std, *std_range)
     with th.no_grad():
         policy.log_std.copy_(th.as_tensor(np.log(action_std), dtype=policy.log_std.dtype))
-    return history | {"best_epoch": best_epoch, "epochs": epoch, "residual_std": residual_std.tolist(),
-                      "action_std": action_std.tolist()}
+    return history | {
+        "best_epoch": best_epoch,
+        "epochs": epoch,
+        "residual_std": residual_std.tolist(),
+        "action_std": action_std.tolist(),
+    }
 
 
-def _train_epoch(policy: ActorCriticPolicy, optimizer: th.optim.Optimizer, observations: th.Tensor, actions: th.Tensor,
-                 batch_size: int, generator: th.Generator) -> float:
+def _train_epoch(
+    policy: ActorCriticPolicy,
+    optimizer: th.optim.Optimizer,
+    observations: th.Tensor,
+    actions: th.Tensor,
+    batch_size: int,
+    generator: th.Generator,
+) -> float:
     """One pass of MSE steps over shuffled minibatches; returns the mean of the minibatch losses."""
     losses = []
     for batch in th.randperm(len(observations), generator=generator).split(batch_size):
@@ -168,7 +179,11 @@ def _residuals(policy: ActorCriticPolicy, observations: th.Tensor, actions: th.T
     training = policy.training
     policy.set_training_mode(False)
     with th.no_grad():
-        residuals = th.cat([actions[i:i + chunk] - actor_mean(policy, observations[i:i + chunk])
-                            for i in range(0, len(observations), chunk)])
+        residuals = th.cat(
+            [
+                actions[i : i + chunk] - actor_mean(policy, observations[i : i + chunk])
+                for i in range(0, len(observations), chunk)
+            ]
+        )
     policy.set_training_mode(training)
     return residuals

@@ -41,8 +41,9 @@ class EpisodeCheckpoint(BaseCallback):
     :param extra: further entries of ``state.json`` (e.g. the setup's timings and records for the summary)
     """
 
-    def __init__(self, folder: pathlib.Path, every: int, identity: dict[str, Any], start: dict[str, Any],
-                 extra: dict[str, Any]) -> None:
+    def __init__(
+        self, folder: pathlib.Path, every: int, identity: dict[str, Any], start: dict[str, Any], extra: dict[str, Any]
+    ) -> None:
         super().__init__()
         self.folder, self.every, self.identity, self.start, self.extra = folder, int(every), identity, start, extra
         self._seen = 0  # episodes this process has seen end
@@ -67,10 +68,19 @@ class EpisodeCheckpoint(BaseCallback):
     def save(self, episodes: int) -> None:
         """Write the model, its replay buffer and then the state naming them, as one unit (see the module doc)."""
         monitor = _monitor(self.model)
-        write_checkpoint(self.folder, {"model": (MODEL, self.model.save), "buffer": (BUFFER, self.model.save_replay_buffer)}, {
-            "identity": self.identity, "episodes": episodes, "steps": int(self.model.num_timesteps),
-            "monitor_seconds": time.time() - monitor.t_start, "cpu_seconds": _episode_info(monitor).cpu_seconds(),
-            "learn_seconds": float(self.start["learn_seconds"]) + time.perf_counter() - self._began, **self.extra})
+        write_checkpoint(
+            self.folder,
+            {"model": (MODEL, self.model.save), "buffer": (BUFFER, self.model.save_replay_buffer)},
+            {
+                "identity": self.identity,
+                "episodes": episodes,
+                "steps": int(self.model.num_timesteps),
+                "monitor_seconds": time.time() - monitor.t_start,
+                "cpu_seconds": _episode_info(monitor).cpu_seconds(),
+                "learn_seconds": float(self.start["learn_seconds"]) + time.perf_counter() - self._began,
+                **self.extra,
+            },
+        )
 
 
 def resume_state(out: pathlib.Path, identity: dict[str, Any]) -> dict[str, Any] | None:
@@ -81,9 +91,11 @@ def resume_state(out: pathlib.Path, identity: dict[str, Any]) -> dict[str, Any] 
         return None
     recorded = state["identity"]
     if recorded != identity:
-        raise ValueError(f"{out} holds a checkpoint of another run (it differs in "
-                         f"{', '.join(differing(recorded, identity))}); use another "
-                         f"out_dir, or delete {out / CHECKPOINT_DIR} to start this run afresh")
+        raise ValueError(
+            f"{out} holds a checkpoint of another run (it differs in "
+            f"{', '.join(differing(recorded, identity))}); use another "
+            f"out_dir, or delete {out / CHECKPOINT_DIR} to start this run afresh"
+        )
     return state
 
 

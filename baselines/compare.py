@@ -22,9 +22,16 @@ from sb3_genrl.markdown import markdown_table
 from sb3_genrl.utils import atomic_path, atomic_write_text
 
 # How the comparison names each method (``genrl`` and :data:`~sb3_genrl.baselines.BASELINES`).
-LABELS = {"genrl": "GenRL", "ppo": "PPO (BC)", "sac": "SAC (prefilled)", "sac-no-prefill": "SAC (no prefill)",
-          "sac-her": "SAC + HER", "latent-ppo": "PPO on latent", "latent-sac": "SAC on latent",
-          "latent-trpo": "TRPO on latent"}
+LABELS = {
+    "genrl": "GenRL",
+    "ppo": "PPO (BC)",
+    "sac": "SAC (prefilled)",
+    "sac-no-prefill": "SAC (no prefill)",
+    "sac-her": "SAC + HER",
+    "latent-ppo": "PPO on latent",
+    "latent-sac": "SAC on latent",
+    "latent-trpo": "TRPO on latent",
+}
 
 
 def compare_runs(run_dirs: list[str | os.PathLike], out_dir: str | os.PathLike, *, task: str | None = None) -> pathlib.Path:
@@ -46,24 +53,54 @@ def compare_runs(run_dirs: list[str | os.PathLike], out_dir: str | os.PathLike, 
         curves = [run["curve"] for run in group]
         series[LABELS.get(algorithm, algorithm)] = mean_std_over_seeds(curves)
         rows.append(_method_row(LABELS.get(algorithm, algorithm), curves, [run["contacts"] for run in group], budget))
-    plot_curves(series, out / "reward_vs_episodes.png", ylabel="mean reward (-distance, m)",
-                title=f"{task_name}: mean +- std over seeds")
+    plot_curves(
+        series,
+        out / "reward_vs_episodes.png",
+        ylabel="mean reward (-distance, m)",
+        title=f"{task_name}: mean +- std over seeds",
+    )
     _plot_contacts(rows, out / "table_contacts.png", title=f"{task_name}: table contacts per episode")
     text = io.StringIO()
     writer = csv.DictWriter(text, fieldnames=list(rows[0]))
     writer.writeheader()
     writer.writerows(rows)
     atomic_write_text(out / "comparison.csv", text.getvalue(), newline="")
-    header = ["method", "seeds", f"reward at {budget} episodes", "episodes run", "final mean reward", "best mean reward",
-              "table contacts / episode"]
-    table = [[row["method"], row["seeds"], f"{row['reward_at_budget']:.3f} +- {row['reward_at_budget_std']:.3f}",
-              row["episodes"], f"{row['final_mean_reward']:.3f} +- {row['final_std']:.3f}", row["best_mean_reward"],
-              "n/a" if np.isnan(row["table_contacts_per_episode"])
-              else f"{row['table_contacts_per_episode']:.2f} +- {row['table_contacts_std']:.2f}"] for row in rows]
-    lines = [f"# {task_name}: GenRL vs baselines", "",
-             f"Mean reward (minus the distance in m; mean +- std over seeds) at the budget every run reached ({budget} "
-             "episodes) and at the end of each method's own runs.", "", markdown_table(header, table), "",
-             "![reward vs episodes](reward_vs_episodes.png)", "", "![table contacts](table_contacts.png)", ""]
+    header = [
+        "method",
+        "seeds",
+        f"reward at {budget} episodes",
+        "episodes run",
+        "final mean reward",
+        "best mean reward",
+        "table contacts / episode",
+    ]
+    table = [
+        [
+            row["method"],
+            row["seeds"],
+            f"{row['reward_at_budget']:.3f} +- {row['reward_at_budget_std']:.3f}",
+            row["episodes"],
+            f"{row['final_mean_reward']:.3f} +- {row['final_std']:.3f}",
+            row["best_mean_reward"],
+            "n/a"
+            if np.isnan(row["table_contacts_per_episode"])
+            else f"{row['table_contacts_per_episode']:.2f} +- {row['table_contacts_std']:.2f}",
+        ]
+        for row in rows
+    ]
+    lines = [
+        f"# {task_name}: GenRL vs baselines",
+        "",
+        f"Mean reward (minus the distance in m; mean +- std over seeds) at the budget every run reached ({budget} "
+        "episodes) and at the end of each method's own runs.",
+        "",
+        markdown_table(header, table),
+        "",
+        "![reward vs episodes](reward_vs_episodes.png)",
+        "",
+        "![table contacts](table_contacts.png)",
+        "",
+    ]
     path = out / "comparison.md"
     atomic_write_text(path, "\n".join(lines))
     return path
@@ -83,8 +120,9 @@ def _read_runs(run_dirs: list[str | os.PathLike], task: str | None) -> tuple[dic
         tasks.add(summary.get("task"))
         episodes = read_monitor(run_dir / MONITOR_FILE) if (run_dir / MONITOR_FILE).exists() else {}
         contacts = episodes.get("table_contacts", np.array([np.nan]))
-        runs[summary["algorithm"]].append({"curve": read_curve(run_dir / "learning_curve.csv"), "summary": summary,
-                                           "contacts": _nanmean(contacts)})
+        runs[summary["algorithm"]].append(
+            {"curve": read_curve(run_dir / "learning_curve.csv"), "summary": summary, "contacts": _nanmean(contacts)}
+        )
     if not runs:
         raise ValueError(f"no runs of task {task!r} among {len(run_dirs)} folders")
     if len(tasks) > 1:
@@ -97,12 +135,19 @@ def _method_row(label: str, curves: list[dict[str, np.ndarray]], contacts: list[
     finals = np.array([curve["mean_reward"][-1] for curve in curves])
     at_budget = np.array([np.interp(budget, curve["episodes"], curve["mean_reward"]) for curve in curves])
     contacts = np.array(contacts)
-    return {"method": label, "seeds": len(curves), "budget": int(budget), "reward_at_budget": at_budget.mean(),
-            "reward_at_budget_std": at_budget.std(), "episodes": int(min(c["episodes"][-1] for c in curves)),
-            "final_mean_reward": finals.mean(), "final_std": finals.std(),
-            "best_mean_reward": max(np.max(curve["mean_reward"]) for curve in curves),
-            "table_contacts_per_episode": _nanmean(contacts),
-            "table_contacts_std": np.nanstd(contacts) if np.isfinite(contacts).any() else np.nan}
+    return {
+        "method": label,
+        "seeds": len(curves),
+        "budget": int(budget),
+        "reward_at_budget": at_budget.mean(),
+        "reward_at_budget_std": at_budget.std(),
+        "episodes": int(min(c["episodes"][-1] for c in curves)),
+        "final_mean_reward": finals.mean(),
+        "final_std": finals.std(),
+        "best_mean_reward": max(np.max(curve["mean_reward"]) for curve in curves),
+        "table_contacts_per_episode": _nanmean(contacts),
+        "table_contacts_std": np.nanstd(contacts) if np.isfinite(contacts).any() else np.nan,
+    }
 
 
 def _nanmean(values: np.ndarray) -> float:

@@ -24,8 +24,9 @@ EVAL_GOALS = 100  # held-out goals of every final evaluation (seed EVAL_GOAL_SEE
 UNMOVED = 0.01  # m: an object whose (x, y) ends this close to its start was not moved
 
 
-def evaluate_trained(algorithm: str, model: Any, task: str, *, generator: Any = None, goals: int = EVAL_GOALS,
-                     seed: int = EVAL_GOAL_SEED) -> dict[str, Any]:
+def evaluate_trained(
+    algorithm: str, model: Any, task: str, *, generator: Any = None, goals: int = EVAL_GOALS, seed: int = EVAL_GOAL_SEED
+) -> dict[str, Any]:
     """A trained policy's deterministic result on held-out goals, the same goals for every method.
 
     The feedback baselines play closed loop (:func:`~sb3_genrl.baselines.feedback.evaluate_feedback_policy`; SAC + HER
@@ -54,8 +55,7 @@ def evaluate_trained(algorithm: str, model: Any, task: str, *, generator: Any = 
     try:
         start = env.initial_state_object_xy()
         if algorithm in FEEDBACK_BASELINES:
-            played = evaluate_feedback_policy(model, task, goals=goals, seed=seed,
-                                              goal_conditioned=algorithm == "sac-her")
+            played = evaluate_feedback_policy(model, task, goals=goals, seed=seed, goal_conditioned=algorithm == "sac-her")
             rewards, infos = played["rewards"], played["infos"]
         else:
             goal_array = held_out_goals(task, goals, seed)
@@ -65,17 +65,21 @@ def evaluate_trained(algorithm: str, model: Any, task: str, *, generator: Any = 
     finally:
         env.close()
     distances = -np.asarray(rewards, dtype=float)
-    unmoved = sum(bool(np.linalg.norm(np.asarray(info["reached"]) - start) < UNMOVED) for info in infos
-                  if "reached" in info)
+    unmoved = sum(bool(np.linalg.norm(np.asarray(info["reached"]) - start) < UNMOVED) for info in infos if "reached" in info)
     contacts = [info["table_contacts"] for info in infos if "table_contacts" in info]
-    return {"goals": goals, "goal_seed": seed, "mean_distance": float(distances.mean()),
-            "median_distance": float(np.median(distances)), "p90_distance": float(np.percentile(distances, 90)),
-            "table_contacts": float(np.mean(contacts)) if len(contacts) == len(infos) else None,
-            "unstable": sum(bool(info.get("unstable", False)) for info in infos), "object_unmoved": unmoved}
+    return {
+        "goals": goals,
+        "goal_seed": seed,
+        "mean_distance": float(distances.mean()),
+        "median_distance": float(np.median(distances)),
+        "p90_distance": float(np.percentile(distances, 90)),
+        "table_contacts": float(np.mean(contacts)) if len(contacts) == len(infos) else None,
+        "unstable": sum(bool(info.get("unstable", False)) for info in infos),
+        "object_unmoved": unmoved,
+    }
 
 
-def load_trained(algorithm: str, path: str | os.PathLike, task: str, *, generator: Any = None,
-                 device: str = "cpu") -> Any:
+def load_trained(algorithm: str, path: str | os.PathLike, task: str, *, generator: Any = None, device: str = "cpu") -> Any:
     """Load the model a run of ``algorithm`` on ``task`` saved (``{algorithm}_policy.zip``; GenRL's
     ``genrl_policy.zip`` needs its generator, SAC + HER's the goal-conditioned task, as SB3 loads its buffer class)."""
     check_input_path(path, "path")
@@ -105,10 +109,12 @@ def training_health(out_dir: str | os.PathLike) -> dict[str, Any]:
     import re
 
     logs = pathlib.Path(out_dir) / "logs"
-    earlier = sorted(logs.glob("progress.until_episode_*.csv"),
-                     key=lambda path: int(re.search(r"_(\d+)\.csv$", path.name).group(1)))
-    columns: dict[str, list[float]] = {key: [] for key in ("train/critic_loss", "train/ent_coef", "train/approx_kl",
-                                                             "train/clip_fraction")}
+    earlier = sorted(
+        logs.glob("progress.until_episode_*.csv"), key=lambda path: int(re.search(r"_(\d+)\.csv$", path.name).group(1))
+    )
+    columns: dict[str, list[float]] = {
+        key: [] for key in ("train/critic_loss", "train/ent_coef", "train/approx_kl", "train/clip_fraction")
+    }
     for path in [*earlier, logs / "progress.csv"]:
         if not path.is_file():
             continue
@@ -128,9 +134,14 @@ def training_health(out_dir: str | os.PathLike) -> dict[str, Any]:
     if ent_coef:
         health |= {"ent_coef_first": ent_coef[0], "ent_coef_max": float(np.max(ent_coef)), "ent_coef_last": ent_coef[-1]}
     if kl:
-        health |= {"approx_kl_median": float(np.median(kl)), "approx_kl_max": float(np.max(kl)),
-                   "clip_fraction_median": float(np.median(clip)) if clip else None}
+        health |= {
+            "approx_kl_median": float(np.median(kl)),
+            "approx_kl_max": float(np.max(kl)),
+            "clip_fraction_median": float(np.median(clip)) if clip else None,
+        }
         if health["approx_kl_median"] > PPO_KL_LIMIT:
-            health["warnings"].append(f"PPO's median approximate KL per update is {health['approx_kl_median']:.3g}: "
-                                      "each update moves the policy far beyond its trust region (see target_kl)")
+            health["warnings"].append(
+                f"PPO's median approximate KL per update is {health['approx_kl_median']:.3g}: "
+                "each update moves the policy far beyond its trust region (see target_kl)"
+            )
     return health

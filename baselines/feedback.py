@@ -50,9 +50,17 @@ def held_out_goals(task: str, goals: int, seed: int) -> np.ndarray:
     return np.array([env.sample_goal(rng) for _ in range(goals)], dtype=np.float32)
 
 
-def evaluate_feedback_policy(model: Any, task: str, *, goals: int | np.ndarray = 100, seed: int = 0,
-                             deterministic: bool = True, time_feature: bool = True, goal_conditioned: bool = False,
-                             allow_outside_region: bool = False) -> dict[str, Any]:
+def evaluate_feedback_policy(
+    model: Any,
+    task: str,
+    *,
+    goals: int | np.ndarray = 100,
+    seed: int = 0,
+    deterministic: bool = True,
+    time_feature: bool = True,
+    goal_conditioned: bool = False,
+    allow_outside_region: bool = False,
+) -> dict[str, Any]:
     """Play an SB3 feedback policy closed loop on held-out goals, all goals stepped together.
 
     :param model: an SB3 model (or anything with ``predict``) trained on :func:`make_feedback_env`'s observations, or
@@ -70,13 +78,14 @@ def evaluate_feedback_policy(model: Any, task: str, *, goals: int | np.ndarray =
     spec = get_task(task)
     if goal_conditioned and spec.goal_env_id is None:
         raise ValueError(f"{spec.name} has no goal-conditioned variant")
-    envs = [gym.make(spec.goal_env_id) if goal_conditioned else make_feedback_env(task, time_feature=time_feature)
-            for _ in goal_array]
+    envs = [
+        gym.make(spec.goal_env_id) if goal_conditioned else make_feedback_env(task, time_feature=time_feature)
+        for _ in goal_array
+    ]
     options = {"allow_outside_region": True} if allow_outside_region else {}
     first = [env.reset(options={"goal": goal, **options})[0] for env, goal in zip(envs, goal_array, strict=True)]
     # One array per observation key (a dict observation) or one array, a row per goal.
-    observations = ({key: np.stack([obs[key] for obs in first]) for key in first[0]} if goal_conditioned
-                    else np.stack(first))
+    observations = {key: np.stack([obs[key] for obs in first]) for key in first[0]} if goal_conditioned else np.stack(first)
     horizon = envs[0].unwrapped.horizon
     actions = np.zeros((len(envs), horizon, 7), dtype=np.float32)
     rewards, infos = np.zeros(len(envs)), [{} for _ in envs]
@@ -99,15 +108,15 @@ def evaluate_feedback_policy(model: Any, task: str, *, goals: int | np.ndarray =
     return {"goals": goal_array, "rewards": rewards, "infos": infos, "actions": actions}
 
 
-def open_loop_rewards(task: str, actions: np.ndarray, goals: np.ndarray, *,
-                      allow_outside_region: bool = False) -> np.ndarray:
+def open_loop_rewards(task: str, actions: np.ndarray, goals: np.ndarray, *, allow_outside_region: bool = False) -> np.ndarray:
     """Rewards of action sequences played open loop (the task's fast path), e.g. the actions a policy predicts
     along a demonstration's own states: what its per-step errors cost without compounding.
 
     :param allow_outside_region: accept goals outside the task's goal region (demonstrations' own goals)
     """
     env = gym.make(get_task(task).env_id).unwrapped
-    rewards, _ = env.play_trajectories(np.clip(actions, -env.max_joint_delta, env.max_joint_delta), goals,
-                                       allow_outside_region=allow_outside_region)
+    rewards, _ = env.play_trajectories(
+        np.clip(actions, -env.max_joint_delta, env.max_joint_delta), goals, allow_outside_region=allow_outside_region
+    )
     env.close()
     return rewards

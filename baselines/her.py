@@ -49,20 +49,29 @@ def goal_episodes(task: str, transitions: dict[str, np.ndarray]) -> dict[str, An
     stored = np.asarray(transitions["rewards"], dtype=np.float64).reshape(n, horizon)[:, -1]
     worst = int(np.argmax(np.abs(rewards[:, -1] - stored)))
     if abs(rewards[worst, -1] - stored[worst]) > REPLAY_TOLERANCE:
-        raise ValueError(f"demonstration {worst} replays to reward {rewards[worst, -1]:.6g}, not its stored "
-                         f"{stored[worst]:.6g}: the dataset was made with another version of the {task} task")
+        raise ValueError(
+            f"demonstration {worst} replays to reward {rewards[worst, -1]:.6g}, not its stored "
+            f"{stored[worst]:.6g}: the dataset was made with another version of the {task} task"
+        )
     time_left = (1 - np.arange(horizon + 1) / horizon).astype(np.float32)
-    observation = np.concatenate([states[:, :, 2:], np.broadcast_to(time_left[None, :, None], (n, horizon + 1, 1))],
-                                 axis=2)
+    observation = np.concatenate([states[:, :, 2:], np.broadcast_to(time_left[None, :, None], (n, horizon + 1, 1))], axis=2)
     env.close()
-    return {"observation": observation, "achieved_goal": paths, "desired_goal": np.repeat(goals[:, None], horizon + 1, 1),
-            "actions": actions, "rewards": rewards, "infos": infos}
+    return {
+        "observation": observation,
+        "achieved_goal": paths,
+        "desired_goal": np.repeat(goals[:, None], horizon + 1, 1),
+        "actions": actions,
+        "rewards": rewards,
+        "infos": infos,
+    }
 
 
 def goal_statistics(episodes: dict[str, Any]) -> dict[str, dict[str, np.ndarray]]:
     """Normalisation statistics of each observation key over the demonstration episodes' states."""
-    return {key: observation_statistics(episodes[key].reshape(-1, episodes[key].shape[-1]))
-            for key in ("observation", "achieved_goal", "desired_goal")}
+    return {
+        key: observation_statistics(episodes[key].reshape(-1, episodes[key].shape[-1]))
+        for key in ("observation", "achieved_goal", "desired_goal")
+    }
 
 
 def add_goal_demonstrations(model: OffPolicyAlgorithm, episodes: dict[str, Any]) -> int:
@@ -79,17 +88,23 @@ def add_goal_demonstrations(model: OffPolicyAlgorithm, episodes: dict[str, Any])
         raise ValueError("the HerReplayBuffer must keep the step infos (copy_info_dict=True) for compute_reward")
     n, horizon = episodes["rewards"].shape
     if n * horizon > buffer.buffer_size - buffer.size():
-        raise ValueError(f"{n * horizon} demonstration transitions do not fit the replay buffer's free "
-                         f"{buffer.buffer_size - buffer.size()} places")
+        raise ValueError(
+            f"{n * horizon} demonstration transitions do not fit the replay buffer's free "
+            f"{buffer.buffer_size - buffer.size()} places"
+        )
     keys = ("observation", "achieved_goal", "desired_goal")
     scaled = model.policy.scale_action(episodes["actions"])  # SB3 stores squashed algorithms' actions in [-1, 1]
     for i in range(n):
         for t in range(horizon):
             terminal = t == horizon - 1
-            buffer.add({key: episodes[key][i, t][None] for key in keys},
-                       {key: episodes[key][i, t + 1][None] for key in keys}, scaled[i, t][None],
-                       np.array([episodes["rewards"][i, t]]), np.array([terminal]),
-                       [episodes["infos"][i] if terminal else {"terminal": False}])
+            buffer.add(
+                {key: episodes[key][i, t][None] for key in keys},
+                {key: episodes[key][i, t + 1][None] for key in keys},
+                scaled[i, t][None],
+                np.array([episodes["rewards"][i, t]]),
+                np.array([terminal]),
+                [episodes["infos"][i] if terminal else {"terminal": False}],
+            )
     return n * horizon
 
 
@@ -107,13 +122,20 @@ def fetch_goal_episodes(task: str, arrays: dict[str, np.ndarray]) -> dict[str, A
     env = spec.env_class()  # Gymnasium-Robotics' env, its MuJoCo fix applied (sb3_genrl.envs.fetch_mujoco)
     observation = np.asarray(arrays["observations"][:, :, 3:], dtype=np.float64)
     if observation.shape[-1] != env.observation_space["observation"].shape[0]:
-        raise ValueError(f"the demonstrations' observations have {observation.shape[-1]} numbers, {spec.env_id}'s "
-                         f"{env.observation_space['observation'].shape[0]}: not this task's dataset")
+        raise ValueError(
+            f"the demonstrations' observations have {observation.shape[-1]} numbers, {spec.env_id}'s "
+            f"{env.observation_space['observation'].shape[0]}: not this task's dataset"
+        )
     achieved = observation[:, :, 3:6] if env.has_object else observation[:, :, 0:3]
     n, steps = arrays["actions"].shape[:2]
     desired = np.repeat(np.asarray(arrays["sampled_goals"], dtype=np.float64)[:, None], steps + 1, axis=1)
     rewards = env.compute_reward(achieved[:, 1:].reshape(-1, 3), desired[:, 1:].reshape(-1, 3), None).reshape(n, steps)
     env.close()
-    return {"observation": observation, "achieved_goal": achieved, "desired_goal": desired,
-            "actions": np.asarray(arrays["actions"], dtype=np.float32), "rewards": rewards,
-            "infos": [{"is_success": float(reward == 0.0)} for reward in rewards[:, -1]]}
+    return {
+        "observation": observation,
+        "achieved_goal": achieved,
+        "desired_goal": desired,
+        "actions": np.asarray(arrays["actions"], dtype=np.float32),
+        "rewards": rewards,
+        "infos": [{"is_success": float(reward == 0.0)} for reward in rewards[:, -1]],
+    }

@@ -14,8 +14,15 @@ from typing import Any
 from sb3_genrl.hyperparams import ZOO_KEYS, load_hyperparams
 
 # the settings file of each baseline
-ZOO_FILES = {"ppo": "ppo", "sac": "sac", "sac-no-prefill": "sac", "sac-her": "sac", "latent-ppo": "latent_ppo",
-             "latent-sac": "latent_sac", "latent-trpo": "latent_trpo"}
+ZOO_FILES = {
+    "ppo": "ppo",
+    "sac": "sac",
+    "sac-no-prefill": "sac",
+    "sac-her": "sac",
+    "latent-ppo": "latent_ppo",
+    "latent-sac": "latent_sac",
+    "latent-trpo": "latent_trpo",
+}
 DEMONSTRATIONS_AS_WARM_UP: dict[str, Any] = {"learning_starts": 0}  # SAC prefilled and SAC + HER learn at once
 # what an entry holds besides the algorithm's plain arguments
 _NOT_PLAIN = ZOO_KEYS | {"policy", "policy_kwargs", "replay_buffer_class", "replay_buffer_kwargs"}
@@ -51,9 +58,24 @@ def baseline_settings(algorithm: str, task: str) -> tuple[dict[str, Any], dict[s
 
 # Constructor arguments the baselines set themselves (the env and policy, the demonstrations' buffer and normalisation,
 # seeding, device and logging): a user's ``algorithm_kwargs`` cannot change them.
-RESERVED = frozenset({"self", "policy", "env", "seed", "device", "verbose", "tensorboard_log", "buffer_size",
-                      "replay_buffer_class", "replay_buffer_kwargs", "policy_kwargs", "_init_setup_model",
-                      "rollout_buffer_class", "action_noise"})  # (the last two take Python objects)
+RESERVED = frozenset(
+    {
+        "self",
+        "policy",
+        "env",
+        "seed",
+        "device",
+        "verbose",
+        "tensorboard_log",
+        "buffer_size",
+        "replay_buffer_class",
+        "replay_buffer_kwargs",
+        "policy_kwargs",
+        "_init_setup_model",
+        "rollout_buffer_class",
+        "action_noise",
+    }
+)  # (the last two take Python objects)
 
 
 def algorithm_class(algorithm: str) -> type:
@@ -85,8 +107,10 @@ def check_algorithm_kwargs(algorithm: str, kwargs: dict[str, Any] | None) -> dic
     names = set(inspect.signature(cls.__init__).parameters) - RESERVED
     wrong = sorted(set(kwargs) - names)
     if wrong:
-        raise ValueError(f"{algorithm} ({cls.__name__}) has no setting {', '.join(map(repr, wrong))} that a user may "
-                         f"change; the settable ones: {', '.join(sorted(names))}")
+        raise ValueError(
+            f"{algorithm} ({cls.__name__}) has no setting {', '.join(map(repr, wrong))} that a user may "
+            f"change; the settable ones: {', '.join(sorted(names))}"
+        )
     try:
         return json.loads(json.dumps(kwargs))
     except (TypeError, ValueError) as error:
@@ -120,9 +144,12 @@ def settings_record(task: str, algorithm_kwargs: dict[str, dict[str, Any]] | Non
     def plain(values: dict[str, Any]) -> dict[str, Any]:
         return {key: value.__name__ if isinstance(value, type) else value for key, value in values.items()}
 
-    cloning = {name: parameter.default for function in (behaviour_cloning, fit_actor)
-               for name, parameter in inspect.signature(function).parameters.items()
-               if parameter.default is not inspect.Parameter.empty and name != "seed"}
+    cloning = {
+        name: parameter.default
+        for function in (behaviour_cloning, fit_actor)
+        for name, parameter in inspect.signature(function).parameters.items()
+        if parameter.default is not inspect.Parameter.empty and name != "seed"
+    }
     observations = {"std_floor": STD_FLOOR, "clip": CLIP, "time_feature": True}
     changes = {name: check_algorithm_kwargs(name, kwargs) for name, kwargs in (algorithm_kwargs or {}).items()}
     record = {}

@@ -22,13 +22,22 @@ from stable_baselines3.her import HerReplayBuffer
 
 def normalized_policy(policy_kwargs: dict[str, Any], observations: np.ndarray) -> dict[str, Any]:
     """``policy_kwargs`` with the features extractor that normalises with ``observations``' statistics."""
-    return policy_kwargs | {"features_extractor_class": NormalizedFlatten,
-                            "features_extractor_kwargs": observation_statistics(observations)}
+    return policy_kwargs | {
+        "features_extractor_class": NormalizedFlatten,
+        "features_extractor_kwargs": observation_statistics(observations),
+    }
 
 
-def ppo_with_behaviour_cloning(env: gym.Env, transitions: dict[str, np.ndarray], *, task: str, seed: int,
-                               bc_kwargs: dict[str, Any] | None = None, settings: dict[str, Any] | None = None,
-                               **common: Any) -> tuple[PPO, dict[str, Any]]:
+def ppo_with_behaviour_cloning(
+    env: gym.Env,
+    transitions: dict[str, np.ndarray],
+    *,
+    task: str,
+    seed: int,
+    bc_kwargs: dict[str, Any] | None = None,
+    settings: dict[str, Any] | None = None,
+    **common: Any,
+) -> tuple[PPO, dict[str, Any]]:
     """PPO (rl-zoo3's HalfCheetah-v4 settings, ``hyperparams/ppo.yml``) whose actor is cloned from the demonstrations.
 
     :param env: the feedback env (with the time feature)
@@ -42,15 +51,31 @@ def ppo_with_behaviour_cloning(env: gym.Env, transitions: dict[str, np.ndarray],
     :return: the model and behaviour cloning's record
     """
     zoo, policy_kwargs = baseline_settings("ppo", task)
-    model = PPO(zoo_hyperparams("ppo", task)["policy"], env, seed=seed, **(zoo | (settings or {})), **common,
-                policy_kwargs=normalized_policy(policy_kwargs, transitions["observations"]))
-    record = behaviour_cloning(model.policy, transitions["observations"], transitions["actions"], transitions["dones"],
-                               seed=seed, **(bc_kwargs or {}))
+    model = PPO(
+        zoo_hyperparams("ppo", task)["policy"],
+        env,
+        seed=seed,
+        **(zoo | (settings or {})),
+        **common,
+        policy_kwargs=normalized_policy(policy_kwargs, transitions["observations"]),
+    )
+    record = behaviour_cloning(
+        model.policy, transitions["observations"], transitions["actions"], transitions["dones"], seed=seed, **(bc_kwargs or {})
+    )
     return model, record
 
 
-def sac_with_demonstrations(env: gym.Env, transitions: dict[str, np.ndarray], *, task: str, steps: int, prefill: bool,
-                            seed: int, settings: dict[str, Any] | None = None, **common: Any) -> SAC:
+def sac_with_demonstrations(
+    env: gym.Env,
+    transitions: dict[str, np.ndarray],
+    *,
+    task: str,
+    steps: int,
+    prefill: bool,
+    seed: int,
+    settings: dict[str, Any] | None = None,
+    **common: Any,
+) -> SAC:
     """SAC (rl-zoo3's MuJoCo defaults, ``hyperparams/sac.yml``), its buffer prefilled with the demonstrations or not
     (then with the zoo's random warm-up).
 
@@ -66,16 +91,30 @@ def sac_with_demonstrations(env: gym.Env, transitions: dict[str, np.ndarray], *,
     method = "sac" if prefill else "sac-no-prefill"
     zoo, policy_kwargs = baseline_settings(method, task)
     n_demos = len(transitions["observations"]) if prefill else 0
-    model = SAC(zoo_hyperparams(method, task)["policy"], env, buffer_size=n_demos + steps, seed=seed,
-                policy_kwargs=normalized_policy(policy_kwargs, transitions["observations"]), **(zoo | (settings or {})),
-                **common)
+    model = SAC(
+        zoo_hyperparams(method, task)["policy"],
+        env,
+        buffer_size=n_demos + steps,
+        seed=seed,
+        policy_kwargs=normalized_policy(policy_kwargs, transitions["observations"]),
+        **(zoo | (settings or {})),
+        **common,
+    )
     if prefill:
         prefill_replay_buffer(model, transitions)
     return model
 
 
-def sac_her_with_demonstrations(env: gym.Env, episodes: dict[str, Any], *, task: str, steps: int, seed: int,
-                                settings: dict[str, Any] | None = None, **common: Any) -> SAC:
+def sac_her_with_demonstrations(
+    env: gym.Env,
+    episodes: dict[str, Any],
+    *,
+    task: str,
+    steps: int,
+    seed: int,
+    settings: dict[str, Any] | None = None,
+    **common: Any,
+) -> SAC:
     """SAC with a ``HerReplayBuffer`` (rl-zoo3's FetchReach-v1 settings, ``final`` goals, ``hyperparams/sac.yml``)
     holding the demonstrations.
 
@@ -92,9 +131,20 @@ def sac_her_with_demonstrations(env: gym.Env, episodes: dict[str, Any], *, task:
     entry = zoo_hyperparams("sac-her", task)
     if entry.get("replay_buffer_class") != "HerReplayBuffer":
         raise ValueError(f"sac-her needs replay_buffer_class HerReplayBuffer, got {entry.get('replay_buffer_class')!r}")
-    policy_kwargs = policy_kwargs | {"features_extractor_class": NormalizedCombined,
-                                     "features_extractor_kwargs": {"statistics": goal_statistics(episodes)}}
-    model = SAC(entry["policy"], env, replay_buffer_class=HerReplayBuffer, replay_buffer_kwargs=entry["replay_buffer_kwargs"],
-                policy_kwargs=policy_kwargs, buffer_size=n_demos + steps, seed=seed, **(zoo | (settings or {})), **common)
+    policy_kwargs = policy_kwargs | {
+        "features_extractor_class": NormalizedCombined,
+        "features_extractor_kwargs": {"statistics": goal_statistics(episodes)},
+    }
+    model = SAC(
+        entry["policy"],
+        env,
+        replay_buffer_class=HerReplayBuffer,
+        replay_buffer_kwargs=entry["replay_buffer_kwargs"],
+        policy_kwargs=policy_kwargs,
+        buffer_size=n_demos + steps,
+        seed=seed,
+        **(zoo | (settings or {})),
+        **common,
+    )
     add_goal_demonstrations(model, episodes)
     return model

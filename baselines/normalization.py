@@ -66,12 +66,14 @@ class NormalizedCombined(BaseFeaturesExtractor):
     :param clip: bound of the normalised features
     """
 
-    def __init__(self, observation_space: spaces.Dict, statistics: dict[str, dict[str, np.ndarray]],
-                 clip: float = CLIP) -> None:
+    def __init__(
+        self, observation_space: spaces.Dict, statistics: dict[str, dict[str, np.ndarray]], clip: float = CLIP
+    ) -> None:
         unknown = sorted(set(statistics) - set(observation_space.spaces))
         if unknown:
-            raise ValueError(f"statistics for keys {unknown} that the observation space lacks "
-                             f"({sorted(observation_space.spaces)})")
+            raise ValueError(
+                f"statistics for keys {unknown} that the observation space lacks ({sorted(observation_space.spaces)})"
+            )
         dims = {key: int(np.prod(space.shape)) for key, space in observation_space.spaces.items()}
         super().__init__(observation_space, features_dim=sum(dims.values()))
         self.clip = float(clip)
@@ -82,8 +84,9 @@ class NormalizedCombined(BaseFeaturesExtractor):
             self.register_buffer(f"std_{key}", _vector(stats["std"], dim, f"{key} std", positive=True))
 
     def forward(self, observations: dict[str, th.Tensor]) -> th.Tensor:
-        parts = [(observations[key].flatten(1) - getattr(self, f"mean_{key}")) / getattr(self, f"std_{key}")
-                 for key in self.keys]
+        parts = [
+            (observations[key].flatten(1) - getattr(self, f"mean_{key}")) / getattr(self, f"std_{key}") for key in self.keys
+        ]
         return th.clamp(th.cat(parts, dim=1), -self.clip, self.clip)
 
 

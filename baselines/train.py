@@ -86,12 +86,26 @@ from sb3_genrl.utils import atomic_path, atomic_write_json, folder_lock
 CHECKPOINT_EVERY = 250  # episodes between checkpoints of an off-policy baseline (about 5 minutes of one core)
 
 
-def train_baseline(algorithm: str, task: str, *, episodes: int, out_dir: str | os.PathLike, seed: int = 0,
-                   demos: str | os.PathLike | dict[str, np.ndarray] | None = None, demo_episodes: int | None = None,
-                   generator: Any = None, bc_kwargs: dict[str, Any] | None = None,
-                   algorithm_kwargs: dict[str, Any] | None = None, eval_goals: int = EVAL_GOALS,
-                   checkpoint_every: int | None = CHECKPOINT_EVERY, device: str = "auto", progress_bar: bool = False,
-                   verbose: int = 0, window: int = 64, overwrite: bool = False) -> dict[str, Any]:
+def train_baseline(
+    algorithm: str,
+    task: str,
+    *,
+    episodes: int,
+    out_dir: str | os.PathLike,
+    seed: int = 0,
+    demos: str | os.PathLike | dict[str, np.ndarray] | None = None,
+    demo_episodes: int | None = None,
+    generator: Any = None,
+    bc_kwargs: dict[str, Any] | None = None,
+    algorithm_kwargs: dict[str, Any] | None = None,
+    eval_goals: int = EVAL_GOALS,
+    checkpoint_every: int | None = CHECKPOINT_EVERY,
+    device: str = "auto",
+    progress_bar: bool = False,
+    verbose: int = 0,
+    window: int = 64,
+    overwrite: bool = False,
+) -> dict[str, Any]:
     """Train one baseline for ``episodes`` episodes and write its outputs to ``out_dir``.
 
     :param algorithm: one of :data:`BASELINES`
@@ -122,8 +136,10 @@ def train_baseline(algorithm: str, task: str, *, episodes: int, out_dir: str | o
     transitions, generator = _inputs(algorithm, spec.name, demos, demo_episodes, generator)
     steps = int(episodes) if transitions is None else int(episodes) * spec.horizon
     summary = {"algorithm": algorithm, "task": spec.name, "episodes": int(episodes), "seed": seed} | (
-        {"settings": baseline_settings(algorithm, spec.name)[0] | changes} if transitions is None
-        else _demonstration_record(algorithm, spec.name, transitions, bc_kwargs, changes))
+        {"settings": baseline_settings(algorithm, spec.name)[0] | changes}
+        if transitions is None
+        else _demonstration_record(algorithm, spec.name, transitions, bc_kwargs, changes)
+    )
     checkpoint_every = checkpoint_every if algorithm in OFF_POLICY_BASELINES else None  # the others: short runs
     identity = _identity(summary) | {"eval_goals": eval_goals, "generator_sha256": generator_digest(generator)}
     with folder_lock(out):  # one run at a time in out; another run's files are refused, never mixed in
@@ -131,8 +147,21 @@ def train_baseline(algorithm: str, task: str, *, episodes: int, out_dir: str | o
         if finished is not None:  # this very run, finished: nothing to do
             return finished
         state = None if checkpoint_every is None else resume_state(out, _identity(summary))  # this run's checkpoint
-        model, summary = _model(algorithm, spec.name, out, state, transitions, generator, steps, summary, eval_goals,
-                                bc_kwargs, changes, began, {"seed": seed, "device": device, "verbose": verbose})
+        model, summary = _model(
+            algorithm,
+            spec.name,
+            out,
+            state,
+            transitions,
+            generator,
+            steps,
+            summary,
+            eval_goals,
+            bc_kwargs,
+            changes,
+            began,
+            {"seed": seed, "device": device, "verbose": verbose},
+        )
         try:
             summary["learn_seconds"] = _learn(model, steps, out, state, checkpoint_every, summary, progress_bar, verbose)
         finally:  # the training env: its Monitor file (complete after this) and any env processes
@@ -155,22 +184,48 @@ def _inputs(algorithm: str, task: str, demos: Any, demo_episodes: int | None, ge
     return None, generator
 
 
-def _model(algorithm: str, task: str, out: pathlib.Path, state: dict[str, Any] | None, transitions: Any, generator: Any,
-           steps: int, summary: dict[str, Any], eval_goals: int, bc_kwargs: dict[str, Any] | None,
-           changes: dict[str, Any], began: tuple[float, float], common: dict[str, Any]) -> tuple[Any, dict[str, Any]]:
+def _model(
+    algorithm: str,
+    task: str,
+    out: pathlib.Path,
+    state: dict[str, Any] | None,
+    transitions: Any,
+    generator: Any,
+    steps: int,
+    summary: dict[str, Any],
+    eval_goals: int,
+    bc_kwargs: dict[str, Any] | None,
+    changes: dict[str, Any],
+    began: tuple[float, float],
+    common: dict[str, Any],
+) -> tuple[Any, dict[str, Any]]:
     """The model to train and the summary so far: resumed from ``state``, or new (its setup's seconds recorded)."""
     if state is not None:
         return _resumed_model(algorithm, task, out, state, common["device"])
-    model = (_latent_model(algorithm, task, generator, summary["settings"], common, out) if transitions is None else
-             _feedback_model(algorithm, task, transitions, steps, out, summary, eval_goals, bc_kwargs,
-                             common | {"settings": changes}))
+    model = (
+        _latent_model(algorithm, task, generator, summary["settings"], common, out)
+        if transitions is None
+        else _feedback_model(
+            algorithm, task, transitions, steps, out, summary, eval_goals, bc_kwargs, common | {"settings": changes}
+        )
+    )
     # demonstrations, behaviour cloning and its evaluation: wall-clock and this process' CPU seconds
-    return model, summary | {"setup_seconds": time.perf_counter() - began[0],
-                             "setup_cpu_seconds": time.process_time() - began[1]}
+    return model, summary | {
+        "setup_seconds": time.perf_counter() - began[0],
+        "setup_cpu_seconds": time.process_time() - began[1],
+    }
 
 
-def _finish(algorithm: str, task: str, model: Any, out: pathlib.Path, summary: dict[str, Any], generator: Any,
-            eval_goals: int, window: int) -> dict[str, Any]:
+def _finish(
+    algorithm: str,
+    task: str,
+    model: Any,
+    out: pathlib.Path,
+    summary: dict[str, Any],
+    generator: Any,
+    eval_goals: int,
+    window: int,
+) -> dict[str, Any]:
     """The trained run's results, final evaluation and health in ``summary.json``; its checkpoint removed."""
     summary |= _episode_results(algorithm, task, out, window, summary["settings"])
     summary["final_eval"] = evaluate_trained(algorithm, model, task, generator=generator, goals=eval_goals)
@@ -182,18 +237,34 @@ def _finish(algorithm: str, task: str, model: Any, out: pathlib.Path, summary: d
     return summary
 
 
-def _learn(model: Any, steps: int, out: pathlib.Path, state: dict[str, Any] | None, checkpoint_every: int | None,
-           summary: dict[str, Any], progress_bar: bool, verbose: int) -> float:
+def _learn(
+    model: Any,
+    steps: int,
+    out: pathlib.Path,
+    state: dict[str, Any] | None,
+    checkpoint_every: int | None,
+    summary: dict[str, Any],
+    progress_bar: bool,
+    verbose: int,
+) -> float:
     """Train ``model`` from ``state`` (a checkpoint's, or ``None``: from the start) to ``steps`` environment steps with
     SB3's logger in ``out``, checkpointing every ``checkpoint_every`` episodes, and save it there; return the seconds
     it trained in all (those before a resume included)."""
     algorithm, start = summary["algorithm"], state or {"episodes": 0, "steps": 0, "learn_seconds": 0.0}
-    callback = None if checkpoint_every is None else EpisodeCheckpoint(
-        out / CHECKPOINT_DIR, checkpoint_every, _identity(summary), start, {"summary": summary})
+    callback = (
+        None
+        if checkpoint_every is None
+        else EpisodeCheckpoint(out / CHECKPOINT_DIR, checkpoint_every, _identity(summary), start, {"summary": summary})
+    )
     model.set_logger(training_logger(out, verbose))
     began = time.perf_counter()
-    model.learn(total_timesteps=steps - start["steps"], progress_bar=progress_bar, tb_log_name=algorithm,
-                reset_num_timesteps=start["steps"] == 0, callback=callback)
+    model.learn(
+        total_timesteps=steps - start["steps"],
+        progress_bar=progress_bar,
+        tb_log_name=algorithm,
+        reset_num_timesteps=start["steps"] == 0,
+        callback=callback,
+    )
     seconds = time.perf_counter() - began
     model.logger.close()
     with atomic_path(out / f"{algorithm}_policy.zip") as tmp:
@@ -201,15 +272,19 @@ def _learn(model: Any, steps: int, out: pathlib.Path, state: dict[str, Any] | No
     return float(start["learn_seconds"]) + seconds
 
 
-def _demonstration_record(algorithm: str, task: str, transitions: dict[str, np.ndarray],
-                          bc_kwargs: dict[str, Any] | None, changes: dict[str, Any]) -> dict[str, Any]:
+def _demonstration_record(
+    algorithm: str, task: str, transitions: dict[str, np.ndarray], bc_kwargs: dict[str, Any] | None, changes: dict[str, Any]
+) -> dict[str, Any]:
     """The summary's entries on the demonstrations and the settings of a feedback baseline (``changes``: the user's
     changes to them)."""
     settings = settings_record(task, {algorithm: changes})[algorithm]
     if algorithm == "ppo":
         settings["behaviour_cloning"] |= bc_kwargs or {}
-    return {"demo_transitions": len(transitions["observations"]), "demo_sha256": _fingerprint(transitions),
-            "settings": settings}
+    return {
+        "demo_transitions": len(transitions["observations"]),
+        "demo_sha256": _fingerprint(transitions),
+        "settings": settings,
+    }
 
 
 def _identity(summary: dict[str, Any]) -> dict[str, Any]:
@@ -226,8 +301,9 @@ def _fingerprint(transitions: dict[str, np.ndarray]) -> str:
     return digest.hexdigest()[:16]
 
 
-def _resumed_model(algorithm: str, task: str, out: pathlib.Path, state: dict[str, Any],
-                   device: str) -> tuple[SAC, dict[str, Any]]:
+def _resumed_model(
+    algorithm: str, task: str, out: pathlib.Path, state: dict[str, Any], device: str
+) -> tuple[SAC, dict[str, Any]]:
     """The off-policy baseline as its checkpoint left it, on a new monitored env that appends to the Monitor file, and
     the run's summary so far (the setup's record, and the episodes at which it was resumed)."""
     prepare_resume(out, state)
@@ -241,21 +317,33 @@ def _resumed_model(algorithm: str, task: str, out: pathlib.Path, state: dict[str
     return model, state["summary"] | {"resumed_at_episodes": resumed}
 
 
-def _episode_results(algorithm: str, task: str, out: pathlib.Path, window: int,
-                     settings: dict[str, Any]) -> dict[str, Any]:
+def _episode_results(algorithm: str, task: str, out: pathlib.Path, window: int, settings: dict[str, Any]) -> dict[str, Any]:
     """Write the run's learning curve; return the summary's entries on the episodes played (from the Monitor file)."""
     curve = write_learning_curve(out / MONITOR_FILE, out, window=window, title=f"{algorithm} on {task}")
     episodes_record = read_monitor(out / MONITOR_FILE)
     returns = episodes_record["return"]
-    results: dict[str, Any] = {"episodes_played": len(returns), "final_mean_reward": float(curve["mean_reward"][-1]),
-                               "best_mean_reward": float(np.max(curve["mean_reward"])), "max_reward": float(returns.max())}
+    results: dict[str, Any] = {
+        "episodes_played": len(returns),
+        "final_mean_reward": float(curve["mean_reward"][-1]),
+        "best_mean_reward": float(np.max(curve["mean_reward"])),
+        "max_reward": float(returns.max()),
+    }
     if algorithm == "ppo":
         results["first_batch"] = _first_batch(episodes_record, settings["n_steps"])
     return results
 
 
-def _check_arguments(algorithm: str, episodes: int, seed: int, demos: Any, demo_episodes: int | None, generator: Any,
-                     eval_goals: int, checkpoint_every: int | None, device: str) -> None:
+def _check_arguments(
+    algorithm: str,
+    episodes: int,
+    seed: int,
+    demos: Any,
+    demo_episodes: int | None,
+    generator: Any,
+    eval_goals: int,
+    checkpoint_every: int | None,
+    device: str,
+) -> None:
     """Refuse bad arguments before anything is built or simulated."""
     if algorithm not in BASELINES:
         raise ValueError(f"unknown baseline {algorithm!r}; expected one of {BASELINES}")
@@ -283,9 +371,17 @@ def _monitored_env(algorithm: str, task: str, out: pathlib.Path, *, append: bool
     return monitor_episodes(env, out, append=append)
 
 
-def _feedback_model(algorithm: str, task: str, transitions: dict[str, np.ndarray], steps: int, out: pathlib.Path,
-                    summary: dict[str, Any], eval_goals: int, bc_kwargs: dict[str, Any] | None,
-                    common: dict[str, Any]) -> PPO | SAC:
+def _feedback_model(
+    algorithm: str,
+    task: str,
+    transitions: dict[str, np.ndarray],
+    steps: int,
+    out: pathlib.Path,
+    summary: dict[str, Any],
+    eval_goals: int,
+    bc_kwargs: dict[str, Any] | None,
+    common: dict[str, Any],
+) -> PPO | SAC:
     """The feedback baseline's model on a monitored env, its demonstrations in place; behaviour cloning's record
     goes to ``summary``."""
     env = _monitored_env(algorithm, task, out)
@@ -299,15 +395,24 @@ def _feedback_model(algorithm: str, task: str, transitions: dict[str, np.ndarray
         model.save(tmp)
     distances = {}
     for mode in ("deterministic", "sampled"):
-        rewards = evaluate_feedback_policy(model, task, goals=eval_goals, seed=EVAL_GOAL_SEED,
-                                           deterministic=mode == "deterministic")["rewards"]
+        rewards = evaluate_feedback_policy(
+            model, task, goals=eval_goals, seed=EVAL_GOAL_SEED, deterministic=mode == "deterministic"
+        )["rewards"]
         distances[f"{mode}_distance"] = float(-rewards.mean())
     best = record["best_epoch"] - 1
-    summary["bc"] = {"epochs": record["epochs"], "best_epoch": record["best_epoch"],
-                     "train_loss": record["train_loss"][best], "heldout_loss": record["heldout_loss"][best],
-                     "train_episodes": record["train_episodes"], "heldout_episodes": record["heldout_episodes"],
-                     "residual_std": record["residual_std"], "action_std": record["action_std"],
-                     "eval_goals": eval_goals, "eval_goal_seed": EVAL_GOAL_SEED, **distances}
+    summary["bc"] = {
+        "epochs": record["epochs"],
+        "best_epoch": record["best_epoch"],
+        "train_loss": record["train_loss"][best],
+        "heldout_loss": record["heldout_loss"][best],
+        "train_episodes": record["train_episodes"],
+        "heldout_episodes": record["heldout_episodes"],
+        "residual_std": record["residual_std"],
+        "action_std": record["action_std"],
+        "eval_goals": eval_goals,
+        "eval_goal_seed": EVAL_GOAL_SEED,
+        **distances,
+    }
     return model
 
 
@@ -318,8 +423,11 @@ def _first_batch(episodes: dict[str, np.ndarray], n_steps: int) -> dict[str, Any
     """
     returns = episodes["return"]
     first = returns[: int(np.sum(np.cumsum(episodes["length"]) <= n_steps))]
-    return {"episodes": len(first), "mean_distance": float(-first.mean()) if len(first) else None,
-            "first_64_mean_distance": float(-returns[:64].mean())}
+    return {
+        "episodes": len(first),
+        "mean_distance": float(-first.mean()) if len(first) else None,
+        "first_64_mean_distance": float(-returns[:64].mean()),
+    }
 
 
 def _demonstrations(demos: Any, demo_episodes: int | None, task: str) -> dict[str, np.ndarray]:
@@ -338,8 +446,7 @@ def _demonstrations(demos: Any, demo_episodes: int | None, task: str) -> dict[st
     return {key: np.asarray(value)[:n] for key, value in transitions.items()}
 
 
-def _latent_model(algorithm: str, task: str, generator: Any, settings: dict[str, Any], common: dict,
-                  out: pathlib.Path) -> Any:
+def _latent_model(algorithm: str, task: str, generator: Any, settings: dict[str, Any], common: dict, out: pathlib.Path) -> Any:
     """A latent-space baseline on the task's :class:`~sb3_genrl.LatentActionWrapper`, under the run's Monitor."""
     from sb3_genrl import LatentActionWrapper
 

@@ -98,22 +98,34 @@ def run_settings(method: str, args: argparse.Namespace, seed: int, demos: str, g
     from sb3_genrl.data import dataset_info
 
     info = dataset_info(demos)
-    settings: dict[str, Any] = {"method": method, "task": args.task, "seed": seed, "episodes": args.episodes,
-                                "sb3_genrl": __version__}
+    settings: dict[str, Any] = {
+        "method": method,
+        "task": args.task,
+        "seed": seed,
+        "episodes": args.episodes,
+        "sb3_genrl": __version__,
+    }
     changes = args.baseline_kwargs.get(method, {})
     if changes:  # (only when given, so that the records of runs without changes stay as they were)
         settings["algorithm_kwargs"] = changes
     if method == "genrl" or method.startswith("latent-"):
-        settings |= {"generator": os.path.abspath(generator), "generator_sha256": _file_digest(generator),
-                     "batch_episodes": args.genrl_kwargs.get("n_steps", WINDOW) if method == "genrl" else WINDOW}
+        settings |= {
+            "generator": os.path.abspath(generator),
+            "generator_sha256": _file_digest(generator),
+            "batch_episodes": args.genrl_kwargs.get("n_steps", WINDOW) if method == "genrl" else WINDOW,
+        }
         if method == "genrl":  # the chosen GenRL arguments, and every setting in effect
             from sb3_genrl.genrl.train import genrl_settings
 
             settings["genrl_kwargs"] = args.genrl_kwargs
             settings["genrl"] = genrl_settings(settings["genrl_kwargs"])
     else:
-        settings |= {"demos": os.path.abspath(demos), "demo_episodes": info["episodes"], "demo_seed": info.get("seed"),
-                     "hyperparameters": settings_record(args.task, {method: changes} if changes else None)[method]}
+        settings |= {
+            "demos": os.path.abspath(demos),
+            "demo_episodes": info["episodes"],
+            "demo_seed": info.get("seed"),
+            "hyperparameters": settings_record(args.task, {method: changes} if changes else None)[method],
+        }
     return json.loads(json.dumps(settings))  # as it reads back from JSON
 
 
@@ -131,20 +143,43 @@ def run_one(method: str, settings: dict[str, Any], demos: str, generator: str, r
         from sb3_genrl.genrl import train_policy
 
         genrl_kwargs = {key: value for key, value in settings["genrl_kwargs"].items() if key != "n_steps"}
-        summary = train_policy(settings["task"], generator, episodes=settings["episodes"], seed=settings["seed"],
-                               out_dir=run, batch_episodes=settings["batch_episodes"], device="cpu", **genrl_kwargs)
+        summary = train_policy(
+            settings["task"],
+            generator,
+            episodes=settings["episodes"],
+            seed=settings["seed"],
+            out_dir=run,
+            batch_episodes=settings["batch_episodes"],
+            device="cpu",
+            **genrl_kwargs,
+        )
         timing = {"setup_seconds": 0.0, "setup_cpu_seconds": 0.0, "learn_seconds": time.perf_counter() - began}
     else:
         from sb3_genrl.baselines.train import train_baseline
 
         latent = method.startswith("latent-")
-        summary = train_baseline(method, settings["task"], episodes=settings["episodes"], out_dir=run,
-                                 seed=settings["seed"], demos=None if latent else demos,
-                                 generator=generator if latent else None,
-                                 algorithm_kwargs=settings.get("algorithm_kwargs"), device="cpu")
+        summary = train_baseline(
+            method,
+            settings["task"],
+            episodes=settings["episodes"],
+            out_dir=run,
+            seed=settings["seed"],
+            demos=None if latent else demos,
+            generator=generator if latent else None,
+            algorithm_kwargs=settings.get("algorithm_kwargs"),
+            device="cpu",
+        )
         timing = {key: summary[key] for key in ("setup_seconds", "setup_cpu_seconds", "learn_seconds")}
-    atomic_write_json(run / "run.json", {"settings": settings, **timing, "episodes_played": _episodes_played(run),
-                                         "bc": summary.get("bc"), "first_batch": summary.get("first_batch")})
+    atomic_write_json(
+        run / "run.json",
+        {
+            "settings": settings,
+            **timing,
+            "episodes_played": _episodes_played(run),
+            "bc": summary.get("bc"),
+            "first_batch": summary.get("first_batch"),
+        },
+    )
     return run_dir
 
 
@@ -155,8 +190,9 @@ def finished(run: pathlib.Path, settings: dict[str, Any]) -> bool:
         return False
     recorded = json.loads(record.read_text())["settings"]
     if recorded != settings:
-        raise ValueError(f"{run} holds a finished run with other settings ({', '.join(differing(recorded, settings))}); "
-                         "use another --work")
+        raise ValueError(
+            f"{run} holds a finished run with other settings ({', '.join(differing(recorded, settings))}); use another --work"
+        )
     return True
 
 
@@ -199,9 +235,14 @@ def final_evaluation(run: pathlib.Path, method: str, task: str, generator: str |
     from sb3_genrl.hyperparams import EVAL_GOAL_SEED
 
     policy = run / f"{method}_policy.zip"
-    key = {"policy_sha256": _file_digest(str(policy)) if policy.exists() else None, "task": task, "goals": EVAL_GOALS,
-           "goal_seed": EVAL_GOAL_SEED, "generator_sha256": _file_digest(generator) if generator else None,
-           "sb3_genrl": sb3_genrl.__version__}
+    key = {
+        "policy_sha256": _file_digest(str(policy)) if policy.exists() else None,
+        "task": task,
+        "goals": EVAL_GOALS,
+        "goal_seed": EVAL_GOAL_SEED,
+        "generator_sha256": _file_digest(generator) if generator else None,
+        "sb3_genrl": sb3_genrl.__version__,
+    }
     cache = run / "final_eval.json"
     if not policy.exists():  # an archived run (see the module doc): its evaluation is all there is
         if not cache.exists():
@@ -238,28 +279,51 @@ def arguments(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--episodes", type=COUNT, default=3000, help="episode budget of every run")
     parser.add_argument("--seeds", type=SEED, nargs="+", default=[0, 1, 2])
     parser.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)
-    parser.add_argument("--demos", type=EXISTING, default=None,
-                        help="demonstration dataset (default: make --demo-count of them)")
+    parser.add_argument(
+        "--demos", type=EXISTING, default=None, help="demonstration dataset (default: make --demo-count of them)"
+    )
     parser.add_argument("--demo-count", type=COUNT, default=4000, help="demonstrations to make when --demos is not given")
-    parser.add_argument("--generator", type=EXISTING, default=None,
-                        help=f"generator for GenRL and the latent baselines (default: {GENERATOR_PRESET}, "
-                             f"{GENERATOR_EPOCHS} epochs, on the demonstrations)")
-    parser.add_argument("--genrl-kwargs", type=json_object_argument, default={},
-                        help="GenRL's arguments, as JSON (default: GenRL's defaults; see the module doc)")
-    parser.add_argument("--baseline-kwargs", type=baseline_kwargs_argument, default={},
-                        help="changes to the baselines' rl-zoo3 settings, as JSON: {baseline: {argument: value}}, e.g. "
-                             "'{\"ppo\": {\"target_kl\": 0.02}}' (default: none)")
+    parser.add_argument(
+        "--generator",
+        type=EXISTING,
+        default=None,
+        help=f"generator for GenRL and the latent baselines (default: {GENERATOR_PRESET}, "
+        f"{GENERATOR_EPOCHS} epochs, on the demonstrations)",
+    )
+    parser.add_argument(
+        "--genrl-kwargs",
+        type=json_object_argument,
+        default={},
+        help="GenRL's arguments, as JSON (default: GenRL's defaults; see the module doc)",
+    )
+    parser.add_argument(
+        "--baseline-kwargs",
+        type=baseline_kwargs_argument,
+        default={},
+        help="changes to the baselines' rl-zoo3 settings, as JSON: {baseline: {argument: value}}, e.g. "
+        '\'{"ppo": {"target_kl": 0.02}}\' (default: none)',
+    )
     parser.add_argument("--jobs", type=COUNT, default=1, help="runs at a time, one process (one core) each")
-    parser.add_argument("--work", type=OUT_DIR, default=None,
-                        help="folder of the runs (default: benchmarks/runs/baselines_TASK)")
-    parser.add_argument("--out", type=JSON_OUT, default=None,
-                        help="JSON result (default: benchmarks/results/baselines[_TASK].json); .md and PNGs beside it")
-    parser.add_argument("--merge", action="store_true",
-                        help="keep the methods of an existing --out that this call does not run (same settings only)")
+    parser.add_argument(
+        "--work", type=OUT_DIR, default=None, help="folder of the runs (default: benchmarks/runs/baselines_TASK)"
+    )
+    parser.add_argument(
+        "--out",
+        type=JSON_OUT,
+        default=None,
+        help="JSON result (default: benchmarks/results/baselines[_TASK].json); .md and PNGs beside it",
+    )
+    parser.add_argument(
+        "--merge",
+        action="store_true",
+        help="keep the methods of an existing --out that this call does not run (same settings only)",
+    )
     args = parser.parse_args(argv)
     if set(args.baseline_kwargs) - set(args.methods):
-        parser.error(f"--baseline-kwargs changes {', '.join(sorted(set(args.baseline_kwargs) - set(args.methods)))}, "
-                     "which --methods does not run")
+        parser.error(
+            f"--baseline-kwargs changes {', '.join(sorted(set(args.baseline_kwargs) - set(args.methods)))}, "
+            "which --methods does not run"
+        )
     try:
         check_genrl_settings(args.genrl_kwargs)
     except (TypeError, ValueError) as error:
@@ -292,11 +356,20 @@ def main(argv: list[str] | None = None) -> None:
     spec = get_task(args.task)
     args.task = spec.name
     work = pathlib.Path(args.work or HERE / "runs" / f"baselines_{spec.name}")
-    out = pathlib.Path(args.out or HERE / "results" / ("baselines.json" if spec.name == "hockey"
-                                                       else f"baselines_{spec.name}.json"))
+    out = pathlib.Path(
+        args.out or HERE / "results" / ("baselines.json" if spec.name == "hockey" else f"baselines_{spec.name}.json")
+    )
     # what the result is a result of, built up as it becomes known; with --merge, compared with --out's at each step
-    benchmark = {"benchmark": "baselines", "task": spec.name, "horizon": spec.horizon, "episodes": args.episodes,
-                 "seeds": args.seeds, "window": WINDOW, "sb3_genrl": _version(), "methods": {}}
+    benchmark = {
+        "benchmark": "baselines",
+        "task": spec.name,
+        "horizon": spec.horizon,
+        "episodes": args.episodes,
+        "seeds": args.seeds,
+        "window": WINDOW,
+        "sb3_genrl": _version(),
+        "methods": {},
+    }
     check_merge = MergeCheck(out, args.merge)
     check_merge(benchmark)
     work.mkdir(parents=True, exist_ok=True)
@@ -305,8 +378,11 @@ def main(argv: list[str] | None = None) -> None:
     if generator:
         benchmark["generator_sha256"] = _file_digest(generator)
     check_merge(benchmark)
-    jobs = [(method, run_settings(method, args, seed, demos, generator), demos, generator,
-             str(work / method / f"seed{seed}")) for method in args.methods for seed in args.seeds]
+    jobs = [
+        (method, run_settings(method, args, seed, demos, generator), demos, generator, str(work / method / f"seed{seed}"))
+        for method in args.methods
+        for seed in args.seeds
+    ]
     run_jobs(jobs, args.jobs)
     result = benchmark | package_versions() | {"machine": platform.machine(), "cpus": os.cpu_count(), "jobs": args.jobs}
     result = collect(result, args, work, generator, {job[0]: job[1] for job in jobs})
@@ -336,8 +412,13 @@ def run_jobs(jobs: list[tuple[Any, ...]], processes: int) -> None:
             print(f"done {future.result()} ({time.perf_counter() - began:.0f} s)", flush=True)
 
 
-def collect(result: dict[str, Any], args: argparse.Namespace, work: pathlib.Path, generator: str | None,
-            settings: dict[str, dict[str, Any]]) -> dict[str, Any]:
+def collect(
+    result: dict[str, Any],
+    args: argparse.Namespace,
+    work: pathlib.Path,
+    generator: str | None,
+    settings: dict[str, dict[str, Any]],
+) -> dict[str, Any]:
     """``result`` with each method's :func:`method_result` (its runs' final evaluations made or read first);
     ``settings``: each method's run settings (the same for all its seeds)."""
     from sb3_genrl.envs import get_task

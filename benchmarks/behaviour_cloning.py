@@ -50,18 +50,24 @@ def seed_result(run: pathlib.Path, task: str, transitions: dict[str, np.ndarray]
     observations = observations.reshape(-1, horizon, observations.shape[-1])
     goals = observations[:, 0, :2]  # the observation starts with the goal's (x, y)
     if len(goals) != summary["bc"]["heldout_episodes"]:
-        raise ValueError(f"{run}: {len(goals)} held-out demonstrations, but its cloning held out "
-                         f"{summary['bc']['heldout_episodes']}; were these its demonstrations?")
+        raise ValueError(
+            f"{run}: {len(goals)} held-out demonstrations, but its cloning held out "
+            f"{summary['bc']['heldout_episodes']}; were these its demonstrations?"
+        )
     actions, _ = policy.predict(observations.reshape(-1, observations.shape[-1]), deterministic=True)
     closed = evaluate_feedback_policy(policy, task, goals=goals, allow_outside_region=True)["rewards"]
-    open_loop = -open_loop_rewards(task, actions.reshape(len(goals), horizon, -1), goals,
-                                    allow_outside_region=True)
-    return {"seed": seed, "held_out_goals": {"deterministic": summary["bc"]["deterministic_distance"],
-                                             "sampled": summary["bc"]["sampled_distance"]},
-            "first_batch": summary.get("first_batch"),
-            "held_out_demonstrations": len(goals),
-            "open_loop_on_held_out_demonstrations": float(open_loop.mean()),
-            "closed_loop_on_held_out_demonstrations": float(-closed.mean())}
+    open_loop = -open_loop_rewards(task, actions.reshape(len(goals), horizon, -1), goals, allow_outside_region=True)
+    return {
+        "seed": seed,
+        "held_out_goals": {
+            "deterministic": summary["bc"]["deterministic_distance"],
+            "sampled": summary["bc"]["sampled_distance"],
+        },
+        "first_batch": summary.get("first_batch"),
+        "held_out_demonstrations": len(goals),
+        "open_loop_on_held_out_demonstrations": float(open_loop.mean()),
+        "closed_loop_on_held_out_demonstrations": float(-closed.mean()),
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -76,11 +82,11 @@ def main(argv: list[str] | None = None) -> int:
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--task", default="hockey", choices=arm_tasks())
-    parser.add_argument("--work", type=EXISTING, help="the baselines benchmark's work folder "
-                        "(default: benchmarks/runs/baselines_TASK)")
+    parser.add_argument(
+        "--work", type=EXISTING, help="the baselines benchmark's work folder (default: benchmarks/runs/baselines_TASK)"
+    )
     parser.add_argument("--seeds", type=SEED, nargs="+", default=[0, 1, 2])
-    parser.add_argument("--out", type=JSON_OUT,
-                        help="JSON (default: benchmarks/results/behaviour_cloning_TASK.json)")
+    parser.add_argument("--out", type=JSON_OUT, help="JSON (default: benchmarks/results/behaviour_cloning_TASK.json)")
     args = parser.parse_args(argv)
     spec = get_task(args.task)
     work = args.work or HERE / "runs" / f"baselines_{spec.name}"
@@ -91,8 +97,14 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"no finished PPO (BC) run in {missing}; run benchmarks/baselines.py --methods ppo first")
     transitions = add_time_feature(load_transitions(work / "demonstrations", task=spec.name), spec.horizon)
     still = evaluate_feedback_policy(HoldStill(), spec.name, goals=EVAL_GOALS, seed=EVAL_GOAL_SEED)
-    result = {"task": spec.name, "goals": EVAL_GOALS, "goal_seed": EVAL_GOAL_SEED, "work": str(work),
-              "arm_holding_still": float(-still["rewards"].mean()), "seeds": []}
+    result = {
+        "task": spec.name,
+        "goals": EVAL_GOALS,
+        "goal_seed": EVAL_GOAL_SEED,
+        "work": str(work),
+        "arm_holding_still": float(-still["rewards"].mean()),
+        "seeds": [],
+    }
     for seed, run in zip(args.seeds, runs, strict=True):
         result["seeds"].append(seed_result(run, spec.name, transitions, seed))
         print(json.dumps(result["seeds"][-1]), flush=True)

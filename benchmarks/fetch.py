@@ -73,40 +73,62 @@ def arguments(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--generator", type=EXISTING, default=None, help="a trained generator")
     parser.add_argument("--demos", type=COUNT, default=4000, help="demonstrations to make (default 4000)")
     parser.add_argument("--epochs", type=COUNT, default=300, help="generator epochs (default 300)")
-    parser.add_argument("--generator-seeds", type=COUNT, default=4,
-                        help="generators trained (seeds 0, 1, ...); the one whose fitted mean solves the most tuning "
-                             "initial states is kept (default 4)")
-    parser.add_argument("--selection-states", type=COUNT, default=100,
-                        help="tuning initial states (reset seeds from TUNING_GOAL_SEED) that choose the generator")
+    parser.add_argument(
+        "--generator-seeds",
+        type=COUNT,
+        default=4,
+        help="generators trained (seeds 0, 1, ...); the one whose fitted mean solves the most tuning "
+        "initial states is kept (default 4)",
+    )
+    parser.add_argument(
+        "--selection-states",
+        type=COUNT,
+        default=100,
+        help="tuning initial states (reset seeds from TUNING_GOAL_SEED) that choose the generator",
+    )
     parser.add_argument("--episodes", type=COUNT, default=None, help="GenRL episodes (default: the task's)")
     parser.add_argument("--seeds", type=SEED, nargs="+", default=list(BENCHMARK_SEEDS))
-    parser.add_argument("--eval-every", type=COUNT, default=None,
-                        help="episodes between evaluations, a multiple of the episodes per iteration (default: about "
-                             "a sixth of the budget)")
+    parser.add_argument(
+        "--eval-every",
+        type=COUNT,
+        default=None,
+        help="episodes between evaluations, a multiple of the episodes per iteration (default: about a sixth of the budget)",
+    )
     parser.add_argument("--eval-states", type=COUNT, default=500, help="held-out initial states per evaluation")
     parser.add_argument("--recon-demos", type=COUNT, default=200, help="new demonstrations reconstructed (default 200)")
     parser.add_argument("--limit-states", type=COUNT, default=100, help="held-out states of the generator's limit")
     parser.add_argument("--prior-draws", type=COUNT, default=100, help="prior draws per state of the generator's limit")
-    parser.add_argument("--near-draws", type=COUNT, default=16,
-                        help="draws from the first seed's final policy per held-out state of the generator's limit near "
-                             "it (default 16)")
+    parser.add_argument(
+        "--near-draws",
+        type=COUNT,
+        default=16,
+        help="draws from the first seed's final policy per held-out state of the generator's limit near it (default 16)",
+    )
     parser.add_argument("--threads", type=COUNT, default=1, help="worker processes playing episodes (default 1)")
     parser.add_argument("--work", default=None, help="folder of the stages' files (default: runs/fetch/TASK)")
     parser.add_argument("--out", type=JSON_OUT, default=None, help="JSON output (default: results/fetch_TASK.json)")
-    parser.add_argument("--no-demonstrations", action="store_true",
-                        help="GenRL without the entry's learning from demonstrations (its callback "
-                             "sb3_genrl.genrl.demonstrations.DemonstrationCallback), for the comparison")
+    parser.add_argument(
+        "--no-demonstrations",
+        action="store_true",
+        help="GenRL without the entry's learning from demonstrations (its callback "
+        "sb3_genrl.genrl.demonstrations.DemonstrationCallback), for the comparison",
+    )
     parser.add_argument("--overwrite", action="store_true", help="start again instead of resuming --out")
-    parser.add_argument("--new-runs", action="store_true",
-                        help="keep --out's demonstrations, generator and its measures, and start its GenRL runs again "
-                             "(when only GenRL's settings differ)")
+    parser.add_argument(
+        "--new-runs",
+        action="store_true",
+        help="keep --out's demonstrations, generator and its measures, and start its GenRL runs again "
+        "(when only GenRL's settings differ)",
+    )
     args = parser.parse_args(argv)
     args.out = args.out or os.path.join(RESULTS, f"fetch_{args.task}.json")
     args.work = os.path.abspath(args.work or os.path.join(ROOT, "runs", "fetch", args.task))
     args.dataset = args.data or os.path.join(args.work, "demonstrations")  # the demonstrations GenRL learns from
     if not args.no_demonstrations and args.generator is not None and args.data is None:
-        parser.error("the task's settings learn from demonstrations: give the generator's dataset as --data with "
-                     "--generator (or --no-demonstrations)")
+        parser.error(
+            "the task's settings learn from demonstrations: give the generator's dataset as --data with "
+            "--generator (or --no-demonstrations)"
+        )
     episodes, batch_episodes, _ = task_settings(args.task)
     args.episodes = args.episodes or episodes
     args.eval_every = args.eval_every or max(batch_episodes, round(args.episodes / 6 / batch_episodes) * batch_episodes)
@@ -118,21 +140,31 @@ def arguments(argv: list[str] | None = None) -> argparse.Namespace:
 def settings_of(args: argparse.Namespace) -> dict[str, object]:
     """What the run is: compared with the JSON's on resume."""
     _, batch_episodes, genrl_kwargs = task_settings(args.task)
-    return {"task": args.task, "env_id": get_task(args.task).env_id, "episodes": args.episodes,
-            "batch_episodes": batch_episodes, "genrl_settings": recorded_genrl_settings(args.task),
-            "seeds": list(args.seeds), "eval_every": args.eval_every, "eval_states": args.eval_states,
-            "eval_seed": EVAL_GOAL_SEED, "demonstrations": args.demos if args.data is None else os.path.abspath(args.data),
-            "generator": "trained" if args.generator is None else os.path.abspath(args.generator),
-            "preset": quickstart_preset(args.task), "generator_recipe": resolve_generator_spec(quickstart_preset(args.task)),
-            "epochs": args.epochs,
-            "generator_seeds": None if args.generator else args.generator_seeds,
-            "selection_states": None if args.generator else args.selection_states, "recon_demos": args.recon_demos,
-            "limit_states": args.limit_states, "prior_draws": args.prior_draws,
-            "demonstration_callback": None if args.no_demonstrations else genrl_kwargs.get("callback")}
+    return {
+        "task": args.task,
+        "env_id": get_task(args.task).env_id,
+        "episodes": args.episodes,
+        "batch_episodes": batch_episodes,
+        "genrl_settings": recorded_genrl_settings(args.task),
+        "seeds": list(args.seeds),
+        "eval_every": args.eval_every,
+        "eval_states": args.eval_states,
+        "eval_seed": EVAL_GOAL_SEED,
+        "demonstrations": args.demos if args.data is None else os.path.abspath(args.data),
+        "generator": "trained" if args.generator is None else os.path.abspath(args.generator),
+        "preset": quickstart_preset(args.task),
+        "generator_recipe": resolve_generator_spec(quickstart_preset(args.task)),
+        "epochs": args.epochs,
+        "generator_seeds": None if args.generator else args.generator_seeds,
+        "selection_states": None if args.generator else args.selection_states,
+        "recon_demos": args.recon_demos,
+        "limit_states": args.limit_states,
+        "prior_draws": args.prior_draws,
+        "demonstration_callback": None if args.no_demonstrations else genrl_kwargs.get("callback"),
+    }
 
 
-RUN_SETTINGS = ("episodes", "batch_episodes", "genrl_settings", "seeds", "eval_every", "eval_states",
-                "demonstration_callback")
+RUN_SETTINGS = ("episodes", "batch_episodes", "genrl_settings", "seeds", "eval_every", "eval_states", "demonstration_callback")
 
 
 def start(args: argparse.Namespace) -> dict[str, object]:
@@ -144,8 +176,10 @@ def start(args: argparse.Namespace) -> dict[str, object]:
         if result.get("settings") != settings:
             differ = sorted(key for key in settings if result.get("settings", {}).get(key) != settings[key])
             if not (args.new_runs and set(differ) <= set(RUN_SETTINGS)):
-                raise SystemExit(f"{args.out} holds another run (it differs in {', '.join(differ)}): give another "
-                                 "--out, --overwrite to start again, or --new-runs if only GenRL's settings differ")
+                raise SystemExit(
+                    f"{args.out} holds another run (it differs in {', '.join(differ)}): give another "
+                    "--out, --overwrite to start again, or --new-runs if only GenRL's settings differ"
+                )
             print(f"{args.out}: GenRL's runs start again ({', '.join(differ)} differ); its other stages are kept")
             for run in result["runs"]:
                 shutil.rmtree(os.path.join(args.work, f"seed_{run['seed']}"), ignore_errors=True)
@@ -175,19 +209,33 @@ def generator_stage(args: argparse.Namespace, result: dict, write) -> str:
     from sb3_genrl.data import dataset_info
 
     record = result.setdefault("generator", {})
-    record.update(demonstrations=args.demos if args.data == data else os.path.abspath(args.data),
-                  preset=quickstart_preset(args.task), epochs=args.epochs, demonstration_info=dataset_info(args.data))
+    record.update(
+        demonstrations=args.demos if args.data == data else os.path.abspath(args.data),
+        preset=quickstart_preset(args.task),
+        epochs=args.epochs,
+        demonstration_info=dataset_info(args.data),
+    )
     candidates = record.setdefault("candidates", [])
     for seed in range(len(candidates), args.generator_seeds):
         start_time = time.perf_counter()
         candidate = os.path.join(args.work, f"vae_seed{seed}.pt")
-        vae = train_generator(args.data, preset=quickstart_preset(args.task), epochs=args.epochs, seed=seed,
-                              out=candidate, progress_bar=True)
+        vae = train_generator(
+            args.data, preset=quickstart_preset(args.task), epochs=args.epochs, seed=seed, out=candidate, progress_bar=True
+        )
         success = fitted_mean_success(args.task, candidate, args.dataset, args.selection_states, TUNING_GOAL_SEED)
-        candidates.append({"seed": seed, "best_epoch": vae.best_epoch, "fitted_mean_tuning_success": success,
-                           "seconds": time.perf_counter() - start_time})
-        print(f"generator seed {seed}: the mean fitted to the demonstrations solves {success:.3f} of "
-              f"{args.selection_states} tuning initial states", flush=True)
+        candidates.append(
+            {
+                "seed": seed,
+                "best_epoch": vae.best_epoch,
+                "fitted_mean_tuning_success": success,
+                "seconds": time.perf_counter() - start_time,
+            }
+        )
+        print(
+            f"generator seed {seed}: the mean fitted to the demonstrations solves {success:.3f} of "
+            f"{args.selection_states} tuning initial states",
+            flush=True,
+        )
         write()
     best = max(candidates, key=lambda candidate: candidate["fitted_mean_tuning_success"])  # the first of equals
     shutil.copyfile(os.path.join(args.work, f"vae_seed{best['seed']}.pt"), path + ".tmp")
@@ -201,12 +249,16 @@ def generator_limit(args: argparse.Namespace, generator: object, result: dict, w
     """The generator's limit (stage 3), unless the JSON has it."""
     if "generator_limit" not in result:
         begin = time.perf_counter()
-        result["generator_limit"] = prior_best_success(generator, args.task, args.limit_states, args.prior_draws,
-                                                       EVAL_GOAL_SEED, args.threads)
+        result["generator_limit"] = prior_best_success(
+            generator, args.task, args.limit_states, args.prior_draws, EVAL_GOAL_SEED, args.threads
+        )
         result["generator_limit"]["seconds"] = time.perf_counter() - begin
         write()
-    print(f"the best of {args.prior_draws} prior draws solves {result['generator_limit']['success_rate']:.3f} of "
-          f"{args.limit_states} held-out states", flush=True)
+    print(
+        f"the best of {args.prior_draws} prior draws solves {result['generator_limit']['success_rate']:.3f} of "
+        f"{args.limit_states} held-out states",
+        flush=True,
+    )
 
 
 def neighbourhood_limit(args: argparse.Namespace, generator: object, seed: int, result: dict, write) -> None:
@@ -216,14 +268,18 @@ def neighbourhood_limit(args: argparse.Namespace, generator: object, seed: int, 
 
         begin = time.perf_counter()
         model = GenRL.load(os.path.join(args.work, f"seed_{seed}", "genrl_policy.zip"), generator=generator, device="cpu")
-        result["policy_neighbourhood"] = policy_neighbourhood_success(model, args.task, args.limit_states,
-                                                                      args.near_draws, EVAL_GOAL_SEED, args.threads)
+        result["policy_neighbourhood"] = policy_neighbourhood_success(
+            model, args.task, args.limit_states, args.near_draws, EVAL_GOAL_SEED, args.threads
+        )
         result["policy_neighbourhood"].update(policy_seed=seed, seconds=time.perf_counter() - begin)
         write()
     near = result["policy_neighbourhood"]
-    print(f"near seed {near['policy_seed']}'s final policy: its mean solves {near['deterministic_success']:.3f} of "
-          f"{near['states']} held-out states, the best of {near['draws_per_state']} draws from it "
-          f"{near['best_of_draws']:.3f}", flush=True)
+    print(
+        f"near seed {near['policy_seed']}'s final policy: its mean solves {near['deterministic_success']:.3f} of "
+        f"{near['states']} held-out states, the best of {near['draws_per_state']} draws from it "
+        f"{near['best_of_draws']:.3f}",
+        flush=True,
+    )
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -238,8 +294,9 @@ def main(argv: list[str] | None = None) -> None:
     generator_path = generator_stage(args, result, write)
     generator = load(generator_path, device="cpu")
     if "reconstruction" not in result:
-        result["reconstruction"] = reconstruction_success(generator, args.task, args.recon_demos, RECONSTRUCTION_SEED,
-                                                          args.threads)
+        result["reconstruction"] = reconstruction_success(
+            generator, args.task, args.recon_demos, RECONSTRUCTION_SEED, args.threads
+        )
         write()
     print(f"reconstructions reach their aims: {result['reconstruction']['success_rate']:.3f}", flush=True)
     for index, seed in enumerate(args.seeds):

@@ -59,24 +59,38 @@ COLLECTION_SEED = 950000  # reset seeds of the collection states: neither TUNING
 
 def arguments(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--task", default="fetch-push",
-                        choices=("fetch-reach", "fetch-push", "fetch-pick-and-place", "fetch-slide"))
+    parser.add_argument(
+        "--task", default="fetch-push", choices=("fetch-reach", "fetch-push", "fetch-pick-and-place", "fetch-slide")
+    )
     parser.add_argument("--generator", type=EXISTING, required=True, help="a VAE of the Fetch recipe")
     parser.add_argument("--data", type=EXISTING, required=True, help="the demonstrations it was trained on")
     parser.add_argument("--states", type=COUNT, default=2000, help="collection states (default 2000)")
     parser.add_argument("--draws", type=COUNT, default=4, help="draws per collection state (default 4)")
-    parser.add_argument("--fit-states", type=COUNT, default=300,
-                        help="collection states the fitted means are scored on (default 300)")
+    parser.add_argument(
+        "--fit-states", type=COUNT, default=300, help="collection states the fitted means are scored on (default 300)"
+    )
     parser.add_argument("--tuning-states", type=COUNT, default=200, help="tuning states (default 200)")
     parser.add_argument("--collection-seed", type=SEED, default=COLLECTION_SEED)
     parser.add_argument("--fit-steps", type=COUNT, default=None, help="Adam steps of each fit (default: the entry's)")
-    parser.add_argument("--policy", type=EXISTING, default=None,
-                        help="a trained GenRL model (genrl_policy.zip) to collect around (default: the fitted start)")
-    parser.add_argument("--variants", type=variants, default=[],
-                        help="more fits of stage 4 to the nearest solving draws, a JSON list of objects with some of "
-                             "net_arch, steps, learning_rate, batch_size (the others: the entry's)")
-    parser.add_argument("--out", type=JSON_OUT, default=None,
-                        help="JSON (default benchmarks/results/fetch_fit_limit_TASK.json; Markdown beside it)")
+    parser.add_argument(
+        "--policy",
+        type=EXISTING,
+        default=None,
+        help="a trained GenRL model (genrl_policy.zip) to collect around (default: the fitted start)",
+    )
+    parser.add_argument(
+        "--variants",
+        type=variants,
+        default=[],
+        help="more fits of stage 4 to the nearest solving draws, a JSON list of objects with some of "
+        "net_arch, steps, learning_rate, batch_size (the others: the entry's)",
+    )
+    parser.add_argument(
+        "--out",
+        type=JSON_OUT,
+        default=None,
+        help="JSON (default benchmarks/results/fetch_fit_limit_TASK.json; Markdown beside it)",
+    )
     args = parser.parse_args(argv)
     if args.fit_states > args.states:
         parser.error(f"--fit-states {args.fit_states} is more than the {args.states} collection states")
@@ -99,7 +113,8 @@ def variants(text: str) -> list[dict[str, Any]]:
             if key in item and not (isinstance(item[key], kind) or kind is float and isinstance(item[key], int)):
                 raise argparse.ArgumentTypeError(f"{key} must be a {kind.__name__}, got {item[key]!r}")
         if any(not isinstance(width, int) or width < 1 for width in item.get("net_arch", [])) or any(
-                item.get(key, 1) <= 0 for key in ("steps", "learning_rate", "batch_size")):
+            item.get(key, 1) <= 0 for key in ("steps", "learning_rate", "batch_size")
+        ):
             raise argparse.ArgumentTypeError(f"positive widths, steps, learning rate and batch size, got {item}")
     return value
 
@@ -119,8 +134,9 @@ def solving_targets(drawn: np.ndarray, solved: np.ndarray, mean: np.ndarray) -> 
     return nearest.astype(np.float32), average.astype(np.float32)
 
 
-def anchored_targets(has: np.ndarray, nearest: np.ndarray, mean: np.ndarray,
-                     solves: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def anchored_targets(
+    has: np.ndarray, nearest: np.ndarray, mean: np.ndarray, solves: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """The states that the start's mean solves or some draw solves, and at each the mean where it solves, else the
     nearest solving draw.
 
@@ -148,31 +164,48 @@ def main(argv: list[str] | None = None) -> dict:
     collection, found = collected(model, args)
     rows += replayed_targets(model.generator, found, args)
     rows += fitted_means(found, pulls, fit, args, own_mean(model, found, args))
-    result = {"benchmark": f"fetch_fit_limit_{args.task}", "command": "python " + " ".join(
-                  ["benchmarks/fetch_fit_limit.py", *(argv if argv is not None else sys.argv[1:])]),
-              **package_versions(), "task": args.task, "generator": os.path.abspath(args.generator),
-              "data": os.path.abspath(args.data), "policy": args.policy and os.path.abspath(args.policy),
-              "fit_steps": fit.fit_steps if args.fit_steps is None else args.fit_steps,
-              "tuning_states": args.tuning_states, "tuning_seed": TUNING_GOAL_SEED, "fit_states": args.fit_states,
-              "collection_seed": args.collection_seed, "collection": collection, "rows": rows,
-              "seconds": time.perf_counter() - begin}
+    result = {
+        "benchmark": f"fetch_fit_limit_{args.task}",
+        "command": "python " + " ".join(["benchmarks/fetch_fit_limit.py", *(argv if argv is not None else sys.argv[1:])]),
+        **package_versions(),
+        "task": args.task,
+        "generator": os.path.abspath(args.generator),
+        "data": os.path.abspath(args.data),
+        "policy": args.policy and os.path.abspath(args.policy),
+        "fit_steps": fit.fit_steps if args.fit_steps is None else args.fit_steps,
+        "tuning_states": args.tuning_states,
+        "tuning_seed": TUNING_GOAL_SEED,
+        "fit_states": args.fit_states,
+        "collection_seed": args.collection_seed,
+        "collection": collection,
+        "rows": rows,
+        "seconds": time.perf_counter() - begin,
+    }
     write_outputs(result, args)
     return result
 
 
 def scored(candidate: GenRL, args: argparse.Namespace) -> dict[str, float]:
     """``candidate``'s success on the tuning states and on the first ``--fit-states`` collection states."""
-    return {"tuning": evaluate_success(candidate, args.task, args.tuning_states, TUNING_GOAL_SEED)["success_rate"],
-            "fit_states": evaluate_success(candidate, args.task, args.fit_states, args.collection_seed)["success_rate"]}
+    return {
+        "tuning": evaluate_success(candidate, args.task, args.tuning_states, TUNING_GOAL_SEED)["success_rate"],
+        "fit_states": evaluate_success(candidate, args.task, args.fit_states, args.collection_seed)["success_rate"],
+    }
 
 
 def collected(model: GenRL, args: argparse.Namespace) -> tuple[dict[str, Any], dict[str, Any]]:
     """:func:`collect`, kept beside the output (``OUT_collection.npz``, with the settings that made it) and reused by a
     rerun with the same task, generator, start, states, draws and seed."""
     path = os.path.splitext(args.out)[0] + "_collection.npz"
-    settings = {"task": args.task, "generator_fingerprint": file_fingerprint(args.generator),
-                "policy_fingerprint": args.policy and file_fingerprint(args.policy), "states": args.states,
-                "draws": args.draws, "collection_seed": args.collection_seed, "fit_steps_of_the_start": args.fit_steps}
+    settings = {
+        "task": args.task,
+        "generator_fingerprint": file_fingerprint(args.generator),
+        "policy_fingerprint": args.policy and file_fingerprint(args.policy),
+        "states": args.states,
+        "draws": args.draws,
+        "collection_seed": args.collection_seed,
+        "fit_steps_of_the_start": args.fit_steps,
+    }
     if os.path.exists(path):
         with np.load(path) as stored:
             if json.loads(str(stored["settings"])) == settings:
@@ -182,8 +215,12 @@ def collected(model: GenRL, args: argparse.Namespace) -> tuple[dict[str, Any], d
         print(f"{path} holds a collection of other settings: collected again", flush=True)
     collection, found = collect(model, args)
     with atomic_path(path) as tmp, open(tmp, "wb") as file:
-        np.savez(file, settings=json.dumps(settings), collection=json.dumps(collection),
-                 **{key: np.asarray(value) for key, value in found.items()})
+        np.savez(
+            file,
+            settings=json.dumps(settings),
+            collection=json.dumps(collection),
+            **{key: np.asarray(value) for key, value in found.items()},
+        )
     return collection, found
 
 
@@ -200,17 +237,26 @@ def collect(model: GenRL, args: argparse.Namespace) -> tuple[dict[str, Any], dic
         distribution = model.policy.get_distribution(th.as_tensor(contexts)).distribution
         mean, spread = distribution.mean.numpy(), distribution.stddev.numpy()
     rng = np.random.default_rng(args.collection_seed)
-    drawn = np.clip(mean[:, None] + spread[:, None] * rng.standard_normal((args.states, args.draws, mean.shape[1])),
-                    low, high).astype(np.float32)
-    solved = replay_success(model.generator, args.task, drawn.reshape(-1, mean.shape[1]),
-                            [seed for seed in seeds for _ in range(args.draws)]).reshape(args.states, args.draws)
+    drawn = np.clip(
+        mean[:, None] + spread[:, None] * rng.standard_normal((args.states, args.draws, mean.shape[1])), low, high
+    ).astype(np.float32)
+    solved = replay_success(
+        model.generator, args.task, drawn.reshape(-1, mean.shape[1]), [seed for seed in seeds for _ in range(args.draws)]
+    ).reshape(args.states, args.draws)
     has = solved.any(axis=1)
-    collection = {"states": args.states, "draws": args.draws, "spread": float(spread.mean()),
-                  "draw_success": float(solved.mean()), "states_with_a_solving_draw": float(has.mean())}
+    collection = {
+        "states": args.states,
+        "draws": args.draws,
+        "spread": float(spread.mean()),
+        "draw_success": float(solved.mean()),
+        "states_with_a_solving_draw": float(has.mean()),
+    }
     print(collection, flush=True)
     if not has.any():
-        raise SystemExit(f"no draw solved any of the {args.states} collection states: nothing to fit the mean to "
-                         "(more --states or --draws, or a policy that solves some states)")
+        raise SystemExit(
+            f"no draw solved any of the {args.states} collection states: nothing to fit the mean to "
+            "(more --states or --draws, or a policy that solves some states)"
+        )
     nearest, average = solving_targets(drawn, solved, mean)
     return collection, {"contexts": contexts, "seeds": seeds, "has": has, "nearest": nearest, "average": average}
 
@@ -218,13 +264,19 @@ def collect(model: GenRL, args: argparse.Namespace) -> tuple[dict[str, Any], dic
 def replayed_targets(generator: Any, found: dict[str, Any], args: argparse.Namespace) -> list[dict[str, Any]]:
     """Stage 3: the targets played again at the first ``--fit-states`` collection states (a state without a solving
     draw counts as unsolved)."""
-    rows, first = [], np.flatnonzero(found["has"][:args.fit_states])
+    rows, first = [], np.flatnonzero(found["has"][: args.fit_states])
     for name in ("nearest", "average"):
         targets = found[name]
-        hits = replay_success(generator, args.task, targets[:len(first)], [found["seeds"][i] for i in first])
+        hits = replay_success(generator, args.task, targets[: len(first)], [found["seeds"][i] for i in first])
         label = "nearest solving draw" if name == "nearest" else "mean of the solving draws"
-        rows.append({"policy": f"each state's {label}, played (no fit)", "pairs": len(targets), "tuning": None,
-                     "fit_states": float(hits.sum() / args.fit_states)})
+        rows.append(
+            {
+                "policy": f"each state's {label}, played (no fit)",
+                "pairs": len(targets),
+                "tuning": None,
+                "fit_states": float(hits.sum() / args.fit_states),
+            }
+        )
         print(rows[-1], flush=True)
     return rows
 
@@ -239,35 +291,55 @@ def own_mean(model: GenRL, found: dict[str, Any], args: argparse.Namespace) -> d
     return {"mean": mean, "solves": solves}
 
 
-def fitted_means(found: dict[str, Any], pulls: tuple[th.Tensor, th.Tensor], fit: Any, args: argparse.Namespace,
-                 start: dict[str, np.ndarray]) -> list[dict[str, Any]]:
+def fitted_means(
+    found: dict[str, Any], pulls: tuple[th.Tensor, th.Tensor], fit: Any, args: argparse.Namespace, start: dict[str, np.ndarray]
+) -> list[dict[str, Any]]:
     """Stage 4: the mean fitted from scratch (the entry's fit, or ``--fit-steps``) to the nearest solving draws, to
     those with the demonstrations, to the start's own mean at every state (whether a fit reproduces a mean that
     the network can hold), and to the start's mean where it solves with the nearest solving draw elsewhere; then
     each of ``--variants`` to the nearest solving draws: its residual error and its success."""
-    entry = {"net_arch": None, "steps": fit.fit_steps if args.fit_steps is None else args.fit_steps,
-             "learning_rate": fit.learning_rate, "batch_size": fit.batch_size}
+    entry = {
+        "net_arch": None,
+        "steps": fit.fit_steps if args.fit_steps is None else args.fit_steps,
+        "learning_rate": fit.learning_rate,
+        "batch_size": fit.batch_size,
+    }
     pairs = (th.as_tensor(found["contexts"][found["has"]]), th.as_tensor(found["nearest"]))
     with_demonstrations = tuple(th.cat(p) for p in zip(pulls, pairs, strict=True))
     own = (th.as_tensor(found["contexts"]), th.as_tensor(start["mean"]))
     states, targets = anchored_targets(found["has"], found["nearest"], start["mean"], start["solves"])
     kept = (th.as_tensor(found["contexts"][states]), th.as_tensor(targets))
-    fits = [("the mean fitted to the nearest solving draws", pairs, entry),
-            ("the mean fitted to them and the demonstrations", with_demonstrations, entry),
-            ("the mean fitted to the start's own mean (a map the network holds)", own, entry),
-            ("the mean fitted to the start's mean where it solves, else the nearest solving draw", kept, entry),
-            *(("the mean fitted to the nearest solving draws, " + ", ".join(f"{key} {value}" for key, value in
-                                                                              variant.items()), pairs, {**entry, **variant})
-              for variant in args.variants)]
+    fits = [
+        ("the mean fitted to the nearest solving draws", pairs, entry),
+        ("the mean fitted to them and the demonstrations", with_demonstrations, entry),
+        ("the mean fitted to the start's own mean (a map the network holds)", own, entry),
+        ("the mean fitted to the start's mean where it solves, else the nearest solving draw", kept, entry),
+        *(
+            (
+                "the mean fitted to the nearest solving draws, "
+                + ", ".join(f"{key} {value}" for key, value in variant.items()),
+                pairs,
+                {**entry, **variant},
+            )
+            for variant in args.variants
+        ),
+    ]
     rows = []
     for name, (pair_contexts, pair_latents), settings in fits:
         fresh, _, _ = fitted_policy(args.task, args.generator, args.data, fit_steps=0, net_arch=settings["net_arch"])
-        fit_mean_to_demonstrations(fresh.policy, pair_contexts, pair_latents, steps=settings["steps"],
-                                   learning_rate=settings["learning_rate"], batch_size=settings["batch_size"])
+        fit_mean_to_demonstrations(
+            fresh.policy,
+            pair_contexts,
+            pair_latents,
+            steps=settings["steps"],
+            learning_rate=settings["learning_rate"],
+            batch_size=settings["batch_size"],
+        )
         with th.no_grad():
             residual = float((policy_mean(fresh.policy, pairs[0]) - pairs[1]).pow(2).mean())
-        rows.append({"policy": name, "pairs": len(pair_latents), **scored(fresh, args), "residual_mse": residual,
-                     "fit": settings})
+        rows.append(
+            {"policy": name, "pairs": len(pair_latents), **scored(fresh, args), "residual_mse": residual, "fit": settings}
+        )
         print(rows[-1], flush=True)
     return rows
 
@@ -276,16 +348,44 @@ def write_outputs(result: dict[str, Any], args: argparse.Namespace) -> None:
     """The JSON and, beside it, its Markdown table."""
     atomic_write_json(args.out, result)
     rows, collection = result["rows"], result["collection"]
-    table = markdown_table(["policy", "pairs", f"success, {args.fit_states} collection states",
-                            f"success, {args.tuning_states} tuning states", "residual MSE on the solving draws"],
-                           [[r["policy"], r["pairs"], r["fit_states"], "" if r["tuning"] is None else r["tuning"],
-                             f"{r['residual_mse']:.4f}" if "residual_mse" in r else ""] for r in rows], align="lrrrr")
+    table = markdown_table(
+        [
+            "policy",
+            "pairs",
+            f"success, {args.fit_states} collection states",
+            f"success, {args.tuning_states} tuning states",
+            "residual MSE on the solving draws",
+        ],
+        [
+            [
+                r["policy"],
+                r["pairs"],
+                r["fit_states"],
+                "" if r["tuning"] is None else r["tuning"],
+                f"{r['residual_mse']:.4f}" if "residual_mse" in r else "",
+            ]
+            for r in rows
+        ],
+        align="lrrrr",
+    )
     around = "the fitted mean" if args.policy is None else "the policy's mean"
-    atomic_write_text(os.path.splitext(args.out)[0] + ".md", "\n".join([
-        f"# What GenRL's mean can hold on {args.task}", "", f"`{result['command']}`", "",
-        f"{args.states} collection states x {args.draws} draws from {around}'s spread "
-        f"({collection['spread']:.3f}): one draw solves {collection['draw_success']:.3f}, some draw solves "
-        f"{collection['states_with_a_solving_draw']:.3f} of the states.", "", table, ""]))
+    atomic_write_text(
+        os.path.splitext(args.out)[0] + ".md",
+        "\n".join(
+            [
+                f"# What GenRL's mean can hold on {args.task}",
+                "",
+                f"`{result['command']}`",
+                "",
+                f"{args.states} collection states x {args.draws} draws from {around}'s spread "
+                f"({collection['spread']:.3f}): one draw solves {collection['draw_success']:.3f}, some draw solves "
+                f"{collection['states_with_a_solving_draw']:.3f} of the states.",
+                "",
+                table,
+                "",
+            ]
+        ),
+    )
     print(table)
 
 

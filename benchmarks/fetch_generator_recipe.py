@@ -55,15 +55,20 @@ def main(argv: list[str] | None = None) -> None:
             if any(all(row.get(k) == v for k, v in key.items()) for row in result["rows"]):
                 continue
             start = time.perf_counter()
-            vae = BetaVAE(actions.shape[1], actions.shape[2], recipe["latent_dim"], beta=recipe["beta"],
-                          path_weight=weight, device="cpu").fit(actions, epochs=args.epochs, seed=seed, progress_bar=False)
+            vae = BetaVAE(
+                actions.shape[1], actions.shape[2], recipe["latent_dim"], beta=recipe["beta"], path_weight=weight, device="cpu"
+            ).fit(actions, epochs=args.epochs, seed=seed, progress_bar=False)
             with tempfile.TemporaryDirectory() as work:
                 path = os.path.join(work, "vae.pt")
                 vae.save(path)
                 fit = fitted_mean_success(args.task, path, data, args.states, TUNING_GOAL_SEED)
             recon = reconstruction_success(vae, args.task, 200, RECONSTRUCTION_SEED)
-            row = key | {"reconstructions_reach_aims": recon["success_rate"], "median_miss_m": recon["median_miss_m"],
-                         "fitted_mean_tuning_success": fit, "seconds": time.perf_counter() - start}
+            row = key | {
+                "reconstructions_reach_aims": recon["success_rate"],
+                "median_miss_m": recon["median_miss_m"],
+                "fitted_mean_tuning_success": fit,
+                "seconds": time.perf_counter() - start,
+            }
             result["rows"].append(row)
             atomic_write_json(args.out, result)
             print(json.dumps(row), flush=True)

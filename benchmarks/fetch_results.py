@@ -25,12 +25,20 @@ from sb3_genrl.utils import atomic_path, atomic_write_json, atomic_write_text
 
 RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
 TASKS = ("fetch-reach", "fetch-push", "fetch-pick-and-place", "fetch-slide")
-TARGETS = {"fetch-reach": (0.99, 500), "fetch-push": (0.95, 3000), "fetch-pick-and-place": (0.90, 6000),
-           "fetch-slide": (0.80, 6000)}  # the issue's 3-seed mean success and episode budget
+TARGETS = {
+    "fetch-reach": (0.99, 500),
+    "fetch-push": (0.95, 3000),
+    "fetch-pick-and-place": (0.90, 6000),
+    "fetch-slide": (0.80, 6000),
+}  # the issue's 3-seed mean success and episode budget
 BENCHMARK_SEEDS = (0, 1, 2)  # a benchmark's JSON is complete once these seeds have finished
 # rl-zoo3's benchmark.md, TQC+HER, one seed: mean return and the environment steps of its run
-ZOO_TQC = {"fetch-reach": (-1.66, 20_000), "fetch-push": (-8.80, 1_000_000), "fetch-pick-and-place": (-9.33, 1_000_000),
-           "fetch-slide": (-29.2, 3_000_000)}
+ZOO_TQC = {
+    "fetch-reach": (-1.66, 20_000),
+    "fetch-push": (-8.80, 1_000_000),
+    "fetch-pick-and-place": (-9.33, 1_000_000),
+    "fetch-slide": (-29.2, 3_000_000),
+}
 # TQC+HER's progress as last read from benchmarks/tqc_fetch.sh's logs (--tqc), kept beside the JSON files
 TQC_PROGRESS = "fetch_tqc_progress.json"
 TQC_COLUMNS = ["run", "episodes", "env steps", "success, rl-zoo3's last evaluation"]
@@ -54,8 +62,9 @@ def write_result(path: str, result: dict) -> None:
     """Write a benchmark's JSON (atomically), with the mean and spread of its finished seeds' final success."""
     finals = [run["final_success"] for run in result["runs"] if run.get("finished")]
     if finals:
-        result.update(final_success_mean=float(np.mean(finals)), final_success_std=float(np.std(finals)),
-                      finished_seeds=len(finals))
+        result.update(
+            final_success_mean=float(np.mean(finals)), final_success_std=float(np.std(finals)), finished_seeds=len(finals)
+        )
     atomic_write_json(path, result)
 
 
@@ -88,8 +97,11 @@ def former_settings(task: str, result: dict) -> list[str]:
         return []
     now = recorded_genrl_settings(task)
     batch_episodes = now["n_steps"]
-    differ = sorted(key for key in now.keys() | settings["genrl_settings"].keys()
-                    if key != "n_steps" and now.get(key) != settings["genrl_settings"].get(key))
+    differ = sorted(
+        key
+        for key in now.keys() | settings["genrl_settings"].keys()
+        if key != "n_steps" and now.get(key) != settings["genrl_settings"].get(key)
+    )
     differ += ["batch_episodes"] if settings.get("batch_episodes", batch_episodes) != batch_episodes else []
     preset = quickstart_preset(task)
     if settings.get("generator") == "trained" and settings.get("preset") == preset:
@@ -106,8 +118,11 @@ def status(result: dict, task: str | None = None) -> str:
         return f"{status(result)}; former settings ({', '.join(differ)} differ)"
     if result.get("complete"):
         return "complete"
-    reached = [f"seed {run['seed']}: {run['curve_episodes'][-1] if run['curve_episodes'] else 0}"
-               + ("" if run.get("finished") else " (running)") for run in result.get("runs", [])]
+    reached = [
+        f"seed {run['seed']}: {run['curve_episodes'][-1] if run['curve_episodes'] else 0}"
+        + ("" if run.get("finished") else " (running)")
+        for run in result.get("runs", [])
+    ]
     return "partial: " + (", ".join(reached) if reached else "no GenRL episodes yet")
 
 
@@ -133,30 +148,63 @@ def row(task: str, result: dict) -> list:
     target, budget = TARGETS[task]
     pending = "not yet measured"
     near = result.get("policy_neighbourhood")
-    near_cell = (f"{near['deterministic_success']:.3f} / {near['best_of_draws']:.3f} ({near['draws_per_state']})"
-                 if near else pending)
-    return [task, demos, recon, limit.get("best_of", {}).get("1", pending), limit.get("success_rate", pending),
-            near_cell, start_cell, success, result["settings"]["episodes"], f">= {target} in {budget}", status(result, task)]
+    near_cell = (
+        f"{near['deterministic_success']:.3f} / {near['best_of_draws']:.3f} ({near['draws_per_state']})" if near else pending
+    )
+    return [
+        task,
+        demos,
+        recon,
+        limit.get("best_of", {}).get("1", pending),
+        limit.get("success_rate", pending),
+        near_cell,
+        start_cell,
+        success,
+        result["settings"]["episodes"],
+        f">= {target} in {budget}",
+        status(result, task),
+    ]
 
 
 def table(found: dict[str, dict], progress: list[list] | None = None, results: str | None = None) -> str:
-    header = ["task", "demonstrations", "reconstructions reach their aims", "one prior draw solves",
-              "best of 100 prior draws", "first seed's final policy: its mean / best of its draws",
-              "GenRL at episode 0 (mean fitted to the demonstrations)",
-              "GenRL held-out success (final, mean ± std)", "GenRL episodes", "target",
-              "run"]
+    header = [
+        "task",
+        "demonstrations",
+        "reconstructions reach their aims",
+        "one prior draw solves",
+        "best of 100 prior draws",
+        "first seed's final policy: its mean / best of its draws",
+        "GenRL at episode 0 (mean fitted to the demonstrations)",
+        "GenRL held-out success (final, mean ± std)",
+        "GenRL episodes",
+        "target",
+        "run",
+    ]
     lines = [markdown_table(header, [row(task, result) for task, result in found.items()])]
     zoo = [[task, f"{ret:.2f}", steps, steps // 50] for task, (ret, steps) in ZOO_TQC.items()]
-    lines += ["", "rl-zoo3's published TQC+HER (benchmark.md, one seed; mean return, -1 per step away from the goal):", "",
-              markdown_table(["task", "mean return", "env steps", "episodes"], zoo)]
+    lines += [
+        "",
+        "rl-zoo3's published TQC+HER (benchmark.md, one seed; mean return, -1 per step away from the goal):",
+        "",
+        markdown_table(["task", "mean return", "env steps", "episodes"], zoo),
+    ]
     sac = sac_her_rows(results) if results else []
     if sac:
-        lines += ["", "SAC+HER here (SB3's SAC and HerReplayBuffer, `benchmarks/fetch_sac_her.py`; the same held-out "
-                  "states):", "", markdown_table(["task", "demonstrations in the buffer", "held-out success (final, "
-                                                  "mean ± std)", "episodes", "run"], sac)]
+        lines += [
+            "",
+            "SAC+HER here (SB3's SAC and HerReplayBuffer, `benchmarks/fetch_sac_her.py`; the same held-out states):",
+            "",
+            markdown_table(
+                ["task", "demonstrations in the buffer", "held-out success (final, mean ± std)", "episodes", "run"], sac
+            ),
+        ]
     if progress:
-        lines += ["", "TQC+HER here (rl-zoo3's entry point and stock settings, `benchmarks/tqc_fetch.sh`; running, "
-                  "partial):", "", markdown_table(TQC_COLUMNS, progress)]
+        lines += [
+            "",
+            "TQC+HER here (rl-zoo3's entry point and stock settings, `benchmarks/tqc_fetch.sh`; running, partial):",
+            "",
+            markdown_table(TQC_COLUMNS, progress),
+        ]
     return "\n".join(lines) + "\n"
 
 
@@ -194,8 +242,14 @@ def tqc_progress(logs: str) -> list[list]:
         last = segments[-1]
         evaluations = os.path.join(last["folder"], "evaluations.npz")
         success = float(np.load(evaluations)["successes"][-1].mean()) if os.path.exists(evaluations) else float("nan")
-        rows.append([os.path.basename(listing).removesuffix("_segments.csv"), int(last["env_steps_total"]) // 50,
-                     int(last["env_steps_total"]), success])
+        rows.append(
+            [
+                os.path.basename(listing).removesuffix("_segments.csv"),
+                int(last["env_steps_total"]) // 50,
+                int(last["env_steps_total"]),
+                success,
+            ]
+        )
     return rows
 
 
@@ -231,8 +285,12 @@ def plot(found: dict[str, dict], path: str) -> None:
             for run in result.get("runs", []):
                 ax.plot(run[key], run["curve_success"], marker="o", label=f"seed {run['seed']}")
             ax.axhline(TARGETS[task][0], color="grey", linestyle="--", linewidth=1)
-            ax.set(ylim=(0, 1.02), xlabel="episodes" if line == 0 else "environment steps",
-                   ylabel="held-out success", title=f"{task} ({'complete' if result.get('complete') else 'partial'})")
+            ax.set(
+                ylim=(0, 1.02),
+                xlabel="episodes" if line == 0 else "environment steps",
+                ylabel="held-out success",
+                title=f"{task} ({'complete' if result.get('complete') else 'partial'})",
+            )
             ax.legend(fontsize=7)
     fig.tight_layout()
     with atomic_path(path) as temporary:

@@ -85,8 +85,12 @@ class Curve(BaseCallback):
 
     def _on_rollout_start(self) -> None:
         episodes = int(self.model.num_timesteps) // FETCH_HORIZON
-        if episodes and self.model.num_timesteps % FETCH_HORIZON == 0 and episodes % self.every == 0 \
-                and episodes not in self.row["curve_episodes"]:
+        if (
+            episodes
+            and self.model.num_timesteps % FETCH_HORIZON == 0
+            and episodes % self.every == 0
+            and episodes not in self.row["curve_episodes"]
+        ):
             self.evaluate(episodes)
 
     def evaluate(self, episodes: int) -> None:
@@ -103,19 +107,35 @@ def run_seed(args: argparse.Namespace, episodes_data: dict, seed: int, row: dict
     steps = args.steps or int(settings["n_timesteps"])
     folder = pathlib.Path(args.work) / f"{args.variant}_seed_{seed}"
     folder.mkdir(parents=True, exist_ok=True)
-    identity = {"task": args.task, "variant": args.variant, "seed": seed, "steps": steps, "settings": json.loads(
-        json.dumps(settings, default=str)), "demonstrations": int(len(episodes_data["rewards"]))}
+    identity = {
+        "task": args.task,
+        "variant": args.variant,
+        "seed": seed,
+        "steps": steps,
+        "settings": json.loads(json.dumps(settings, default=str)),
+        "demonstrations": int(len(episodes_data["rewards"])),
+    }
     state = resume_state(folder, identity)
     env = Monitor(episode_info(gym.make(env_id)))
     plain = {key: value for key, value in settings.items() if key not in ZOO_ONLY}
-    policy_kwargs = settings["policy_kwargs"] | {"features_extractor_class": NormalizedCombined,
-                                                 "features_extractor_kwargs": {"statistics": goal_statistics(episodes_data)}}
+    policy_kwargs = settings["policy_kwargs"] | {
+        "features_extractor_class": NormalizedCombined,
+        "features_extractor_kwargs": {"statistics": goal_statistics(episodes_data)},
+    }
     n_demos = int(np.prod(episodes_data["rewards"].shape)) if args.variant == "demos" else 0
     if state is None:
         row.update(curve_episodes=[], curve_env_steps=[], curve_success=[])
-        model = SAC(settings["policy"], env, replay_buffer_class=HerReplayBuffer, device="cpu", seed=seed,
-                    replay_buffer_kwargs=settings["replay_buffer_kwargs"], policy_kwargs=policy_kwargs,
-                    buffer_size=n_demos + steps, **plain)
+        model = SAC(
+            settings["policy"],
+            env,
+            replay_buffer_class=HerReplayBuffer,
+            device="cpu",
+            seed=seed,
+            replay_buffer_kwargs=settings["replay_buffer_kwargs"],
+            policy_kwargs=policy_kwargs,
+            buffer_size=n_demos + steps,
+            **plain,
+        )
         if args.variant == "demos":
             add_goal_demonstrations(model, episodes_data)
             model.learning_starts = 0  # the demonstrations are the warm-up data
@@ -130,34 +150,35 @@ def run_seed(args: argparse.Namespace, episodes_data: dict, seed: int, row: dict
     curve = Curve(env_id, args.eval_every, args.eval_states, row, write)
     checkpoint = EpisodeCheckpoint(folder / CHECKPOINT_DIR, args.checkpoint_every, identity, start, {})
     begin = time.perf_counter()
-    model.learn(steps - model.num_timesteps, callback=CallbackList([curve, checkpoint]),
-                reset_num_timesteps=state is None)
+    model.learn(steps - model.num_timesteps, callback=CallbackList([curve, checkpoint]), reset_num_timesteps=state is None)
     row["seconds"] = row.get("seconds", 0.0) + time.perf_counter() - begin
     episodes = int(model.num_timesteps) // FETCH_HORIZON
     if episodes not in row["curve_episodes"]:
         curve.evaluate(episodes)
-    row.update(final_success=row["curve_success"][-1], episodes=episodes, env_steps=int(model.num_timesteps),
-               finished=True)
+    row.update(final_success=row["curve_success"][-1], episodes=episodes, env_steps=int(model.num_timesteps), finished=True)
     write()
     env.close()
 
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--task", required=True, choices=("fetch-reach", "fetch-push", "fetch-pick-and-place",
-                                                          "fetch-slide"))
+    parser.add_argument("--task", required=True, choices=("fetch-reach", "fetch-push", "fetch-pick-and-place", "fetch-slide"))
     parser.add_argument("--variant", required=True, choices=("demos", "none"), help="demonstrations in the buffer")
     parser.add_argument("--data", type=EXISTING, default=None, help="the dataset (default runs/fetch/TASK/demonstrations)")
     parser.add_argument("--seeds", type=SEED, nargs="+", default=list(BENCHMARK_SEEDS))
     parser.add_argument("--eval-every", type=COUNT, default=None, help="episodes between evaluations (default: a sixth)")
     parser.add_argument("--eval-states", type=COUNT, default=500)
-    parser.add_argument("--checkpoint-every", type=COUNT, default=None,
-                        help=f"episodes between checkpoints (default: the evaluations', at most {CHECKPOINT_EVERY}, "
-                             "as genrl baseline)")
+    parser.add_argument(
+        "--checkpoint-every",
+        type=COUNT,
+        default=None,
+        help=f"episodes between checkpoints (default: the evaluations', at most {CHECKPOINT_EVERY}, as genrl baseline)",
+    )
     parser.add_argument("--steps", type=COUNT, default=None, help="environment steps (default: the entry's n_timesteps)")
     parser.add_argument("--work", default=None, help="run folders (default runs/fetch_sac_her/TASK)")
-    parser.add_argument("--out", type=JSON_OUT, default=None,
-                        help="JSON (default runs/fetch_sac_her/fetch_sac_her_TASK_VARIANT.json)")
+    parser.add_argument(
+        "--out", type=JSON_OUT, default=None, help="JSON (default runs/fetch_sac_her/fetch_sac_her_TASK_VARIANT.json)"
+    )
     args = parser.parse_args(argv)
     root = os.path.join(os.path.dirname(HERE), "runs")
     data = args.data or os.path.join(root, "fetch", args.task, "demonstrations")
@@ -171,12 +192,20 @@ def main(argv: list[str] | None = None) -> None:
     args.checkpoint_every = args.checkpoint_every or min(args.eval_every, CHECKPOINT_EVERY)
     torch.set_num_threads(1)
     episodes_data = fetch_goal_episodes(args.task, load_arrays(data))
-    result = {**package_versions(), "benchmark": f"fetch_sac_her_{args.task}_{args.variant}", "task": args.task,
-              "variant": args.variant,
-              "settings_file": "benchmarks/sac_her_fetch.yml", "settings": entry(get_task(args.task).env_id),
-              "demonstrations": int(len(episodes_data["rewards"])) if args.variant == "demos" else 0,
-              "eval_states": args.eval_states, "eval_seed": EVAL_GOAL_SEED, "eval_every": args.eval_every,
-              "complete": False, "runs": []}
+    result = {
+        **package_versions(),
+        "benchmark": f"fetch_sac_her_{args.task}_{args.variant}",
+        "task": args.task,
+        "variant": args.variant,
+        "settings_file": "benchmarks/sac_her_fetch.yml",
+        "settings": entry(get_task(args.task).env_id),
+        "demonstrations": int(len(episodes_data["rewards"])) if args.variant == "demos" else 0,
+        "eval_states": args.eval_states,
+        "eval_seed": EVAL_GOAL_SEED,
+        "eval_every": args.eval_every,
+        "complete": False,
+        "runs": [],
+    }
     if os.path.exists(args.out):  # resumed: only a run of the same settings
         with open(args.out) as file:
             kept = json.load(file)
@@ -194,8 +223,10 @@ def main(argv: list[str] | None = None) -> None:
             run_seed(args, episodes_data, seed, row, write)
     result["complete"] = all_seeds_finished(result)
     write()
-    print(f"SAC+HER ({args.variant}) on {args.task}: {result['final_success_mean']:.3f} over {result['finished_seeds']} "
-          f"seeds ({'complete' if result['complete'] else 'partial'}); wrote {args.out}")
+    print(
+        f"SAC+HER ({args.variant}) on {args.task}: {result['final_success_mean']:.3f} over {result['finished_seeds']} "
+        f"seeds ({'complete' if result['complete'] else 'partial'}); wrote {args.out}"
+    )
 
 
 if __name__ == "__main__":

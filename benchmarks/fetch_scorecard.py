@@ -77,9 +77,12 @@ def arguments(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--task", required=True, choices=FETCH_TASKS)
     parser.add_argument("--data", type=EXISTING, required=True, help="the task's demonstrations (genrl demos --task)")
-    parser.add_argument("--variants", nargs="+", default=list(VARIANTS),
-                        help=f"the {RECIPE} recipe with these settings changed, e.g. latent_dim=6,path_weight=0 "
-                             "('' for the recipe)")
+    parser.add_argument(
+        "--variants",
+        nargs="+",
+        default=list(VARIANTS),
+        help=f"the {RECIPE} recipe with these settings changed, e.g. latent_dim=6,path_weight=0 ('' for the recipe)",
+    )
     parser.add_argument("--epochs", type=COUNT, default=300, help="generator epochs (default 300, the benchmark's)")
     parser.add_argument("--episodes", type=COUNT, default=None, help="GenRL episodes (default: the task's entry)")
     parser.add_argument("--eval-states", type=COUNT, default=500, help="held-out initial states (default 500)")
@@ -89,8 +92,12 @@ def arguments(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--pr-samples", type=COUNT, default=2000, help="precision/recall samples (the study's 2000)")
     parser.add_argument("--dwpr-samples", type=COUNT, default=1000, help="DwPR samples per intervention (1000)")
     parser.add_argument("--work", default=None, help="generators and GenRL runs (default runs/fetch_scorecard/TASK)")
-    parser.add_argument("--out", type=JSON_OUT, default=None,
-                        help="JSON (default benchmarks/results/fetch_scorecard_TASK.json; Markdown beside it)")
+    parser.add_argument(
+        "--out",
+        type=JSON_OUT,
+        default=None,
+        help="JSON (default benchmarks/results/fetch_scorecard_TASK.json; Markdown beside it)",
+    )
     args = parser.parse_args(argv)
     specs = [variant_spec(variant) for variant in args.variants]
     if len({json.dumps(spec, sort_keys=True) for spec in specs}) != len(specs):
@@ -104,12 +111,24 @@ def arguments(argv: list[str] | None = None) -> argparse.Namespace:
 
 def settings_of(args: argparse.Namespace) -> dict[str, object]:
     """What every row shares: checked when the JSON is continued."""
-    return {"task": args.task, "env_id": get_task(args.task).env_id, "data": os.path.abspath(args.data),
-            "recipe": resolve_generator_spec(RECIPE), "epochs": args.epochs, "episodes": args.episodes,
-            "eval_states": args.eval_states, "eval_seed": EVAL_GOAL_SEED, "tuning_states": args.tuning_states,
-            "tuning_seed": TUNING_GOAL_SEED, "contexts": args.contexts, "draws": args.draws,
-            "prior_seed": PRIOR_ROLLOUT_SEED, "pr_samples": args.pr_samples, "dwpr_samples": args.dwpr_samples,
-            "genrl_settings": task_settings(args.task)[2]}
+    return {
+        "task": args.task,
+        "env_id": get_task(args.task).env_id,
+        "data": os.path.abspath(args.data),
+        "recipe": resolve_generator_spec(RECIPE),
+        "epochs": args.epochs,
+        "episodes": args.episodes,
+        "eval_states": args.eval_states,
+        "eval_seed": EVAL_GOAL_SEED,
+        "tuning_states": args.tuning_states,
+        "tuning_seed": TUNING_GOAL_SEED,
+        "contexts": args.contexts,
+        "draws": args.draws,
+        "prior_seed": PRIOR_ROLLOUT_SEED,
+        "pr_samples": args.pr_samples,
+        "dwpr_samples": args.dwpr_samples,
+        "genrl_settings": task_settings(args.task)[2],
+    }
 
 
 def generator_row(args: argparse.Namespace, variant: str, actions: np.ndarray) -> dict[str, object]:
@@ -121,26 +140,58 @@ def generator_row(args: argparse.Namespace, variant: str, actions: np.ndarray) -
     path = os.path.join(folder, "vae.pt")
     begin = time.perf_counter()
     if not os.path.exists(path):  # written atomically by save(): present only once trained
-        vae = BetaVAE(actions.shape[1], actions.shape[2], spec["latent_dim"], beta=spec["beta"],
-                      path_weight=spec["path_weight"], device="cpu")
+        vae = BetaVAE(
+            actions.shape[1],
+            actions.shape[2],
+            spec["latent_dim"],
+            beta=spec["beta"],
+            path_weight=spec["path_weight"],
+            device="cpu",
+        )
         vae.fit(actions, epochs=args.epochs, seed=0, progress_bar=False).save(path)
     generator = load(path, device="cpu")
     trained = time.perf_counter()
-    score = evaluate_generator(generator, real_subset(actions, args.pr_samples, 0), n=args.pr_samples,
-                               dwpr_n=args.dwpr_samples, seed=0, name=name, device="cpu", task=args.task,
-                               contexts=args.contexts, draws=args.draws, prior_seed=PRIOR_ROLLOUT_SEED)
+    score = evaluate_generator(
+        generator,
+        real_subset(actions, args.pr_samples, 0),
+        n=args.pr_samples,
+        dwpr_n=args.dwpr_samples,
+        seed=0,
+        name=name,
+        device="cpu",
+        task=args.task,
+        contexts=args.contexts,
+        draws=args.draws,
+        prior_seed=PRIOR_ROLLOUT_SEED,
+    )
     fitted = fitted_mean_success(args.task, path, args.data, args.tuning_states, TUNING_GOAL_SEED)
     scored = time.perf_counter()
     _, batch_episodes, genrl_kwargs = task_settings(args.task)
-    run = train_policy(args.task, path, episodes=args.episodes, seed=0, out_dir=os.path.join(folder, "genrl"),
-                       batch_episodes=batch_episodes, demonstrations=args.data, device="cpu", **genrl_kwargs)
+    run = train_policy(
+        args.task,
+        path,
+        episodes=args.episodes,
+        seed=0,
+        out_dir=os.path.join(folder, "genrl"),
+        batch_episodes=batch_episodes,
+        demonstrations=args.data,
+        device="cpu",
+        **genrl_kwargs,
+    )
     model = GenRL.load(run["model_path"], generator=generator, device="cpu")
     success = evaluate_success(model, args.task, episodes=args.eval_states, seed=EVAL_GOAL_SEED)["success_rate"]
     row = score.row()
-    return {"variant": variant, "model": name, "spec": spec, **{key: row[key] for key in MEASURES if key in row},
-            "prior_median": row["prior_median"], "fitted_start": fitted, "episodes": run["episodes"],
-            "final_success": float(success),
-            "seconds": {"generator": trained - begin, "scorecard": scored - trained, "genrl": time.perf_counter() - scored}}
+    return {
+        "variant": variant,
+        "model": name,
+        "spec": spec,
+        **{key: row[key] for key in MEASURES if key in row},
+        "prior_median": row["prior_median"],
+        "fitted_start": fitted,
+        "episodes": run["episodes"],
+        "final_success": float(success),
+        "seconds": {"generator": trained - begin, "scorecard": scored - trained, "genrl": time.perf_counter() - scored},
+    }
 
 
 def write(args: argparse.Namespace, result: dict) -> None:
@@ -151,11 +202,19 @@ def write(args: argparse.Namespace, result: dict) -> None:
         result["correlation"] = [dataclasses.asdict(row) for row in table.rows]
     atomic_write_json(args.out, result)
     header = ["generator", *MEASURES, "GenRL final success"]
-    lines = [f"# Generator scorecard against GenRL on {args.task}", "",
-             f"`{result['command']}`: {len(rows)} generators, GenRL {args.episodes} episodes (seed 0), success of the "
-             f"deterministic policy on {args.eval_states} held-out initial states.", "",
-             markdown_table(header, [[row["model"], *(row[key] for key in MEASURES), row["final_success"]] for row in rows],
-                            align="l" + "r" * (len(header) - 1)), ""]
+    lines = [
+        f"# Generator scorecard against GenRL on {args.task}",
+        "",
+        f"`{result['command']}`: {len(rows)} generators, GenRL {args.episodes} episodes (seed 0), success of the "
+        f"deterministic policy on {args.eval_states} held-out initial states.",
+        "",
+        markdown_table(
+            header,
+            [[row["model"], *(row[key] for key in MEASURES), row["final_success"]] for row in rows],
+            align="l" + "r" * (len(header) - 1),
+        ),
+        "",
+    ]
     if len(rows) >= 3:
         lines += ["Each measure against the final success, over the generators:", "", table.to_markdown()]
     atomic_write_text(os.path.splitext(args.out)[0] + ".md", "\n".join(lines) + "\n")
@@ -165,9 +224,13 @@ def main(argv: list[str] | None = None) -> None:
     args = arguments(argv)
     torch.set_num_threads(1)
     settings = settings_of(args)
-    result = {"benchmark": f"fetch_scorecard_{args.task}", "settings": settings, "rows": [],
-              "command": "python benchmarks/fetch_scorecard.py " + " ".join(argv if argv is not None else sys.argv[1:]),
-              **package_versions()}
+    result = {
+        "benchmark": f"fetch_scorecard_{args.task}",
+        "settings": settings,
+        "rows": [],
+        "command": "python benchmarks/fetch_scorecard.py " + " ".join(argv if argv is not None else sys.argv[1:]),
+        **package_versions(),
+    }
     if os.path.exists(args.out):
         with open(args.out) as file:
             result = json.load(file)

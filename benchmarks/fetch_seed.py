@@ -44,8 +44,15 @@ class SuccessCurve(BaseCallback):
     :class:`~sb3_genrl.genrl.demonstrations.DemonstrationCallback`, before this one), also at the start of a fresh run,
     after the policy's mean was fitted to them (the fit's losses as ``row["demo_init"]``)."""
 
-    def __init__(self, task: str, every: int, states: int, row: dict, write: Callable[[], None],
-                 demonstrations: DemonstrationCallback | None = None) -> None:
+    def __init__(
+        self,
+        task: str,
+        every: int,
+        states: int,
+        row: dict,
+        write: Callable[[], None],
+        demonstrations: DemonstrationCallback | None = None,
+    ) -> None:
         super().__init__()
         self.task, self.every, self.states, self.row, self.write = task, every, states, row, write
         self.demonstrations = demonstrations
@@ -85,8 +92,9 @@ def recorded_genrl_settings(task: str) -> dict[str, Any]:
     return genrl_settings(run_settings(genrl_kwargs, batch_episodes, n_envs=1))
 
 
-def fitted_policy(task: str, generator_path: str, dataset: str, fit_steps: int | None = None,
-                  net_arch: list[int] | None = None) -> tuple[GenRL, DemonstrationCallback, tuple[th.Tensor, th.Tensor]]:
+def fitted_policy(
+    task: str, generator_path: str, dataset: str, fit_steps: int | None = None, net_arch: list[int] | None = None
+) -> tuple[GenRL, DemonstrationCallback, tuple[th.Tensor, th.Tensor]]:
     """GenRL with the task's entry (policy seed 0) and its mean fitted to the demonstrations ``dataset`` as the entry's
     ``DemonstrationCallback`` fits them (``fit_steps``: another number of Adam steps; 0: no fit), before any episode.
     ``net_arch``: other hidden layers of the policy's mean. Returns the model, the entry's callback and the
@@ -97,18 +105,31 @@ def fitted_policy(task: str, generator_path: str, dataset: str, fit_steps: int |
         policy_kwargs = dict(genrl_kwargs.get("policy_kwargs") or {})
         policy_kwargs["net_arch"] = {**dict(policy_kwargs.get("net_arch") or {}), "pi": list(net_arch)}
         genrl_kwargs["policy_kwargs"] = policy_kwargs
-    fit = next((item for item in build_callbacks(callback, demonstrations=dataset, task=task)
-                if isinstance(item, DemonstrationCallback)), None)
+    fit = next(
+        (
+            item
+            for item in build_callbacks(callback, demonstrations=dataset, task=task)
+            if isinstance(item, DemonstrationCallback)
+        ),
+        None,
+    )
     if fit is None or not fit.fit_steps:
         raise ValueError(f"the entry of {task} in hyperparams/genrl.yml fits no demonstrations")
     generator = load(generator_path, device="cpu")
-    model = make_genrl(LatentActionWrapper(gym.make(get_task(task).env_id), generator), generator, seed=0, device="cpu",
-                       n_steps=batch_episodes, **genrl_kwargs)
+    model = make_genrl(
+        LatentActionWrapper(gym.make(get_task(task).env_id), generator),
+        generator,
+        seed=0,
+        device="cpu",
+        n_steps=batch_episodes,
+        **genrl_kwargs,
+    )
     pulls = fit.pulls(generator, model.observation_space, model.latent_clip)
     steps = fit.fit_steps if fit_steps is None else fit_steps
     if steps:
-        fit_mean_to_demonstrations(model.policy, *pulls, steps=steps, learning_rate=fit.learning_rate,
-                                   batch_size=fit.batch_size)
+        fit_mean_to_demonstrations(
+            model.policy, *pulls, steps=steps, learning_rate=fit.learning_rate, batch_size=fit.batch_size
+        )
     return model, fit, pulls
 
 
@@ -120,20 +141,32 @@ def fitted_mean_success(task: str, generator_path: str, dataset: str, states: in
     return float(evaluate_success(model, task, episodes=states, seed=seed)["success_rate"])
 
 
-def train_seed(task: str, generator_path: str, seed: int, args: argparse.Namespace, row: dict,
-               write: Callable[[], None]) -> None:
+def train_seed(
+    task: str, generator_path: str, seed: int, args: argparse.Namespace, row: dict, write: Callable[[], None]
+) -> None:
     """Train (or resume) GenRL with one seed to ``args.episodes``, evaluating on the way and at the end (into ``row``)."""
     _, batch_episodes, genrl_kwargs = task_settings(task)
     callback = None if args.no_demonstrations else genrl_kwargs.get("callback")
     genrl_kwargs.pop("callback", None)
-    demonstrations = build_callbacks(callback, demonstrations=args.dataset if callback else None,
-                                     what=f"the entry of {task} in hyperparams/genrl.yml", task=task)
+    demonstrations = build_callbacks(
+        callback,
+        demonstrations=args.dataset if callback else None,
+        what=f"the entry of {task} in hyperparams/genrl.yml",
+        task=task,
+    )
     folder = pathlib.Path(args.work) / f"seed_{seed}"
     generator = load(generator_path, device="cpu")
-    identity = {"algorithm": "genrl", "task": task, "episodes": int(args.episodes), "seed": seed,
-                "batch_episodes": batch_episodes, "generator_sha256": generator_digest(generator),
-                "genrl_settings": recorded_genrl_settings(task), "demonstration_callback": callback,
-                "demonstrations": [dataset_fingerprint(item.dataset) for item in demonstrations]}
+    identity = {
+        "algorithm": "genrl",
+        "task": task,
+        "episodes": int(args.episodes),
+        "seed": seed,
+        "batch_episodes": batch_episodes,
+        "generator_sha256": generator_digest(generator),
+        "genrl_settings": recorded_genrl_settings(task),
+        "demonstration_callback": callback,
+        "demonstrations": [dataset_fingerprint(item.dataset) for item in demonstrations],
+    }
     state = resume_state(folder / "checkpoint", identity)
     if state is None:  # from the start: what an earlier unfinished try left is dropped
         shutil.rmtree(folder, ignore_errors=True)
@@ -143,8 +176,9 @@ def train_seed(task: str, generator_path: str, seed: int, args: argparse.Namespa
         row.update({key: row[key][:kept] for key in CURVE})
         row["resumed_at_episodes"] = [*row.get("resumed_at_episodes", []), int(state["episodes"])]
     os.makedirs(folder, exist_ok=True)
-    env = monitor_episodes(RandomStateRecorder(LatentActionWrapper(gym.make(get_task(task).env_id), generator)),
-                           folder, append=state is not None)
+    env = monitor_episodes(
+        RandomStateRecorder(LatentActionWrapper(gym.make(get_task(task).env_id), generator)), folder, append=state is not None
+    )
     logger = training_logger(folder)
     curve = SuccessCurve(task, args.eval_every, args.eval_states, row, write, *demonstrations[:1])
     if state is None:
@@ -155,15 +189,18 @@ def train_seed(task: str, generator_path: str, seed: int, args: argparse.Namespa
     checkpoint = GenRLCheckpoint(folder / "checkpoint", args.eval_every, identity, state)
     callbacks = [*demonstrations, curve, checkpoint]  # the fit before the curve's first point, the kept pulls saved
     begin = time.perf_counter()
-    model.learn(int(args.episodes) - model.num_timesteps, callback=CallbackList(callbacks),
-                reset_num_timesteps=state is None)
+    model.learn(int(args.episodes) - model.num_timesteps, callback=CallbackList(callbacks), reset_num_timesteps=state is None)
     row["seconds"] = row.get("seconds", 0.0) + time.perf_counter() - begin
     if not row["curve_episodes"] or row["curve_episodes"][-1] != model.num_timesteps:
         curve.evaluate()
     model.logger.close()
     model.save(folder / "genrl_policy.zip")
     env.close()
-    row.update(final_success=row["curve_success"][-1], episodes=int(model.num_timesteps),
-               env_steps=int(model.num_timesteps) * FETCH_HORIZON, finished=True)
+    row.update(
+        final_success=row["curve_success"][-1],
+        episodes=int(model.num_timesteps),
+        env_steps=int(model.num_timesteps) * FETCH_HORIZON,
+        finished=True,
+    )
     write()
     shutil.rmtree(folder / "checkpoint", ignore_errors=True)

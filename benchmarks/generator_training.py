@@ -35,12 +35,24 @@ def benchmark(n: int, horizon: int, epochs: int, batch_size: int, device: str, s
         generator = make_generator(preset, horizon=horizon, action_dim=N_JOINTS, device=device)
         start = time.perf_counter()
         # One model-selection evaluation (at the last epoch), as in a run with a large eval_every.
-        generator.fit(trajectories, epochs=epochs, batch_size=batch_size, seed=seed, eval_every=epochs,
-                      progress_bar=False, device=device)
+        generator.fit(
+            trajectories, epochs=epochs, batch_size=batch_size, seed=seed, eval_every=epochs, progress_bar=False, device=device
+        )
         seconds = time.perf_counter() - start
-        rows.append({"model": kind, "preset": preset, "n": n, "horizon": horizon, "action_dim": N_JOINTS,
-                     "epochs": epochs, "batch_size": batch_size, "seconds": seconds, "epochs_per_second": epochs / seconds,
-                     "device": str(generator.device)})
+        rows.append(
+            {
+                "model": kind,
+                "preset": preset,
+                "n": n,
+                "horizon": horizon,
+                "action_dim": N_JOINTS,
+                "epochs": epochs,
+                "batch_size": batch_size,
+                "seconds": seconds,
+                "epochs_per_second": epochs / seconds,
+                "device": str(generator.device),
+            }
+        )
     return rows
 
 
@@ -53,8 +65,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--device", type=option(check_device), default="auto")
     parser.add_argument("--seed", type=SEED, default=0)
     parser.add_argument("--threads", type=COUNT, default=None, help="torch CPU threads (default: torch's choice)")
-    parser.add_argument("--out", type=JSON_OUT, default=DEFAULT_OUT,
-                        help="JSON file for the results")
+    parser.add_argument("--out", type=JSON_OUT, default=DEFAULT_OUT, help="JSON file for the results")
     args = parser.parse_args(argv)
     if args.threads is not None:
         torch.set_num_threads(args.threads)
@@ -62,13 +73,20 @@ def main(argv: list[str] | None = None) -> None:
     rows = benchmark(args.n, args.horizon, args.epochs, args.batch_size, args.device, args.seed)
     print(f"{'model':<6} {'N':>7} {'T x M':>7} {'epochs':>6} {'seconds':>9} {'epochs/s':>9} {'s/epoch':>8}  device")
     for row in rows:
-        print(f"{row['model']:<6} {row['n']:>7} {row['horizon'] * row['action_dim']:>7} {row['epochs']:>6} "
-              f"{row['seconds']:>9.2f} {row['epochs_per_second']:>9.3f} {1 / row['epochs_per_second']:>8.2f}  {row['device']}")
+        print(
+            f"{row['model']:<6} {row['n']:>7} {row['horizon'] * row['action_dim']:>7} {row['epochs']:>6} "
+            f"{row['seconds']:>9.2f} {row['epochs_per_second']:>9.3f} {1 / row['epochs_per_second']:>8.2f}  {row['device']}"
+        )
     paper_hours = {row["model"]: 5000 / row["epochs_per_second"] / 3600 for row in rows}
     print("5000 paper epochs would take " + ", ".join(f"{model}: {hours:.1f} h" for model, hours in paper_hours.items()))
-    environment = {"sb3_genrl": __version__, "torch": torch.__version__, "torch_threads": torch.get_num_threads(),
-                   "cuda": torch.cuda.get_device_name() if torch.cuda.is_available() else None,
-                   "processor": platform.processor() or platform.machine(), "cpu_count": os.cpu_count()}
+    environment = {
+        "sb3_genrl": __version__,
+        "torch": torch.__version__,
+        "torch_threads": torch.get_num_threads(),
+        "cuda": torch.cuda.get_device_name() if torch.cuda.is_available() else None,
+        "processor": platform.processor() or platform.machine(),
+        "cpu_count": os.cpu_count(),
+    }
     atomic_write_json(args.out, {"environment": environment, "results": rows})
     print(f"wrote {args.out}")
 

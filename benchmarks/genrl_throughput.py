@@ -81,25 +81,47 @@ def run_genrl(task: str, generator_path: str, episodes: int, n_envs: int, thread
     seconds = {"simulation": 0.0, "decoding": 0.0, "updates": 0.0, "learn": 0.0}
     parts = dict.fromkeys(UPDATE_PARTS, 0.0)  # the parts of the updates (inside GenRL.train)
     played: list[tuple[np.ndarray, np.ndarray]] = []
-    with (timed(task_class, "play_trajectories", seconds, "simulation", played),
-          timed(type(generator), "decode", seconds, "decoding"), timed(GenRL, "train", seconds, "updates"),
-          timed(GenRL, "learn", seconds, "learn"), timed(HindsightRelabelling, "extend_batch", parts, "relabelled_pulls"),
-          timed(GenRL, "_e_step", parts, "e_step"), timed(HindsightRelabelling, "regress", parts, "regression"),
-          timed(GenRL, "_fit_value_function", parts, "value_fit")):
+    with (
+        timed(task_class, "play_trajectories", seconds, "simulation", played),
+        timed(type(generator), "decode", seconds, "decoding"),
+        timed(GenRL, "train", seconds, "updates"),
+        timed(GenRL, "learn", seconds, "learn"),
+        timed(HindsightRelabelling, "extend_batch", parts, "relabelled_pulls"),
+        timed(GenRL, "_e_step", parts, "e_step"),
+        timed(HindsightRelabelling, "regress", parts, "regression"),
+        timed(GenRL, "_fit_value_function", parts, "value_fit"),
+    ):
         start = time.perf_counter()
-        summary = train_policy(task, generator, episodes=episodes, batch_episodes=batch_episodes, n_envs=n_envs,
-                               n_threads=threads, seed=0, out_dir=os.path.join(work, f"{task}_{n_envs}"), device="cpu",
-                               checkpoint_every=None, **genrl_kwargs)
+        summary = train_policy(
+            task,
+            generator,
+            episodes=episodes,
+            batch_episodes=batch_episodes,
+            n_envs=n_envs,
+            n_threads=threads,
+            seed=0,
+            out_dir=os.path.join(work, f"{task}_{n_envs}"),
+            device="cpu",
+            checkpoint_every=None,
+            **genrl_kwargs,
+        )
         wall = time.perf_counter() - start
     learn = seconds.pop("learn")  # GenRL's loop: the run without its set-up and its outputs (model, curve, plot)
-    row = {"task": task, "n_envs": n_envs, "batch_episodes": batch_episodes, "episodes": summary["episodes"],
-           "wall_seconds": wall, "learn_seconds": learn, "episodes_per_second": summary["episodes"] / learn,
-           "episodes_per_second_with_set_up": summary["episodes"] / wall,
-           **{f"{key}_seconds": value for key, value in seconds.items()},
-           **{f"{key}_share": value / learn for key, value in seconds.items()},
-           "final_mean_reward": summary["final_mean_reward"],
-           "updates_per_iteration_seconds": seconds["updates"] / summary["iterations"],
-           "update_parts_share": {key: value / seconds["updates"] for key, value in parts.items()}}
+    row = {
+        "task": task,
+        "n_envs": n_envs,
+        "batch_episodes": batch_episodes,
+        "episodes": summary["episodes"],
+        "wall_seconds": wall,
+        "learn_seconds": learn,
+        "episodes_per_second": summary["episodes"] / learn,
+        "episodes_per_second_with_set_up": summary["episodes"] / wall,
+        **{f"{key}_seconds": value for key, value in seconds.items()},
+        **{f"{key}_share": value / learn for key, value in seconds.items()},
+        "final_mean_reward": summary["final_mean_reward"],
+        "updates_per_iteration_seconds": seconds["updates"] / summary["iterations"],
+        "update_parts_share": {key: value / seconds["updates"] for key, value in parts.items()},
+    }
     row["other_share"] = 1.0 - sum(row[f"{key}_share"] for key in seconds)  # policy, SB3's loop, the wrappers
     return row | {"played": played}
 
@@ -125,12 +147,20 @@ def measure_task(task: str, generator_path: str, args: argparse.Namespace, work:
         n_envs = task_settings(task)[1] if n_envs == "N" else int(n_envs)
         row = run_genrl(task, generator_path, episodes, n_envs, threads, work)
         bound = open_loop_rate(env, *played_sample(row.pop("played"), args.bound_episodes), threads, args.repeats)
-        row.update(threads=threads, open_loop_bound=bound, scripted_open_loop_bound=scripted,
-                   share_of_bound=row["episodes_per_second"] / bound,
-                   collection_share_of_bound=row["episodes"] / (row["learn_seconds"] - row["updates_seconds"]) / bound)
-        print(f"{task} n_envs={n_envs}: {row['episodes_per_second']:.1f} episodes/s, {row['share_of_bound']:.2f} of "
-              f"the bound ({bound:.1f}); updates {row['updates_share']:.0%} ("
-              + ", ".join(f"{key} {share:.0%}" for key, share in row["update_parts_share"].items()) + ")", flush=True)
+        row.update(
+            threads=threads,
+            open_loop_bound=bound,
+            scripted_open_loop_bound=scripted,
+            share_of_bound=row["episodes_per_second"] / bound,
+            collection_share_of_bound=row["episodes"] / (row["learn_seconds"] - row["updates_seconds"]) / bound,
+        )
+        print(
+            f"{task} n_envs={n_envs}: {row['episodes_per_second']:.1f} episodes/s, {row['share_of_bound']:.2f} of "
+            f"the bound ({bound:.1f}); updates {row['updates_share']:.0%} ("
+            + ", ".join(f"{key} {share:.0%}" for key, share in row["update_parts_share"].items())
+            + ")",
+            flush=True,
+        )
         rows.append(row)
     env.close()
     return rows
@@ -149,8 +179,13 @@ def updated_runs(path: str, rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--generator", action="append", required=True, metavar="TASK=PATH",
-                        help="the generator of a task (e.g. a quickstart's vae.pt); the tasks measured are these")
+    parser.add_argument(
+        "--generator",
+        action="append",
+        required=True,
+        metavar="TASK=PATH",
+        help="the generator of a task (e.g. a quickstart's vae.pt); the tasks measured are these",
+    )
     parser.add_argument("--episodes", type=COUNT, default=None, help=f"GenRL episodes per run (default {EPISODES})")
     parser.add_argument("--n-envs", nargs="+", default=["2", "N"], help="envs per step: numbers, N: an iteration's")
     parser.add_argument("--threads", type=COUNT, default=default_threads(), help="simulation threads (all cores)")
@@ -165,24 +200,59 @@ def main() -> None:
             parser.error(f"--generator {task}=...: the tasks measured are {', '.join(EPISODES)}")
         check_input_path(path, "--generator")
     torch.set_num_threads(1)  # as the quickstart: the models are small, one thread is as fast
-    command = "python benchmarks/genrl_throughput.py " + " ".join(f"--generator {task}=..." for task in generators) + (
-        f" --n-envs {' '.join(args.n_envs)} --update" if args.update else "")
+    command = (
+        "python benchmarks/genrl_throughput.py "
+        + " ".join(f"--generator {task}=..." for task in generators)
+        + (f" --n-envs {' '.join(args.n_envs)} --update" if args.update else "")
+    )
     load_before = os.getloadavg()
     with tempfile.TemporaryDirectory() as work:
         rows = [row for task, path in generators.items() for row in measure_task(task, path, args, work)]
     for row in rows:
         row.update(command=command, load_average_before=load_before, load_average_after=os.getloadavg())
     rows = updated_runs(args.out, rows) if args.update else rows
-    header = ("task", "n_envs", "episodes/s", "bound", "share", "simulation", "decoding", "updates", "other",
-              "of the updates: " + " / ".join(UPDATE_PARTS))
-    print(markdown_table(header, [[r["task"], r["n_envs"], f"{r['episodes_per_second']:.1f}", f"{r['open_loop_bound']:.1f}",
-                                   f"{r['share_of_bound']:.2f}", *(f"{r[f'{k}_share']:.0%}" for k in (
-                                       "simulation", "decoding", "updates", "other")),
-                                   " / ".join(f"{r['update_parts_share'][k]:.0%}" for k in UPDATE_PARTS)
-                                   if "update_parts_share" in r else "not measured"] for r in rows]))
-    atomic_write_json(args.out, {"command": command, "machine": platform.processor() or platform.machine(),
-                                 "cores": default_threads(), "load_average_before": load_before,
-                                 "load_average_after": os.getloadavg(), "runs": rows})
+    header = (
+        "task",
+        "n_envs",
+        "episodes/s",
+        "bound",
+        "share",
+        "simulation",
+        "decoding",
+        "updates",
+        "other",
+        "of the updates: " + " / ".join(UPDATE_PARTS),
+    )
+    print(
+        markdown_table(
+            header,
+            [
+                [
+                    r["task"],
+                    r["n_envs"],
+                    f"{r['episodes_per_second']:.1f}",
+                    f"{r['open_loop_bound']:.1f}",
+                    f"{r['share_of_bound']:.2f}",
+                    *(f"{r[f'{k}_share']:.0%}" for k in ("simulation", "decoding", "updates", "other")),
+                    " / ".join(f"{r['update_parts_share'][k]:.0%}" for k in UPDATE_PARTS)
+                    if "update_parts_share" in r
+                    else "not measured",
+                ]
+                for r in rows
+            ],
+        )
+    )
+    atomic_write_json(
+        args.out,
+        {
+            "command": command,
+            "machine": platform.processor() or platform.machine(),
+            "cores": default_threads(),
+            "load_average_before": load_before,
+            "load_average_after": os.getloadavg(),
+            "runs": rows,
+        },
+    )
     print(f"wrote {args.out}")
 
 

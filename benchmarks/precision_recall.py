@@ -71,17 +71,35 @@ def _worker(method: str, size: int, dim: int, k: int, seed: int) -> dict:
             for a, b in ((x, x), (y, y), (x, y)):
                 for i in range(0, size, block):
                     for j in range(0, size, block):
-                        torch.mm(a[i:i + block], b[j:j + block].T)
+                        torch.mm(a[i : i + block], b[j : j + block].T)
     else:
         raise ValueError(f"unknown method {method!r}")
     seconds = time.perf_counter() - start
-    return {"method": method, "size": size, "seconds": seconds, "peak_mb": _peak_mb() - baseline, **result,
-            "torch_threads": torch.get_num_threads()}
+    return {
+        "method": method,
+        "size": size,
+        "seconds": seconds,
+        "peak_mb": _peak_mb() - baseline,
+        **result,
+        "torch_threads": torch.get_num_threads(),
+    }
 
 
 def _run(method: str, size: int, args: argparse.Namespace) -> dict:
-    command = [sys.executable, os.path.abspath(__file__), "--worker", method, "--size", str(size), "--dim",
-               str(args.dim), "--k", str(args.k), "--seed", str(args.seed)]
+    command = [
+        sys.executable,
+        os.path.abspath(__file__),
+        "--worker",
+        method,
+        "--size",
+        str(size),
+        "--dim",
+        str(args.dim),
+        "--k",
+        str(args.k),
+        "--seed",
+        str(args.seed),
+    ]
     completed = subprocess.run(command, capture_output=True, text=True, check=False)
     if completed.returncode != 0:
         return {"method": method, "size": size, "error": completed.stderr.strip().splitlines()[-1:]}
@@ -101,8 +119,7 @@ def _table(runs: list[dict], find) -> str:
         ratio = run["seconds"] / bound["seconds"] if bound else float("nan")
         precision = f"{run['precision']:.4f}" if "precision" in run else ""
         recall = f"{run['recall']:.4f}" if "recall" in run else ""
-        table.append([run["size"], run["method"], f"{run['seconds']:.2f}", f"{run['peak_mb']:.0f}", precision, recall,
-                      ratio])
+        table.append([run["size"], run["method"], f"{run['seconds']:.2f}", f"{run['peak_mb']:.0f}", precision, recall, ratio])
     header = ["N vs N", "method", "time (s)", "peak memory (MiB)", "precision", "recall", "time / matmul bound"]
     return markdown_table(header, table, digits=2, align="rlrrrrr")
 
@@ -156,8 +173,18 @@ def main(argv: list[str] | None = None) -> int:
             entry["same_values_as_prdc"] = (ours["precision"], ours["recall"]) == (prdc_run["precision"], prdc_run["recall"])
         summary.append(entry)
         print(json.dumps(entry))
-    atomic_write_json(args.out, {"dim": args.dim, "k": args.k, "seed": args.seed, "cpu_count": os.cpu_count(),
-                                 "machine": platform.processor() or platform.machine(), "runs": runs, "summary": summary})
+    atomic_write_json(
+        args.out,
+        {
+            "dim": args.dim,
+            "k": args.k,
+            "seed": args.seed,
+            "cpu_count": os.cpu_count(),
+            "machine": platform.processor() or platform.machine(),
+            "runs": runs,
+            "summary": summary,
+        },
+    )
     print(f"wrote {args.out}")
     return 0
 

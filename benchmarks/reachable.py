@@ -29,8 +29,9 @@ from sb3_genrl.utils import atomic_path
 CACHE = pathlib.Path(__file__).resolve().parent / "runs" / "limits"  # the played grids (ignored by git)
 
 
-def latent_set(generator: TrajectoryGenerator, *, grid: int = 201, extent: float = 3.0, samples: int = 10_000,
-               seed: int = 0) -> np.ndarray:
+def latent_set(
+    generator: TrajectoryGenerator, *, grid: int = 201, extent: float = 3.0, samples: int = 10_000, seed: int = 0
+) -> np.ndarray:
     """Dense latent actions: a ``grid x grid`` grid over ``[-extent, extent]^2`` for a 2-D latent space (row-major,
     first coordinate slowest), else ``samples`` draws from the prior clipped to the same box."""
     if generator.latent_dim == 2:
@@ -55,8 +56,9 @@ def candidate_points(task: str, rows: np.ndarray) -> np.ndarray:
     return position[crossing, :2] + fraction[:, None] * (position[crossing + 1, :2] - position[crossing, :2])
 
 
-def play_candidates(task: str, trajectories: np.ndarray, *, chunk: int = 2048,
-                    cache: str | os.PathLike | None = None) -> list[np.ndarray]:
+def play_candidates(
+    task: str, trajectories: np.ndarray, *, chunk: int = 2048, cache: str | os.PathLike | None = None
+) -> list[np.ndarray]:
     """Play trajectories (on every core) and return each one's candidate points; none for an unstable episode.
 
     :param cache: a folder where the result is kept, named by a digest of the task and the trajectories (the
@@ -82,7 +84,7 @@ def play_candidates(task: str, trajectories: np.ndarray, *, chunk: int = 2048,
 
     env._finish = finish  # type: ignore[method-assign]
     for start in range(0, len(trajectories), chunk):
-        batch = trajectories[start:start + chunk]
+        batch = trajectories[start : start + chunk]
         env.play_trajectories(batch, np.zeros((len(batch), 2)), n_threads=default_threads(), allow_outside_region=True)
     if path is not None:
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -101,13 +103,25 @@ def nearest(candidates: list[np.ndarray], goals: np.ndarray) -> tuple[np.ndarray
 
 def summary(distances: np.ndarray) -> dict[str, float]:
     """Mean, median, 90th percentile and maximum of distances (m)."""
-    return {"mean": float(np.mean(distances)), "median": float(np.median(distances)),
-            "p90": float(np.percentile(distances, 90)), "max": float(np.max(distances))}
+    return {
+        "mean": float(np.mean(distances)),
+        "median": float(np.median(distances)),
+        "p90": float(np.percentile(distances, 90)),
+        "max": float(np.max(distances)),
+    }
 
 
-def generator_limit(generator: TrajectoryGenerator, task: str, goals: np.ndarray, *, grid: int = 201,
-                    extent: float = 3.0, check: int = 5, prior_samples: int = 10_000,
-                    cache: str | os.PathLike | None = CACHE) -> dict[str, Any]:
+def generator_limit(
+    generator: TrajectoryGenerator,
+    task: str,
+    goals: np.ndarray,
+    *,
+    grid: int = 201,
+    extent: float = 3.0,
+    check: int = 5,
+    prior_samples: int = 10_000,
+    cache: str | os.PathLike | None = CACHE,
+) -> dict[str, Any]:
     """The generator's best reachable distance to each goal over :func:`latent_set`, checked by replaying.
 
     For a 2-D latent space the result also holds the mean over coarser grids and over ``prior_samples`` draws from
@@ -139,14 +153,30 @@ def generator_limit(generator: TrajectoryGenerator, task: str, goals: np.ndarray
     prior_mean = None
     if generator.latent_dim == 2 and prior_samples:
         prior_mean = prior_limit(generator, task, goals, samples=prior_samples, extent=extent, cache=cache)["summary"]
-    return {"distances": distances, "best_latents": latents[owner], "latents": latents, "candidates": candidates,
-            "summary": summary(distances), "n_latents": len(latents), "coarser_grid_means": coarser,
-            "prior_samples": prior_samples if prior_mean else 0, "prior_samples_mean": prior_mean and prior_mean["mean"]}
+    return {
+        "distances": distances,
+        "best_latents": latents[owner],
+        "latents": latents,
+        "candidates": candidates,
+        "summary": summary(distances),
+        "n_latents": len(latents),
+        "coarser_grid_means": coarser,
+        "prior_samples": prior_samples if prior_mean else 0,
+        "prior_samples_mean": prior_mean and prior_mean["mean"],
+    }
 
 
-def prior_limit(generator: TrajectoryGenerator, task: str, goals: np.ndarray, *, samples: int = 10_000,
-                extent: float = 3.0, seed: int = 0, check: int = 5,
-                cache: str | os.PathLike | None = CACHE) -> dict[str, Any]:
+def prior_limit(
+    generator: TrajectoryGenerator,
+    task: str,
+    goals: np.ndarray,
+    *,
+    samples: int = 10_000,
+    extent: float = 3.0,
+    seed: int = 0,
+    check: int = 5,
+    cache: str | os.PathLike | None = CACHE,
+) -> dict[str, Any]:
     """The generator's best reachable distance to each goal over ``samples`` latent actions drawn from its prior
     (clipped to ``[-extent, extent]``, as :func:`latent_set` draws them for latent spaces of more than 2 dimensions)."""
     latents = np.clip(generator.sample_prior(samples, rng=np.random.default_rng(seed)), -extent, extent)
@@ -192,11 +222,17 @@ def main() -> None:
         parser.error(f"--out: {out.parent} is not a folder")
     generator = load(args.generator, device="cpu")
     goals = held_out_goals(args.task, args.goals, args.goal_seed)
-    result: dict[str, Any] = {"task": args.task, "generator": os.path.abspath(args.generator), "goals": args.goals,
-                              "goal_seed": args.goal_seed}
+    result: dict[str, Any] = {
+        "task": args.task,
+        "generator": os.path.abspath(args.generator),
+        "goals": args.goals,
+        "goal_seed": args.goal_seed,
+    }
     if args.prior_samples:
-        result["prior_samples"] = {"n": args.prior_samples, **prior_limit(generator, args.task, goals,
-                                                                         samples=args.prior_samples)["summary"]}
+        result["prior_samples"] = {
+            "n": args.prior_samples,
+            **prior_limit(generator, args.task, goals, samples=args.prior_samples)["summary"],
+        }
     if args.grid:
         limit = generator_limit(generator, args.task, goals, grid=args.grid, prior_samples=0)
         result["grid"] = {"n": args.grid, **limit["summary"], "coarser_grid_means": limit["coarser_grid_means"]}

@@ -85,17 +85,32 @@ def main() -> None:
     parser.add_argument("--episodes", type=COUNT, default=256)
     parser.add_argument("--step-episodes", type=COUNT, default=16)
     parser.add_argument("--repeats", type=COUNT, default=3)
-    parser.add_argument("--out", type=JSON_OUT,
-                        default="benchmarks/results/sim_throughput.json")
+    parser.add_argument("--out", type=JSON_OUT, default="benchmarks/results/sim_throughput.json")
     args = parser.parse_args()
     rows = [measure(task, args.episodes, args.step_episodes, args.repeats) for task in ("hockey", "basketball")]
     print(f"episodes per second (best of {args.repeats} runs, {args.episodes} episodes)")
-    header = ("task", "raw mj_step bound", "open loop 1 thread", "open loop 2 threads", "step by step", "1 thread / bound",
-              "step by step / bound")
-    print(markdown_table(header, [[r["task"], *(f"{r[key]:.1f}" for key in ("raw_mj_step", "open_loop_1_thread",
-                                    "open_loop_2_thread", "step_by_step")),
-                                   *(f"{r[key]:.2f}" for key in ("open_loop_1_thread_vs_bound", "step_by_step_vs_bound"))]
-                                  for r in rows]))
+    header = (
+        "task",
+        "raw mj_step bound",
+        "open loop 1 thread",
+        "open loop 2 threads",
+        "step by step",
+        "1 thread / bound",
+        "step by step / bound",
+    )
+    print(
+        markdown_table(
+            header,
+            [
+                [
+                    r["task"],
+                    *(f"{r[key]:.1f}" for key in ("raw_mj_step", "open_loop_1_thread", "open_loop_2_thread", "step_by_step")),
+                    *(f"{r[key]:.2f}" for key in ("open_loop_1_thread_vs_bound", "step_by_step_vs_bound")),
+                ]
+                for r in rows
+            ],
+        )
+    )
     atomic_write_json(args.out, rows)
     print(f"wrote {args.out}")
 

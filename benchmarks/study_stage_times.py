@@ -47,34 +47,47 @@ def main() -> None:
     demos = out / "demonstrations"
     timed("demos_4000", lambda: make_demonstrations(task, 4000, demos, seed=0, progress_bar=False, n_threads=1) and None)
     for name, epochs in (("VAE1", 30), ("GAN2", 30)):
+
         def short(name=name, epochs=epochs):
-            train_generator(str(demos), preset=name, epochs=epochs, eval_every=10, seed=0, out=out / f"{name}_{epochs}.pt",
-                            device="cpu")
+            train_generator(
+                str(demos), preset=name, epochs=epochs, eval_every=10, seed=0, out=out / f"{name}_{epochs}.pt", device="cpu"
+            )
 
         timed(f"{name}_{epochs}ep", short)
     real = real_subset(load_actions(demos), 2000, 0)
 
     def evaluate(path):
-        r = evaluate_generator(load(path, device="cpu"), real, n=2000, k=3, dwpr_n=1000, interventions=5, seed=0,
-                               device="cpu")
+        r = evaluate_generator(load(path, device="cpu"), real, n=2000, k=3, dwpr_n=1000, interventions=5, seed=0, device="cpu")
         return {k: float(v) for k, v in r.row().items() if k != "model"}
 
     timed("evaluate_VAE1", lambda: evaluate(out / "VAE1_30.pt"))
     _, batch, kwargs = task_settings(task)
 
     def policy():
-        train_policy(task, str(out / "VAE1_30.pt"), episodes=256, seed=0, out_dir=out / "policy", batch_episodes=batch,
-                     device="cpu", **kwargs)
+        train_policy(
+            task,
+            str(out / "VAE1_30.pt"),
+            episodes=256,
+            seed=0,
+            out_dir=out / "policy",
+            batch_episodes=batch,
+            device="cpu",
+            **kwargs,
+        )
         return {"episodes": 256, "batch": batch}
 
     timed("genrl_256", policy)
     for name, epochs in (("GAN2", 500), ("GAN2", 1500)):
+
         def gan(name=name, epochs=epochs):
             path = out / f"{name}_{epochs}.pt"
             train_generator(str(demos), preset=name, epochs=epochs, eval_every=50, seed=0, out=path, device="cpu")
             generator = load(path, device="cpu")
-            return {**evaluate(path), "best_epoch": generator.best_epoch,
-                    "selection_mse": [h["selection_mse"] for h in generator.history]}
+            return {
+                **evaluate(path),
+                "best_epoch": generator.best_epoch,
+                "selection_mse": [h["selection_mse"] for h in generator.history],
+            }
 
         timed(f"{name}_{epochs}ep", gan)
 

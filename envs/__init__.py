@@ -62,8 +62,10 @@ def get_task(task: str | TaskSpec) -> TaskSpec:
     for spec in TASKS.values():
         if spec.env_id == task:
             return spec
-    raise ValueError(f"unknown task {task!r}; expected one of {sorted(TASKS)} or their Gymnasium ids "
-                     f"{sorted(spec.env_id for spec in TASKS.values())}")
+    raise ValueError(
+        f"unknown task {task!r}; expected one of {sorted(TASKS)} or their Gymnasium ids "
+        f"{sorted(spec.env_id for spec in TASKS.values())}"
+    )
 
 
 def arm_tasks() -> tuple[str, ...]:
@@ -71,8 +73,9 @@ def arm_tasks() -> tuple[str, ...]:
     motions' showcase, the feedback baselines, the video and the study run on (not, for now, the Fetch tasks)."""
     from sb3_genrl.envs.base import ArmTaskEnv
 
-    return tuple(name for name, spec in TASKS.items()
-                 if isinstance(spec.env_class, type) and issubclass(spec.env_class, ArmTaskEnv))
+    return tuple(
+        name for name, spec in TASKS.items() if isinstance(spec.env_class, type) and issubclass(spec.env_class, ArmTaskEnv)
+    )
 
 
 def make_task(name: str, **kwargs: Any):

@@ -60,10 +60,11 @@ def arm_mjcf(tool: str) -> str:
     for i in range(len(_LINKS), 0, -1):  # from the flange inwards: each link's body holds the next one
         axis, geom, _ = _LINKS[i - 1]
         start = 0.4 if i == 1 else _LINKS[i - 2][2]  # link 1 sits on the 0.4 m pedestal
-        inner = (f'<body name="link{i}" pos="0 0 {start:g}" gravcomp="1">{_joint(i, axis)}<geom {geom}/>'
-                 f"{inner}</body>")
-    return ('<body name="base" pos="0 0 0" childclass="arm"><geom name="pedestal" type="cylinder" size="0.09 0.2" '
-            f'pos="0 0 0.2" rgba="0.25 0.25 0.28 1"/>{inner}</body>')
+        inner = f'<body name="link{i}" pos="0 0 {start:g}" gravcomp="1">{_joint(i, axis)}<geom {geom}/>{inner}</body>'
+    return (
+        '<body name="base" pos="0 0 0" childclass="arm"><geom name="pedestal" type="cylinder" size="0.09 0.2" '
+        f'pos="0 0 0.2" rgba="0.25 0.25 0.28 1"/>{inner}</body>'
+    )
 
 
 def task_mjcf(*, name: str, tool: str, world: str, sensors: str, camera: str) -> str:

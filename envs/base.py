@@ -43,8 +43,7 @@ class ArmTaskEnv(gym.Env, EzPickle):
         height: int = 480,
         **kwargs: Any,
     ) -> None:
-        EzPickle.__init__(self, max_joint_delta=max_joint_delta, render_mode=render_mode, width=width, height=height,
-                          **kwargs)
+        EzPickle.__init__(self, max_joint_delta=max_joint_delta, render_mode=render_mode, width=width, height=height, **kwargs)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
         if not max_joint_delta > 0:
@@ -128,8 +127,9 @@ class ArmTaskEnv(gym.Env, EzPickle):
         if options.get("goal") is None:
             self.goal = self.sample_goal(self.np_random)
         else:
-            self.goal = self._check_goals(options["goal"], None, "options['goal']",
-                                          allow_outside_region=bool(options.get("allow_outside_region", False)))
+            self.goal = self._check_goals(
+                options["goal"], None, "options['goal']", allow_outside_region=bool(options.get("allow_outside_region", False))
+            )
         self._reset_episode()
         return self._get_obs(), {"goal": self.goal.copy()}
 
@@ -251,8 +251,9 @@ class ArmTaskEnv(gym.Env, EzPickle):
         self._done = True
         return frames
 
-    def _check_goals(self, goals: np.ndarray, n: int | None, name: str = "goals", *,
-                     allow_outside_region: bool = False) -> np.ndarray:
+    def _check_goals(
+        self, goals: np.ndarray, n: int | None, name: str = "goals", *, allow_outside_region: bool = False
+    ) -> np.ndarray:
         """Goals as finite float64 ``(x, y)`` pairs inside the goal region, or a ``ValueError`` naming the problem.
 
         :param goals: one ``(2,)`` goal, or ``(n, 2)`` goals
@@ -272,10 +273,13 @@ class ArmTaskEnv(gym.Env, EzPickle):
             low = np.minimum(self.goal_low, self.goal_low.astype(np.float32))
             high = np.maximum(self.goal_high, self.goal_high.astype(np.float32))
             outside = np.any((goals < low) | (goals > high), axis=-1) | ~self._in_region(goals.reshape(-1, 2)).reshape(
-                goals.shape[:-1])
+                goals.shape[:-1]
+            )
             if np.any(outside):
-                raise ValueError(f"{name} {goals[outside] if goals.ndim == 2 else goals} lies outside the goal region "
-                                 f"({self.goal_region_text(low, high)}) of {type(self).__name__}")
+                raise ValueError(
+                    f"{name} {goals[outside] if goals.ndim == 2 else goals} lies outside the goal region "
+                    f"({self.goal_region_text(low, high)}) of {type(self).__name__}"
+                )
         return goals if n is None else np.broadcast_to(goals, (n, 2))
 
     def _in_region(self, goals: np.ndarray) -> np.ndarray:
@@ -298,16 +302,24 @@ class ArmTaskEnv(gym.Env, EzPickle):
         return trajectories
 
     # ----------------------------------------------------------------------------------------- fast path
-    def play_trajectory(self, trajectory: np.ndarray, goal: np.ndarray, *,
-                        allow_outside_region: bool = False) -> tuple[float, dict[str, Any]]:
+    def play_trajectory(
+        self, trajectory: np.ndarray, goal: np.ndarray, *, allow_outside_region: bool = False
+    ) -> tuple[float, dict[str, Any]]:
         """Play one ``(horizon, 7)`` trajectory for ``goal``; the same reward and info as stepping through it."""
-        rewards, infos = self.play_trajectories(np.asarray(trajectory)[None], np.asarray(goal)[None],
-                                                allow_outside_region=allow_outside_region)
+        rewards, infos = self.play_trajectories(
+            np.asarray(trajectory)[None], np.asarray(goal)[None], allow_outside_region=allow_outside_region
+        )
         return float(rewards[0]), infos[0]
 
     def play_trajectories(
-        self, trajectories: np.ndarray, goals: np.ndarray, *, n_threads: int = 1, chunk: int = 256,
-        return_joint_states: bool = False, allow_outside_region: bool = False,
+        self,
+        trajectories: np.ndarray,
+        goals: np.ndarray,
+        *,
+        n_threads: int = 1,
+        chunk: int = 256,
+        return_joint_states: bool = False,
+        allow_outside_region: bool = False,
     ) -> tuple[np.ndarray, list[dict[str, Any]]] | tuple[np.ndarray, list[dict[str, Any]], np.ndarray]:
         """Play a batch of open-loop trajectories with :mod:`mujoco.rollout` (no per-step Python).
 
@@ -330,7 +342,7 @@ class ArmTaskEnv(gym.Env, EzPickle):
         infos: list[dict[str, Any]] = []
         joint_states = np.empty((len(trajectories), self.horizon + 1, 14), np.float32) if return_joint_states else None
         for start in range(0, len(trajectories), chunk):
-            batch = trajectories[start:start + chunk]
+            batch = trajectories[start : start + chunk]
             commands = np.empty_like(batch)
             command = np.tile(self.home_qpos(), (len(batch), 1))
             clipped = np.zeros(len(batch), dtype=int)
@@ -342,8 +354,9 @@ class ArmTaskEnv(gym.Env, EzPickle):
             controls = ramp(previous, commands, self.frame_skip).reshape(len(batch), -1, 7)
             hold = np.repeat(commands[:, -1:], self.settle_steps * self.frame_skip, axis=1)
             controls = np.concatenate([controls, hold], axis=1)
-            states, sensordata = pool.rollout(self.model, datas, self.initial_state[None], controls,
-                                              initial_warmstart=np.zeros((1, self.model.nv)))
+            states, sensordata = pool.rollout(
+                self.model, datas, self.initial_state[None], controls, initial_warmstart=np.zeros((1, self.model.nv))
+            )
             for i, rows in enumerate(sensordata):
                 length = self._episode_length(rows)
                 reward, info = self._finish(rows[:length], goals[start + i], int(clipped[i]))
@@ -360,8 +373,11 @@ class ArmTaskEnv(gym.Env, EzPickle):
         milliseconds per call, as much as a short batch's physics (batched GenRL plays a batch every step)."""
         if getattr(self, "_pool", None) is None or self._pool[0] != n_threads:
             self._close_pool()
-            self._pool = (n_threads, [mujoco.MjData(self.model) for _ in range(n_threads)],
-                          rollout.Rollout(nthread=n_threads if n_threads > 1 else 0))
+            self._pool = (
+                n_threads,
+                [mujoco.MjData(self.model) for _ in range(n_threads)],
+                rollout.Rollout(nthread=n_threads if n_threads > 1 else 0),
+            )
         return self._pool[1], self._pool[2]
 
     def _close_pool(self) -> None:

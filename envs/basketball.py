@@ -107,8 +107,10 @@ class BasketballEnv(ArmTaskEnv):
         return in_goal_region(goals, tolerance=1e-5)
 
     def goal_region_text(self, low: np.ndarray, high: np.ndarray) -> str:
-        return (f"radius in [{BASKET_RADIUS_RANGE[0]}, {BASKET_RADIUS_RANGE[1]}] m, angle in [{BASKET_ANGLE_RANGE[0]:.4f}, "
-                f"{BASKET_ANGLE_RANGE[1]:.4f}] rad")
+        return (
+            f"radius in [{BASKET_RADIUS_RANGE[0]}, {BASKET_RADIUS_RANGE[1]}] m, angle in [{BASKET_ANGLE_RANGE[0]:.4f}, "
+            f"{BASKET_ANGLE_RANGE[1]:.4f}] rad"
+        )
 
     def _mjcf(self) -> str:
         return task_mjcf(name="basketball", tool=_TOOL, world=_WORLD, sensors=_SENSORS, camera=_CAMERA)
@@ -125,8 +127,8 @@ class BasketballEnv(ArmTaskEnv):
     def _place_objects(self) -> None:
         mujoco.mj_kinematics(self.model, self.data)
         ball_adr = self.model.joint("ball").qposadr[0]
-        self.data.qpos[ball_adr:ball_adr + 3] = self.data.site("cup_centre").xpos
-        self.data.qpos[ball_adr + 3:ball_adr + 7] = [1, 0, 0, 0]
+        self.data.qpos[ball_adr : ball_adr + 3] = self.data.site("cup_centre").xpos
+        self.data.qpos[ball_adr + 3 : ball_adr + 7] = [1, 0, 0, 0]
 
     def _settled(self, row: np.ndarray) -> bool:
         return bool(row[3] < BALL_RADIUS + 0.01 and np.linalg.norm(row[4:7]) < 0.05)
@@ -186,16 +188,28 @@ def in_goal_region(points: np.ndarray, tolerance: float = 0.0) -> np.ndarray:
     points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
     radius = np.linalg.norm(points, axis=1)
     angle = np.arctan2(points[:, 1], points[:, 0])
-    return ((radius >= BASKET_RADIUS_RANGE[0] - tolerance) & (radius <= BASKET_RADIUS_RANGE[1] + tolerance)
-            & (angle >= BASKET_ANGLE_RANGE[0] - tolerance) & (angle <= BASKET_ANGLE_RANGE[1] + tolerance))
+    return (
+        (radius >= BASKET_RADIUS_RANGE[0] - tolerance)
+        & (radius <= BASKET_RADIUS_RANGE[1] + tolerance)
+        & (angle >= BASKET_ANGLE_RANGE[0] - tolerance)
+        & (angle <= BASKET_ANGLE_RANGE[1] + tolerance)
+    )
 
 
 def region_patch() -> Any:
     """The goal region's outline for the coverage plot."""
     from matplotlib.patches import Wedge
 
-    return Wedge((0, 0), BASKET_RADIUS_RANGE[1], np.degrees(BASKET_ANGLE_RANGE[0]), np.degrees(BASKET_ANGLE_RANGE[1]),
-                 width=BASKET_RADIUS_RANGE[1] - BASKET_RADIUS_RANGE[0], fill=False, color="k", label="goal region")
+    return Wedge(
+        (0, 0),
+        BASKET_RADIUS_RANGE[1],
+        np.degrees(BASKET_ANGLE_RANGE[0]),
+        np.degrees(BASKET_ANGLE_RANGE[1]),
+        width=BASKET_RADIUS_RANGE[1] - BASKET_RADIUS_RANGE[0],
+        fill=False,
+        color="k",
+        label="goal region",
+    )
 
 
 # ----------------------------------------------------------------------------------------- the scripted expert
@@ -216,8 +230,15 @@ BASKETBALL_STRENGTH = (0.23, 0.72)  # the demonstrations' strengths: they land 0
 BASKETBALL_YAW = np.pi / 2 + 0.15  # rad, either side
 
 
-def throw_motion(*, yaw: float = 0.0, shoulder: float = 0.7, elbow: float = 0.3, wrist: float = 0.15,
-                 duration: int = 4, throw_start: int = 30) -> np.ndarray:
+def throw_motion(
+    *,
+    yaw: float = 0.0,
+    shoulder: float = 0.7,
+    elbow: float = 0.3,
+    wrist: float = 0.15,
+    duration: int = 4,
+    throw_start: int = 30,
+) -> np.ndarray:
     """A throw with separate joint amplitudes: turn the base slowly by ``yaw``, then swing fast.
 
     :param yaw: base rotation (rad), positive throws to the robot's left (positive y); spread over 18 steps so the
@@ -243,8 +264,14 @@ def scripted_throw(*, strength: float = 0.5, yaw: float = 0.0) -> np.ndarray:
     :param yaw: base rotation (rad), positive throws to the robot's left (positive y); the ball lands at this bearing
     :return: ``(78, 7)`` joint position deltas
     """
-    return throw_motion(yaw=yaw, shoulder=strength, elbow=BASKETBALL_ELBOW_SHARE * strength, wrist=0.0,
-                        duration=BASKETBALL_SWING_STEPS, throw_start=BASKETBALL_THROW_START)
+    return throw_motion(
+        yaw=yaw,
+        shoulder=strength,
+        elbow=BASKETBALL_ELBOW_SHARE * strength,
+        wrist=0.0,
+        duration=BASKETBALL_SWING_STEPS,
+        throw_start=BASKETBALL_THROW_START,
+    )
 
 
 def sample_throw(rng: np.random.Generator) -> np.ndarray:
@@ -264,9 +291,20 @@ def is_valid(info: dict[str, Any]) -> bool:
     return info.get("crossings", 0) > 0
 
 
-
-TASK = TaskSpec(name="basketball", env_id="GenRL/Basketball-v0", env_class=BasketballEnv, horizon=BASKETBALL_HORIZON,
-                goal_low=BasketballEnv.goal_low, goal_high=BasketballEnv.goal_high, in_goal_region=in_goal_region,
-                cell_size=0.25, sample_expert=sample_throw, perturbation_scales=BASKETBALL_PERTURBATION,
-                is_valid=is_valid, region_patch=region_patch, figure_size=(6.0, 8.0),
-                goal_env_id="GenRL/BasketballGoal-v0", goal_env_class=BasketballGoalEnv)
+TASK = TaskSpec(
+    name="basketball",
+    env_id="GenRL/Basketball-v0",
+    env_class=BasketballEnv,
+    horizon=BASKETBALL_HORIZON,
+    goal_low=BasketballEnv.goal_low,
+    goal_high=BasketballEnv.goal_high,
+    in_goal_region=in_goal_region,
+    cell_size=0.25,
+    sample_expert=sample_throw,
+    perturbation_scales=BASKETBALL_PERTURBATION,
+    is_valid=is_valid,
+    region_patch=region_patch,
+    figure_size=(6.0, 8.0),
+    goal_env_id="GenRL/BasketballGoal-v0",
+    goal_env_class=BasketballGoalEnv,
+)

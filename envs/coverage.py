@@ -55,8 +55,13 @@ def coverage_fraction(reached: np.ndarray, task: str | TaskSpec) -> float:
     return float(covered_cells(reached, task).mean())
 
 
-def coverage_report(source: np.ndarray | str | os.PathLike[str], task: str | TaskSpec | None,
-                    out_dir: str | os.PathLike[str], *, final_dir: str | os.PathLike[str] | None = None) -> dict[str, Any]:
+def coverage_report(
+    source: np.ndarray | str | os.PathLike[str],
+    task: str | TaskSpec | None,
+    out_dir: str | os.PathLike[str],
+    *,
+    final_dir: str | os.PathLike[str] | None = None,
+) -> dict[str, Any]:
     """Write ``coverage.json`` and ``coverage.png`` (reached points over the goal region) into ``out_dir``.
 
     :param source: a dataset directory or the reached points ``(N, 2)``
@@ -83,10 +88,17 @@ def coverage_report(source: np.ndarray | str | os.PathLike[str], task: str | Tas
     out_dir.mkdir(parents=True, exist_ok=True)
     named = out_dir if final_dir is None else Path(final_dir)
     covered = covered_cells(reached, spec)
-    report = {"task": spec.name, "episodes": int(len(reached)), "cell_size": spec.cell_size, "cells": int(len(covered)),
-              "covered_cells": int(covered.sum()), "coverage": float(covered.mean()),
-              "in_region": float(in_goal_region(reached, spec).mean()) if len(reached) else 0.0,
-              "json": str(named / "coverage.json"), "png": str(named / "coverage.png")}
+    report = {
+        "task": spec.name,
+        "episodes": int(len(reached)),
+        "cell_size": spec.cell_size,
+        "cells": int(len(covered)),
+        "covered_cells": int(covered.sum()),
+        "coverage": float(covered.mean()),
+        "in_region": float(in_goal_region(reached, spec).mean()) if len(reached) else 0.0,
+        "json": str(named / "coverage.json"),
+        "png": str(named / "coverage.png"),
+    }
     with atomic_path(out_dir / "coverage.png") as tmp:
         _plot(reached, spec, covered, tmp, report["coverage"])
     atomic_write_json(out_dir / "coverage.json", report, indent=1)

@@ -35,8 +35,9 @@ ACTION_MARGIN = 0.95  # trajectories use at most this share of the action box
 JOINT_MARGIN = 0.05  # rad kept from each joint limit
 
 
-def perturbation(horizon: int, rng: np.random.Generator, scales: np.ndarray, *, max_bumps: int = 4,
-                 durations: tuple[int, int] = (6, 30)) -> np.ndarray:
+def perturbation(
+    horizon: int, rng: np.random.Generator, scales: np.ndarray, *, max_bumps: int = 4, durations: tuple[int, int] = (6, 30)
+) -> np.ndarray:
     """Random smooth joint-velocity changes, as per-step joint position deltas.
 
     :param horizon: control steps T
@@ -62,13 +63,15 @@ def within_limits(trajectories: np.ndarray, home: np.ndarray, max_joint_delta: f
     each with a margin (:data:`ACTION_MARGIN`, :data:`JOINT_MARGIN`)."""
     in_box = np.abs(trajectories).max(axis=(1, 2)) <= ACTION_MARGIN * max_joint_delta
     commands = home + np.cumsum(trajectories, axis=1)
-    in_range = np.all((commands >= JOINT_RANGE[:, 0] + JOINT_MARGIN) & (commands <= JOINT_RANGE[:, 1] - JOINT_MARGIN),
-                      axis=(1, 2))
+    in_range = np.all(
+        (commands >= JOINT_RANGE[:, 0] + JOINT_MARGIN) & (commands <= JOINT_RANGE[:, 1] - JOINT_MARGIN), axis=(1, 2)
+    )
     return in_box & in_range
 
 
-def sample_trajectories(task: str | TaskSpec, n: int, rng: np.random.Generator, *, home: np.ndarray | None = None,
-                        max_joint_delta: float = 0.5) -> np.ndarray:
+def sample_trajectories(
+    task: str | TaskSpec, n: int, rng: np.random.Generator, *, home: np.ndarray | None = None, max_joint_delta: float = 0.5
+) -> np.ndarray:
     """Draw ``n`` perturbed expert trajectories (before simulation; see the module docstring).
 
     :param task: a task name from :data:`sb3_genrl.envs.TASKS` (or its spec)
@@ -110,8 +113,16 @@ def is_valid(task: str | TaskSpec, info: dict[str, Any]) -> bool:
     return bool(get_task(task).is_valid(info))
 
 
-def make_demonstrations(task: str | TaskSpec, episodes: int, out_dir: str | os.PathLike[str], *, seed: int = 0,
-                        n_threads: int | None = None, progress_bar: bool = True, chunk: int = 256) -> Path:
+def make_demonstrations(
+    task: str | TaskSpec,
+    episodes: int,
+    out_dir: str | os.PathLike[str],
+    *,
+    seed: int = 0,
+    n_threads: int | None = None,
+    progress_bar: bool = True,
+    chunk: int = 256,
+) -> Path:
     """Generate ``episodes`` valid demonstrations of ``task`` and write them as a Minari dataset in ``out_dir``.
 
     Trajectory ``k`` (and its sampled goal) is drawn from its own generator ``np.random.default_rng([seed, k])``;
@@ -160,20 +171,26 @@ def refuse_existing_output(out_dir: Path) -> None:
     try:
         info = dataset_info(out_dir)
     except ValueError:
-        raise ValueError(f"{str(out_dir)!r} already exists and is not an empty directory; choose another output "
-                         "path") from None
+        raise ValueError(
+            f"{str(out_dir)!r} already exists and is not an empty directory; choose another output path"
+        ) from None
     held = f"{info.get('episodes')} {info.get('task')} demonstrations, seed {info.get('seed')}"
     if not (out_dir / "coverage.json").is_file():
-        raise ValueError(f"{str(out_dir)!r} already exists: it holds a dataset ({held}) without its coverage report, "
-                         "left by an interrupted run of an older sb3-genrl version, which wrote the report after the "
-                         "dataset. Delete the folder and rerun, or add the report with "
-                         "sb3_genrl.envs.coverage.coverage_report(path, None, path)")
-    raise ValueError(f"{str(out_dir)!r} already exists and holds a complete dataset ({held}); choose another output "
-                     "path, or delete it to make it again")
+        raise ValueError(
+            f"{str(out_dir)!r} already exists: it holds a dataset ({held}) without its coverage report, "
+            "left by an interrupted run of an older sb3-genrl version, which wrote the report after the "
+            "dataset. Delete the folder and rerun, or add the report with "
+            "sb3_genrl.envs.coverage.coverage_report(path, None, path)"
+        )
+    raise ValueError(
+        f"{str(out_dir)!r} already exists and holds a complete dataset ({held}); choose another output "
+        "path, or delete it to make it again"
+    )
 
 
-def _make_demonstrations(spec: TaskSpec, episodes: int, out_dir: Path, seed: int, n_threads: int | None,
-                         progress_bar: bool, chunk: int) -> Path:
+def _make_demonstrations(
+    spec: TaskSpec, episodes: int, out_dir: Path, seed: int, n_threads: int | None, progress_bar: bool, chunk: int
+) -> Path:
     from sb3_genrl.envs.coverage import coverage_report
 
     import sb3_genrl
@@ -184,28 +201,45 @@ def _make_demonstrations(spec: TaskSpec, episodes: int, out_dir: Path, seed: int
     n_threads = default_threads() if n_threads is None else int(n_threads)
     if spec.demonstrations is not None:  # a task with its own (not an ArmTaskEnv)
         arrays, drawn, described = spec.demonstrations(spec, episodes, seed, n_threads, progress_bar)
-        observation_space, action_space, details = described["observation_space"], described["action_space"], {
-            "observation": described["observation"]}
+        observation_space, action_space, details = (
+            described["observation_space"],
+            described["action_space"],
+            {"observation": described["observation"]},
+        )
     else:
         env = spec.make_env()
         kept, drawn = _valid_episodes(spec, env, episodes, seed, n_threads, chunk, progress_bar)
         arrays = _episode_arrays(env, kept)
         observation_space, action_space = env.observation_space, env.action_space
-        details = {"observation": "goal xy, 7 joint positions, 7 joint velocities",
-                   "max_joint_delta": env.max_joint_delta}
-    genrl = {"task": task, "env_id": spec.env_id, "horizon": spec.horizon, "seed": int(seed),
-             "version": sb3_genrl.__version__, "mujoco": package_versions()["mujoco"], "episodes": int(episodes),
-             "drawn": int(drawn),
-             "goal": "reached (hindsight: each demonstration's goal is the point it reached)", **details,
-             "seconds": round(time.perf_counter() - began, 1)}
-    return write_dataset(out_dir, arrays, dataset_id=f"genrl/{task}-v0", observation_space=observation_space,
-                         action_space=action_space, genrl=genrl,
-                         description=f"{episodes} perturbed scripted demonstrations of {spec.env_id} (sb3-genrl)",
-                         extra_files=lambda tmp: coverage_report(arrays["reached"][:, :2], spec, tmp, final_dir=out_dir))
+        details = {"observation": "goal xy, 7 joint positions, 7 joint velocities", "max_joint_delta": env.max_joint_delta}
+    genrl = {
+        "task": task,
+        "env_id": spec.env_id,
+        "horizon": spec.horizon,
+        "seed": int(seed),
+        "version": sb3_genrl.__version__,
+        "mujoco": package_versions()["mujoco"],
+        "episodes": int(episodes),
+        "drawn": int(drawn),
+        "goal": "reached (hindsight: each demonstration's goal is the point it reached)",
+        **details,
+        "seconds": round(time.perf_counter() - began, 1),
+    }
+    return write_dataset(
+        out_dir,
+        arrays,
+        dataset_id=f"genrl/{task}-v0",
+        observation_space=observation_space,
+        action_space=action_space,
+        genrl=genrl,
+        description=f"{episodes} perturbed scripted demonstrations of {spec.env_id} (sb3-genrl)",
+        extra_files=lambda tmp: coverage_report(arrays["reached"][:, :2], spec, tmp, final_dir=out_dir),
+    )
 
 
-def _valid_episodes(spec: TaskSpec, env: ArmTaskEnv, episodes: int, seed: int, n_threads: int, chunk: int,
-                    progress_bar: bool) -> tuple[dict[str, np.ndarray], int]:
+def _valid_episodes(
+    spec: TaskSpec, env: ArmTaskEnv, episodes: int, seed: int, n_threads: int, chunk: int, progress_bar: bool
+) -> tuple[dict[str, np.ndarray], int]:
     """Draw and simulate trajectories in chunks until ``episodes`` are valid (see :func:`make_demonstrations`).
 
     :return: the valid episodes' ``actions``, ``joints``, ``reached`` and ``sampled_goals``, and the number drawn
@@ -219,8 +253,9 @@ def _valid_episodes(spec: TaskSpec, env: ArmTaskEnv, episodes: int, seed: int, n
                 raise RuntimeError(f"none of the first {drawn} {spec.name} trajectories was valid")
             size = min(chunk, int(1.1 * (episodes - count)) + 4)
             rngs = [np.random.default_rng([seed, k]) for k in range(drawn, drawn + size)]
-            actions = np.concatenate([sample_trajectories(spec, 1, r, home=home, max_joint_delta=env.max_joint_delta)
-                                      for r in rngs])
+            actions = np.concatenate(
+                [sample_trajectories(spec, 1, r, home=home, max_joint_delta=env.max_joint_delta) for r in rngs]
+            )
             goals = np.stack([env.sample_goal(r) for r in rngs])
             _, infos, joints = env.play_trajectories(actions, goals, n_threads=n_threads, return_joint_states=True)
             drawn += size
@@ -243,6 +278,12 @@ def _episode_arrays(env: ArmTaskEnv, kept: dict[str, np.ndarray]) -> dict[str, n
     rewards[:, -1] = -0.0  # minus the distance between the reached point and the goal, which is that point
     terminations = np.zeros((n, horizon), dtype=bool)
     terminations[:, -1] = True
-    return {"observations": observations, "actions": kept["actions"].astype(np.float32), "rewards": rewards,
-            "terminations": terminations, "truncations": np.zeros((n, horizon), dtype=bool),
-            "reached": kept["reached"].astype(np.float64), "sampled_goals": kept["sampled_goals"].astype(np.float64)}
+    return {
+        "observations": observations,
+        "actions": kept["actions"].astype(np.float32),
+        "rewards": rewards,
+        "terminations": terminations,
+        "truncations": np.zeros((n, horizon), dtype=bool),
+        "reached": kept["reached"].astype(np.float64),
+        "sampled_goals": kept["sampled_goals"].astype(np.float64),
+    }

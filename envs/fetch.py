@@ -38,13 +38,19 @@ SUCCESS_DISTANCE = 0.05  # Gymnasium-Robotics' distance_threshold of every Fetch
 # The goal regions' (x, y) boxes: the initial gripper position plus Gymnasium-Robotics' target_offset +- target_range
 # (Reach, PickAndPlace: gripper at (1.342, 0.749), range 0.15; Push: (1.363, 0.749), 0.15; Slide: (1.013, 0.749)
 # + (0.4, 0), 0.3).
-GOAL_BOXES = {"Reach": ((1.19, 0.60), (1.49, 0.90)), "Push": ((1.21, 0.60), (1.51, 0.90)),
-              "PickAndPlace": ((1.19, 0.60), (1.49, 0.90)), "Slide": ((1.11, 0.45), (1.71, 1.05))}
+GOAL_BOXES = {
+    "Reach": ((1.19, 0.60), (1.49, 0.90)),
+    "Push": ((1.21, 0.60), (1.51, 0.90)),
+    "PickAndPlace": ((1.19, 0.60), (1.49, 0.90)),
+    "Slide": ((1.11, 0.45), (1.71, 1.05)),
+}
 AIM_MARGIN = 0.02  # the demonstrations' aims are drawn over the goal region widened by this much (m)
 PERTURBATION = np.array([0.05, 0.05, 0.03, 0.0])  # m travelled by one bump per axis at level 1 (gripper untouched)
 # Slide: the puck's travel (m) after a strike of each speed (units of action), measured on random reset states
-SLIDE_DISTANCE_TO_SPEED = (np.array([0.0, 0.02, 0.068, 0.123, 0.19, 0.26, 0.437, 0.68]),
-                           np.array([0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.8, 1.0]))
+SLIDE_DISTANCE_TO_SPEED = (
+    np.array([0.0, 0.02, 0.068, 0.123, 0.19, 0.26, 0.437, 0.68]),
+    np.array([0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.8, 1.0]),
+)
 
 
 def waypoint_actions(start: np.ndarray, moves: list[tuple[np.ndarray | None, float, int]]) -> np.ndarray:
@@ -59,8 +65,8 @@ def waypoint_actions(start: np.ndarray, moves: list[tuple[np.ndarray | None, flo
     for target, gripper, steps in moves:
         target = position if target is None else np.asarray(target, dtype=np.float64)
         n = min(steps, FETCH_HORIZON - t)
-        actions[t:t + n, :3] = (target - position) / steps / (STEP_METRES * GRIPPER_GAIN)
-        actions[t:t + n, 3] = gripper
+        actions[t : t + n, :3] = (target - position) / steps / (STEP_METRES * GRIPPER_GAIN)
+        actions[t : t + n, 3] = gripper
         t, position = t + n, target
     actions[t:, 3] = gripper
     return np.clip(actions, -1.0, 1.0)
@@ -73,8 +79,7 @@ def _approach(observation: np.ndarray, aim: np.ndarray, back: float, lift: float
     direction = aim[:2] - obj[:2]
     direction = direction / max(float(np.linalg.norm(direction)), 1e-6)
     behind = np.r_[obj[:2] - back * direction, obj[2] - 0.005]
-    return direction, behind, [(grip + [0.0, 0.0, lift], 0.0, 5), (behind + [0.0, 0.0, lift], 0.0, 8),
-                               (behind, 0.0, 5)]
+    return direction, behind, [(grip + [0.0, 0.0, lift], 0.0, 5), (behind + [0.0, 0.0, lift], 0.0, 8), (behind, 0.0, 5)]
 
 
 def reach_expert(observation: np.ndarray, aim: np.ndarray) -> np.ndarray:
@@ -104,8 +109,16 @@ def pick_and_place_expert(observation: np.ndarray, aim: np.ndarray) -> np.ndarra
     grip, obj = observation[:3], observation[3:6]
     grasp = obj + [0.0, 0.0, -0.005]
     carry = np.r_[aim[:2], max(aim[2], obj[2])]
-    return waypoint_actions(grip, [(obj + [0.0, 0.0, 0.08], 1.0, 8), (grasp, 1.0, 6), (None, -1.0, 5),
-                                   (grasp + [0.0, 0.0, 0.08], -1.0, 6), (carry, -1.0, 15)])
+    return waypoint_actions(
+        grip,
+        [
+            (obj + [0.0, 0.0, 0.08], 1.0, 8),
+            (grasp, 1.0, 6),
+            (None, -1.0, 5),
+            (grasp + [0.0, 0.0, 0.08], -1.0, 6),
+            (carry, -1.0, 15),
+        ],
+    )
 
 
 @dataclass(frozen=True)
@@ -144,9 +157,15 @@ def _table_or_air(rng: np.random.Generator, env: Any) -> float:  # as Gymnasium-
     return float(env.height_offset + (rng.uniform(0.0, 0.45) if rng.uniform() < 0.5 else 0.0))
 
 
-FAMILIES = {family.name: family for family in (
-    FetchFamily("Reach", reach_expert, _reach_height), FetchFamily("Push", push_expert, _on_table),
-    FetchFamily("Slide", slide_expert, _on_table), FetchFamily("PickAndPlace", pick_and_place_expert, _table_or_air))}
+FAMILIES = {
+    family.name: family
+    for family in (
+        FetchFamily("Reach", reach_expert, _reach_height),
+        FetchFamily("Push", push_expert, _on_table),
+        FetchFamily("Slide", slide_expert, _on_table),
+        FetchFamily("PickAndPlace", pick_and_place_expert, _table_or_air),
+    )
+}
 FETCH_IDS = tuple(family.env_id for family in FAMILIES.values())
 
 
@@ -202,13 +221,29 @@ def _task(name: str, short: str, maker: Callable[..., Any]) -> TaskSpec:
         return np.all((points >= low) & (points <= high), axis=1)
 
     family = FAMILIES[name]
-    return TaskSpec(name=short, env_id=family.env_id, env_class=maker, horizon=FETCH_HORIZON, goal_low=low, goal_high=high,
-                    in_goal_region=in_goal_region, cell_size=0.03 if name == "Slide" else 0.02,
-                    sample_expert=family.expert, perturbation_scales=PERTURBATION, is_valid=is_valid,
-                    action_dim=FETCH_ACTION_DIM, demonstrations=make_arrays,
-                    evaluate=evaluate_success, generator_preset="VAE-FETCH", video=False)
+    return TaskSpec(
+        name=short,
+        env_id=family.env_id,
+        env_class=maker,
+        horizon=FETCH_HORIZON,
+        goal_low=low,
+        goal_high=high,
+        in_goal_region=in_goal_region,
+        cell_size=0.03 if name == "Slide" else 0.02,
+        sample_expert=family.expert,
+        perturbation_scales=PERTURBATION,
+        is_valid=is_valid,
+        action_dim=FETCH_ACTION_DIM,
+        demonstrations=make_arrays,
+        evaluate=evaluate_success,
+        generator_preset="VAE-FETCH",
+        video=False,
+    )
 
 
-TASKS = (_task("Reach", "fetch-reach", make_fetch_reach), _task("Push", "fetch-push", make_fetch_push),
-         _task("Slide", "fetch-slide", make_fetch_slide),
-         _task("PickAndPlace", "fetch-pick-and-place", make_fetch_pick_and_place))
+TASKS = (
+    _task("Reach", "fetch-reach", make_fetch_reach),
+    _task("Push", "fetch-push", make_fetch_push),
+    _task("Slide", "fetch-slide", make_fetch_slide),
+    _task("PickAndPlace", "fetch-pick-and-place", make_fetch_pick_and_place),
+)

@@ -33,8 +33,9 @@ def _env(env_id: str) -> gym.Env:
     return _ENVS[env_id]
 
 
-def play_expert(env_id: str, actions: np.ndarray | None, reset_seed: int, aim: np.ndarray | None,
-                rng: np.random.Generator | None = None) -> dict[str, Any]:
+def play_expert(
+    env_id: str, actions: np.ndarray | None, reset_seed: int, aim: np.ndarray | None, rng: np.random.Generator | None = None
+) -> dict[str, Any]:
     """Reset the env with ``reset_seed`` and play the expert's trajectory (or ``actions``) open-loop.
 
     :param env_id: a Fetch id
@@ -64,10 +65,16 @@ def play_expert(env_id: str, actions: np.ndarray | None, reset_seed: int, aim: n
         infos.append(info)
     achieved_array = np.array(achieved, dtype=np.float64)
     on_table = not task.has_object or bool(achieved_array[-1, 2] > task.height_offset - 0.02)
-    return {"actions": np.asarray(actions, dtype=np.float32), "observations": np.array(observations),
-            "achieved": achieved_array, "infos": infos, "aim": aim, "on_table": on_table,
-            "aim_distance": float(np.linalg.norm(achieved_array[-1] - aim)),
-            "is_success": bool(infos[-1]["is_success"])}
+    return {
+        "actions": np.asarray(actions, dtype=np.float32),
+        "observations": np.array(observations),
+        "achieved": achieved_array,
+        "infos": infos,
+        "aim": aim,
+        "on_table": on_table,
+        "aim_distance": float(np.linalg.norm(achieved_array[-1] - aim)),
+        "is_success": bool(infos[-1]["is_success"]),
+    }
 
 
 def _demonstration(env_id: str, seed: int, k: int) -> dict[str, Any]:
@@ -88,17 +95,26 @@ def _play_chunk(env_id: str, seed: int, start: int, stop: int) -> list[dict[str,
             out.append(None)
             continue
         reached = played["achieved"][-1]
-        rewards = [float(_env(env_id).unwrapped.compute_reward(a, reached, info))
-                   for a, info in zip(played["achieved"][1:], played["infos"], strict=True)]
+        rewards = [
+            float(_env(env_id).unwrapped.compute_reward(a, reached, info))
+            for a, info in zip(played["achieved"][1:], played["infos"], strict=True)
+        ]
         goal = np.repeat(reached[None], FETCH_HORIZON + 1, axis=0)
-        out.append({"observations": np.concatenate([goal, played["observations"]], axis=1).astype(np.float32),
-                    "actions": played["actions"], "rewards": np.array(rewards), "reached": reached,
-                    "sampled_goals": played["aim"]})
+        out.append(
+            {
+                "observations": np.concatenate([goal, played["observations"]], axis=1).astype(np.float32),
+                "actions": played["actions"],
+                "rewards": np.array(rewards),
+                "reached": reached,
+                "sampled_goals": played["aim"],
+            }
+        )
     return out
 
 
-def make_arrays(spec: TaskSpec, episodes: int, seed: int, n_threads: int, progress_bar: bool,
-                chunk: int = 64) -> tuple[dict[str, np.ndarray], int, dict[str, Any]]:
+def make_arrays(
+    spec: TaskSpec, episodes: int, seed: int, n_threads: int, progress_bar: bool, chunk: int = 64
+) -> tuple[dict[str, np.ndarray], int, dict[str, Any]]:
     """``episodes`` valid demonstrations of a Fetch task (see the module docstring), as the dataset's arrays.
 
     :return: the arrays of :mod:`sb3_genrl.data.minari_io` (``reached`` and ``sampled_goals`` ``(N, 3)``), the number
@@ -108,11 +124,16 @@ def make_arrays(spec: TaskSpec, episodes: int, seed: int, n_threads: int, progre
     kept: list[dict[str, Any]] = []
     drawn = 0
     chunk = min(chunk, episodes + 4)
-    pool = (concurrent.futures.ProcessPoolExecutor(n_threads, mp_context=multiprocessing.get_context("spawn"))
-            if n_threads > 1 else None)
+    pool = (
+        concurrent.futures.ProcessPoolExecutor(n_threads, mp_context=multiprocessing.get_context("spawn"))
+        if n_threads > 1
+        else None
+    )
     play = map if pool is None else pool.map
-    with pool or contextlib.nullcontext(), tqdm(total=episodes, disable=not progress_bar, unit="episode",
-                                                 desc=f"{spec.name} demonstrations") as bar:
+    with (
+        pool or contextlib.nullcontext(),
+        tqdm(total=episodes, disable=not progress_bar, unit="episode", desc=f"{spec.name} demonstrations") as bar,
+    ):
         while len(kept) < episodes:
             if drawn >= 2000 and not kept:
                 raise RuntimeError(f"none of the first {drawn} {spec.name} trajectories was valid")
@@ -128,10 +149,15 @@ def make_arrays(spec: TaskSpec, episodes: int, seed: int, n_threads: int, progre
     terminations[:, -1] = True
     arrays.update(terminations=terminations, truncations=np.zeros((n, FETCH_HORIZON), dtype=bool))
     dim = arrays["observations"].shape[-1]
-    return arrays, drawn, {
-        "observation_space": spaces.Box(-np.inf, np.inf, shape=(dim,), dtype=np.float32),
-        "action_space": spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32),
-        "observation": "reached goal (the achieved goal at the end), then the env's observation"}
+    return (
+        arrays,
+        drawn,
+        {
+            "observation_space": spaces.Box(-np.inf, np.inf, shape=(dim,), dtype=np.float32),
+            "action_space": spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32),
+            "observation": "reached goal (the achieved goal at the end), then the env's observation",
+        },
+    )
 
 
 def expert_success(task: str | TaskSpec, episodes: int, seed: int) -> dict[str, float]:
@@ -139,8 +165,11 @@ def expert_success(task: str | TaskSpec, episodes: int, seed: int) -> dict[str, 
     reset states (seeds ``seed, seed + 1, ...``): its success rate and median final distance (m)."""
     spec = get_task(task)
     played = [play_expert(spec.env_id, None, seed + i, None) for i in range(episodes)]
-    return {"episodes": episodes, "success_rate": float(np.mean([p["is_success"] for p in played])),
-            "median_distance": float(np.median([p["aim_distance"] for p in played]))}
+    return {
+        "episodes": episodes,
+        "success_rate": float(np.mean([p["is_success"] for p in played])),
+        "median_distance": float(np.median([p["aim_distance"] for p in played])),
+    }
 
 
 def evaluate_success(model: Any, task: str | TaskSpec, episodes: int = 100, seed: int = 0) -> dict[str, Any]:
@@ -167,31 +196,41 @@ def evaluate_success(model: Any, task: str | TaskSpec, episodes: int = 100, seed
         successes.append(float(info["is_success"]))
         distances.append(float(np.linalg.norm(task_env._get_obs()["achieved_goal"] - task_env.goal)))
     env.close()
-    return {"episodes": episodes, "seed": seed, "success_rate": float(np.mean(successes)),
-            "successes": successes, "distances": distances}
+    return {
+        "episodes": episodes,
+        "seed": seed,
+        "success_rate": float(np.mean(successes)),
+        "successes": successes,
+        "distances": distances,
+    }
 
 
-def _replay_chunk(env_id: str, actions: np.ndarray, reset_seeds: list[int], aims: list[np.ndarray | None]
-                  ) -> list[tuple[bool, float]]:
+def _replay_chunk(
+    env_id: str, actions: np.ndarray, reset_seeds: list[int], aims: list[np.ndarray | None]
+) -> list[tuple[bool, float]]:
     """Play each of ``actions`` open-loop from its reset seed: whether it solved the env's goal, and its distance to
     its aim (None: the env's goal)."""
     played = [play_expert(env_id, tau, seed, aim) for tau, seed, aim in zip(actions, reset_seeds, aims, strict=True)]
     return [(p["is_success"], p["aim_distance"] if p["on_table"] else np.inf) for p in played]
 
 
-def _replay(env_id: str, actions: np.ndarray, reset_seeds: list[int], aims: list[np.ndarray | None],
-            n_threads: int, chunk: int = 100) -> list[tuple[bool, float]]:
+def _replay(
+    env_id: str, actions: np.ndarray, reset_seeds: list[int], aims: list[np.ndarray | None], n_threads: int, chunk: int = 100
+) -> list[tuple[bool, float]]:
     """:func:`_replay_chunk` over ``n_threads`` worker processes (1: here), in the order given."""
-    parts = [(env_id, actions[i:i + chunk], reset_seeds[i:i + chunk], aims[i:i + chunk])
-             for i in range(0, len(actions), chunk)]
+    parts = [
+        (env_id, actions[i : i + chunk], reset_seeds[i : i + chunk], aims[i : i + chunk])
+        for i in range(0, len(actions), chunk)
+    ]
     if n_threads == 1:
         return [row for part in parts for row in _replay_chunk(*part)]
     with concurrent.futures.ProcessPoolExecutor(n_threads, mp_context=multiprocessing.get_context("spawn")) as pool:
         return [row for rows in pool.map(_replay_chunk, *zip(*parts, strict=True)) for row in rows]
 
 
-def reconstruction_success(generator: Any, task: str | TaskSpec, episodes: int, seed: int,
-                           n_threads: int = 1) -> dict[str, Any]:
+def reconstruction_success(
+    generator: Any, task: str | TaskSpec, episodes: int, seed: int, n_threads: int = 1
+) -> dict[str, Any]:
     """How closely a VAE reproduces demonstrations it was not trained on: ``episodes`` new valid demonstrations (drawn
     as :func:`make_arrays` draws them, with ``seed``; give another seed than the training set's), each encoded to its
     posterior mean, decoded and replayed open-loop from its own reset state; the share that end within 5 cm of the
@@ -205,15 +244,22 @@ def reconstruction_success(generator: Any, task: str | TaskSpec, episodes: int, 
             demonstrations.append(played)
     actions = np.stack([d["actions"] for d in demonstrations])
     decoded = np.clip(generator.decode(generator.encode(actions)[0]), -1.0, 1.0).astype(np.float32)
-    rows = _replay(spec.env_id, decoded, [d["reset_seed"] for d in demonstrations],
-                   [d["aim"] for d in demonstrations], n_threads)
+    rows = _replay(
+        spec.env_id, decoded, [d["reset_seed"] for d in demonstrations], [d["aim"] for d in demonstrations], n_threads
+    )
     misses = np.array([distance for _, distance in rows])
-    return {"demonstrations": episodes, "seed": seed, "drawn": k, "success_rate": float(np.mean(misses < 0.05)),
-            "median_miss_m": float(np.median(misses))}
+    return {
+        "demonstrations": episodes,
+        "seed": seed,
+        "drawn": k,
+        "success_rate": float(np.mean(misses < 0.05)),
+        "median_miss_m": float(np.median(misses)),
+    }
 
 
-def replay_success(generator: Any, task: str | TaskSpec, latents: np.ndarray, reset_seeds: list[int],
-                   n_threads: int = 1) -> np.ndarray:
+def replay_success(
+    generator: Any, task: str | TaskSpec, latents: np.ndarray, reset_seeds: list[int], n_threads: int = 1
+) -> np.ndarray:
     """Whether each latent action, decoded (clipped to the action box) and played open-loop from its reset seed,
     solves the env's goal (``info["is_success"]`` of the last step)."""
     actions = np.clip(generator.decode(np.asarray(latents, dtype=np.float32)), -1.0, 1.0).astype(np.float32)
@@ -221,8 +267,9 @@ def replay_success(generator: Any, task: str | TaskSpec, latents: np.ndarray, re
     return np.array([success for success, _ in rows], dtype=bool)
 
 
-def prior_best_success(generator: Any, task: str | TaskSpec, states: int, draws: int, seed: int,
-                       n_threads: int = 1) -> dict[str, Any]:
+def prior_best_success(
+    generator: Any, task: str | TaskSpec, states: int, draws: int, seed: int, n_threads: int = 1
+) -> dict[str, Any]:
     """The generator's own limit: for each of ``states`` initial states (reset seeds ``seed, seed + 1, ...``),
     ``draws`` latent actions from its prior, decoded and played open-loop; per state the number of draws that solve
     the env's goal (``info["is_success"]``). Returns the share of states solved by at least one draw (best of
@@ -232,19 +279,25 @@ def prior_best_success(generator: Any, task: str | TaskSpec, states: int, draws:
     spec = get_task(task)
     rng = np.random.default_rng([seed, states, draws])
     actions = np.clip(generator.decode(generator.sample_prior(states * draws, rng)), -1.0, 1.0).astype(np.float32)
-    rows = _replay(spec.env_id, actions, [seed + i // draws for i in range(states * draws)], [None] * len(actions),
-                   n_threads)
+    rows = _replay(spec.env_id, actions, [seed + i // draws for i in range(states * draws)], [None] * len(actions), n_threads)
     solved = np.array([success for success, _ in rows], dtype=bool).reshape(states, draws).sum(axis=1)
 
     def best_of(k: int) -> float:  # P(at least one of k draws without replacement solves the state), mean over states
         return float(np.mean([1.0 - comb(draws - int(s), k) / comb(draws, k) for s in solved]))
 
-    return {"states": states, "prior_draws_per_state": draws, "seed": seed, "success_rate": best_of(draws),
-            "best_of": {str(k): best_of(k) for k in (1, 10, 100) if k <= draws}, "solving_draws": solved.tolist()}
+    return {
+        "states": states,
+        "prior_draws_per_state": draws,
+        "seed": seed,
+        "success_rate": best_of(draws),
+        "best_of": {str(k): best_of(k) for k in (1, 10, 100) if k <= draws},
+        "solving_draws": solved.tolist(),
+    }
 
 
-def policy_neighbourhood_success(model: Any, task: str | TaskSpec, states: int, draws: int, seed: int,
-                                 n_threads: int = 1) -> dict[str, Any]:
+def policy_neighbourhood_success(
+    model: Any, task: str | TaskSpec, states: int, draws: int, seed: int, n_threads: int = 1
+) -> dict[str, Any]:
     """What the generator allows near a trained GenRL policy: for each of ``states`` initial states (reset seeds
     ``seed, seed + 1, ...``), the policy's deterministic latent action and ``draws`` latent actions from the policy's
     own distribution at that state (clipped to the latent box), decoded and played open-loop. Returns the share of
@@ -270,10 +323,18 @@ def policy_neighbourhood_success(model: Any, task: str | TaskSpec, states: int, 
     alphas = np.clip(alphas, env.action_space.low, env.action_space.high).reshape(states * (draws + 1), -1)
     alphas = alphas.astype(np.float32)
     actions = np.clip(model.generator.decode(alphas), -1.0, 1.0).astype(np.float32)
-    rows = _replay(spec.env_id, actions, [seed + i // (draws + 1) for i in range(len(actions))], [None] * len(actions),
-                   n_threads)
+    rows = _replay(
+        spec.env_id, actions, [seed + i // (draws + 1) for i in range(len(actions))], [None] * len(actions), n_threads
+    )
     solved = np.array([success for success, _ in rows], dtype=bool).reshape(states, draws + 1)
-    return {"states": states, "draws_per_state": draws, "seed": seed, "deterministic_success": float(solved[:, 0].mean()),
-            "best_of_draws": float(solved[:, 1:].any(axis=1).mean()), "draw_success": float(solved[:, 1:].mean()),
-            "spread": float(std.mean()), "deterministic_solved": solved[:, 0].astype(float).tolist(),
-            "solving_draws": solved[:, 1:].sum(axis=1).tolist()}
+    return {
+        "states": states,
+        "draws_per_state": draws,
+        "seed": seed,
+        "deterministic_success": float(solved[:, 0].mean()),
+        "best_of_draws": float(solved[:, 1:].any(axis=1).mean()),
+        "draw_success": float(solved[:, 1:].mean()),
+        "spread": float(std.mean()),
+        "deterministic_solved": solved[:, 0].astype(float).tolist(),
+        "solving_draws": solved[:, 1:].sum(axis=1).tolist(),
+    }

@@ -27,12 +27,18 @@ from typing import Any
 import mujoco
 import numpy as np
 
-ROBOTICS_HINT = ('the Fetch tasks need Gymnasium-Robotics: pip install "sb3-genrl[robotics]" '
-                 '(or pip install -e ".[robotics]" in a checkout)')
+ROBOTICS_HINT = (
+    'the Fetch tasks need Gymnasium-Robotics: pip install "sb3-genrl[robotics]" '
+    '(or pip install -e ".[robotics]" in a checkout)'
+)
 # Joint type -> (numbers in qpos, numbers in qvel) of each helper, exactly as Gymnasium-Robotics 1.4.2 counts them
 # (its get_joint_qvel counts 4 for a ball joint; kept, the fix changes nothing but the comparison).
-_SIZES = {"get_joint_qpos": {0: 7, 1: 4}, "set_joint_qpos": {0: 7, 1: 4},
-          "get_joint_qvel": {0: 6, 1: 4}, "set_joint_qvel": {0: 6, 1: 3}}
+_SIZES = {
+    "get_joint_qpos": {0: 7, 1: 4},
+    "set_joint_qpos": {0: 7, 1: 4},
+    "get_joint_qvel": {0: 6, 1: 4},
+    "set_joint_qvel": {0: 6, 1: 3},
+}
 _ONE_NUMBER = (int(mujoco.mjtJoint.mjJNT_SLIDE), int(mujoco.mjtJoint.mjJNT_HINGE))
 assert int(mujoco.mjtJoint.mjJNT_FREE) == 0 and int(mujoco.mjtJoint.mjJNT_BALL) == 1
 
@@ -86,8 +92,11 @@ def _set_aside(own_ids: tuple[str, ...]) -> dict[str, Any]:
     """Remove from Gymnasium's registry those of ``own_ids`` that this package registered; return them."""
     from gymnasium.envs.registration import registry
 
-    return {env_id: registry.pop(env_id) for env_id in own_ids if env_id in registry
-            and str(getattr(registry[env_id], "entry_point", "")).startswith("sb3_genrl.")}
+    return {
+        env_id: registry.pop(env_id)
+        for env_id in own_ids
+        if env_id in registry and str(getattr(registry[env_id], "entry_point", "")).startswith("sb3_genrl.")
+    }
 
 
 class _FixOnImport(importlib.abc.MetaPathFinder):

@@ -42,8 +42,11 @@ class GoalConditionedMixin:
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(**kwargs)
         plain = self.observation_space
-        joints = spaces.Box(np.append(plain.low[2:], 0.0).astype(np.float32),
-                            np.append(plain.high[2:], 1.0).astype(np.float32), dtype=np.float32)
+        joints = spaces.Box(
+            np.append(plain.low[2:], 0.0).astype(np.float32),
+            np.append(plain.high[2:], 1.0).astype(np.float32),
+            dtype=np.float32,
+        )
         # The object starts within 1 m of the robot and moves below MAX_OBJECT_SPEED (faster is flagged unstable)
         # for at most (horizon + settle_steps) control steps: a bound on where it can be.
         reach = 1.0 + MAX_OBJECT_SPEED * (self.horizon + self.settle_steps) * self.frame_skip * self.model.opt.timestep
@@ -52,8 +55,11 @@ class GoalConditionedMixin:
 
     def _get_obs(self) -> dict[str, np.ndarray]:
         plain = super()._get_obs()
-        return {"observation": np.append(plain[2:], np.float32(1 - self._t / self.horizon)),
-                "achieved_goal": self.data.sensordata[1:3].copy(), "desired_goal": np.array(self.goal, dtype=np.float64)}
+        return {
+            "observation": np.append(plain[2:], np.float32(1 - self._t / self.horizon)),
+            "achieved_goal": self.data.sensordata[1:3].copy(),
+            "desired_goal": np.array(self.goal, dtype=np.float64),
+        }
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         obs, info = super().reset(seed=seed, options=options)
@@ -82,13 +88,17 @@ class GoalConditionedMixin:
         achieved, desired = np.atleast_2d(achieved), np.atleast_2d(desired)
         infos = [info] if isinstance(info, dict) else list(info)
         if achieved.shape != desired.shape or achieved.shape[1:] != (2,) or len(infos) != len(achieved):
-            raise ValueError(f"compute_reward needs (B, 2) achieved and desired goals and B infos, got {achieved.shape}, "
-                             f"{desired.shape} and {len(infos)} infos")
+            raise ValueError(
+                f"compute_reward needs (B, 2) achieved and desired goals and B infos, got {achieved.shape}, "
+                f"{desired.shape} and {len(infos)} infos"
+            )
         rewards = np.zeros(len(achieved))
         for i, step_info in enumerate(infos):
             if "terminal" not in step_info:
-                raise ValueError("compute_reward needs each transition's step info (with 'terminal'); make "
-                                 "HerReplayBuffer with copy_info_dict=True")
+                raise ValueError(
+                    "compute_reward needs each transition's step info (with 'terminal'); make "
+                    "HerReplayBuffer with copy_info_dict=True"
+                )
             if step_info["terminal"]:
                 rewards[i] = self._terminal_reward(achieved[i], desired[i], step_info)
         return float(rewards[0]) if single else rewards

@@ -41,13 +41,17 @@ _WORLD = f"""
   <geom type="cylinder" size="0.04 0.001" contype="0" conaffinity="0" rgba="0.9 0.1 0.1 1"/>
 </body>
 """
-_SENSORS = """
+_SENSORS = (
+    """
 <clock/>
 <framepos objtype="body" objname="puck"/>
 <framelinvel objtype="body" objname="puck"/>
-""" + "\n".join(f'<jointvel joint="joint{i}"/>' for i in range(1, 8)) + """
+"""
+    + "\n".join(f'<jointvel joint="joint{i}"/>' for i in range(1, 8))
+    + """
 <contact subtree1="tool" geom2="table" num="1" data="found"/>
 """
+)
 _CAMERA = '<camera name="overview" pos="0.75 -1.75 1.55" xyaxes="1 0 0 0 0.7 0.714"/>'
 
 
@@ -115,8 +119,8 @@ class HockeyEnv(ArmTaskEnv):
         blade = data.geom("blade")
         centre = blade.xpos
         puck_adr = self.model.joint("puck").qposadr[0]
-        data.qpos[puck_adr:puck_adr + 3] = [centre[0] + 0.012 + PUCK_RADIUS + 0.01, centre[1], PUCK_HALF_HEIGHT]
-        data.qpos[puck_adr + 3:puck_adr + 7] = [1, 0, 0, 0]
+        data.qpos[puck_adr : puck_adr + 3] = [centre[0] + 0.012 + PUCK_RADIUS + 0.01, centre[1], PUCK_HALF_HEIGHT]
+        data.qpos[puck_adr + 3 : puck_adr + 7] = [1, 0, 0, 0]
 
     def _settled(self, row: np.ndarray) -> bool:
         return bool(np.linalg.norm(row[4:7]) < 0.005)
@@ -184,10 +188,10 @@ HOCKEY_SWING_START = 25
 # measured distance (m) -> strength curve of scripted_hit.
 HOCKEY_AIM_MARGIN = 0.08
 HOCKEY_PUCK_X = 0.36
-HOCKEY_DISTANCE_TO_STRENGTH = (np.array([0.19, 0.256, 0.301, 0.362, 0.43, 0.49, 0.549, 0.612, 0.676, 0.765, 0.84, 0.92,
-                                         0.998, 1.079, 1.165, 1.252]),
-                               np.array([0.6, 0.7, 0.75, 0.8, 0.9, 0.95, 1.0, 1.05, 1.1, 1.15, 1.25, 1.3, 1.35, 1.4, 1.45,
-                                         1.5]))
+HOCKEY_DISTANCE_TO_STRENGTH = (
+    np.array([0.19, 0.256, 0.301, 0.362, 0.43, 0.49, 0.549, 0.612, 0.676, 0.765, 0.84, 0.92, 0.998, 1.079, 1.165, 1.252]),
+    np.array([0.6, 0.7, 0.75, 0.8, 0.9, 0.95, 1.0, 1.05, 1.1, 1.15, 1.25, 1.3, 1.35, 1.4, 1.45, 1.5]),
+)
 
 
 def scripted_hit(*, strength: float = 1.0, direction: float = 0.0, swing_start: int = 25) -> np.ndarray:
@@ -217,8 +221,7 @@ def sample_hit(rng: np.random.Generator) -> np.ndarray:
     target = rng.uniform(HOCKEY_GOAL_LOW - HOCKEY_AIM_MARGIN, HOCKEY_GOAL_HIGH + HOCKEY_AIM_MARGIN)
     offset = target - np.array([HOCKEY_PUCK_X, 0.0])
     strength = np.interp(np.linalg.norm(offset), *HOCKEY_DISTANCE_TO_STRENGTH) * rng.uniform(0.95, 1.05)
-    return scripted_hit(strength=strength, direction=float(np.arctan2(-offset[1], offset[0])),
-                        swing_start=HOCKEY_SWING_START)
+    return scripted_hit(strength=strength, direction=float(np.arctan2(-offset[1], offset[0])), swing_start=HOCKEY_SWING_START)
 
 
 def is_valid(info: dict[str, Any]) -> bool:
@@ -226,8 +229,18 @@ def is_valid(info: dict[str, Any]) -> bool:
     return info.get("table_contacts", 1) == 0
 
 
-
-TASK = TaskSpec(name="hockey", env_id="GenRL/Hockey-v0", env_class=HockeyEnv, horizon=HOCKEY_HORIZON,
-                goal_low=HOCKEY_GOAL_LOW, goal_high=HOCKEY_GOAL_HIGH, in_goal_region=in_goal_region, cell_size=0.05,
-                sample_expert=sample_hit, perturbation_scales=HOCKEY_PERTURBATION, is_valid=is_valid,
-                goal_env_id="GenRL/HockeyGoal-v0", goal_env_class=HockeyGoalEnv)
+TASK = TaskSpec(
+    name="hockey",
+    env_id="GenRL/Hockey-v0",
+    env_class=HockeyEnv,
+    horizon=HOCKEY_HORIZON,
+    goal_low=HOCKEY_GOAL_LOW,
+    goal_high=HOCKEY_GOAL_HIGH,
+    in_goal_region=in_goal_region,
+    cell_size=0.05,
+    sample_expert=sample_hit,
+    perturbation_scales=HOCKEY_PERTURBATION,
+    is_valid=is_valid,
+    goal_env_id="GenRL/HockeyGoal-v0",
+    goal_env_class=HockeyGoalEnv,
+)

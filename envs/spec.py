@@ -85,11 +85,15 @@ class TaskSpec:
         if not np.all(np.asarray(self.goal_low) < np.asarray(self.goal_high)):
             raise ValueError(f"task {self.name!r}: goal_low {self.goal_low} must be below goal_high {self.goal_high}")
         if np.shape(self.perturbation_scales) != (self.action_dim,):
-            raise ValueError(f"task {self.name!r}: perturbation_scales must have shape ({self.action_dim},), "
-                             f"got {np.shape(self.perturbation_scales)}")
+            raise ValueError(
+                f"task {self.name!r}: perturbation_scales must have shape ({self.action_dim},), "
+                f"got {np.shape(self.perturbation_scales)}"
+            )
         if getattr(self.env_class, "horizon", self.horizon) != self.horizon:
-            raise ValueError(f"task {self.name!r}: horizon {self.horizon} differs from {self.env_class.__name__}.horizon "
-                             f"{self.env_class.horizon}")
+            raise ValueError(
+                f"task {self.name!r}: horizon {self.horizon} differs from {self.env_class.__name__}.horizon "
+                f"{self.env_class.horizon}"
+            )
         if (self.goal_env_id is None) != (self.goal_env_class is None):
             raise ValueError(f"task {self.name!r}: give both goal_env_id and goal_env_class, or neither")
         if not self.cell_size > 0:

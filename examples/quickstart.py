@@ -42,8 +42,7 @@ def main() -> None:
 
     # 2. Generator: a beta-VAE with a 2-D latent space (paper table 1, VAE1: N_alpha = 2, beta = 0.01) trained on the
     #    demonstrations' action trajectories (69 steps x 7 joint position changes).
-    vae = train_generator(dataset, preset="VAE1", epochs=args.epochs, seed=args.seed, out=out / "vae.pt",
-                          progress_bar=True)
+    vae = train_generator(dataset, preset="VAE1", epochs=args.epochs, seed=args.seed, out=out / "vae.pt", progress_bar=True)
     print(f"beta-VAE: best checkpoint at epoch {vae.best_epoch} of {args.epochs}")
 
     # 3. GenRL: a policy from the goal to a latent action, trained with the paper's EM algorithm. train_policy wraps
@@ -54,8 +53,16 @@ def main() -> None:
     #    kept, and the policy's mean (64 x 64 x 64) fitted to them by 512 Adam steps after each iteration
     #    (hindsight_kwargs={"history": 120, "regression_steps": 512}).
     _, batch_episodes, genrl_kwargs = load_genrl_settings("GenRL/Hockey-v0")
-    result = train_policy("hockey", str(out / "vae.pt"), episodes=args.episodes, seed=args.seed,
-                          out_dir=out / "policy", batch_episodes=batch_episodes, progress_bar=True, **genrl_kwargs)
+    result = train_policy(
+        "hockey",
+        str(out / "vae.pt"),
+        episodes=args.episodes,
+        seed=args.seed,
+        out_dir=out / "policy",
+        batch_episodes=batch_episodes,
+        progress_bar=True,
+        **genrl_kwargs,
+    )
     print(f"GenRL: {result['episodes']} episodes, learning curve in {result['png_path']}")
 
     # 4. The trained policy, deterministic, on 100 goals it has not seen: play the decoded trajectories.
@@ -66,8 +73,10 @@ def main() -> None:
     latents, _ = model.predict(goals, deterministic=True)
     rewards, infos = env.play_trajectories(model.generator.decode(latents), goals)
     contacts = sum(info["table_contacts"] for info in infos)
-    print(f"mean final distance to 100 new goals: {-rewards.mean() * 100:.1f} cm "
-          f"(median {-np.median(rewards) * 100:.1f} cm; stick-table contacts: {contacts})")
+    print(
+        f"mean final distance to 100 new goals: {-rewards.mean() * 100:.1f} cm "
+        f"(median {-np.median(rewards) * 100:.1f} cm; stick-table contacts: {contacts})"
+    )
 
 
 if __name__ == "__main__":

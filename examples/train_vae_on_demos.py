@@ -46,8 +46,14 @@ def plot(demonstrations: np.ndarray, generated: np.ndarray, path: str) -> None:
         for index, trajectory in enumerate(demonstrations):
             axis.plot(time_steps, trajectory[:, joint], color="C0", alpha=0.7, label="test" if index == 0 else None)
         for index, trajectory in enumerate(generated):
-            axis.plot(time_steps, trajectory[:, joint], color="C1", linestyle="--", alpha=0.8,
-                      label="generated" if index == 0 else None)
+            axis.plot(
+                time_steps,
+                trajectory[:, joint],
+                color="C1",
+                linestyle="--",
+                alpha=0.8,
+                label="generated" if index == 0 else None,
+            )
         axis.set_title(f"joint {joint + 1}")
         axis.set_xlabel("time step")
     axes.flat[0].set_ylabel("action")

@@ -115,13 +115,15 @@ def check_device(device: Any, name: str = "device") -> Any:
     try:
         parsed = torch.device(device)
     except (RuntimeError, TypeError, ValueError):
-        raise ValueError(_named(name, f"must be 'auto' or a torch device such as 'cpu', 'cuda' or 'cuda:0', "
-                                      f"got {device!r}")) from None
+        raise ValueError(
+            _named(name, f"must be 'auto' or a torch device such as 'cpu', 'cuda' or 'cuda:0', got {device!r}")
+        ) from None
     if parsed.type == "cuda":
         count = torch.cuda.device_count() if torch.cuda.is_available() else 0
         if (parsed.index or 0) >= count:
-            raise ValueError(_named(name, f"{device!r} is not available: this machine has {count} CUDA device(s); "
-                                          "use 'cpu' or 'auto'"))
+            raise ValueError(
+                _named(name, f"{device!r} is not available: this machine has {count} CUDA device(s); use 'cpu' or 'auto'")
+            )
     elif parsed.type == "mps" and not torch.backends.mps.is_available():
         raise ValueError(_named(name, f"{device!r} is not available on this machine; use 'cpu' or 'auto'"))
     elif parsed.type not in ("cpu", "cuda", "mps"):
@@ -187,8 +189,9 @@ def _check_writable(folder: Path, name: str, target: Path | None = None) -> None
     try:
         handle, probe = tempfile.mkstemp(dir=existing, prefix=".genrl-write-check-")
     except OSError as error:
-        raise ValueError(_named(name, f"{str(target)!r} cannot be written: {str(existing)!r} is not writable "
-                                      f"({error.strerror})")) from None
+        raise ValueError(
+            _named(name, f"{str(target)!r} cannot be written: {str(existing)!r} is not writable ({error.strerror})")
+        ) from None
     os.close(handle)
     os.unlink(probe)
 
@@ -205,8 +208,9 @@ def option(check: Callable[..., T], parse: Callable[[str], Any] = str, **kwargs:
         try:
             value = parse(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"expected {'an integer' if parse is int else 'a number'}, "
-                                             f"got {text!r}") from None
+            raise argparse.ArgumentTypeError(
+                f"expected {'an integer' if parse is int else 'a number'}, got {text!r}"
+            ) from None
         try:
             return check(value, "", **kwargs)
         except ValueError as error:

@@ -74,8 +74,9 @@ def episode_info(env: gym.Env, info_keywords: Sequence[str] = EPISODE_INFO) -> g
     return _EpisodeInfo(env, info_keywords)
 
 
-def monitor_episodes(env: gym.Env, out_dir: str | os.PathLike, info_keywords: Sequence[str] = EPISODE_INFO, *,
-                     append: bool = False) -> Monitor:
+def monitor_episodes(
+    env: gym.Env, out_dir: str | os.PathLike, info_keywords: Sequence[str] = EPISODE_INFO, *, append: bool = False
+) -> Monitor:
     """Wrap ``env`` in SB3's Monitor writing ``out_dir/episodes.monitor.csv`` (one row per episode, as it ends).
 
     Each row also holds ``cpu_seconds`` (see :class:`_EpisodeInfo`); the timesteps at an episode's end are the
@@ -87,8 +88,12 @@ def monitor_episodes(env: gym.Env, out_dir: str | os.PathLike, info_keywords: Se
     :param append: add rows to an existing file (a resumed run) instead of starting a new one
     :return: the monitored env
     """
-    return Monitor(episode_info(env, info_keywords), str(pathlib.Path(out_dir) / MONITOR_FILE),
-                   info_keywords=(*info_keywords, "cpu_seconds"), override_existing=not append)
+    return Monitor(
+        episode_info(env, info_keywords),
+        str(pathlib.Path(out_dir) / MONITOR_FILE),
+        info_keywords=(*info_keywords, "cpu_seconds"),
+        override_existing=not append,
+    )
 
 
 def training_logger(out_dir: str | os.PathLike, verbose: int = 0) -> Logger:
@@ -114,8 +119,10 @@ def read_monitor(path: str | os.PathLike) -> dict[str, np.ndarray]:
         rows = list(csv.DictReader(file))
     if not rows:
         return {}
-    return {_MONITOR_COLUMNS.get(key, key): np.array([float(row[key]) if row[key] not in ("", None) else np.nan
-                                                      for row in rows]) for key in rows[0]}
+    return {
+        _MONITOR_COLUMNS.get(key, key): np.array([float(row[key]) if row[key] not in ("", None) else np.nan for row in rows])
+        for key in rows[0]
+    }
 
 
 def windowed_curve(values: np.ndarray, window: int) -> tuple[np.ndarray, np.ndarray]:
@@ -128,8 +135,9 @@ def windowed_curve(values: np.ndarray, window: int) -> tuple[np.ndarray, np.ndar
     return np.arange(1, n + 1) * window, means
 
 
-def write_learning_curve(monitor_csv: str | os.PathLike, out_dir: str | os.PathLike, *, window: int = 64,
-                         title: str = "") -> dict[str, np.ndarray]:
+def write_learning_curve(
+    monitor_csv: str | os.PathLike, out_dir: str | os.PathLike, *, window: int = 64, title: str = ""
+) -> dict[str, np.ndarray]:
     """Average a Monitor file over windows of ``window`` episodes; write ``learning_curve.csv`` (episodes,
     mean_reward, max_reward, mean_table_contacts) and ``learning_curve.png``.
 
@@ -147,17 +155,20 @@ def write_learning_curve(monitor_csv: str | os.PathLike, out_dir: str | os.PathL
     episodes, mean_reward = windowed_curve(returns, window)
     contacts = columns.get("table_contacts", np.full(len(returns), np.nan))
     windows = [slice(max(0, end - window), end) for end in episodes]
-    curve = {"episodes": episodes, "mean_reward": mean_reward,
-             "max_reward": np.array([np.max(returns[w]) for w in windows]),
-             "mean_table_contacts": np.array([np.nanmean(contacts[w]) if np.isfinite(contacts[w]).any() else np.nan
-                                              for w in windows])}
+    curve = {
+        "episodes": episodes,
+        "mean_reward": mean_reward,
+        "max_reward": np.array([np.max(returns[w]) for w in windows]),
+        "mean_table_contacts": np.array(
+            [np.nanmean(contacts[w]) if np.isfinite(contacts[w]).any() else np.nan for w in windows]
+        ),
+    }
     table = io.StringIO()
     writer = csv.writer(table)
     writer.writerow(curve)
     writer.writerows(zip(*curve.values(), strict=True))
     atomic_write_text(out / "learning_curve.csv", table.getvalue(), newline="")
-    plot_curves({title or "run": (episodes, mean_reward, None)}, out / "learning_curve.png", ylabel="mean reward",
-                title=title)
+    plot_curves({title or "run": (episodes, mean_reward, None)}, out / "learning_curve.png", ylabel="mean reward", title=title)
     return curve
 
 
@@ -170,8 +181,9 @@ def read_curve(csv_path: str | os.PathLike) -> dict[str, np.ndarray]:
     return {key: np.array([float(row[key]) if row[key] not in ("", None) else np.nan for row in rows]) for key in rows[0]}
 
 
-def mean_std_over_seeds(curves: Sequence[dict[str, np.ndarray]], key: str = "mean_reward",
-                        grid: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def mean_std_over_seeds(
+    curves: Sequence[dict[str, np.ndarray]], key: str = "mean_reward", grid: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Mean and std over runs of ``key``, each run linearly interpolated onto a common grid of episodes."""
     if not curves:
         raise ValueError("no curves given")
@@ -183,8 +195,15 @@ def mean_std_over_seeds(curves: Sequence[dict[str, np.ndarray]], key: str = "mea
     return grid, values.mean(axis=0), values.std(axis=0)
 
 
-def plot_curves(series: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray | None]], path: str | os.PathLike, *,
-                ylabel: str, title: str = "", xlabel: str = "episodes", log_y: bool = False) -> pathlib.Path:
+def plot_curves(
+    series: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray | None]],
+    path: str | os.PathLike,
+    *,
+    ylabel: str,
+    title: str = "",
+    xlabel: str = "episodes",
+    log_y: bool = False,
+) -> pathlib.Path:
     """One line per series (x, mean, std or None), a shaded band of +- std where given; ``log_y``: a log y-axis."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure

@@ -15,8 +15,19 @@ import pathlib
 from importlib import resources
 from typing import Any
 
-__all__ = ["EVAL_GOAL_SEED", "PRIOR_ROLLOUT_SEED", "TUNING_GOAL_SEED", "changed_settings", "hyperparams_file", "known_algos",
-           "known_env_ids", "lay_over", "load_genrl_settings", "load_hyperparams", "parse_kwargs"]
+__all__ = [
+    "EVAL_GOAL_SEED",
+    "PRIOR_ROLLOUT_SEED",
+    "TUNING_GOAL_SEED",
+    "changed_settings",
+    "hyperparams_file",
+    "known_algos",
+    "known_env_ids",
+    "lay_over",
+    "load_genrl_settings",
+    "load_hyperparams",
+    "parse_kwargs",
+]
 
 EVAL_GOAL_SEED = 12345  # the held-out goals of every final evaluation (never used for tuning)
 TUNING_GOAL_SEED = 777  # the goals settings are chosen on (never used for evaluation)
@@ -25,14 +36,14 @@ PRIOR_ROLLOUT_SEED = 4242  # the goals of the generator scorecard's prior rollou
 _PACKAGE = "sb3_genrl.hyperparams_files"
 _KWARGS = ("policy_kwargs", "replay_buffer_kwargs")  # the entries' keys that may be rl-zoo3's "dict(...)" strings
 # rl-zoo3's keys that its ExperimentManager takes out of an entry before the algorithm is built
-ZOO_KEYS = frozenset({"n_timesteps", "n_envs", "normalize", "env_wrapper", "vec_env_wrapper", "frame_stack",
-                      "callback", "normalize_kwargs"})
+ZOO_KEYS = frozenset(
+    {"n_timesteps", "n_envs", "normalize", "env_wrapper", "vec_env_wrapper", "frame_stack", "callback", "normalize_kwargs"}
+)
 
 
 def known_algos() -> list[str]:
     """The algorithms with a settings file (``genrl``, ``ppo``, ``sac``, ...)."""
-    return sorted(path.name.removesuffix(".yml") for path in resources.files(_PACKAGE).iterdir()
-                  if path.name.endswith(".yml"))
+    return sorted(path.name.removesuffix(".yml") for path in resources.files(_PACKAGE).iterdir() if path.name.endswith(".yml"))
 
 
 def known_env_ids(algo: str) -> list[str]:
@@ -69,8 +80,9 @@ def load_hyperparams(algo: str, env_id: str) -> dict[str, Any]:
     """
     entries = _entries(algo)
     if env_id not in entries:
-        raise ValueError(f"{hyperparams_file(algo)} has no entry for {env_id!r}; known env ids: "
-                         f"{', '.join(known_env_ids(algo))}")
+        raise ValueError(
+            f"{hyperparams_file(algo)} has no entry for {env_id!r}; known env ids: {', '.join(known_env_ids(algo))}"
+        )
     entry = copy.deepcopy(entries[env_id])
     for key in _KWARGS:
         if key in entry:
@@ -139,8 +151,9 @@ def changed_settings(env_id: str) -> list[str]:
             changed += [f"policy_kwargs.{name}" for name, given in value.items() if _POLICY_DEFAULTS.get(name) != given]
         elif key == "hindsight_kwargs":
             changed += ["hindsight_kwargs"] * (value is not None)
-            changed += [f"hindsight_kwargs.{name}" for name, given in (value or {}).items()
-                        if HINDSIGHT_DEFAULTS[name] != given]
+            changed += [
+                f"hindsight_kwargs.{name}" for name, given in (value or {}).items() if HINDSIGHT_DEFAULTS[name] != given
+            ]
         elif key == "callback":
             for path, kwargs in callback_entries(value, f"{env_id}: callback"):
                 cls = callback_class(path, f"{env_id}: callback")

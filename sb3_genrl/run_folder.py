@@ -32,8 +32,9 @@ class RunFolderError(ValueError):
     """A run folder holds another run than the one asked for (see :func:`open_run`)."""
 
 
-def open_run(out: str | os.PathLike[str], identity: Mapping[str, Any], outputs: Sequence[str], *,
-             overwrite: bool = False) -> dict[str, Any] | None:
+def open_run(
+    out: str | os.PathLike[str], identity: Mapping[str, Any], outputs: Sequence[str], *, overwrite: bool = False
+) -> dict[str, Any] | None:
     """Make ``out`` ready for the run ``identity`` (see the module doc); call it holding the folder's lock.
 
     :param out: the run folder
@@ -49,11 +50,15 @@ def open_run(out: str | os.PathLike[str], identity: Mapping[str, Any], outputs: 
     recorded = _read_record(out)
     if not overwrite and present:
         if recorded is None:
-            raise RunFolderError(f"{out} holds a run's files ({', '.join(present)}) but no {RUN_RECORD} saying what run "
-                                 f"made them. Nothing was changed: {_WAYS_OUT}")
+            raise RunFolderError(
+                f"{out} holds a run's files ({', '.join(present)}) but no {RUN_RECORD} saying what run "
+                f"made them. Nothing was changed: {_WAYS_OUT}"
+            )
         if recorded != identity:
-            raise RunFolderError(f"{out} holds another run (it differs in {', '.join(differing(recorded, identity))}). "
-                                 f"Nothing was changed: {_WAYS_OUT}")
+            raise RunFolderError(
+                f"{out} holds another run (it differs in {', '.join(differing(recorded, identity))}). "
+                f"Nothing was changed: {_WAYS_OUT}"
+            )
         if (out / SUMMARY).is_file():
             return json.loads((out / SUMMARY).read_text())
     if overwrite or not (out / CHECKPOINT_DIR / CHECKPOINT_STATE).is_file():
@@ -67,8 +72,9 @@ def differing(recorded: Mapping[str, Any], identity: Mapping[str, Any]) -> list[
     return sorted(key for key in set(recorded) | set(identity) if recorded.get(key) != identity.get(key))
 
 
-_WAYS_OUT = ("rerun with that run's settings, choose another output folder (--out), or pass --overwrite "
-             "(overwrite=True) to replace it")
+_WAYS_OUT = (
+    "rerun with that run's settings, choose another output folder (--out), or pass --overwrite (overwrite=True) to replace it"
+)
 
 
 def _read_record(out: Path) -> dict[str, Any] | None:
@@ -112,8 +118,10 @@ def keep_episodes(out: str | os.PathLike[str], episodes: int) -> None:
     lines = monitor_file.read_text().splitlines(keepends=True)
     kept = 2 + int(episodes)  # the JSON header, the column names, one row per episode
     if len(lines) < kept:
-        raise ValueError(f"{monitor_file} holds {len(lines) - 2} episodes, fewer than its checkpoint's {episodes}; "
-                         "pass --overwrite to start the run afresh")
+        raise ValueError(
+            f"{monitor_file} holds {len(lines) - 2} episodes, fewer than its checkpoint's {episodes}; "
+            "pass --overwrite to start the run afresh"
+        )
     atomic_write_text(monitor_file, "".join(lines[:kept]), newline="")
     progress = out / LOG_DIR / "progress.csv"
     earlier = progress.with_name(f"progress.until_episode_{episodes}.csv")

@@ -41,8 +41,9 @@ def save_image(image: np.ndarray, path: str | Path) -> Path:
     return Path(path)
 
 
-def play_scripted(out_dir: str | Path, *, tasks: tuple[str, ...] | None = None, seed: int = 0, width: int = 320,
-                  height: int = 240) -> Path:
+def play_scripted(
+    out_dir: str | Path, *, tasks: tuple[str, ...] | None = None, seed: int = 0, width: int = 320, height: int = 240
+) -> Path:
     """Play one base motion of each task's scripted expert, save frame strips and GIFs, and write ``report.md``.
 
     The motion is the expert's (:attr:`TaskSpec.sample_expert <sb3_genrl.envs.spec.TaskSpec>`, unperturbed) drawn
@@ -66,9 +67,13 @@ def play_scripted(out_dir: str | Path, *, tasks: tuple[str, ...] | None = None, 
     check_positive_int(height, "height")
     out = check_output_dir(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    lines = ["# Scripted motions of the GenRL tasks", "",
-             "One base motion of each task's scripted expert played on its MuJoCo task (offscreen rendering); the red "
-             "goal marks the point it reaches.", ""]
+    lines = [
+        "# Scripted motions of the GenRL tasks",
+        "",
+        "One base motion of each task's scripted expert played on its MuJoCo task (offscreen rendering); the red "
+        "goal marks the point it reaches.",
+        "",
+    ]
     for spec in specs:
         env = spec.make_env(render_mode="rgb_array", width=width, height=height)
         trajectory = spec.sample_expert(np.random.default_rng(seed))
@@ -78,10 +83,17 @@ def play_scripted(out_dir: str | Path, *, tasks: tuple[str, ...] | None = None, 
         save_image(frame_strip(frames), out / f"{spec.name}_strip.png")
         save_animation(frames, out / f"{spec.name}.gif", fps=12)
         env.close()
-        lines += [f"## {spec.name}", "", f"![{spec.name}]({spec.name}.gif)", "",
-                  f"![{spec.name} frames]({spec.name}_strip.png)", "",
-                  f"- reached: ({goal[0]:.2f}, {goal[1]:.2f}) m; in the goal region: "
-                  f"{'yes' if spec.in_goal_region(goal[None])[0] else 'no'}", ""]
+        lines += [
+            f"## {spec.name}",
+            "",
+            f"![{spec.name}]({spec.name}.gif)",
+            "",
+            f"![{spec.name} frames]({spec.name}_strip.png)",
+            "",
+            f"- reached: ({goal[0]:.2f}, {goal[1]:.2f}) m; in the goal region: "
+            f"{'yes' if spec.in_goal_region(goal[None])[0] else 'no'}",
+            "",
+        ]
         if "table_contacts" in info:
             lines += [f"- table contacts: {info['table_contacts']}", ""]
     report = out / "report.md"

@@ -127,8 +127,10 @@ def folder_lock(folder: str | os.PathLike, lock_file: str | os.PathLike | None =
         if not _try_lock(fd):
             holder = os.read(fd, 32).decode(errors="replace").strip() or "unknown"
             os.close(fd)
-            raise FolderInUseError(f"{folder} is in use by another process (PID {holder}, lock file {path}): wait "
-                                   "for it to finish, or stop it, then rerun")
+            raise FolderInUseError(
+                f"{folder} is in use by another process (PID {holder}, lock file {path}): wait "
+                "for it to finish, or stop it, then rerun"
+            )
         if _same_file(fd, path):
             break
         os.close(fd)  # the holder before removed this file as we opened it: lock the current one
@@ -172,8 +174,9 @@ def _try_lock(fd: int) -> bool:
 CHECKPOINT_STATE = "state.json"
 
 
-def write_checkpoint(folder: str | os.PathLike[str], files: Mapping[str, tuple[str, Callable[[Path], None]]],
-                     state: Mapping[str, Any]) -> dict[str, Any]:
+def write_checkpoint(
+    folder: str | os.PathLike[str], files: Mapping[str, tuple[str, Callable[[Path], None]]], state: Mapping[str, Any]
+) -> dict[str, Any]:
     """Write a checkpoint of several files as one unit into ``folder``.
 
     Each file is written (atomically) under a name of its own, ``<stem>-<random><suffix>``; then ``state.json``,

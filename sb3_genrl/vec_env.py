@@ -57,13 +57,17 @@ class BatchedLatentVecEnv(DummyVecEnv):
             raise ValueError(f"n_threads must be a positive integer, got {n_threads!r}")
         wrappers = [find_latent_wrapper(env) for env in self.envs]
         if any(wrapper is None or not wrapper.use_fast_path for wrapper in wrappers):
-            raise ValueError("BatchedLatentVecEnv needs envs with a LatentActionWrapper on its task's fast path "
-                             "(play_trajectories and get_context); use DummyVecEnv or SubprocVecEnv for the others")
+            raise ValueError(
+                "BatchedLatentVecEnv needs envs with a LatentActionWrapper on its task's fast path "
+                "(play_trajectories and get_context); use DummyVecEnv or SubprocVecEnv for the others"
+            )
         self.latent_wrappers: list[LatentActionWrapper] = wrappers  # type: ignore[assignment]
         tasks = [wrapper.env.unwrapped for wrapper in self.latent_wrappers]
         if any(type(task) is not type(tasks[0]) or task.spec != tasks[0].spec for task in tasks):
-            raise ValueError("BatchedLatentVecEnv plays all envs' trajectories with one task: its envs must wrap the "
-                             f"same task, got {sorted({f'{type(task).__name__} {task.spec}' for task in tasks})}")
+            raise ValueError(
+                "BatchedLatentVecEnv plays all envs' trajectories with one task: its envs must wrap the "
+                f"same task, got {sorted({f'{type(task).__name__} {task.spec}' for task in tasks})}"
+            )
 
     def step_wait(self) -> Any:
         play_together(self.latent_wrappers, self.actions, n_threads=int(self.n_threads))

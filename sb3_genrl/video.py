@@ -30,13 +30,26 @@ def check_mp4_writer(out: str | os.PathLike) -> None:
 
         imageio_ffmpeg.get_ffmpeg_exe()
     except (ImportError, RuntimeError) as error:
-        raise ValueError(f"out: writing {str(out)!r} needs imageio-ffmpeg, a dependency of sb3-genrl ({error}); "
-                         "install it (pip install imageio-ffmpeg) or write a .gif") from None
+        raise ValueError(
+            f"out: writing {str(out)!r} needs imageio-ffmpeg, a dependency of sb3-genrl ({error}); "
+            "install it (pip install imageio-ffmpeg) or write a .gif"
+        ) from None
 
 
-def record_video(task: str, out: str | os.PathLike, *, policy: str | os.PathLike | None = None,
-                 generator: str | os.PathLike | None = None, goals: int = 6, seed: int = 0, width: int = 480,
-                 height: int = 352, fps: int = 25, strip: bool = True, trust_policy: bool = False) -> dict:
+def record_video(
+    task: str,
+    out: str | os.PathLike,
+    *,
+    policy: str | os.PathLike | None = None,
+    generator: str | os.PathLike | None = None,
+    goals: int = 6,
+    seed: int = 0,
+    width: int = 480,
+    height: int = 352,
+    fps: int = 25,
+    strip: bool = True,
+    trust_policy: bool = False,
+) -> dict:
     """Play ``goals`` episodes and write them one after the other as an MP4 or GIF (by ``out``'s suffix).
 
     With ``policy`` (a GenRL run folder or model zip) the policy picks each goal's latent action

@@ -103,8 +103,16 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         if int(max_hold_steps) != max_hold_steps or max_hold_steps < 0:
             raise ValueError(f"max_hold_steps must be a non-negative integer, got {max_hold_steps!r}")
         gym.utils.RecordConstructorArgs.__init__(
-            self, generator=generator, context=context, context_space=context_space, reward=reward,
-            latent_clip=latent_clip, hold_action=hold_action, max_hold_steps=max_hold_steps, use_fast_path=use_fast_path)
+            self,
+            generator=generator,
+            context=context,
+            context_space=context_space,
+            reward=reward,
+            latent_clip=latent_clip,
+            hold_action=hold_action,
+            max_hold_steps=max_hold_steps,
+            use_fast_path=use_fast_path,
+        )
         gym.Wrapper.__init__(self, env)
         self.generator = generator
         self.reward_mode: RewardMode = reward
@@ -142,8 +150,10 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         task, generator = self.env.unwrapped, self.generator
         task_horizon = getattr(task, "horizon", None)
         if isinstance(task_horizon, int | np.integer) and task_horizon != generator.horizon:
-            raise ValueError(f"the generator's trajectories have horizon T = {generator.horizon} time steps, but "
-                             f"{type(task).__name__} has horizon {task_horizon}; use a generator trained on this task")
+            raise ValueError(
+                f"the generator's trajectories have horizon T = {generator.horizon} time steps, but "
+                f"{type(task).__name__} has horizon {task_horizon}; use a generator trained on this task"
+            )
         # The fast open-loop path of the GenRL tasks (one MuJoCo rollout for the whole trajectory).
         has_fast_path = hasattr(task, "play_trajectories") and hasattr(task, "get_context")
         if use_fast_path and not has_fast_path:
@@ -226,9 +236,11 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
             info = self._play_steps(self._decode(alpha[None])[0])
         info["latent_clipped"] = latent_clipped
         if not np.isfinite(info["reward"]):  # refused here: a NaN would silently stall any learner downstream
-            raise ValueError(f"{type(self.env.unwrapped).__name__} returned the non-finite reward {info['reward']!r} for "
-                             f"the latent action {alpha.tolist()} (context {np.asarray(self._context).tolist()}); a reward "
-                             "must be a finite number")
+            raise ValueError(
+                f"{type(self.env.unwrapped).__name__} returned the non-finite reward {info['reward']!r} for "
+                f"the latent action {alpha.tolist()} (context {np.asarray(self._context).tolist()}); a reward "
+                "must be a finite number"
+            )
         relabel = getattr(self.env.unwrapped, "hindsight", None)
         if self._context_source == "task" and callable(relabel):  # for GenRL's hindsight_kwargs
             info["hindsight"] = relabel(info)
@@ -257,8 +269,14 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     def _fast_path_info(self, reward: float, info: dict[str, Any]) -> dict[str, Any]:
         """A step's info from one trajectory's fast-path result: the task's info with the step path's keys."""
-        return {**info, "reward": float(reward), "steps_played": self.generator.horizon, "hold_steps": 0, "ended": True,
-                "fast_path": True}
+        return {
+            **info,
+            "reward": float(reward),
+            "steps_played": self.generator.horizon,
+            "hold_steps": 0,
+            "ended": True,
+            "fast_path": True,
+        }
 
     def _play_steps(self, tau: np.ndarray) -> dict[str, Any]:
         rewards: list[float] = []
@@ -302,13 +320,16 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         # a trajectory that leaves the achieved goal where it started (a push that misses the object) solves its
         # relabelled goal whatever it does: such a pull teaches nothing about reaching goals
         last_info = goal_steps[-1][1]
-        if (float(np.asarray(compute_reward(self._start_achieved, new_goal, last_info)).item())
-                >= float(np.asarray(compute_reward(new_goal, new_goal, last_info)).item())):
+        if float(np.asarray(compute_reward(self._start_achieved, new_goal, last_info)).item()) >= float(
+            np.asarray(compute_reward(new_goal, new_goal, last_info)).item()
+        ):
             return None
-        rewards = [float(np.asarray(compute_reward(achieved, new_goal, info)).item()) for achieved, info in
-                   (goal_steps[-1:] if self.reward_mode == "last" else goal_steps)]
+        rewards = [
+            float(np.asarray(compute_reward(achieved, new_goal, info)).item())
+            for achieved, info in (goal_steps[-1:] if self.reward_mode == "last" else goal_steps)
+        ]
         desired = np.ravel(new_goal).astype(np.float32)
-        return np.concatenate([desired, np.asarray(self._context, np.float32)[desired.size:]]), float(np.sum(rewards))
+        return np.concatenate([desired, np.asarray(self._context, np.float32)[desired.size :]]), float(np.sum(rewards))
 
     def play_batch(self, alphas: np.ndarray, goals: np.ndarray, *, n_threads: int = 1) -> tuple[np.ndarray, list[dict]]:
         """Play many latent actions ``(B, latent_dim)`` for goals ``(B, goal_dim)`` through the task's fast path.
@@ -335,8 +356,11 @@ def is_goal_env(env: gym.Env) -> bool:
     """Whether ``env`` follows Gymnasium-Robotics' ``GoalEnv`` convention: a ``Dict`` observation space with
     ``observation``, ``achieved_goal`` and ``desired_goal``, and ``env.unwrapped.compute_reward``."""
     space = env.observation_space
-    return (isinstance(space, spaces.Dict) and all(isinstance(space.spaces.get(key), spaces.Box) for key in GOAL_KEYS)
-            and callable(getattr(env.unwrapped, "compute_reward", None)))
+    return (
+        isinstance(space, spaces.Dict)
+        and all(isinstance(space.spaces.get(key), spaces.Box) for key in GOAL_KEYS)
+        and callable(getattr(env.unwrapped, "compute_reward", None))
+    )
 
 
 def goal_context_space(space: spaces.Dict) -> spaces.Box:
@@ -396,5 +420,3 @@ def latent_action_env(
         if shapes[0] != shapes[1]:
             raise ValueError(f"generator (latent_dim, T, M) = {shapes[0]} differs from the wrapped env's {shapes[1]}")
     return env, generator if generator is not None else env_generator
-
-

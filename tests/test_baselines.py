@@ -59,8 +59,13 @@ def demos():
 
 def test_normalisation_statistics_are_saved_and_reloaded_with_the_model(demos, tmp_path):
     transitions = add_time_feature(demos, HOCKEY_HORIZON)
-    model = PPO("MlpPolicy", make_feedback_env("hockey"), seed=0, device="cpu",
-                policy_kwargs=normalized_policy(baseline_settings("ppo", "hockey")[1], transitions["observations"]))
+    model = PPO(
+        "MlpPolicy",
+        make_feedback_env("hockey"),
+        seed=0,
+        device="cpu",
+        policy_kwargs=normalized_policy(baseline_settings("ppo", "hockey")[1], transitions["observations"]),
+    )
     model.save(tmp_path / "model.zip")
     loaded = PPO.load(tmp_path / "model.zip", device="cpu")
     # Statistics computed here, independently: float64 mean and std, std floored.
@@ -83,10 +88,21 @@ def test_early_stopping_stops_on_a_rising_heldout_loss():
     observations = rng.normal(size=(512, 4)).astype(np.float32)
     actions = np.tanh(observations[:, :2] @ np.array([[0.3, -0.2], [0.1, 0.4]], dtype=np.float32))
     th.manual_seed(0)
-    policy = ActorCriticPolicy(gym.spaces.Box(-10, 10, (4,), np.float32), gym.spaces.Box(-1, 1, (2,), np.float32),
-                               lr_schedule=lambda _: 1e-3, net_arch=[32, 32])
-    record = fit_actor(policy, (observations, actions), (observations, -actions), max_epochs=100, patience=4,
-                       batch_size=64, learning_rate=3e-3)
+    policy = ActorCriticPolicy(
+        gym.spaces.Box(-10, 10, (4,), np.float32),
+        gym.spaces.Box(-1, 1, (2,), np.float32),
+        lr_schedule=lambda _: 1e-3,
+        net_arch=[32, 32],
+    )
+    record = fit_actor(
+        policy,
+        (observations, actions),
+        (observations, -actions),
+        max_epochs=100,
+        patience=4,
+        batch_size=64,
+        learning_rate=3e-3,
+    )
     losses = record["heldout_loss"]
     assert record["epochs"] == record["best_epoch"] + 4 < 100
     assert losses[record["best_epoch"] - 1] == min(losses) and losses[-1] > min(losses)
@@ -94,16 +110,21 @@ def test_early_stopping_stops_on_a_rising_heldout_loss():
     with th.no_grad():
         mean = actor_mean(policy, th.as_tensor(observations)).numpy()
     residuals = -actions - mean
-    assert np.mean(residuals ** 2) == pytest.approx(min(losses), rel=1e-5)
-    np.testing.assert_allclose(policy.log_std.exp().detach().numpy(), np.clip(residuals.std(axis=0), *STD_RANGE),
-                               rtol=1e-4)
+    assert np.mean(residuals**2) == pytest.approx(min(losses), rel=1e-5)
+    np.testing.assert_allclose(policy.log_std.exp().detach().numpy(), np.clip(residuals.std(axis=0), *STD_RANGE), rtol=1e-4)
 
 
 @pytest.mark.slow
 def test_behaviour_cloning_reproduces_heldout_demonstrations_open_loop():
     transitions = add_time_feature(demo_transitions(40, seed=1), HOCKEY_HORIZON)
-    model, record = ppo_with_behaviour_cloning(make_feedback_env("hockey"), transitions, task="hockey", seed=0, device="cpu",
-                                               bc_kwargs={"holdout": 0.1, "batch_size": 64, "patience": 20})
+    model, record = ppo_with_behaviour_cloning(
+        make_feedback_env("hockey"),
+        transitions,
+        task="hockey",
+        seed=0,
+        device="cpu",
+        bc_kwargs={"holdout": 0.1, "batch_size": 64, "patience": 20},
+    )
     assert record["heldout_episodes"] == 4 and record["best_epoch"] > 1
     _, heldout = split_episodes(transitions["dones"], 0.1, seed=0)
     observations = transitions["observations"][heldout].reshape(4, HOCKEY_HORIZON, -1)
@@ -117,7 +138,7 @@ def test_behaviour_cloning_reproduces_heldout_demonstrations_open_loop():
     env = HockeyEnv()
     cloned_rewards, _ = env.play_trajectories(cloned, goals)
     zero_rewards, _ = env.play_trajectories(np.zeros_like(cloned), goals)
-    assert np.mean((cloned - actions) ** 2) < 0.05 * np.mean(actions ** 2)  # the zero action's error is 1x
+    assert np.mean((cloned - actions) ** 2) < 0.05 * np.mean(actions**2)  # the zero action's error is 1x
     assert np.all(cloned_rewards > zero_rewards) and np.mean(-cloned_rewards) < 0.25 * np.mean(-zero_rewards)
 
 
@@ -142,8 +163,19 @@ def test_prefilled_buffer_holds_exactly_the_demonstrations(demos):
 @pytest.mark.parametrize("algorithm", FEEDBACK_BASELINES)
 def test_baselines_run_end_to_end(algorithm, demos, tmp_path):
     change = {"n_steps": 128} if algorithm == "ppo" else {"gamma": 0.95}  # a user's change to the zoo's settings
-    summary = train_baseline(algorithm, "hockey", episodes=12, out_dir=tmp_path, demos=demos, demo_episodes=10,
-                             bc_kwargs={"max_epochs": 2}, eval_goals=2, window=5, algorithm_kwargs=change, device="cpu")
+    summary = train_baseline(
+        algorithm,
+        "hockey",
+        episodes=12,
+        out_dir=tmp_path,
+        demos=demos,
+        demo_episodes=10,
+        bc_kwargs={"max_epochs": 2},
+        eval_goals=2,
+        window=5,
+        algorithm_kwargs=change,
+        device="cpu",
+    )
     assert summary["episodes_played"] >= 12 and summary["demo_transitions"] == 10 * 69
     episodes = read_monitor(tmp_path / MONITOR_FILE)
     assert len(episodes["return"]) == summary["episodes_played"] and np.all(episodes["length"] == 69)
@@ -161,7 +193,7 @@ def test_baselines_run_end_to_end(algorithm, demos, tmp_path):
     # The final evaluation: the saved policy, deterministic, one goal at a time on a fresh env (the goal-conditioned
     # task for SAC + HER), against the summary's, which stepped the held-out goals together.
     model = load_trained(algorithm, tmp_path / f"{algorithm}_policy.zip", "hockey")
-    (name, value), = change.items()
+    ((name, value),) = change.items()
     assert getattr(model, name) == value and summary["settings"][name] == value
     distances, unstable, unmoved = [], 0, 0
     for goal in held_out_goals("hockey", 2, EVAL_GOAL_SEED):
@@ -182,8 +214,12 @@ def test_baselines_run_end_to_end(algorithm, demos, tmp_path):
     # The summary's mean is that of the batched evaluation's goals, each of which the goal stepped alone matches:
     # batched and single forward passes differ in float32 rounding, which 69 closed-loop steps, the stick's hit and
     # the table contacts amplify (up to 2% here, a 5% tolerance); another goal, observation or env would be metres off.
-    batched = -np.asarray(evaluate_feedback_policy(model, "hockey", goals=2, seed=EVAL_GOAL_SEED,
-                                                   goal_conditioned=algorithm == "sac-her")["rewards"], dtype=float)
+    batched = -np.asarray(
+        evaluate_feedback_policy(model, "hockey", goals=2, seed=EVAL_GOAL_SEED, goal_conditioned=algorithm == "sac-her")[
+            "rewards"
+        ],
+        dtype=float,
+    )
     assert final["mean_distance"] == pytest.approx(float(np.mean(batched)), rel=1e-9)
     for (distance, _), together in zip(distances, batched, strict=True):
         assert distance == pytest.approx(together, rel=5e-2)
@@ -226,11 +262,13 @@ def test_open_loop_rewards_play_the_actions_as_the_env_does():
     _, info = env.play_trajectory(trajectory, np.zeros(2), allow_outside_region=True)
     outside = info["reached"] + np.array([0.0, 2.0])  # a goal off the task's region
     inside = np.array([1.0, 0.1])
-    rewards = open_loop_rewards("hockey", np.stack([trajectory, trajectory]), np.stack([info["reached"], outside]),
-                                allow_outside_region=True)
+    rewards = open_loop_rewards(
+        "hockey", np.stack([trajectory, trajectory]), np.stack([info["reached"], outside]), allow_outside_region=True
+    )
     np.testing.assert_allclose(rewards, [0.0, -2.0], atol=1e-5)  # reached exactly / 2 m beside it
     assert open_loop_rewards("hockey", trajectory[None], inside[None])[0] == pytest.approx(
-        -np.linalg.norm(info["reached"] - inside), abs=1e-5)
+        -np.linalg.norm(info["reached"] - inside), abs=1e-5
+    )
     with pytest.raises(ValueError, match="outside the goal region"):
         open_loop_rewards("hockey", trajectory[None], outside[None])
 
@@ -262,8 +300,16 @@ def _open_in_this_process(path) -> bool:
 @pytest.mark.parametrize("algorithm", ["sac", "sac-her"])
 def test_a_stopped_off_policy_run_resumes_from_its_checkpoint(algorithm, demos, tmp_path, monkeypatch):
     _killed_in_episode(monkeypatch, 4)
-    run = {"episodes": 5, "out_dir": tmp_path, "demos": demos, "demo_episodes": 10, "checkpoint_every": 2,
-           "device": "cpu", "seed": 1, "window": 5}
+    run = {
+        "episodes": 5,
+        "out_dir": tmp_path,
+        "demos": demos,
+        "demo_episodes": 10,
+        "checkpoint_every": 2,
+        "device": "cpu",
+        "seed": 1,
+        "window": 5,
+    }
     with pytest.raises(_Killed):
         train_baseline(algorithm, "hockey", **run)
     assert not _open_in_this_process(tmp_path / MONITOR_FILE)  # the stopped run's env was closed
@@ -298,14 +344,24 @@ def test_a_checkpoint_interrupted_while_written_leaves_the_previous_one_whole(de
         save_buffer(model, path)
 
     monkeypatch.setattr(SAC, "save_replay_buffer", disk_full_at_the_second_checkpoint)
-    run = {"episodes": 5, "out_dir": tmp_path, "demos": demos, "demo_episodes": 10, "checkpoint_every": 2,
-           "device": "cpu", "seed": 1, "window": 5, "eval_goals": 2}
+    run = {
+        "episodes": 5,
+        "out_dir": tmp_path,
+        "demos": demos,
+        "demo_episodes": 10,
+        "checkpoint_every": 2,
+        "device": "cpu",
+        "seed": 1,
+        "window": 5,
+        "eval_goals": 2,
+    }
     with pytest.raises(OSError, match="No space left"):
         train_baseline("sac", "hockey", **run)
     state = json.loads((tmp_path / "checkpoint" / "state.json").read_text())
     assert state["episodes"] == 2 and sorted(state["files"]) == ["buffer", "model"]
-    assert sorted(path.name for path in (tmp_path / "checkpoint").iterdir()) == sorted(["state.json",
-                                                                                         *state["files"].values()])
+    assert sorted(path.name for path in (tmp_path / "checkpoint").iterdir()) == sorted(
+        ["state.json", *state["files"].values()]
+    )
     assert SAC.load(tmp_path / "checkpoint" / state["files"]["model"], device="cpu").num_timesteps == 2 * 69
     monkeypatch.undo()
     summary = train_baseline("sac", "hockey", **run)  # resumed from episode 2: the budget is met exactly
@@ -315,8 +371,17 @@ def test_a_checkpoint_interrupted_while_written_leaves_the_previous_one_whole(de
 
 def test_a_run_resumed_twice_from_one_checkpoint_keeps_its_early_log(demos, tmp_path, monkeypatch):
     _killed_in_episode(monkeypatch, 6)
-    run = {"episodes": 6, "out_dir": tmp_path, "demos": demos, "demo_episodes": 10, "checkpoint_every": 5,
-           "device": "cpu", "seed": 1, "window": 3, "eval_goals": 2}
+    run = {
+        "episodes": 6,
+        "out_dir": tmp_path,
+        "demos": demos,
+        "demo_episodes": 10,
+        "checkpoint_every": 5,
+        "device": "cpu",
+        "seed": 1,
+        "window": 3,
+        "eval_goals": 2,
+    }
     with pytest.raises(_Killed):
         train_baseline("sac-no-prefill", "hockey", **run)
     early = (tmp_path / "logs" / "progress.csv").read_text()
@@ -329,8 +394,17 @@ def test_a_run_resumed_twice_from_one_checkpoint_keeps_its_early_log(demos, tmp_
 
 def test_a_sac_run_with_the_largest_seed_resumes(demos, tmp_path, monkeypatch):
     _killed_in_episode(monkeypatch, 3)
-    run = {"episodes": 3, "out_dir": tmp_path, "demos": demos, "demo_episodes": 10, "checkpoint_every": 2,
-           "device": "cpu", "seed": 2**32 - 1, "window": 3, "eval_goals": 2}
+    run = {
+        "episodes": 3,
+        "out_dir": tmp_path,
+        "demos": demos,
+        "demo_episodes": 10,
+        "checkpoint_every": 2,
+        "device": "cpu",
+        "seed": 2**32 - 1,
+        "window": 3,
+        "eval_goals": 2,
+    }
     with pytest.raises(_Killed):
         train_baseline("sac-no-prefill", "hockey", **run)
     monkeypatch.undo()
@@ -341,8 +415,16 @@ def test_a_sac_run_with_the_largest_seed_resumes(demos, tmp_path, monkeypatch):
 def test_a_baseline_rerun_never_leaves_a_summary_beside_another_runs_cloned_policy(demos, tmp_path, monkeypatch):
     from sb3_genrl.baselines import train as baseline_train
 
-    run = {"episodes": 2, "out_dir": tmp_path, "demos": demos, "demo_episodes": 10, "eval_goals": 2, "window": 2,
-           "algorithm_kwargs": {"n_steps": 128}, "device": "cpu"}
+    run = {
+        "episodes": 2,
+        "out_dir": tmp_path,
+        "demos": demos,
+        "demo_episodes": 10,
+        "eval_goals": 2,
+        "window": 2,
+        "algorithm_kwargs": {"n_steps": 128},
+        "device": "cpu",
+    }
     first = train_baseline("ppo", "hockey", bc_kwargs={"max_epochs": 2}, **run)
     cloned = (tmp_path / "bc_policy.zip").read_bytes()
     again = train_baseline("ppo", "hockey", bc_kwargs={"max_epochs": 2}, **run)  # finished: nothing done
@@ -367,8 +449,9 @@ def test_demonstrations_enter_the_her_buffer_as_episodes(demos):
     assert episodes["observation"].shape == (12, 70, 15) and episodes["achieved_goal"].shape == (12, 70, 2)
     # Each demonstration reached its own goal: the terminal achieved goal is the goal, the reward 0.
     np.testing.assert_allclose(episodes["achieved_goal"][:, -1], episodes["desired_goal"][:, -1], atol=1e-6)
-    model = sac_her_with_demonstrations(gym.make("GenRL/HockeyGoal-v0"), episodes, task="hockey", steps=100, seed=0,
-                                        device="cpu")
+    model = sac_her_with_demonstrations(
+        gym.make("GenRL/HockeyGoal-v0"), episodes, task="hockey", steps=100, seed=0, device="cpu"
+    )
     buffer = model.replay_buffer
     assert buffer.size() == 12 * 69 and np.all(buffer.ep_length[: 12 * 69, 0] == 69)
     np.testing.assert_array_equal(buffer.observations["observation"][:69, 0], episodes["observation"][0, :-1])
@@ -378,16 +461,35 @@ def test_demonstrations_enter_the_her_buffer_as_episodes(demos):
     # Relabelled samples: a terminal transition scores 0 against its own final goal, any other transition 0 too.
     samples = buffer.sample(2048)
     rewards, terminal = samples.rewards[:, 0].numpy(), samples.dones[:, 0].numpy() > 0
-    final = np.all(np.isclose(samples.observations["desired_goal"].numpy(),
-                              samples.next_observations["achieved_goal"].numpy(), atol=1e-6), axis=1)
+    final = np.all(
+        np.isclose(
+            samples.observations["desired_goal"].numpy(), samples.next_observations["achieved_goal"].numpy(), atol=1e-6
+        ),
+        axis=1,
+    )
     assert np.all(rewards[~terminal] == 0) and np.sum(terminal & final) > 5
     assert np.all(np.abs(rewards[terminal & final]) < 1e-6)
 
 
 def test_sac_her_through_the_cli(tmp_path):
     dataset = make_demonstrations("hockey", 4, tmp_path / "demos", progress_bar=False)
-    code = main(["baseline", "sac-her", "--task", "hockey", "--demos", str(dataset), "--episodes", "3",
-                 "--out", str(tmp_path / "run"), "--device", "cpu", "--no-progress-bar"])
+    code = main(
+        [
+            "baseline",
+            "sac-her",
+            "--task",
+            "hockey",
+            "--demos",
+            str(dataset),
+            "--episodes",
+            "3",
+            "--out",
+            str(tmp_path / "run"),
+            "--device",
+            "cpu",
+            "--no-progress-bar",
+        ]
+    )
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
     assert code == 0 and summary["algorithm"] == "sac-her" and summary["episodes_played"] >= 3
     assert summary["demo_transitions"] == 4 * 69 and summary["settings"]["goal_selection_strategy"] == "final"
@@ -412,13 +514,23 @@ def _dataset_of(demos: dict[str, np.ndarray], path, task: str, horizon: int = 69
 
     n = len(demos["observations"]) // horizon
     episodes = {key: value.reshape(n, horizon, *value.shape[1:]) for key, value in demos.items()}
-    arrays = {"observations": np.concatenate([episodes["observations"], episodes["next_observations"][:, -1:]], axis=1),
-              "actions": episodes["actions"], "rewards": episodes["rewards"].astype(np.float64),
-              "terminations": episodes["dones"].astype(bool), "truncations": np.zeros((n, horizon), dtype=bool),
-              "reached": np.zeros((n, 2)), "sampled_goals": np.zeros((n, 2))}
-    return write_dataset(path, arrays, dataset_id=f"genrl/{task}-v0", genrl={"task": task, "horizon": horizon},
-                         observation_space=spaces.Box(-np.inf, np.inf, (16,), np.float32),
-                         action_space=spaces.Box(-0.5, 0.5, (7,), np.float32))
+    arrays = {
+        "observations": np.concatenate([episodes["observations"], episodes["next_observations"][:, -1:]], axis=1),
+        "actions": episodes["actions"],
+        "rewards": episodes["rewards"].astype(np.float64),
+        "terminations": episodes["dones"].astype(bool),
+        "truncations": np.zeros((n, horizon), dtype=bool),
+        "reached": np.zeros((n, 2)),
+        "sampled_goals": np.zeros((n, 2)),
+    }
+    return write_dataset(
+        path,
+        arrays,
+        dataset_id=f"genrl/{task}-v0",
+        genrl={"task": task, "horizon": horizon},
+        observation_space=spaces.Box(-np.inf, np.inf, (16,), np.float32),
+        action_space=spaces.Box(-0.5, 0.5, (7,), np.float32),
+    )
 
 
 def test_baselines_refuse_another_tasks_demonstrations(demos, tmp_path, capsys):
@@ -426,17 +538,19 @@ def test_baselines_refuse_another_tasks_demonstrations(demos, tmp_path, capsys):
 
     hockey = _dataset_of(demos, tmp_path / "hockey_demos", "hockey")
     basketball = _dataset_of(demos, tmp_path / "basketball_demos", "basketball")
-    for algorithm, task, dataset, other in (("ppo", "hockey", basketball, "basketball"),
-                                            ("sac", "basketball", hockey, "hockey")):
+    for algorithm, task, dataset, other in (
+        ("ppo", "hockey", basketball, "basketball"),
+        ("sac", "basketball", hockey, "hockey"),
+    ):
         out = tmp_path / f"{algorithm}_run"
-        assert main(["baseline", algorithm, "--task", task, "--demos", str(dataset), "--episodes", "1",
-                     "--out", str(out)]) == 2
+        assert (
+            main(["baseline", algorithm, "--task", task, "--demos", str(dataset), "--episodes", "1", "--out", str(out)]) == 2
+        )
         error = capsys.readouterr().err
         assert str(dataset) in error and repr(other) in error and repr(task) in error, error
         assert not (out / "summary.json").exists()
     # The dataset of the task itself is accepted: its transitions are the ones the baseline is given.
-    summary = train_baseline("sac", "hockey", episodes=1, out_dir=tmp_path / "sac_ok", demos=hockey, device="cpu",
-                             window=1)
+    summary = train_baseline("sac", "hockey", episodes=1, out_dir=tmp_path / "sac_ok", demos=hockey, device="cpu", window=1)
     assert summary["demo_transitions"] == len(demos["observations"])
 
 
@@ -447,19 +561,45 @@ def test_the_baselines_run_with_the_zoo_entries_of_their_yml_files():
     # (hyperparams/*.yml say where each entry comes from and what changed); both tasks the same.
     for task in ("hockey", "basketball"):
         ppo, ppo_policy = baseline_settings("ppo", task)
-        assert ppo == {"n_steps": 512, "batch_size": 64, "gamma": 0.98, "learning_rate": 2.0633e-05,
-                       "ent_coef": 0.000401762, "clip_range": 0.1, "n_epochs": 20, "gae_lambda": 0.92,
-                       "max_grad_norm": 0.8, "vf_coef": 0.58096}
-        assert ppo_policy == {"log_std_init": -2, "ortho_init": False, "activation_fn": nn.ReLU,
-                              "net_arch": {"pi": [256, 256], "vf": [256, 256]}}
-        zoo_sac = {"learning_rate": 3e-4, "batch_size": 256, "tau": 0.005, "gamma": 0.99, "train_freq": 1,
-                   "gradient_steps": 1, "ent_coef": "auto", "learning_starts": 10_000}
+        assert ppo == {
+            "n_steps": 512,
+            "batch_size": 64,
+            "gamma": 0.98,
+            "learning_rate": 2.0633e-05,
+            "ent_coef": 0.000401762,
+            "clip_range": 0.1,
+            "n_epochs": 20,
+            "gae_lambda": 0.92,
+            "max_grad_norm": 0.8,
+            "vf_coef": 0.58096,
+        }
+        assert ppo_policy == {
+            "log_std_init": -2,
+            "ortho_init": False,
+            "activation_fn": nn.ReLU,
+            "net_arch": {"pi": [256, 256], "vf": [256, 256]},
+        }
+        zoo_sac = {
+            "learning_rate": 3e-4,
+            "batch_size": 256,
+            "tau": 0.005,
+            "gamma": 0.99,
+            "train_freq": 1,
+            "gradient_steps": 1,
+            "ent_coef": "auto",
+            "learning_starts": 10_000,
+        }
         assert baseline_settings("sac-no-prefill", task) == (zoo_sac, {"net_arch": [256, 256]})
         assert baseline_settings("sac", task) == (zoo_sac | {"learning_starts": 0}, {"net_arch": [256, 256]})
-        assert baseline_settings("sac-her", task) == ({"learning_rate": 1e-3, "batch_size": 256, "gamma": 0.99,
-                                                       "ent_coef": "auto", "learning_starts": 0}, {"net_arch": [64, 64]})
-        assert baseline_settings("latent-ppo", task)[0] == baseline_settings("latent-trpo", task)[0] == {
-            "n_steps": 64, "batch_size": 64}
+        assert baseline_settings("sac-her", task) == (
+            {"learning_rate": 1e-3, "batch_size": 256, "gamma": 0.99, "ent_coef": "auto", "learning_starts": 0},
+            {"net_arch": [64, 64]},
+        )
+        assert (
+            baseline_settings("latent-ppo", task)[0]
+            == baseline_settings("latent-trpo", task)[0]
+            == {"n_steps": 64, "batch_size": 64}
+        )
         assert baseline_settings("latent-sac", task)[0] == {"learning_starts": 64}
 
 
@@ -490,8 +630,9 @@ def test_training_health_reads_every_progress_file_and_flags_divergence(tmp_path
     logs.mkdir()
     header = "time/total_timesteps,train/critic_loss,train/ent_coef\n"
     # A resumed run: the rows before its checkpoints are kept in progress.until_episode_K.csv, read in K's order.
-    (logs / "progress.until_episode_20.csv").write_text(header + "".join(f"{i},{v},0.5\n" for i, v in
-                                                                          enumerate([2, 4, 3, 5, 1])))
+    (logs / "progress.until_episode_20.csv").write_text(
+        header + "".join(f"{i},{v},0.5\n" for i, v in enumerate([2, 4, 3, 5, 1]))
+    )
     (logs / "progress.until_episode_3.csv").write_text(header + "0,,0.9\n1,1,0.8\n")  # no loss before learning starts
     (logs / "progress.csv").write_text(header + "9,7,0.2\n")
     health = training_health(tmp_path)

@@ -12,35 +12,54 @@ import pytest
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 
 
-@pytest.mark.parametrize(("script", "argv", "message"), [
-    ("genrl.py", ["--episodes", "0"], "argument --episodes: must be an integer >= 1, got 0"),
-    ("genrl.py", ["--task", "golf"], "argument --task: invalid choice: 'golf'"),
-    ("genrl.py", ["--task", "basketball", "--out", "FILE/result.json"],
-     "argument --out: 'FILE/result.json' cannot be created"),
-    ("genrl.py", ["--genrl-kwargs", '{"target_kl": 0.02}'], "--genrl-kwargs needs --out"),
-    ("genrl.py", ["--library-defaults"], "--library-defaults needs --out"),
-    ("genrl.py", ["--task", "basketball", "--genrl-kwargs", '{"hindsight_kwargs": {"history": 0}}', "--out", "r.json"],
-     "argument --genrl-kwargs: hindsight_kwargs['history'] must be an integer >= 1, got 0"),
-    ("genrl.py", ["--genrl-kwargs", '{"hindsigt": true}', "--out", "r.json"], "hindsigt"),
-    ("genrl.py", ["--library-defaults", "--genrl-kwargs", '{"hindsight_kwargs": {"regression_weighted": true}}',
-                  "--out", "r.json"], "argument --genrl-kwargs: hindsight_kwargs['regression_weighted']"),
-    ("genrl.py", ["--task", "basketball", "--genrl-kwargs", '{"e_step": "kl_penalty"}', "--out", "r.json"],
-     "argument --genrl-kwargs: hindsight_kwargs needs e_step='trpo'"),  # basketball's hindsight, laid over
-    ("baselines.py", ["--task", "golf"], "argument --task: invalid choice: 'golf'"),
-    ("baselines.py", ["--work", "FILE"], "argument --work: 'FILE' is a file; expected a folder"),
-    ("baselines.py", ["--genrl-kwargs", '{"gama": 1}'], "argument --genrl-kwargs: 'gama' is not a GenRL setting"),
-    ("behaviour_cloning.py", ["--out", "result.txt"], "argument --out: 'result.txt' must end in .json"),
-    ("generator_training.py", ["--device", "bogus", "--out", "out.json"],
-     "argument --device: must be 'auto' or a torch device"),
-    ("precision_recall.py", ["--out", "FOLDER"], "argument --out: 'FOLDER' is a folder; expected a file name"),
-    ("sim_throughput.py", ["--repeats", "0"], "argument --repeats: must be an integer >= 1, got 0"),
-    ("reachable.py", ["--task", "hockey", "--generator", "missing.pt", "--out", "out.json"], "missing.pt is not a file"),
-])
+@pytest.mark.parametrize(
+    ("script", "argv", "message"),
+    [
+        ("genrl.py", ["--episodes", "0"], "argument --episodes: must be an integer >= 1, got 0"),
+        ("genrl.py", ["--task", "golf"], "argument --task: invalid choice: 'golf'"),
+        (
+            "genrl.py",
+            ["--task", "basketball", "--out", "FILE/result.json"],
+            "argument --out: 'FILE/result.json' cannot be created",
+        ),
+        ("genrl.py", ["--genrl-kwargs", '{"target_kl": 0.02}'], "--genrl-kwargs needs --out"),
+        ("genrl.py", ["--library-defaults"], "--library-defaults needs --out"),
+        (
+            "genrl.py",
+            ["--task", "basketball", "--genrl-kwargs", '{"hindsight_kwargs": {"history": 0}}', "--out", "r.json"],
+            "argument --genrl-kwargs: hindsight_kwargs['history'] must be an integer >= 1, got 0",
+        ),
+        ("genrl.py", ["--genrl-kwargs", '{"hindsigt": true}', "--out", "r.json"], "hindsigt"),
+        (
+            "genrl.py",
+            ["--library-defaults", "--genrl-kwargs", '{"hindsight_kwargs": {"regression_weighted": true}}', "--out", "r.json"],
+            "argument --genrl-kwargs: hindsight_kwargs['regression_weighted']",
+        ),
+        (
+            "genrl.py",
+            ["--task", "basketball", "--genrl-kwargs", '{"e_step": "kl_penalty"}', "--out", "r.json"],
+            "argument --genrl-kwargs: hindsight_kwargs needs e_step='trpo'",
+        ),  # basketball's hindsight, laid over
+        ("baselines.py", ["--task", "golf"], "argument --task: invalid choice: 'golf'"),
+        ("baselines.py", ["--work", "FILE"], "argument --work: 'FILE' is a file; expected a folder"),
+        ("baselines.py", ["--genrl-kwargs", '{"gama": 1}'], "argument --genrl-kwargs: 'gama' is not a GenRL setting"),
+        ("behaviour_cloning.py", ["--out", "result.txt"], "argument --out: 'result.txt' must end in .json"),
+        (
+            "generator_training.py",
+            ["--device", "bogus", "--out", "out.json"],
+            "argument --device: must be 'auto' or a torch device",
+        ),
+        ("precision_recall.py", ["--out", "FOLDER"], "argument --out: 'FOLDER' is a folder; expected a file name"),
+        ("sim_throughput.py", ["--repeats", "0"], "argument --repeats: must be an integer >= 1, got 0"),
+        ("reachable.py", ["--task", "hockey", "--generator", "missing.pt", "--out", "out.json"], "missing.pt is not a file"),
+    ],
+)
 def test_benchmarks_refuse_bad_arguments_before_any_work(tmp_path, script, argv, message):
     (tmp_path / "FILE").write_text("")
     (tmp_path / "FOLDER").mkdir()
-    done = subprocess.run([sys.executable, str(BENCHMARKS / script), *argv], cwd=tmp_path, capture_output=True,
-                          text=True, timeout=120)
+    done = subprocess.run(
+        [sys.executable, str(BENCHMARKS / script), *argv], cwd=tmp_path, capture_output=True, text=True, timeout=120
+    )
     assert done.returncode == 2 and message in done.stderr, done.stderr
     assert done.stderr.splitlines()[-1].startswith(f"{script}: error: ")
     assert sorted(path.name for path in tmp_path.iterdir()) == ["FILE", "FOLDER"]  # nothing was written
@@ -49,8 +68,12 @@ def test_benchmarks_refuse_bad_arguments_before_any_work(tmp_path, script, argv,
 def test_the_benchmarks_are_a_package_without_path_edits():
     for path in sorted(BENCHMARKS.glob("*.py")):
         assert "sys.path" not in path.read_text() and "noqa: E402" not in path.read_text(), path.name
-    done = subprocess.run([sys.executable, "-m", "sb3_genrl.benchmarks.genrl", "--task", "hockey", "--episodes", "0"],
-                          capture_output=True, text=True, timeout=120)
+    done = subprocess.run(
+        [sys.executable, "-m", "sb3_genrl.benchmarks.genrl", "--task", "hockey", "--episodes", "0"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert done.returncode == 2 and "argument --episodes: must be an integer >= 1, got 0" in done.stderr
 
 
@@ -71,9 +94,19 @@ def test_the_genrl_benchmark_takes_the_tasks_entry_and_writes_its_default_output
 
 
 def _result(methods, **changes):
-    result = {"benchmark": "baselines", "task": "basketball", "horizon": 78, "episodes": 3000, "seeds": [0, 1, 2],
-              "window": 64, "sb3_genrl": "1", "worst_reward": -16.0, "demos": "runs/demonstrations", "jobs": 1,
-              "methods": {method: {"row": f"{method} of this result"} for method in methods}}
+    result = {
+        "benchmark": "baselines",
+        "task": "basketball",
+        "horizon": 78,
+        "episodes": 3000,
+        "seeds": [0, 1, 2],
+        "window": 64,
+        "sb3_genrl": "1",
+        "worst_reward": -16.0,
+        "demos": "runs/demonstrations",
+        "jobs": 1,
+        "methods": {method: {"row": f"{method} of this result"} for method in methods},
+    }
     return result | changes
 
 
@@ -91,8 +124,14 @@ def test_baselines_merge_keeps_the_other_methods_in_order_and_refuses_other_sett
     assert merged["demo_dataset"] == current["demo_dataset"]  # (not held by the earlier result: not compared)
     again = merge(merged, _result(["ppo"], demo_dataset=current["demo_dataset"]))
     assert again["merged_methods"] == ["genrl", "sac", "sac-her", "latent-trpo"]
-    for key, value in [("episodes", 1000), ("seeds", [0]), ("task", "hockey"), ("demos", "elsewhere"),
-                       ("generator_sha256", "other"), ("sb3_genrl", "2")]:
+    for key, value in [
+        ("episodes", 1000),
+        ("seeds", [0]),
+        ("task", "hockey"),
+        ("demos", "elsewhere"),
+        ("generator_sha256", "other"),
+        ("sb3_genrl", "2"),
+    ]:
         with pytest.raises(ValueError, match=f"{key}: .* there, .* now"):
             merge(previous, _result(["sac"], **{key: value}))
     with pytest.raises(ValueError, match="demo_dataset"):
@@ -102,9 +141,27 @@ def test_baselines_merge_keeps_the_other_methods_in_order_and_refuses_other_sett
 def test_baselines_merge_refuses_a_result_of_other_settings_before_any_work(tmp_path):
     out = tmp_path / "result.json"
     out.write_text(json.dumps(_result(["sac"])))  # basketball, 3000 episodes, seeds 0 1 2
-    done = subprocess.run([sys.executable, str(BENCHMARKS / "baselines.py"), "--task", "basketball", "--episodes", "40",
-                           "--methods", "sac-her", "--merge", "--out", str(out), "--work", str(tmp_path / "work")],
-                          cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    done = subprocess.run(
+        [
+            sys.executable,
+            str(BENCHMARKS / "baselines.py"),
+            "--task",
+            "basketball",
+            "--episodes",
+            "40",
+            "--methods",
+            "sac-her",
+            "--merge",
+            "--out",
+            str(out),
+            "--work",
+            str(tmp_path / "work"),
+        ],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert done.returncode != 0 and "--merge: cannot merge into" in done.stderr, done.stderr
     assert "episodes: 3000 there, 40 now" in done.stderr
     assert sorted(path.name for path in tmp_path.iterdir()) == ["result.json"]  # no runs, demonstrations or output
@@ -121,9 +178,14 @@ def test_baselines_reuses_an_archived_runs_evaluation_and_refuses_a_stale_one(tm
     run.mkdir(parents=True)
     with pytest.raises(ValueError, match="has neither sac_policy.zip nor its final evaluation"):
         module.final_evaluation(run, "sac", "basketball", None)
-    record = {"policy_sha256": "digest of the policy it had", "task": "basketball", "goals": EVAL_GOALS,
-              "goal_seed": EVAL_GOAL_SEED, "generator_sha256": None, "sb3_genrl": sb3_genrl.__version__} \
-        | {name: 1.0 for name in module.FINAL_RESULTS}
+    record = {
+        "policy_sha256": "digest of the policy it had",
+        "task": "basketball",
+        "goals": EVAL_GOALS,
+        "goal_seed": EVAL_GOAL_SEED,
+        "generator_sha256": None,
+        "sb3_genrl": sb3_genrl.__version__,
+    } | {name: 1.0 for name in module.FINAL_RESULTS}
     (run / "final_eval.json").write_text(json.dumps(record))
     assert module.final_evaluation(run, "sac", "basketball", None) == record  # no policy file to evaluate again
     with pytest.raises(ValueError, match="its final_eval.json was made with another task"):

@@ -40,64 +40,173 @@ def test_help_lists_the_commands_in_workflow_order_and_version(cli):
     assert cli("--version")[:2] == (0, f"genrl {__version__}\n")
 
 
-@pytest.mark.parametrize(("argv", "message"), [
-    (("demos", "--task", "hockey", "--episodes", "-1", "--out", "D"),
-     "argument --episodes: must be an integer between 1 and 100000000, got -1"),
-    (("demos", "--task", "hockey", "--episodes", "2.5", "--out", "D"), "argument --episodes: expected an integer, got '2.5'"),
-    (("demos", "--task", "golf", "--out", "D"), "argument --task: invalid choice: 'golf'"),
-    (("demos", "--task", "hockey", "--out", "FILE"), "argument --out: 'FILE' is a file; expected a folder"),
-    (("demos", "--task", "hockey", "--out", "FILE/sub"), "argument --out: 'FILE/sub' cannot be created: 'FILE' is a file"),
-    (("demos", "--task", "hockey", "--threads", "0", "--out", "D"), "argument --threads: must be an integer >= 1, got 0"),
-    (("quickstart", "--episodes", "-1", "--out", "D"), "argument --episodes: must be an integer between 1 and 100000000, "
-                                                         "got -1"),
-    (("quickstart", "--demo-episodes", "0", "--out", "D"),
-     "argument --demo-episodes: must be an integer between 4 and 100000000, got 0"),
-    (("quickstart", "--device", "bogus", "--out", "D"), "argument --device: must be 'auto' or a torch device"),
-    (("quickstart", "--out", "FILE"), "argument --out: 'FILE' is a file; expected a folder"),
-    (("train-policy", "--task", "hockey", "--generator", "GEN", "--episodes", "8", "--seed", "-1", "--out", "D"),
-     "argument --seed: must be an integer between 0 and 4294967295, got -1"),
-    (("train-policy", "--task", "hockey", "--generator", "GEN", "--episodes", "8", "--batch-episodes", "1", "--out", "D"),
-     "argument --batch-episodes: must be an integer >= 2, got 1"),
-    (("train-policy", "--task", "hockey", "--generator", "missing.pt", "--episodes", "8", "--out", "D"),
-     "argument --generator: 'missing.pt' does not exist"),
-    (("train-policy", "--task", "hockey", "--generator", "GEN", "--episodes", "8", "--genrl-kwargs", "[1]",
-      "--out", "D"), "argument --genrl-kwargs: expected a JSON object, got '[1]'"),
-    (("train-policy", "--task", "hockey", "--generator", "GEN", "--episodes", "8", "--genrl-kwargs", "{",
-      "--out", "D"), "argument --genrl-kwargs: not JSON"),
-    (("train-policy", "--task", "hockey", "--generator", "GEN", "--episodes", "8", "--genrl-kwargs",
-      '{"hindsight_kwargs": {"history": 0}}', "--out", "D"),
-     "argument --e-step/--genrl-kwargs: hockey's entry in hyperparams/genrl.yml, --e-step trpo, --genrl-kwargs: "
-     "hindsight_kwargs['history'] must be an integer >= 1, got 0"),
-    (("train-policy", "--task", "hockey", "--generator", "GEN", "--episodes", "8", "--genrl-kwargs",
-      '{"hindsight_kwargs": {"regression_weighted": true}}', "--library-defaults", "--out", "D"),
-     "argument --e-step/--genrl-kwargs: GenRL's defaults, --e-step trpo, --genrl-kwargs: "
-     "hindsight_kwargs['regression_weighted'] weights the regression's pulls, which needs regression_steps > 0"),
-    (("train-policy", "--task", "hockey", "--generator", "GEN", "--episodes", "8", "--genrl-kwargs", '{"gama": 1}',
-      "--out", "D"), "'gama' is not a GenRL setting"),
-    (("train-policy", "--task", "basketball", "--generator", "GEN", "--episodes", "8", "--e-step", "kl_penalty",
-      "--out", "D"), "argument --e-step/--genrl-kwargs: basketball's entry in hyperparams/genrl.yml, --e-step kl_penalty: "
-     "hindsight_kwargs needs e_step='trpo'"),
-    (("baseline", "ppo", "--task", "hockey", "--demos", "D0", "--episodes", "8", "--bc-max-epochs", "-1", "--out", "D"),
-     "argument --bc-max-epochs: must be an integer >= 1, got -1"),
-    (("baseline", "ppo", "--task", "hockey", "--demos", "D0", "--episodes", "8", "--device", "cuda:7", "--out", "D"),
-     "argument --device: "),
-    (("baseline", "ppo", "--task", "hockey", "--demos", "D0", "--episodes", "8", "--out", "FILE"),
-     "argument --out: 'FILE' is a file"),
-    (("evaluate", "GEN", "--data", "D0", "--n", "0", "--out", "D"), "argument --n: must be an integer >= 1, got 0"),
-    (("evaluate", "GEN", "--data", "D0", "--out", "FILE"), "argument --out: 'FILE' is a file"),
-    (("evaluate", "GEN", "--data", "D0", "--rank-by", "fid", "--out", "D"), "argument --rank-by: invalid choice: 'fid'"),
-    (("evaluate", "GEN", "--data", "D0", "--min-precision", "1.5", "--out", "D"),
-     "argument --min-precision: must be a number in [0, 1], got 1.5"),
-    (("compare", "--runs", "D0", "--out", "FILE"), "argument --out: 'FILE' is a file"),
-    (("study", "--workers", "0", "--out", "D"), "argument --workers: must be an integer >= 1, got 0"),
-    (("study", "--models", "VAE10", "--out", "D"), "argument --models: invalid choice: 'VAE10'"),
-    (("study", "--out", "FILE"), "argument --out: 'FILE' is a file"),
-    (("play", "--out", "FILE"), "argument --out: 'FILE' is a file"),
-    (("video", "--task", "hockey", "--generator", "GEN", "--out", "v.avi"), "argument --out: 'v.avi' must end in .mp4"),
-    (("video", "--task", "hockey", "--generator", "GEN", "--out", "D0"), "argument --out: 'D0' is a folder"),
-    (("video", "--task", "hockey", "--generator", "GEN", "--goals", "0", "--out", "v.gif"), "argument --goals"),
-    (("train-generator", "--data", "D0", "--batch-size", "0", "--out", "g.pt"), "argument --batch-size: must be"),
-])
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (
+            ("demos", "--task", "hockey", "--episodes", "-1", "--out", "D"),
+            "argument --episodes: must be an integer between 1 and 100000000, got -1",
+        ),
+        (
+            ("demos", "--task", "hockey", "--episodes", "2.5", "--out", "D"),
+            "argument --episodes: expected an integer, got '2.5'",
+        ),
+        (("demos", "--task", "golf", "--out", "D"), "argument --task: invalid choice: 'golf'"),
+        (("demos", "--task", "hockey", "--out", "FILE"), "argument --out: 'FILE' is a file; expected a folder"),
+        (("demos", "--task", "hockey", "--out", "FILE/sub"), "argument --out: 'FILE/sub' cannot be created: 'FILE' is a file"),
+        (("demos", "--task", "hockey", "--threads", "0", "--out", "D"), "argument --threads: must be an integer >= 1, got 0"),
+        (
+            ("quickstart", "--episodes", "-1", "--out", "D"),
+            "argument --episodes: must be an integer between 1 and 100000000, got -1",
+        ),
+        (
+            ("quickstart", "--demo-episodes", "0", "--out", "D"),
+            "argument --demo-episodes: must be an integer between 4 and 100000000, got 0",
+        ),
+        (("quickstart", "--device", "bogus", "--out", "D"), "argument --device: must be 'auto' or a torch device"),
+        (("quickstart", "--out", "FILE"), "argument --out: 'FILE' is a file; expected a folder"),
+        (
+            ("train-policy", "--task", "hockey", "--generator", "GEN", "--episodes", "8", "--seed", "-1", "--out", "D"),
+            "argument --seed: must be an integer between 0 and 4294967295, got -1",
+        ),
+        (
+            (
+                "train-policy",
+                "--task",
+                "hockey",
+                "--generator",
+                "GEN",
+                "--episodes",
+                "8",
+                "--batch-episodes",
+                "1",
+                "--out",
+                "D",
+            ),
+            "argument --batch-episodes: must be an integer >= 2, got 1",
+        ),
+        (
+            ("train-policy", "--task", "hockey", "--generator", "missing.pt", "--episodes", "8", "--out", "D"),
+            "argument --generator: 'missing.pt' does not exist",
+        ),
+        (
+            (
+                "train-policy",
+                "--task",
+                "hockey",
+                "--generator",
+                "GEN",
+                "--episodes",
+                "8",
+                "--genrl-kwargs",
+                "[1]",
+                "--out",
+                "D",
+            ),
+            "argument --genrl-kwargs: expected a JSON object, got '[1]'",
+        ),
+        (
+            ("train-policy", "--task", "hockey", "--generator", "GEN", "--episodes", "8", "--genrl-kwargs", "{", "--out", "D"),
+            "argument --genrl-kwargs: not JSON",
+        ),
+        (
+            (
+                "train-policy",
+                "--task",
+                "hockey",
+                "--generator",
+                "GEN",
+                "--episodes",
+                "8",
+                "--genrl-kwargs",
+                '{"hindsight_kwargs": {"history": 0}}',
+                "--out",
+                "D",
+            ),
+            "argument --e-step/--genrl-kwargs: hockey's entry in hyperparams/genrl.yml, --e-step trpo, --genrl-kwargs: "
+            "hindsight_kwargs['history'] must be an integer >= 1, got 0",
+        ),
+        (
+            (
+                "train-policy",
+                "--task",
+                "hockey",
+                "--generator",
+                "GEN",
+                "--episodes",
+                "8",
+                "--genrl-kwargs",
+                '{"hindsight_kwargs": {"regression_weighted": true}}',
+                "--library-defaults",
+                "--out",
+                "D",
+            ),
+            "argument --e-step/--genrl-kwargs: GenRL's defaults, --e-step trpo, --genrl-kwargs: "
+            "hindsight_kwargs['regression_weighted'] weights the regression's pulls, which needs regression_steps > 0",
+        ),
+        (
+            (
+                "train-policy",
+                "--task",
+                "hockey",
+                "--generator",
+                "GEN",
+                "--episodes",
+                "8",
+                "--genrl-kwargs",
+                '{"gama": 1}',
+                "--out",
+                "D",
+            ),
+            "'gama' is not a GenRL setting",
+        ),
+        (
+            (
+                "train-policy",
+                "--task",
+                "basketball",
+                "--generator",
+                "GEN",
+                "--episodes",
+                "8",
+                "--e-step",
+                "kl_penalty",
+                "--out",
+                "D",
+            ),
+            "argument --e-step/--genrl-kwargs: basketball's entry in hyperparams/genrl.yml, --e-step kl_penalty: "
+            "hindsight_kwargs needs e_step='trpo'",
+        ),
+        (
+            ("baseline", "ppo", "--task", "hockey", "--demos", "D0", "--episodes", "8", "--bc-max-epochs", "-1", "--out", "D"),
+            "argument --bc-max-epochs: must be an integer >= 1, got -1",
+        ),
+        (
+            ("baseline", "ppo", "--task", "hockey", "--demos", "D0", "--episodes", "8", "--device", "cuda:7", "--out", "D"),
+            "argument --device: ",
+        ),
+        (
+            ("baseline", "ppo", "--task", "hockey", "--demos", "D0", "--episodes", "8", "--out", "FILE"),
+            "argument --out: 'FILE' is a file",
+        ),
+        (("evaluate", "GEN", "--data", "D0", "--n", "0", "--out", "D"), "argument --n: must be an integer >= 1, got 0"),
+        (("evaluate", "GEN", "--data", "D0", "--out", "FILE"), "argument --out: 'FILE' is a file"),
+        (("evaluate", "GEN", "--data", "D0", "--rank-by", "fid", "--out", "D"), "argument --rank-by: invalid choice: 'fid'"),
+        (
+            ("evaluate", "GEN", "--data", "D0", "--min-precision", "1.5", "--out", "D"),
+            "argument --min-precision: must be a number in [0, 1], got 1.5",
+        ),
+        (("compare", "--runs", "D0", "--out", "FILE"), "argument --out: 'FILE' is a file"),
+        (("study", "--workers", "0", "--out", "D"), "argument --workers: must be an integer >= 1, got 0"),
+        (("study", "--models", "VAE10", "--out", "D"), "argument --models: invalid choice: 'VAE10'"),
+        (("study", "--out", "FILE"), "argument --out: 'FILE' is a file"),
+        (("play", "--out", "FILE"), "argument --out: 'FILE' is a file"),
+        (("video", "--task", "hockey", "--generator", "GEN", "--out", "v.avi"), "argument --out: 'v.avi' must end in .mp4"),
+        (("video", "--task", "hockey", "--generator", "GEN", "--out", "D0"), "argument --out: 'D0' is a folder"),
+        (("video", "--task", "hockey", "--generator", "GEN", "--goals", "0", "--out", "v.gif"), "argument --goals"),
+        (("train-generator", "--data", "D0", "--batch-size", "0", "--out", "g.pt"), "argument --batch-size: must be"),
+    ],
+)
 def test_arguments_and_paths_are_checked_before_any_work(tmp_path, monkeypatch, cli, argv, message):
     monkeypatch.chdir(tmp_path)
     Path("FILE").write_text("")
@@ -139,8 +248,9 @@ def test_an_output_folder_that_cannot_be_written_is_refused(tmp_path, monkeypatc
     assert code == 2 and f"argument --out: '{out}' cannot be written" in err and not out.exists()
 
 
-@pytest.mark.parametrize("error", [ValueError, FileNotFoundError, PermissionError, FileExistsError, IsADirectoryError,
-                                   NotADirectoryError])
+@pytest.mark.parametrize(
+    "error", [ValueError, FileNotFoundError, PermissionError, FileExistsError, IsADirectoryError, NotADirectoryError]
+)
 def test_known_errors_are_one_line_with_exit_status_2(tmp_path, monkeypatch, cli, error):
     import sb3_genrl.showcase
 
@@ -188,8 +298,7 @@ def test_library_functions_check_before_any_work(tmp_path):
     from sb3_genrl.genrl import train_policy
 
     with pytest.raises(ValueError, match="hindsight_kwargs needs e_step='trpo'"):  # GenRL's settings, before its Monitor
-        train_policy("hockey", "missing.pt", episodes=8, out_dir=tmp_path / "policy", e_step="kl_penalty",
-                     hindsight_kwargs={})
+        train_policy("hockey", "missing.pt", episodes=8, out_dir=tmp_path / "policy", e_step="kl_penalty", hindsight_kwargs={})
     with pytest.raises(ValueError, match="n_steps=16: give the episodes per iteration as batch_episodes"):
         train_policy("hockey", "missing.pt", episodes=8, out_dir=tmp_path / "policy", n_steps=16)
     assert list(tmp_path.iterdir()) == []  # no demonstrations were made, no folder created
@@ -212,11 +321,13 @@ def test_every_library_entry_point_checks_its_output_path_and_seed_first(tmp_pat
     entry_points = {
         "make_demonstrations": lambda out, seed: make_demonstrations("hockey", 2, out, seed=seed, progress_bar=False),
         "train_generator": lambda out, seed: train_generator(trajectories, out=out / "g.pt", seed=seed),
-        "evaluate_generators": lambda out, seed: evaluate_generators([hockey_generator], trajectories, n=5, out_dir=out,
-                                                                     seed=seed),
+        "evaluate_generators": lambda out, seed: evaluate_generators(
+            [hockey_generator], trajectories, n=5, out_dir=out, seed=seed
+        ),
         "train_policy": lambda out, seed: train_policy("hockey", hockey_generator, episodes=8, out_dir=out, seed=seed),
-        "train_baseline": lambda out, seed: train_baseline("latent-ppo", "hockey", episodes=8, out_dir=out, seed=seed,
-                                                           generator=hockey_generator),
+        "train_baseline": lambda out, seed: train_baseline(
+            "latent-ppo", "hockey", episodes=8, out_dir=out, seed=seed, generator=hockey_generator
+        ),
         "compare_runs": lambda out, seed: compare_runs([tmp_path], out),
         "play_scripted": lambda out, seed: play_scripted(out, seed=seed),
         "record_video": lambda out, seed: record_video("hockey", out / "v.gif", generator=hockey_generator, seed=seed),
@@ -260,14 +371,51 @@ def runs(tmp_path_factory, hockey_generator):
     from sb3_genrl.cli import main
 
     root = tmp_path_factory.mktemp("runs")
-    assert main(["train-policy", "--task", "hockey", "--generator", hockey_generator, "--episodes", "32",
-                 "--batch-episodes", "16", "--genrl-kwargs",
-                 '{"hindsight_kwargs": {"history": 2, "regression_steps": 3, "regression_weighted": true}}',
-                 "--device", "cpu", "--no-progress-bar",
-                 "--out", str(root / "genrl")]) == 0
-    assert main(["baseline", "latent-ppo", "--task", "hockey", "--generator", hockey_generator, "--episodes", "16",
-                 "--algorithm-kwargs", '{"gamma": 0.9}', "--device", "cpu", "--no-progress-bar",
-                 "--out", str(root / "ppo")]) == 0
+    assert (
+        main(
+            [
+                "train-policy",
+                "--task",
+                "hockey",
+                "--generator",
+                hockey_generator,
+                "--episodes",
+                "32",
+                "--batch-episodes",
+                "16",
+                "--genrl-kwargs",
+                '{"hindsight_kwargs": {"history": 2, "regression_steps": 3, "regression_weighted": true}}',
+                "--device",
+                "cpu",
+                "--no-progress-bar",
+                "--out",
+                str(root / "genrl"),
+            ]
+        )
+        == 0
+    )
+    assert (
+        main(
+            [
+                "baseline",
+                "latent-ppo",
+                "--task",
+                "hockey",
+                "--generator",
+                hockey_generator,
+                "--episodes",
+                "16",
+                "--algorithm-kwargs",
+                '{"gamma": 0.9}',
+                "--device",
+                "cpu",
+                "--no-progress-bar",
+                "--out",
+                str(root / "ppo"),
+            ]
+        )
+        == 0
+    )
     return root
 
 
@@ -298,8 +446,11 @@ def test_baseline_and_compare(runs, tmp_path, cli, hockey_generator):
     genrl = load_trained("genrl", runs / "genrl" / "genrl_policy.zip", "hockey", generator=generator)
     settings = json.loads((runs / "genrl" / "summary.json").read_text())["genrl_settings"]
     # the task's entry with --genrl-kwargs merged into its hindsight_kwargs, as the model was built
-    assert settings["hindsight_kwargs"] == genrl.hindsight_kwargs == {"history": 2, "regression_steps": 3,
-                                                                       "regression_weighted": True}
+    assert (
+        settings["hindsight_kwargs"]
+        == genrl.hindsight_kwargs
+        == {"history": 2, "regression_steps": 3, "regression_weighted": True}
+    )
     assert (genrl.hindsight.history, genrl.hindsight.regression_steps, genrl.hindsight.regression_weighted) == (2, 3, True)
     assert settings["policy_kwargs"] == {"net_arch": {"pi": [64, 64, 64], "vf": [64, 64]}}
     _, genrl_rewards, _ = evaluate_on_goals(genrl, "hockey", goals=100, seed=EVAL_GOAL_SEED)
@@ -340,11 +491,24 @@ def test_baseline_offers_every_baseline_and_checks_its_inputs_first(cli, tmp_pat
         needs = "a generator" if algorithm in LATENT_BASELINES else "demonstrations"
         assert code == 2 and f"genrl baseline: error: {algorithm} needs {needs}" in err and printed == "", err
         assert not (tmp_path / algorithm).exists()
-    code, _, err = cli("baseline", "latent-sac", "--task", "hockey", "--generator", tmp_path, "--episodes", 8,
-                       "--algorithm-kwargs", '{"gama": 1}', "--out", tmp_path / "sac")
+    code, _, err = cli(
+        "baseline",
+        "latent-sac",
+        "--task",
+        "hockey",
+        "--generator",
+        tmp_path,
+        "--episodes",
+        8,
+        "--algorithm-kwargs",
+        '{"gama": 1}',
+        "--out",
+        tmp_path / "sac",
+    )
     assert code == 2 and "latent-sac (SAC) has no setting 'gama'" in err and not (tmp_path / "sac").exists()
-    code, _, err = cli("baseline", "latent-sac", "--task", "hockey", "--episodes", 8, "--algorithm-kwargs", "[1]",
-                       "--out", tmp_path / "sac")
+    code, _, err = cli(
+        "baseline", "latent-sac", "--task", "hockey", "--episodes", 8, "--algorithm-kwargs", "[1]", "--out", tmp_path / "sac"
+    )
     assert code == 2 and "expected a JSON object" in err
 
 
@@ -425,13 +589,16 @@ def test_absurd_counts_and_too_few_demonstrations_are_refused_before_any_work(tm
     from sb3_genrl.study.quickstart import quickstart
 
     huge = str(10**12)
-    for argv in (["train-policy", "--task", "hockey", "--generator", hockey_generator, "--episodes", huge],
-                 ["demos", "--task", "hockey", "--episodes", huge], ["baseline", "latent-trpo", "--task", "hockey",
-                                                                       "--generator", hockey_generator, "--episodes", huge]):
+    for argv in (
+        ["train-policy", "--task", "hockey", "--generator", hockey_generator, "--episodes", huge],
+        ["demos", "--task", "hockey", "--episodes", huge],
+        ["baseline", "latent-trpo", "--task", "hockey", "--generator", hockey_generator, "--episodes", huge],
+    ):
         code, _, err = cli(*argv, "--out", tmp_path / "run")
         assert code == 2 and "--episodes: must be an integer between 1 and 100000000" in err
-    code, _, err = cli("video", "--task", "hockey", "--generator", hockey_generator, "--goals", huge, "--out",
-                       tmp_path / "v.gif")
+    code, _, err = cli(
+        "video", "--task", "hockey", "--generator", hockey_generator, "--goals", huge, "--out", tmp_path / "v.gif"
+    )
     assert code == 2 and "--goals: must be an integer between 1 and 100" in err
     code, _, err = cli("quickstart", "--demo-episodes", 1, "--out", tmp_path / "quick")
     assert code == 2 and "--demo-episodes: must be an integer between 4 and" in err
@@ -448,14 +615,22 @@ def test_a_full_disk_and_an_interrupt_are_one_line_with_their_exit_status(tmp_pa
     def fails_with(error):
         def command(args):
             raise error
+
         return command
 
     for error, status, line in (
-            (OSError(errno.ENOSPC, "No space left on device", str(tmp_path / "x.csv")), 1,
-             f"error: No space left on device: '{tmp_path / 'x.csv'}'"),
-            (KeyboardInterrupt(), 130, "interrupted; rerun the same command to resume"),
-            (RuntimeError("[enforce fail at inline_container.cc:664] . unexpected pos 64 vs 0"), 1,
-             "error: torch could not write a file (is the disk full?): [enforce fail at inline_container.cc:664]")):
+        (
+            OSError(errno.ENOSPC, "No space left on device", str(tmp_path / "x.csv")),
+            1,
+            f"error: No space left on device: '{tmp_path / 'x.csv'}'",
+        ),
+        (KeyboardInterrupt(), 130, "interrupted; rerun the same command to resume"),
+        (
+            RuntimeError("[enforce fail at inline_container.cc:664] . unexpected pos 64 vs 0"),
+            1,
+            "error: torch could not write a file (is the disk full?): [enforce fail at inline_container.cc:664]",
+        ),
+    ):
         monkeypatch.setattr(commands, "compare_command", fails_with(error))
         code, _, err = cli("compare", "--runs", tmp_path, "--out", tmp_path / "out")
         assert code == status and err.startswith(f"genrl compare: {line}") and err.count("\n") == 1
@@ -468,14 +643,36 @@ def test_ctrl_c_of_a_run_with_env_processes_exits_130_in_one_line(tmp_path, hock
     import time
 
     run = tmp_path / "run"
-    process = subprocess.Popen([sys.executable, "-m", "sb3_genrl.cli", "train-policy", "--task", "hockey", "--generator",
-                                hockey_generator, "--episodes", "100000", "--batch-episodes", "2", "--n-envs", "2",
-                                "--out", str(run), "--no-progress-bar"], stdout=subprocess.DEVNULL,
-                               stderr=subprocess.PIPE, text=True, start_new_session=True)
+    process = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "sb3_genrl.cli",
+            "train-policy",
+            "--task",
+            "hockey",
+            "--generator",
+            hockey_generator,
+            "--episodes",
+            "100000",
+            "--batch-episodes",
+            "2",
+            "--n-envs",
+            "2",
+            "--out",
+            str(run),
+            "--no-progress-bar",
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
     try:
         deadline = time.monotonic() + 120
-        while not ((run / "episodes.monitor.csv").is_file() and len((run / "episodes.monitor.csv").read_text()
-                                                                      .splitlines()) > 6):
+        while not (
+            (run / "episodes.monitor.csv").is_file() and len((run / "episodes.monitor.csv").read_text().splitlines()) > 6
+        ):
             assert time.monotonic() < deadline and process.poll() is None
             time.sleep(0.2)
         os.killpg(process.pid, signal.SIGINT)  # what Ctrl-C does: the whole process group

@@ -21,17 +21,26 @@ def _arrays(seed: int = 0) -> dict[str, np.ndarray]:
     terminations[:, -1] = True
     rewards = np.zeros((N, T))
     rewards[:, -1] = -rng.uniform(size=N)
-    return {"observations": rng.normal(size=(N, T + 1, D)).astype(np.float32),
-            "actions": rng.uniform(-0.4, 0.4, size=(N, T, M)).astype(np.float32), "rewards": rewards,
-            "terminations": terminations, "truncations": np.zeros((N, T), dtype=bool),
-            "reached": rng.normal(size=(N, 2)), "sampled_goals": rng.normal(size=(N, 2))}
+    return {
+        "observations": rng.normal(size=(N, T + 1, D)).astype(np.float32),
+        "actions": rng.uniform(-0.4, 0.4, size=(N, T, M)).astype(np.float32),
+        "rewards": rewards,
+        "terminations": terminations,
+        "truncations": np.zeros((N, T), dtype=bool),
+        "reached": rng.normal(size=(N, 2)),
+        "sampled_goals": rng.normal(size=(N, 2)),
+    }
 
 
 def _write(path: Path, arrays: dict[str, np.ndarray], task: str = "hockey") -> Path:
-    return write_dataset(path, arrays, dataset_id=f"genrl/{task}-v0",
-                         observation_space=spaces.Box(-np.inf, np.inf, (D,), np.float32),
-                         action_space=spaces.Box(-0.5, 0.5, (M,), np.float32),
-                         genrl={"task": task, "horizon": T, "seed": 3, "version": "0.test"})
+    return write_dataset(
+        path,
+        arrays,
+        dataset_id=f"genrl/{task}-v0",
+        observation_space=spaces.Box(-np.inf, np.inf, (D,), np.float32),
+        action_space=spaces.Box(-0.5, 0.5, (M,), np.float32),
+        genrl={"task": task, "horizon": T, "seed": 3, "version": "0.test"},
+    )
 
 
 @pytest.fixture(scope="module")
@@ -114,8 +123,14 @@ def test_write_refuses_existing_and_leaves_nothing_half_written(tmp_path: Path) 
     with pytest.raises(ValueError, match="missing"):
         _write(tmp_path / "new", broken)
     with pytest.raises(ValueError, match="Malformed dataset ID"):
-        write_dataset(tmp_path / "bad-id", _arrays(), dataset_id="not an id", observation_space=spaces.Box(0, 1, (D,)),
-                      action_space=spaces.Box(0, 1, (M,)), genrl={"task": "hockey", "horizon": T})
+        write_dataset(
+            tmp_path / "bad-id",
+            _arrays(),
+            dataset_id="not an id",
+            observation_space=spaces.Box(0, 1, (D,)),
+            action_space=spaces.Box(0, 1, (M,)),
+            genrl={"task": "hockey", "horizon": T},
+        )
     assert sorted(p.name for p in tmp_path.iterdir()) == ["taken"]
 
 
@@ -143,8 +158,13 @@ def test_core_does_not_import_the_tasks() -> None:
 
     for source in Path(sb3_genrl.data.__file__).parent.glob("*.py"):
         for node in ast.walk(ast.parse(source.read_text())):
-            names = [alias.name for alias in node.names] if isinstance(node, ast.Import) else \
-                [node.module or ""] if isinstance(node, ast.ImportFrom) else []
+            names = (
+                [alias.name for alias in node.names]
+                if isinstance(node, ast.Import)
+                else [node.module or ""]
+                if isinstance(node, ast.ImportFrom)
+                else []
+            )
             assert not any(name.startswith(("sb3_genrl.envs", "sb3_genrl.baselines")) for name in names), source
 
 
@@ -168,7 +188,7 @@ def test_truncated_or_overwritten_npz_gives_an_error_naming_it(dataset, tmp_path
         assert str(npz) in str(error.value)
     data = bytearray((dataset[0] / "data" / "genrl_episodes.npz").read_bytes())
     start = bytes(data).find(dataset[1]["actions"].tobytes()[:64])
-    data[start:start + 64] = bytes(64)  # 64 bytes overwritten inside the actions array: its CRC-32 no longer matches
+    data[start : start + 64] = bytes(64)  # 64 bytes overwritten inside the actions array: its CRC-32 no longer matches
     npz.write_bytes(bytes(data))
     with pytest.raises(ValueError, match="damaged") as error:
         load_actions(copy)

@@ -19,8 +19,9 @@ EPISODES = 8
 
 @pytest.fixture(scope="module")
 def hockey_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return make_demonstrations("hockey", EPISODES, tmp_path_factory.mktemp("demos") / "hockey", seed=5, n_threads=2,
-                               progress_bar=False, chunk=12)
+    return make_demonstrations(
+        "hockey", EPISODES, tmp_path_factory.mktemp("demos") / "hockey", seed=5, n_threads=2, progress_bar=False, chunk=12
+    )
 
 
 @pytest.mark.parametrize("task", ["hockey", "basketball"])
@@ -147,14 +148,16 @@ def test_coverage_report_files(hockey_dataset: Path, tmp_path: Path) -> None:
 
 def test_cli_demos(tmp_path: Path, cli) -> None:
     out = tmp_path / "cli"
-    code, printed, err = cli("demos", "--task", "basketball", "--episodes", 3, "--out", out, "--seed", 1, "--threads", 2,
-                             "--no-progress-bar")
+    code, printed, err = cli(
+        "demos", "--task", "basketball", "--episodes", 3, "--out", out, "--seed", 1, "--threads", 2, "--no-progress-bar"
+    )
     assert code == 0, err
     assert "3 basketball demonstrations" in printed and str(out) in printed and "coverage:" in printed
     assert dataset_info(out)["task"] == "basketball"
     arrays = load_arrays(out, task="basketball")
-    rewards, infos = TASKS["basketball"].make_env().play_trajectories(arrays["actions"], arrays["reached"],
-                                                                     allow_outside_region=True)
+    rewards, infos = (
+        TASKS["basketball"].make_env().play_trajectories(arrays["actions"], arrays["reached"], allow_outside_region=True)
+    )
     np.testing.assert_array_equal(rewards, 0.0)  # hindsight goals: every demonstration succeeds
     assert all(info["crossings"] > 0 and not info["joint_limit_clipped"] for info in infos)
     code, _, err = cli("demos", "--task", "basketball", "--episodes", 3, "--out", out, "--no-progress-bar")

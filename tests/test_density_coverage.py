@@ -35,6 +35,7 @@ def test_density_coverage_matches_brute_force(kind: str, k: int) -> None:
 
 def test_density_coverage_equal_prdc() -> None:
     import prdc  # the reference implementation (the test extra installs it)
+
     rng = np.random.default_rng(0)
     real, generated = rng.normal(size=(300, 8)), rng.normal(0.2, 0.9, size=(250, 8))
     for k in (3, 5):

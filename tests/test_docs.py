@@ -13,8 +13,19 @@ CITED = re.compile(r"benchmarks/results/([A-Za-z0-9_.\-]+\.(?:json|png|md))")
 
 
 def test_docs_build_without_warnings(tmp_path):
-    command = [sys.executable, "-m", "sphinx", "-E", "-W", "--keep-going", "-q", "-b", "html", str(ROOT / "docs"),
-               str(tmp_path / "html")]
+    command = [
+        sys.executable,
+        "-m",
+        "sphinx",
+        "-E",
+        "-W",
+        "--keep-going",
+        "-q",
+        "-b",
+        "html",
+        str(ROOT / "docs"),
+        str(tmp_path / "html"),
+    ]
     done = subprocess.run(command, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stdout + done.stderr
     assert (tmp_path / "html" / "modules" / "genrl.html").exists()

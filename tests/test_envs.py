@@ -128,8 +128,9 @@ def test_blade_pushed_into_table_counts_contacts(hockey):
     assert info["table_contacts"] == 0
 
 
-@pytest.mark.parametrize("make, trajectory", [(HockeyEnv, scripted_hit(strength=1.2, direction=0.3)),
-                                              (BasketballEnv, scripted_throw(yaw=-0.4))])
+@pytest.mark.parametrize(
+    "make, trajectory", [(HockeyEnv, scripted_hit(strength=1.2, direction=0.3)), (BasketballEnv, scripted_throw(yaw=-0.4))]
+)
 def test_fast_path_equals_step_path(make, trajectory):
     env = make()
     goal = env.sample_goal(np.random.default_rng(1))
@@ -206,8 +207,9 @@ def test_throw_family_spans_the_basket_region_smoothly(basketball):
 
     strengths = np.linspace(*BASKETBALL_STRENGTH, 12)
     for yaw in (-BASKETBALL_YAW, 0.0, BASKETBALL_YAW):
-        _, infos = basketball.play_trajectories(np.stack([scripted_throw(strength=s, yaw=yaw) for s in strengths]),
-                                                np.zeros(2), allow_outside_region=True)  # (the goal plays no role)
+        _, infos = basketball.play_trajectories(
+            np.stack([scripted_throw(strength=s, yaw=yaw) for s in strengths]), np.zeros(2), allow_outside_region=True
+        )  # (the goal plays no role)
         reached = np.array([info["reached"] for info in infos])
         assert all(info["crossings"] >= 1 and not info["joint_limit_clipped"] for info in infos)
         radius, bearing = np.linalg.norm(reached, axis=1), np.arctan2(reached[:, 1], reached[:, 0])
@@ -219,8 +221,7 @@ def test_throw_family_spans_the_basket_region_smoothly(basketball):
 
 def test_play_trajectories_refuses_a_chunk_or_thread_count_that_is_not_a_positive_integer(hockey):
     batch, goal = np.stack([scripted_hit(strength=s) for s in (0.8, 1.0, 1.2)]), np.array([1.0, 0.0])
-    for name, value in (("chunk", -1), ("chunk", 0), ("chunk", 1.5), ("n_threads", 0), ("n_threads", 2.5),
-                        ("n_threads", "2")):
+    for name, value in (("chunk", -1), ("chunk", 0), ("chunk", 1.5), ("n_threads", 0), ("n_threads", 2.5), ("n_threads", "2")):
         with pytest.raises(ValueError, match=f"{name} must be a positive integer, got {value!r}"):
             hockey.play_trajectories(batch, goal, **{name: value})
     rewards, infos = hockey.play_trajectories(batch, goal, chunk=2)
@@ -253,8 +254,10 @@ def test_goals_outside_the_goal_region_or_of_wrong_length_are_refused(hockey, ba
 
 def test_hindsight_goal_is_the_point_reached_and_rewards_zero(hockey, basketball):
     # The relabelled goal is one the same trajectory solves: replayed for it, the reward is 0 (its distance to itself).
-    for env, trajectory, goal in ((hockey, scripted_hit(strength=1.1, direction=0.2), np.array([1.0, 0.0])),
-                                  (basketball, scripted_throw(yaw=0.3), np.array([3.0, 0.0]))):
+    for env, trajectory, goal in (
+        (hockey, scripted_hit(strength=1.1, direction=0.2), np.array([1.0, 0.0])),
+        (basketball, scripted_throw(yaw=0.3), np.array([3.0, 0.0])),
+    ):
         reward, info = env.play_trajectory(trajectory, goal)
         context, relabelled_reward = env.hindsight(info)
         assert context.dtype == np.float32 and context.shape == (2,) and relabelled_reward == 0.0
@@ -285,6 +288,5 @@ def test_basketball_refuses_goals_inside_its_bounding_box_but_outside_its_half_a
     edge = np.array([8 * np.cos(np.pi / 4), 8 * np.sin(np.pi / 4)], dtype=np.float32)  # float32 goals on the rim pass
     for inside in (edge, [1.0, 0.0], [0.0, 8.0], [0.0, -1.0]):
         assert basketball.reset(options={"goal": inside})[1]["goal"].tolist() == np.asarray(inside, np.float64).tolist()
-    reward, _ = basketball.play_trajectory(np.zeros((basketball.horizon, 7)), np.array([0.0, 0.0]),
-                                           allow_outside_region=True)
+    reward, _ = basketball.play_trajectory(np.zeros((basketball.horizon, 7)), np.array([0.0, 0.0]), allow_outside_region=True)
     assert np.isfinite(reward)

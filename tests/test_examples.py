@@ -18,18 +18,25 @@ EXAMPLES = pathlib.Path(__file__).resolve().parents[1] / "examples"
 
 def run_example(name: str, *args: str, cwd: pathlib.Path) -> str:
     env = dict(os.environ, MUJOCO_GL=os.environ.get("MUJOCO_GL", "egl"), OMP_NUM_THREADS="1")
-    completed = subprocess.run([sys.executable, str(EXAMPLES / name), *args], cwd=cwd, env=env, capture_output=True,
-                               text=True, timeout=600)
+    completed = subprocess.run(
+        [sys.executable, str(EXAMPLES / name), *args], cwd=cwd, env=env, capture_output=True, text=True, timeout=600
+    )
     assert completed.returncode == 0, completed.stderr[-3000:]
     return completed.stdout
 
 
 def test_quickstart_example_runs_the_whole_workflow(tmp_path):
     out = tmp_path / "hockey"
-    stdout = run_example("quickstart.py", "--out", str(out), "--demo-episodes", "80", "--epochs", "2", "--episodes", "64",
-                         cwd=tmp_path)
-    for path in ("demonstrations", "vae.pt", "policy/genrl_policy.zip", "policy/learning_curve.png",
-                 "policy/learning_curve.csv"):
+    stdout = run_example(
+        "quickstart.py", "--out", str(out), "--demo-episodes", "80", "--epochs", "2", "--episodes", "64", cwd=tmp_path
+    )
+    for path in (
+        "demonstrations",
+        "vae.pt",
+        "policy/genrl_policy.zip",
+        "policy/learning_curve.png",
+        "policy/learning_curve.csv",
+    ):
         assert (out / path).exists(), path
     summary = json.loads((out / "policy" / "summary.json").read_text())  # hockey's own settings, as the quickstart's
     from sb3_genrl.hyperparams import load_genrl_settings

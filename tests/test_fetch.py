@@ -42,13 +42,14 @@ def test_joint_helpers_fail_under_this_mujoco_without_the_fix_and_work_with_it()
     for joint, size in ((hinge, 1), (slide, 1), (free, 7)):
         joint_id = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, joint)
         start = model.jnt_qposadr[joint_id]
-        np.testing.assert_array_equal(mujoco_utils.get_joint_qpos(model, data, joint), data.qpos[start:start + size])
-        mujoco_utils.set_joint_qpos(model, data, joint, data.qpos[start:start + size] + 0.01)
-        np.testing.assert_array_equal(mujoco_utils.get_joint_qpos(model, data, joint),
-                                      mujoco_utils.get_joint_qpos(model, data, joint))
+        np.testing.assert_array_equal(mujoco_utils.get_joint_qpos(model, data, joint), data.qpos[start : start + size])
+        mujoco_utils.set_joint_qpos(model, data, joint, data.qpos[start : start + size] + 0.01)
+        np.testing.assert_array_equal(
+            mujoco_utils.get_joint_qpos(model, data, joint), mujoco_utils.get_joint_qpos(model, data, joint)
+        )
     qvel_start = model.jnt_dofadr[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, free)]
     mujoco_utils.set_joint_qvel(model, data, free, np.arange(6.0))
-    np.testing.assert_array_equal(data.qvel[qvel_start:qvel_start + 6], np.arange(6.0))
+    np.testing.assert_array_equal(data.qvel[qvel_start : qvel_start + 6], np.arange(6.0))
 
 
 @pytest.mark.parametrize("task", FETCH_TASKS)
@@ -72,8 +73,10 @@ def test_fetch_ids_reset_whichever_of_the_two_packages_is_imported_first(order):
     import subprocess
     import sys
 
-    code = (f"import {order}\nimport gymnasium as gym\nenv = gym.make('FetchPush-v4')\nenv.reset(seed=0)\n"
-            "print(type(env.unwrapped).__module__)")
+    code = (
+        f"import {order}\nimport gymnasium as gym\nenv = gym.make('FetchPush-v4')\nenv.reset(seed=0)\n"
+        "print(type(env.unwrapped).__module__)"
+    )
     result = subprocess.run([sys.executable, "-W", "always", "-c", code], capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip().splitlines()[-1] == "gymnasium_robotics.envs.fetch.push"
@@ -113,20 +116,35 @@ def test_demonstrations_generator_and_genrl_on_fetch_push(tmp_path, cli):
     np.testing.assert_allclose(arrays["observations"][:, 0, :3], arrays["reached"], rtol=1e-6)
     assert np.all(arrays["rewards"][:, -1] == 0.0)
     # the same seed gives the same set, however many worker processes play it
-    again = load_arrays(make_demonstrations("fetch-push", 12, tmp_path / "again", seed=3, n_threads=2,
-                                            progress_bar=False))
+    again = load_arrays(make_demonstrations("fetch-push", 12, tmp_path / "again", seed=3, n_threads=2, progress_bar=False))
     np.testing.assert_array_equal(again["actions"], arrays["actions"])
     check_her_episodes(arrays)
 
     generator = train_generator(dataset, preset="VAE-FETCH", epochs=2, seed=0, out=tmp_path / "vae.pt", progress_bar=False)
     # the task's entry learns from demonstrations: refused without them, before any work, saying how to make them
-    policy = ["train-policy", "--task", "fetch-push", "--generator", tmp_path / "vae.pt", "--episodes", 32,
-              "--batch-episodes", 16, "--device", "cpu", "--no-progress-bar", "--out", tmp_path / "policy"]
+    policy = [
+        "train-policy",
+        "--task",
+        "fetch-push",
+        "--generator",
+        tmp_path / "vae.pt",
+        "--episodes",
+        32,
+        "--batch-episodes",
+        16,
+        "--device",
+        "cpu",
+        "--no-progress-bar",
+        "--out",
+        tmp_path / "policy",
+    ]
     code, _, err = cli(*policy)
     assert code == 2 and "--data DIR" in err and "`genrl demos --task fetch-push --episodes 4000 --out DIR`" in err
     assert not (tmp_path / "policy").exists()
-    small = {"hindsight_kwargs": {"history": 2, "regression_steps": 4},
-             "callback": [{"sb3_genrl.genrl.demonstrations.DemonstrationCallback": {"fit_steps": 300}}]}
+    small = {
+        "hindsight_kwargs": {"history": 2, "regression_steps": 4},
+        "callback": [{"sb3_genrl.genrl.demonstrations.DemonstrationCallback": {"fit_steps": 300}}],
+    }
     code, _, err = cli(*policy, "--data", dataset, "--genrl-kwargs", json.dumps(small))
     assert code == 0, err
     from sb3_genrl.study.state import dataset_fingerprint
@@ -189,24 +207,40 @@ def test_the_generators_limit_counts_the_draws_that_solve_each_state():
 def test_the_results_table_labels_a_partial_run_with_the_episodes_reached(tmp_path):
     from sb3_genrl.benchmarks.fetch_results import main
 
-    run = {"seed": 0, "finished": False, "curve_episodes": [512, 1024], "curve_env_steps": [25600, 51200],
-           "curve_success": [0.1, 0.2]}
+    run = {
+        "seed": 0,
+        "finished": False,
+        "curve_episodes": [512, 1024],
+        "curve_env_steps": [25600, 51200],
+        "curve_success": [0.1, 0.2],
+    }
     done = dict(run, seed=1, finished=True, final_success=0.4, curve_success=[0.3, 0.4])
-    result = {"settings": {"episodes": 3000}, "complete": False, "runs": [run, done],
-              "reconstruction": {"success_rate": 0.6}, "generator_limit": {"success_rate": 0.7, "best_of": {"1": 0.1}}}
+    result = {
+        "settings": {"episodes": 3000},
+        "complete": False,
+        "runs": [run, done],
+        "reconstruction": {"success_rate": 0.6},
+        "generator_limit": {"success_rate": 0.7, "best_of": {"1": 0.1}},
+    }
     (tmp_path / "fetch_fetch-push.json").write_text(json.dumps(result))
     main(["--results", str(tmp_path)])
     line = next(line for line in (tmp_path / "fetch.md").read_text().splitlines() if line.startswith("| fetch-push"))
     assert "partial: seed 0: 1024 (running), seed 1: 1024" in line and "0.400 ± 0.000 (1 seed)" in line
     assert (tmp_path / "fetch_curves.png").stat().st_size > 0
     # SAC+HER's JSON (benchmarks/fetch_sac_her.py): its finished seeds' mean, the buffer's demonstrations, the budget
-    sac = {"settings": {"n_timesteps": 25600}, "demonstrations": 4000, "complete": False,
-           "runs": [done, dict(done, seed=2, final_success=0.8), run]}
+    sac = {
+        "settings": {"n_timesteps": 25600},
+        "demonstrations": 4000,
+        "complete": False,
+        "runs": [done, dict(done, seed=2, final_success=0.8), run],
+    }
     (tmp_path / "fetch_sac_her_fetch-push_demos.json").write_text(json.dumps(sac))
     main(["--results", str(tmp_path)])
     text = (tmp_path / "fetch.md").read_text()
-    assert "| fetch-push | 4000 | 0.600 ± 0.200 (2 seeds) | 512 | partial: seed 1: 1024, seed 2: 1024, seed 0: 1024 " \
-           "(running) |" in text
+    assert (
+        "| fetch-push | 4000 | 0.600 ± 0.200 (2 seeds) | 512 | partial: seed 1: 1024, seed 2: 1024, seed 0: 1024 "
+        "(running) |" in text
+    )
 
 
 def test_tqc_progress_read_from_the_logs_is_kept_for_a_machine_without_them(tmp_path):
@@ -247,12 +281,26 @@ def test_new_runs_keep_the_generator_stages_and_drop_what_the_old_runs_measured(
     settings = settings_of(args)
     # the recorded settings are those the runs use: the entry's episodes per iteration as n_steps
     assert settings["genrl_settings"]["n_steps"] == settings["batch_episodes"] == 32
-    old = dict(settings, genrl_settings=dict(settings["genrl_settings"], hindsight_kwargs={"history": 60,
-                                                                                           "regression_steps": 64}))
-    measures = {"generator": {"generator": "vae.pt"}, "reconstruction": {"success_rate": 0.7},
-                "generator_limit": {"success_rate": 0.9}}
-    out.write_text(json.dumps({"settings": old, "runs": [{"seed": 0, "finished": True}], "complete": True,
-                               "policy_neighbourhood": {"policy_seed": 0}, "final_success_mean": 0.8, **measures}))
+    old = dict(
+        settings, genrl_settings=dict(settings["genrl_settings"], hindsight_kwargs={"history": 60, "regression_steps": 64})
+    )
+    measures = {
+        "generator": {"generator": "vae.pt"},
+        "reconstruction": {"success_rate": 0.7},
+        "generator_limit": {"success_rate": 0.9},
+    }
+    out.write_text(
+        json.dumps(
+            {
+                "settings": old,
+                "runs": [{"seed": 0, "finished": True}],
+                "complete": True,
+                "policy_neighbourhood": {"policy_seed": 0},
+                "final_success_mean": 0.8,
+                **measures,
+            }
+        )
+    )
     (work / "seed_0").mkdir(parents=True)
     with pytest.raises(SystemExit, match="differs in genrl_settings"):
         start(args)
@@ -276,8 +324,22 @@ def test_the_benchmark_keeps_the_generator_whose_fitted_mean_solves_the_most_tun
 
     monkeypatch.setattr(fetch, "fitted_mean_success", score)
     out, work = tmp_path / "fetch.json", tmp_path / "work"
-    argv = ["--task", "fetch-push", "--demos", "6", "--epochs", "1", "--generator-seeds", "3", "--selection-states", "4",
-            "--out", str(out), "--work", str(work)]
+    argv = [
+        "--task",
+        "fetch-push",
+        "--demos",
+        "6",
+        "--epochs",
+        "1",
+        "--generator-seeds",
+        "3",
+        "--selection-states",
+        "4",
+        "--out",
+        str(out),
+        "--work",
+        str(work),
+    ]
     args = fetch.arguments(argv)
     result = fetch.start(args)
     path = fetch.generator_stage(args, result, lambda: fetch.write_result(str(out), result))
@@ -327,20 +389,51 @@ def test_sac_her_resumes_only_a_run_of_the_same_settings(tmp_path):
     out = tmp_path / "sac.json"
     out.write_text(json.dumps({"benchmark": "fetch_sac_her_fetch-reach_demos", "eval_states": 7, "runs": []}))
     with pytest.raises(SystemExit, match="differs in demonstrations, eval_every, eval_seed, eval_states, settings"):
-        fetch_sac_her.main(["--task", "fetch-reach", "--variant", "demos", "--data", str(data), "--out", str(out),
-                            "--work", str(tmp_path / "work")])
+        fetch_sac_her.main(
+            [
+                "--task",
+                "fetch-reach",
+                "--variant",
+                "demos",
+                "--data",
+                str(data),
+                "--out",
+                str(out),
+                "--work",
+                str(tmp_path / "work"),
+            ]
+        )
     assert not (tmp_path / "work").exists() and json.loads(out.read_text())["eval_states"] == 7  # nothing touched
 
 
 def test_sac_her_checkpoints_between_evaluations_and_a_stopped_seed_resumes_from_there(tmp_path, monkeypatch):
     from sb3_genrl.benchmarks import fetch_sac_her
     from sb3_genrl.envs.demonstrations import make_demonstrations
+
     from sb3_genrl.utils import read_checkpoint
 
     data = make_demonstrations("fetch-reach", 2, tmp_path / "demos", seed=3, n_threads=1, progress_bar=False)
     out, work = tmp_path / "sac.json", tmp_path / "work"
-    argv = ["--task", "fetch-reach", "--variant", "demos", "--data", str(data), "--out", str(out), "--work", str(work),
-            "--seeds", "0", "--steps", "150", "--eval-every", "3", "--eval-states", "2"]
+    argv = [
+        "--task",
+        "fetch-reach",
+        "--variant",
+        "demos",
+        "--data",
+        str(data),
+        "--out",
+        str(out),
+        "--work",
+        str(work),
+        "--seeds",
+        "0",
+        "--steps",
+        "150",
+        "--eval-every",
+        "3",
+        "--eval-states",
+        "2",
+    ]
     fetch_sac_her.main(argv + ["--checkpoint-every", "1"])
     # a checkpoint after each of the first two episodes (the run ends with the third), none at an evaluation
     state = read_checkpoint(work / "demos_seed_0" / "checkpoint")
@@ -376,9 +469,36 @@ def test_the_scorecard_benchmark_scores_each_generator_then_trains_genrl_on_it_a
 
     data, work, out = tmp_path / "demos", tmp_path / "work", tmp_path / "scorecard.json"
     make_demonstrations("fetch-reach", 6, str(data), seed=0, n_threads=1, progress_bar=False)
-    argv = ["--task", "fetch-reach", "--data", str(data), "--variants", "", "latent_dim=3", "path_weight=0,beta=0.01",
-            "--epochs", "1", "--episodes", "32", "--eval-states", "2", "--tuning-states", "2", "--contexts", "2",
-            "--draws", "2", "--pr-samples", "6", "--dwpr-samples", "4", "--work", str(work), "--out", str(out)]
+    argv = [
+        "--task",
+        "fetch-reach",
+        "--data",
+        str(data),
+        "--variants",
+        "",
+        "latent_dim=3",
+        "path_weight=0,beta=0.01",
+        "--epochs",
+        "1",
+        "--episodes",
+        "32",
+        "--eval-states",
+        "2",
+        "--tuning-states",
+        "2",
+        "--contexts",
+        "2",
+        "--draws",
+        "2",
+        "--pr-samples",
+        "6",
+        "--dwpr-samples",
+        "4",
+        "--work",
+        str(work),
+        "--out",
+        str(out),
+    ]
     fetch_scorecard.main(argv)
     result = json.loads(out.read_text())
     rows = {row["variant"]: row for row in result["rows"]}
@@ -399,9 +519,12 @@ def test_the_scorecard_benchmark_scores_each_generator_then_trains_genrl_on_it_a
         fetch_scorecard.main([*argv[:-2], "--episodes", "64", "--out", str(out)])
     # the correlations, against scipy on rows whose success differs
     args = fetch_scorecard.arguments(argv)
-    synthetic = [{**row, "model": name, "final_success": success, "recall": recall}
-                 for row, name, success, recall in zip(result["rows"] * 2, "ABCDEF", (0.1, 0.5, 0.3, 0.9, 0.2, 0.6),
-                                                        (0.2, 0.6, 0.5, 0.8, 0.1, 0.7), strict=False)]
+    synthetic = [
+        {**row, "model": name, "final_success": success, "recall": recall}
+        for row, name, success, recall in zip(
+            result["rows"] * 2, "ABCDEF", (0.1, 0.5, 0.3, 0.9, 0.2, 0.6), (0.2, 0.6, 0.5, 0.8, 0.1, 0.7), strict=False
+        )
+    ]
     fetch_scorecard.write(args, {**result, "rows": synthetic})
     recall = next(row for row in json.loads(out.read_text())["correlation"] if row["measure"] == "recall")
     success, values = [row["final_success"] for row in synthetic], [row["recall"] for row in synthetic]
@@ -446,8 +569,9 @@ def test_the_fit_limit_benchmark_picks_each_states_nearest_solving_draw_and_repl
 
     generator = make_generator("VAE-FETCH", horizon=50, action_dim=4, device="cpu")
     env = LatentActionWrapper(gym.make("FetchReach-v4"), generator)
-    latents = np.clip(rng.normal(size=(3, generator.latent_dim)), env.action_space.low,
-                      env.action_space.high).astype(np.float32)
+    latents = np.clip(rng.normal(size=(3, generator.latent_dim)), env.action_space.low, env.action_space.high).astype(
+        np.float32
+    )
     stepped, distances = [], []
     for i, latent in enumerate(latents):
         env.reset(seed=20 + i)
@@ -467,8 +591,17 @@ def test_the_fit_limit_benchmark_checks_its_fit_variants_before_any_work():
     from sb3_genrl.benchmarks.fetch_fit_limit import variants
 
     assert variants('[{"steps": 8000}, {"net_arch": [128, 128], "learning_rate": 1}]') == [
-        {"steps": 8000}, {"net_arch": [128, 128], "learning_rate": 1}]
-    for bad in ('{"steps": 8000}', '[{"step": 8000}]', '[{"steps": 0}]', '[{"net_arch": [0]}]', '[{"steps": 1.5}]',
-                '[{"batch_size": "256"}]', "[{steps: 1}]"):
+        {"steps": 8000},
+        {"net_arch": [128, 128], "learning_rate": 1},
+    ]
+    for bad in (
+        '{"steps": 8000}',
+        '[{"step": 8000}]',
+        '[{"steps": 0}]',
+        '[{"net_arch": [0]}]',
+        '[{"steps": 1.5}]',
+        '[{"batch_size": "256"}]',
+        "[{steps: 1}]",
+    ):
         with pytest.raises(argparse.ArgumentTypeError):
             variants(bad)

@@ -25,16 +25,20 @@ class PointGoalEnv(gym.Env):
     def __init__(self, episode_length: int = 5) -> None:
         self.episode_length = episode_length
         box = spaces.Box(-3.0, 3.0, shape=(2,), dtype=np.float64)
-        self.observation_space = spaces.Dict({"observation": spaces.Box(-3.0, 3.0, shape=(4,), dtype=np.float64),
-                                              "achieved_goal": box, "desired_goal": box})
+        self.observation_space = spaces.Dict(
+            {"observation": spaces.Box(-3.0, 3.0, shape=(4,), dtype=np.float64), "achieved_goal": box, "desired_goal": box}
+        )
         self.action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
 
     def compute_reward(self, achieved_goal, desired_goal, info):
         return -(np.linalg.norm(np.asarray(achieved_goal) - desired_goal, axis=-1) > THRESHOLD).astype(np.float32)
 
     def _obs(self):
-        return {"observation": np.concatenate([self.position, self.start]), "achieved_goal": self.position.copy(),
-                "desired_goal": self.goal.copy()}
+        return {
+            "observation": np.concatenate([self.position, self.start]),
+            "achieved_goal": self.position.copy(),
+            "desired_goal": self.goal.copy(),
+        }
 
     def reset(self, *, seed=None, options=None):
         super().reset(seed=seed)
@@ -90,8 +94,9 @@ def test_genrl_picks_multi_input_policy_for_a_dict_context():
     class DictEnv(gym.ObservationWrapper):  # other keys than a goal env's: the context is the Dict reset observation
         def __init__(self, env):
             super().__init__(env)
-            self.observation_space = spaces.Dict({"position": env.observation_space["achieved_goal"],
-                                                  "goal": env.observation_space["desired_goal"]})
+            self.observation_space = spaces.Dict(
+                {"position": env.observation_space["achieved_goal"], "goal": env.observation_space["desired_goal"]}
+            )
 
         def observation(self, observation):
             return {"position": observation["achieved_goal"], "goal": observation["desired_goal"]}
@@ -105,8 +110,9 @@ def test_genrl_picks_multi_input_policy_for_a_dict_context():
 
 def test_genrl_learns_from_the_sparse_reward_and_logs_the_success_rate(tmp_path):
     env = LatentActionWrapper(PointGoalEnv(), LinearGenerator())
-    model = GenRL(env, n_steps=16, batch_size=16, seed=0, device="cpu",
-                  hindsight_kwargs={"history": 60, "regression_steps": 64})
+    model = GenRL(
+        env, n_steps=16, batch_size=16, seed=0, device="cpu", hindsight_kwargs={"history": 60, "regression_steps": 64}
+    )
     model.set_logger(configure(str(tmp_path), ["csv"]))
     model.learn(800)
     with open(tmp_path / "progress.csv") as file:
@@ -129,13 +135,15 @@ def test_the_prior_rollout_plays_a_goal_env_through_the_step_path_from_each_cont
     generator, seed, contexts, draws = LinearGenerator(), 5, 8, 60
     result = prior_rollout(generator, PointGoalEnv(), contexts=contexts, draws=draws, seed=seed)
     # independently: each context is the reset of seed + g, each draw's end point is start + the sum of its actions
-    alphas = np.clip(generator.sample_prior(contexts * draws, np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0])),
-                     -3, 3)  # GenRL's action box
+    alphas = np.clip(
+        generator.sample_prior(contexts * draws, np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0])), -3, 3
+    )  # GenRL's action box
     task, best, solved = PointGoalEnv(), [], []
     for g in range(contexts):
         task.reset(seed=seed + g)
-        ends = task.start + np.array([generator.decode(alpha[None])[0].astype(np.float64).sum(axis=0)
-                                      for alpha in alphas[g * draws:(g + 1) * draws]])
+        ends = task.start + np.array(
+            [generator.decode(alpha[None])[0].astype(np.float64).sum(axis=0) for alpha in alphas[g * draws : (g + 1) * draws]]
+        )
         hit = np.linalg.norm(ends - task.goal, axis=1) <= THRESHOLD
         best.append(0.0 if hit.any() else -1.0)
         solved.append(bool(hit.any()))

@@ -35,14 +35,16 @@ def family() -> tuple[np.ndarray, np.ndarray]:
 
 @pytest.fixture(scope="module")
 def vae(family) -> BetaVAE:
-    return BetaVAE(HORIZON, ACTION_DIM, 2, beta=0.01, device="cpu").fit(family[0], epochs=EPOCHS, seed=0,
-                                                                         progress_bar=False, eval_every=5)
+    return BetaVAE(HORIZON, ACTION_DIM, 2, beta=0.01, device="cpu").fit(
+        family[0], epochs=EPOCHS, seed=0, progress_bar=False, eval_every=5
+    )
 
 
 @pytest.fixture(scope="module")
 def gan(family) -> InfoGAN:
-    return InfoGAN(HORIZON, ACTION_DIM, 2, info_weight=1.5, device="cpu").fit(family[0], epochs=EPOCHS, seed=0,
-                                                                               progress_bar=False, eval_every=5)
+    return InfoGAN(HORIZON, ACTION_DIM, 2, info_weight=1.5, device="cpu").fit(
+        family[0], epochs=EPOCHS, seed=0, progress_bar=False, eval_every=5
+    )
 
 
 def family_residual(trajectories: np.ndarray) -> np.ndarray:
@@ -189,8 +191,7 @@ def test_same_seed_same_weights(model_class, kwargs):
 
 
 def test_presets_match_paper_table_1():
-    expected_vae = [(2, 0.01), (2, 0.005), (2, 0.001), (3, 0.01), (3, 0.005), (3, 0.001), (6, 0.01), (6, 0.005),
-                    (6, 0.001)]
+    expected_vae = [(2, 0.01), (2, 0.005), (2, 0.001), (3, 0.01), (3, 0.005), (3, 0.001), (6, 0.01), (6, 0.005), (6, 0.001)]
     expected_gan = [(2, 0.1), (2, 1.5), (2, 3.5), (3, 0.1), (3, 1.5), (3, 3.5), (6, 0.1), (6, 1.5), (6, 3.5)]
     for index, (latent_dim, beta) in enumerate(expected_vae, start=1):
         assert PRESETS[f"VAE{index}"] == {"model": "vae", "latent_dim": latent_dim, "beta": beta}
@@ -259,8 +260,24 @@ def test_train_generator_and_cli_write_loadable_models(tmp_path, capsys):
     npy = tmp_path / "demos.npy"
     np.save(npy, data)
     out = tmp_path / "gan.pt"
-    code = cli_main(["train-generator", "--data", str(npy), "--preset", "GAN2", "--epochs", "2", "--batch-size", "32",
-                     "--no-progress-bar", "--out", str(out), "--tensorboard-log", str(tmp_path / "tb")])
+    code = cli_main(
+        [
+            "train-generator",
+            "--data",
+            str(npy),
+            "--preset",
+            "GAN2",
+            "--epochs",
+            "2",
+            "--batch-size",
+            "32",
+            "--no-progress-bar",
+            "--out",
+            str(out),
+            "--tensorboard-log",
+            str(tmp_path / "tb"),
+        ]
+    )
     assert code == 0 and "InfoGAN" in capsys.readouterr().out
     model = load(out)
     assert isinstance(model, InfoGAN) and (model.latent_dim, model.info_weight, model.horizon) == (2, 1.5, 6)
@@ -268,10 +285,32 @@ def test_train_generator_and_cli_write_loadable_models(tmp_path, capsys):
     npz = tmp_path / "demos.npz"
     np.savez(npz, actions=data)
     vae = train_generator(npz, latent_dim=3, beta=0.001, epochs=1, batch_size=32, out=tmp_path / "vae.pt")
-    assert load(tmp_path / "vae.pt").config() == vae.config() == {"horizon": 6, "action_dim": 2, "latent_dim": 3,
-                                                                   "std_floor": 0.05, "beta": 0.001}
-    assert cli_main(["train-generator", "--data", str(npz), "--preset", "VAE1", "--std-floor", "0.2", "--epochs", "1",
-                     "--batch-size", "32", "--no-progress-bar", "--out", str(tmp_path / "vae_floor.pt")]) == 0
+    assert (
+        load(tmp_path / "vae.pt").config()
+        == vae.config()
+        == {"horizon": 6, "action_dim": 2, "latent_dim": 3, "std_floor": 0.05, "beta": 0.001}
+    )
+    assert (
+        cli_main(
+            [
+                "train-generator",
+                "--data",
+                str(npz),
+                "--preset",
+                "VAE1",
+                "--std-floor",
+                "0.2",
+                "--epochs",
+                "1",
+                "--batch-size",
+                "32",
+                "--no-progress-bar",
+                "--out",
+                str(tmp_path / "vae_floor.pt"),
+            ]
+        )
+        == 0
+    )
     floored = load(tmp_path / "vae_floor.pt")
     assert floored.std_floor == 0.2
     assert float(floored.action_std.min()) >= 0.2 * float(floored.action_std.max()) * (1 - 1e-6)
@@ -279,15 +318,18 @@ def test_train_generator_and_cli_write_loadable_models(tmp_path, capsys):
     assert "needs" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize(("args", "message"), [
-    (("--data", "missing.npy"), "argument --data: 'missing.npy' does not exist"),
-    (("--lr", "-1"), "argument --lr: must be a finite number > 0, got -1.0"),
-    (("--lr", "inf"), "argument --lr: must be a finite number > 0, got inf"),
-    (("--epochs", "0"), "argument --epochs: must be an integer >= 1, got 0"),
-    (("--seed", "-1"), "argument --seed: must be an integer between 0 and 4294967295, got -1"),
-    (("--device", "bogus"), "argument --device: must be 'auto' or a torch device"),
-    (("--out", "."), "argument --out: '.' is a folder; expected a file name"),
-])
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (("--data", "missing.npy"), "argument --data: 'missing.npy' does not exist"),
+        (("--lr", "-1"), "argument --lr: must be a finite number > 0, got -1.0"),
+        (("--lr", "inf"), "argument --lr: must be a finite number > 0, got inf"),
+        (("--epochs", "0"), "argument --epochs: must be an integer >= 1, got 0"),
+        (("--seed", "-1"), "argument --seed: must be an integer between 0 and 4294967295, got -1"),
+        (("--device", "bogus"), "argument --device: must be 'auto' or a torch device"),
+        (("--out", "."), "argument --out: '.' is a folder; expected a file name"),
+    ],
+)
 def test_train_generator_cli_checks_arguments_first(tmp_path, cli, monkeypatch, args, message):
     monkeypatch.chdir(tmp_path)
     np.save("demos.npy", np.zeros((10, 4, 2), dtype=np.float32))
@@ -300,10 +342,12 @@ def test_train_generator_cli_checks_arguments_first(tmp_path, cli, monkeypatch, 
 def test_train_generator_checks_arguments_before_training(tmp_path):
     data = np.zeros((10, 4, 2), dtype=np.float32)
     (tmp_path / "folder").mkdir()
-    for kwargs, message in (({"epochs": -1}, "epochs must be an integer >= 1, got -1"),
-                            ({"batch_size": 2.5}, r"batch_size must be an integer >= 1, got 2.5 \(float\)"),
-                            ({"lr": float("nan")}, "lr must be a finite number > 0"),
-                            ({"out": tmp_path / "folder"}, "is a folder; expected a file name")):
+    for kwargs, message in (
+        ({"epochs": -1}, "epochs must be an integer >= 1, got -1"),
+        ({"batch_size": 2.5}, r"batch_size must be an integer >= 1, got 2.5 \(float\)"),
+        ({"lr": float("nan")}, "lr must be a finite number > 0"),
+        ({"out": tmp_path / "folder"}, "is a folder; expected a file name"),
+    ):
         with pytest.raises(ValueError, match=message):
             train_generator(data, **kwargs)
 
@@ -314,9 +358,12 @@ def test_train_generator_refuses_an_output_that_is_one_of_its_inputs(tmp_path, c
     dataset = tmp_path / "dataset"
     dataset.mkdir()
     (dataset / "genrl_episodes.npz").write_bytes(b"the dataset's own copy")
-    for data, out, message in ((npy, npy, "is the data file"), (str(npy), tmp_path / "." / "demos.npy", "is the data file"),
-                               (dataset, dataset / "genrl_episodes.npz", "is inside the dataset"),
-                               (dataset, dataset / "new.pt", "is inside the dataset")):
+    for data, out, message in (
+        (npy, npy, "is the data file"),
+        (str(npy), tmp_path / "." / "demos.npy", "is the data file"),
+        (dataset, dataset / "genrl_episodes.npz", "is inside the dataset"),
+        (dataset, dataset / "new.pt", "is inside the dataset"),
+    ):
         with pytest.raises(ValueError, match=message):
             train_generator(data, epochs=1, out=out)
     code, _, err = cli("train-generator", "--data", str(npy), "--epochs", "1", "--out", str(npy))
@@ -327,8 +374,9 @@ def test_train_generator_refuses_an_output_that_is_one_of_its_inputs(tmp_path, c
 
 def test_infogan_noise_is_fixed_at_decode(tmp_path):
     data, _ = sine_ramp_trajectories(80, 6, 2, rng=0)
-    model = InfoGAN(6, 2, 2, info_weight=1.0, noise_dim=3, device="cpu").fit(data, epochs=1, batch_size=32, seed=0,
-                                                                            progress_bar=False)
+    model = InfoGAN(6, 2, 2, info_weight=1.0, noise_dim=3, device="cpu").fit(
+        data, epochs=1, batch_size=32, seed=0, progress_bar=False
+    )
     assert model.networks["generator"][0].in_features == 5
     alpha = model.sample_prior(4, rng=0)
     with torch.no_grad():
@@ -348,7 +396,7 @@ def test_corrupted_weights_are_refused_on_load(vae, tmp_path):
     weight = vae.decoder[-1].weight.detach().cpu().numpy().tobytes()  # the largest tensor, stored uncompressed
     start = bytes(data).find(weight[:256])
     assert start > 0
-    data[start + 64:start + 128] = bytes(b ^ 0x5A for b in data[start + 64:start + 128])  # 64 bytes flipped
+    data[start + 64 : start + 128] = bytes(b ^ 0x5A for b in data[start + 64 : start + 128])  # 64 bytes flipped
     path.write_bytes(bytes(data))
     with pytest.raises(ValueError, match="checksum") as error:
         load(path)
@@ -368,8 +416,9 @@ def test_file_without_checksum_is_refused_naming_the_file(vae, tmp_path):
 
 
 def test_diverged_training_is_not_saved(family, tmp_path, cli):
-    diverged = BetaVAE(HORIZON, ACTION_DIM, 2, beta=0.01, device="cpu").fit(family[0][:300], epochs=4, seed=0, lr=1e6,
-                                                                            progress_bar=False, eval_every=2)
+    diverged = BetaVAE(HORIZON, ACTION_DIM, 2, beta=0.01, device="cpu").fit(
+        family[0][:300], epochs=4, seed=0, lr=1e6, progress_bar=False, eval_every=2
+    )
     assert diverged.best_epoch is None  # every selection MSE was nan
     with pytest.raises(ValueError, match="no checkpoint was selected"):
         diverged.save(tmp_path / "nan.pt")
@@ -381,8 +430,24 @@ def test_diverged_training_is_not_saved(family, tmp_path, cli):
     np.save(npy, family[0][:300])
     for option, value in (("--lr", "1e6"), ("--lr", "inf"), ("--beta", "inf")):
         out = tmp_path / f"cli{option}{value}.pt"
-        code, _, err = cli("train-generator", "--data", npy, "--model", "vae", "--latent-dim", 2, option, value,
-                           "--epochs", 2, "--batch-size", 64, "--no-progress-bar", "--out", out)
+        code, _, err = cli(
+            "train-generator",
+            "--data",
+            npy,
+            "--model",
+            "vae",
+            "--latent-dim",
+            2,
+            option,
+            value,
+            "--epochs",
+            2,
+            "--batch-size",
+            64,
+            "--no-progress-bar",
+            "--out",
+            out,
+        )
         assert code == 2 and not out.exists(), (option, value)
         assert err.strip(), (option, value)
 
@@ -428,12 +493,17 @@ def test_path_error_matches_a_brute_force_running_sum(tmp_path):
     rng = np.random.default_rng(0)
     vae = BetaVAE(horizon, joints, 2, beta=0.01, path_weight=2.5, device="cpu")
     vae.action_std = torch.as_tensor(rng.uniform(0.5, 2.0, (horizon, joints)), dtype=torch.float32)
-    reconstruction, batch = (torch.as_tensor(rng.normal(size=(4, horizon * joints)), dtype=torch.float32)
-                             for _ in range(2))
+    reconstruction, batch = (torch.as_tensor(rng.normal(size=(4, horizon * joints)), dtype=torch.float32) for _ in range(2))
     raw = (reconstruction - batch).numpy().reshape(4, horizon, joints) * vae.action_std.numpy()
     sigma = vae.action_std.numpy().mean(axis=0)
-    expected = np.mean([(sum(raw[b, s, j] for s in range(t + 1)) / (sigma[j] * np.sqrt(horizon))) ** 2
-                        for b in range(4) for t in range(horizon) for j in range(joints)])
+    expected = np.mean(
+        [
+            (sum(raw[b, s, j] for s in range(t + 1)) / (sigma[j] * np.sqrt(horizon))) ** 2
+            for b in range(4)
+            for t in range(horizon)
+            for j in range(joints)
+        ]
+    )
     np.testing.assert_allclose(vae.path_error(reconstruction, batch).item(), expected, rtol=1e-5)
     assert vae.config()["path_weight"] == 2.5 and "path_weight" not in BetaVAE(horizon, joints, 2, beta=0.01).config()
     fetch = make_generator("VAE-FETCH", horizon=horizon, action_dim=joints, device="cpu")
@@ -444,8 +514,12 @@ def test_path_error_matches_a_brute_force_running_sum(tmp_path):
 
 def test_path_weight_trains_a_model_that_saves_and_loads_with_it(family, tmp_path):
     trajectories, _ = family
-    models = [BetaVAE(trajectories.shape[1], trajectories.shape[2], 2, beta=0.01, path_weight=weight, device="cpu")
-              .fit(trajectories[:200], epochs=3, seed=0, eval_every=3) for weight in (0.0, 4.0)]
+    models = [
+        BetaVAE(trajectories.shape[1], trajectories.shape[2], 2, beta=0.01, path_weight=weight, device="cpu").fit(
+            trajectories[:200], epochs=3, seed=0, eval_every=3
+        )
+        for weight in (0.0, 4.0)
+    ]
     assert "path" in models[1].history[-1] and "path" not in models[0].history[-1]
     latents = np.zeros((1, 2), dtype=np.float32)
     assert not np.allclose(models[0].decode(latents), models[1].decode(latents))  # the term changes the training

@@ -74,12 +74,18 @@ def test_compute_reward_equals_the_plain_tasks_reward(task):
         # Relabelled goals (the terminal achieved goal, goals near it, on the line from the robot through it, where
         # a bouncing ball's other crossings lie, and anywhere): the plain task played for each is the reference.
         final = observations[-1]["achieved_goal"]
-        relabelled = np.concatenate([final[None], final + rng.normal(0, 0.3, (4, 2)),
-                                     final / np.linalg.norm(final) * np.linspace(0.5, 12.0, 8)[:, None],
-                                     np.array([plain.sample_goal(rng) for _ in range(5)])])
+        relabelled = np.concatenate(
+            [
+                final[None],
+                final + rng.normal(0, 0.3, (4, 2)),
+                final / np.linalg.norm(final) * np.linspace(0.5, 12.0, 8)[:, None],
+                np.array([plain.sample_goal(rng) for _ in range(5)]),
+            ]
+        )
         batch = env.compute_reward(np.repeat(final[None], len(relabelled), 0), relabelled, [info] * len(relabelled))
-        reference, _ = plain.play_trajectories(np.repeat(trajectory[None], len(relabelled), 0), relabelled,
-                                               allow_outside_region=True)  # relabelled goals lie anywhere
+        reference, _ = plain.play_trajectories(
+            np.repeat(trajectory[None], len(relabelled), 0), relabelled, allow_outside_region=True
+        )  # relabelled goals lie anywhere
         np.testing.assert_allclose(batch, reference, rtol=0, atol=1e-12)
         assert batch[0] == 0.0
         assert env.compute_reward(final, relabelled[3], info) == batch[3]

@@ -41,35 +41,54 @@ def test_an_entry_is_a_fresh_copy():
 
 
 def test_unknown_env_ids_and_algorithms_are_refused_naming_what_is_known():
-    with pytest.raises(ValueError, match=r"hyperparams/genrl\.yml has no entry for 'GenRL/Golf-v0'; known env ids: "
-                                         r"FetchPickAndPlace-v4, FetchPush-v4, FetchReach-v4, FetchSlide-v4, "
-                                         r"GenRL/Basketball-v0, GenRL/Hockey-v0"):
+    with pytest.raises(
+        ValueError,
+        match=r"hyperparams/genrl\.yml has no entry for 'GenRL/Golf-v0'; known env ids: "
+        r"FetchPickAndPlace-v4, FetchPush-v4, FetchReach-v4, FetchSlide-v4, "
+        r"GenRL/Basketball-v0, GenRL/Hockey-v0",
+    ):
         load_hyperparams("genrl", "GenRL/Golf-v0")
     with pytest.raises(ValueError, match=r"no settings file tqc\.yml for 'tqc'; known: genrl, .*ppo, sac"):
         load_hyperparams("tqc", "GenRL/Hockey-v0")
 
 
 def test_genrl_settings_of_the_tasks():
-    assert load_genrl_settings("GenRL/Hockey-v0") == (3000, 16, {
-        "policy": "MlpPolicy", "batch_size": 16, "hindsight_kwargs": {"history": 120, "regression_steps": 512},
-        "policy_kwargs": {"net_arch": {"pi": [64, 64, 64], "vf": [64, 64]}}})
+    assert load_genrl_settings("GenRL/Hockey-v0") == (
+        3000,
+        16,
+        {
+            "policy": "MlpPolicy",
+            "batch_size": 16,
+            "hindsight_kwargs": {"history": 120, "regression_steps": 512},
+            "policy_kwargs": {"net_arch": {"pi": [64, 64, 64], "vf": [64, 64]}},
+        },
+    )
     episodes, batch_episodes, kwargs = load_genrl_settings("GenRL/Basketball-v0")
     assert (episodes, batch_episodes, kwargs["policy"], kwargs["hindsight_kwargs"]) == (
-        20000, 16, "ContextStdPolicy", {"history": 60, "regression_steps": 512})
+        20000,
+        16,
+        "ContextStdPolicy",
+        {"history": 60, "regression_steps": 512},
+    )
 
 
-@pytest.mark.parametrize(("entry", "message"), [
-    ({"n_timesteps": 100, "n_steps": 8, "normalize": True}, "'normalize' is not a GenRL setting"),
-    ({"n_timesteps": 100, "n_steps": 8, "hindsight_kwargs": {"history": 0}}, r"hindsight_kwargs\['history'\]"),
-    ({"n_timesteps": 100, "n_steps": 8, "policy": "CnnPolicy"}, "unknown policy 'CnnPolicy'"),
-    ({"n_timesteps": 100, "n_steps": 8, "e_step": "kl_penalty", "hindsight_kwargs": {}}, "needs e_step='trpo'"),
-    ({"n_steps": 8}, "needs n_timesteps"),
-    ({"n_timesteps": 100, "n_steps": 1}, "the episodes per iteration, must be at least 2"),
-    ({"n_timesteps": 100.0, "n_steps": 8}, "n_timesteps must be an integer of at least 1, got 100.0"),
-    ({"n_timesteps": 100, "n_steps": 8, "n_envs": 0}, "n_envs must be an integer of at least 1, got 0"),
-    ({"n_timesteps": 100, "n_steps": 8, "policy_kwargs": "dict(net_arch=[8], activation_fn=os.system)"},
-     "'os.system' is not a class of torch.nn"),
-])
+@pytest.mark.parametrize(
+    ("entry", "message"),
+    [
+        ({"n_timesteps": 100, "n_steps": 8, "normalize": True}, "'normalize' is not a GenRL setting"),
+        ({"n_timesteps": 100, "n_steps": 8, "hindsight_kwargs": {"history": 0}}, r"hindsight_kwargs\['history'\]"),
+        ({"n_timesteps": 100, "n_steps": 8, "policy": "CnnPolicy"}, "unknown policy 'CnnPolicy'"),
+        ({"n_timesteps": 100, "n_steps": 8, "e_step": "kl_penalty", "hindsight_kwargs": {}}, "needs e_step='trpo'"),
+        ({"n_steps": 8}, "needs n_timesteps"),
+        ({"n_timesteps": 100, "n_steps": 1}, "the episodes per iteration, must be at least 2"),
+        ({"n_timesteps": 100.0, "n_steps": 8}, "n_timesteps must be an integer of at least 1, got 100.0"),
+        ({"n_timesteps": 100, "n_steps": 8, "n_envs": 0}, "n_envs must be an integer of at least 1, got 0"),
+        (
+            {"n_timesteps": 100, "n_steps": 8, "policy_kwargs": "dict(net_arch=[8], activation_fn=os.system)"},
+            "'os.system' is not a class of torch.nn",
+        ),
+    ],
+)
 def test_a_bad_genrl_entry_gets_the_validators_error_naming_the_file_and_env_id(monkeypatch, entry, message):
     monkeypatch.setattr(hyperparams, "_entries", lambda algo: {"Toy/Reach-v0": entry})
     with pytest.raises(ValueError, match=message) as error:
@@ -85,14 +104,27 @@ def test_n_envs_times_n_steps_is_the_batch():
 
 
 def test_policy_kwargs_strings_are_parsed_without_eval():
-    assert parse_kwargs("dict(log_std_init=-2, ortho_init=False, activation_fn=nn.ReLU, "
-                        "net_arch=dict(pi=[256, 256], vf=[256, 256]))") == {
-        "log_std_init": -2, "ortho_init": False, "activation_fn": nn.ReLU, "net_arch": {"pi": [256, 256], "vf": [256, 256]}}
+    assert parse_kwargs(
+        "dict(log_std_init=-2, ortho_init=False, activation_fn=nn.ReLU, net_arch=dict(pi=[256, 256], vf=[256, 256]))"
+    ) == {"log_std_init": -2, "ortho_init": False, "activation_fn": nn.ReLU, "net_arch": {"pi": [256, 256], "vf": [256, 256]}}
     assert parse_kwargs("dict(activation_fn=th.nn.Tanh, n=(1, 2.5), name='final', none=None)") == {
-        "activation_fn": nn.Tanh, "n": (1, 2.5), "name": "final", "none": None}
+        "activation_fn": nn.Tanh,
+        "n": (1, 2.5),
+        "name": "final",
+        "none": None,
+    }
     assert parse_kwargs({"net_arch": [64]}) == {"net_arch": [64]} and parse_kwargs("{'a': 1}") == {"a": 1}
-    for text in ("__import__('os').system('true')", "dict(a=open('x'))", "dict(a=nn.Module.__subclasses__)",
-                 "dict(a=nn.functional)", "dict(**x)", "dict(a=b)", "[1, 2]", "dict(a=-'x')", "dict(a=1 + 2)"):
+    for text in (
+        "__import__('os').system('true')",
+        "dict(a=open('x'))",
+        "dict(a=nn.Module.__subclasses__)",
+        "dict(a=nn.functional)",
+        "dict(**x)",
+        "dict(a=b)",
+        "[1, 2]",
+        "dict(a=-'x')",
+        "dict(a=1 + 2)",
+    ):
         with pytest.raises(ValueError, match="policy_kwargs: "):
             parse_kwargs(text, "policy_kwargs")
 
@@ -100,8 +132,12 @@ def test_policy_kwargs_strings_are_parsed_without_eval():
 def test_lay_over_merges_mappings_and_replaces_the_rest():
     settings = {"hindsight_kwargs": {"history": 120, "regression_steps": 512}, "target_kl": 0.01, "policy_kwargs": {}}
     laid = lay_over(settings, {"hindsight_kwargs": {"history": 30}, "target_kl": 0.02, "gae": None})
-    assert laid == {"hindsight_kwargs": {"history": 30, "regression_steps": 512}, "target_kl": 0.02, "policy_kwargs": {},
-                    "gae": None}
+    assert laid == {
+        "hindsight_kwargs": {"history": 30, "regression_steps": 512},
+        "target_kl": 0.02,
+        "policy_kwargs": {},
+        "gae": None,
+    }
     assert lay_over(settings, {"hindsight_kwargs": None})["hindsight_kwargs"] is None  # hindsight off
     assert settings["hindsight_kwargs"]["history"] == 120  # unchanged
 
@@ -109,8 +145,20 @@ def test_lay_over_merges_mappings_and_replaces_the_rest():
 def test_the_genrl_that_train_policy_builds_is_the_entrys(hockey_generator, tmp_path, cli):
     from sb3_genrl.genrl.train import genrl_settings
 
-    code, _, err = cli("train-policy", "--task", "hockey", "--generator", hockey_generator, "--episodes", 32,
-                       "--device", "cpu", "--no-progress-bar", "--out", tmp_path / "run")
+    code, _, err = cli(
+        "train-policy",
+        "--task",
+        "hockey",
+        "--generator",
+        hockey_generator,
+        "--episodes",
+        32,
+        "--device",
+        "cpu",
+        "--no-progress-bar",
+        "--out",
+        tmp_path / "run",
+    )
     assert code == 0, err
     _, batch_episodes, kwargs = load_genrl_settings("GenRL/Hockey-v0")
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
@@ -121,23 +169,36 @@ def test_the_genrl_that_train_policy_builds_is_the_entrys(hockey_generator, tmp_
 def test_the_goal_seeds_are_named_once():
     assert (EVAL_GOAL_SEED, TUNING_GOAL_SEED) == (12345, 777)
     pattern = re.compile(r"\b(12345|777)\b")
-    found = [str(path.relative_to(ROOT)) for folder in ("sb3_genrl", "envs", "baselines", "benchmarks", "examples")
-             for path in sorted((ROOT / folder).rglob("*.py"))
-             if path.name != "hyperparams.py" and pattern.search(path.read_text())]
+    found = [
+        str(path.relative_to(ROOT))
+        for folder in ("sb3_genrl", "envs", "baselines", "benchmarks", "examples")
+        for path in sorted((ROOT / folder).rglob("*.py"))
+        if path.name != "hyperparams.py" and pattern.search(path.read_text())
+    ]
     assert found == []
 
 
 def test_changed_settings_names_each_setting_that_differs_from_genrls_defaults(monkeypatch):
     import sb3_genrl.hyperparams as hyperparams
 
-    settings = {"policy": "MlpPolicy", "batch_size": 64, "target_kl": 0.03,  # batch_size 64 is GenRL's default
-                "policy_kwargs": {"net_arch": {"pi": [64, 64], "vf": [64, 64]}, "log_std_init": -2.0},
-                "hindsight_kwargs": {"history": 1, "regression_steps": 64},  # history 1 is the default
-                "callback": [{"sb3_genrl.genrl.demonstrations.DemonstrationCallback": {"fit_steps": 100, "keep": True}}]}
+    settings = {
+        "policy": "MlpPolicy",
+        "batch_size": 64,
+        "target_kl": 0.03,  # batch_size 64 is GenRL's default
+        "policy_kwargs": {"net_arch": {"pi": [64, 64], "vf": [64, 64]}, "log_std_init": -2.0},
+        "hindsight_kwargs": {"history": 1, "regression_steps": 64},  # history 1 is the default
+        "callback": [{"sb3_genrl.genrl.demonstrations.DemonstrationCallback": {"fit_steps": 100, "keep": True}}],
+    }
     monkeypatch.setattr(hyperparams, "load_genrl_settings", lambda env_id: (3000, 32, settings))
     assert hyperparams.changed_settings("Any-v0") == [
-        "n_steps", "target_kl", "policy_kwargs.log_std_init", "hindsight_kwargs", "hindsight_kwargs.regression_steps",
-        "callback: DemonstrationCallback", "DemonstrationCallback.fit_steps"]
+        "n_steps",
+        "target_kl",
+        "policy_kwargs.log_std_init",
+        "hindsight_kwargs",
+        "hindsight_kwargs.regression_steps",
+        "callback: DemonstrationCallback",
+        "DemonstrationCallback.fit_steps",
+    ]
     monkeypatch.setattr(hyperparams, "load_genrl_settings", lambda env_id: (3000, 64, {"policy": "ContextStdPolicy"}))
     assert hyperparams.changed_settings("Any-v0") == ["policy"]
 

@@ -75,8 +75,10 @@ def point_sets(kind: str, rng: np.random.Generator) -> tuple[np.ndarray, np.ndar
     if kind == "grid":
         return grid_points(rng, 60, 3), grid_points(rng, 50, 3)
     if kind == "offset_grid":  # exact ties that float32 values far from the origin cannot resolve
-        return (1000.0 + grid_points(rng, 60, 4).astype(np.float64) / 4,
-                1000.0 + grid_points(rng, 50, 4).astype(np.float64) / 4)
+        return (
+            1000.0 + grid_points(rng, 60, 4).astype(np.float64) / 4,
+            1000.0 + grid_points(rng, 50, 4).astype(np.float64) / 4,
+        )
     # (N, T, M) with a large common offset, where float32 cancellation is worst
     return 100.0 + rng.normal(size=(50, 4, 3)).astype(np.float32), 100.0 + rng.normal(size=(40, 4, 3)).astype(np.float32)
 
@@ -179,8 +181,17 @@ def test_correlation_table_against_numpy() -> None:
     records = []
     for index in range(8):
         kind = "VAE" if index % 2 == 0 else "GAN"
-        records.append({"model": f"{kind}{index}", "type": kind, "precision": rng.uniform(), "recall": rng.uniform(),
-                        "delta_1": rng.uniform(), "mean_delta": 0.5, "score": rng.normal()})
+        records.append(
+            {
+                "model": f"{kind}{index}",
+                "type": kind,
+                "precision": rng.uniform(),
+                "recall": rng.uniform(),
+                "delta_1": rng.uniform(),
+                "mean_delta": 0.5,
+                "score": rng.normal(),
+            }
+        )
     table = correlation_table(records, measure_names=["precision", "recall", "mean_delta"])
     assert [row.group for row in table.rows[::3]] == ["VAE", "GAN", "ALL"]
     for group in ("VAE", "GAN", "ALL"):
@@ -203,10 +214,12 @@ def test_correlation_table_against_numpy() -> None:
 
 
 def test_correlation_table_few_models_and_rendering(tmp_path) -> None:
-    records = [{"model": "VAE1", "type": "VAE", "recall": 0.1, "score": 1.0},
-               {"model": "VAE2", "type": "VAE", "recall": 0.4, "score": 3.0},
-               {"model": "GAN1", "type": "GAN", "recall": 0.3, "score": 2.0},
-               {"model": "GAN2", "type": "GAN", "recall": float("nan"), "score": 2.5}]
+    records = [
+        {"model": "VAE1", "type": "VAE", "recall": 0.1, "score": 1.0},
+        {"model": "VAE2", "type": "VAE", "recall": 0.4, "score": 3.0},
+        {"model": "GAN1", "type": "GAN", "recall": 0.3, "score": 2.0},
+        {"model": "GAN2", "type": "GAN", "recall": float("nan"), "score": 2.5},
+    ]
     table = correlation_table(records)
     vae = table.get("VAE", "recall")
     assert math.isnan(vae.pearson_r) and "fewer than 3" in vae.note
@@ -218,16 +231,22 @@ def test_correlation_table_few_models_and_rendering(tmp_path) -> None:
     for row, expected in zip(rows, table.rows, strict=True):
         for key, value in (("pearson_r", expected.pearson_r), ("p_value", expected.p_value)):
             assert float(row[key]) == value or (math.isnan(value) and math.isnan(float(row[key])))
-        assert (row["group"], row["measure"], int(row["num_models"])) == (expected.group, expected.measure,
-                                                                           expected.num_models)
+        assert (row["group"], row["measure"], int(row["num_models"])) == (
+            expected.group,
+            expected.measure,
+            expected.num_models,
+        )
     markdown = table.to_markdown(digits=4)
     lines = markdown.strip().splitlines()[2:]
     assert len(lines) == len(table.rows)
     for line, expected in zip(lines, table.rows, strict=True):
         cells = [cell.strip() for cell in line.strip("|").split("|")]
         assert cells[:3] == [expected.group, expected.measure, str(expected.num_models)]
-        for cell, value in zip([cells[i] for i in (3, 5, 6, 8)], (expected.pearson_r, expected.p_value,
-                                                            expected.spearman_rho, expected.spearman_p), strict=True):
+        for cell, value in zip(
+            [cells[i] for i in (3, 5, 6, 8)],
+            (expected.pearson_r, expected.p_value, expected.spearman_rho, expected.spearman_p),
+            strict=True,
+        ):
             assert (cell == "nan" and math.isnan(value)) or float(cell) == pytest.approx(value, abs=5e-5)
     with pytest.raises(ValueError, match="no 'score'"):
         correlation_table([{"model": "x", "recall": 1.0}])
@@ -264,10 +283,19 @@ def test_bootstrap_intervals_equal_a_loop_over_resamples_and_scipy_bootstrap() -
     x, y = rng.normal(size=15), rng.normal(size=15)
     y = y + x
     pearson_ci, spearman_ci = bootstrap_correlations(x, y, resamples=2000, seed=0)
-    for statistic, ours in ((lambda a, b: np.corrcoef(a, b)[0, 1], pearson_ci),
-                            (lambda a, b: spearmanr(a, b).statistic, spearman_ci)):
-        theirs = bootstrap((x, y), statistic, paired=True, vectorized=False, n_resamples=2000, method="percentile",
-                           rng=np.random.default_rng(1)).confidence_interval
+    for statistic, ours in (
+        (lambda a, b: np.corrcoef(a, b)[0, 1], pearson_ci),
+        (lambda a, b: spearmanr(a, b).statistic, spearman_ci),
+    ):
+        theirs = bootstrap(
+            (x, y),
+            statistic,
+            paired=True,
+            vectorized=False,
+            n_resamples=2000,
+            method="percentile",
+            rng=np.random.default_rng(1),
+        ).confidence_interval
         assert abs(ours.low - theirs.low) < 0.05 and abs(ours.high - theirs.high) < 0.05
 
 
@@ -280,8 +308,9 @@ def test_correlation_rows_hold_spearman_and_the_bootstrap_intervals(tmp_path) ->
     x, y = [r["recall"] for r in records], [r["score"] for r in records]
     assert row.spearman_rho == pytest.approx(spearmanr(x, y).statistic, abs=1e-12)
     expected_r, expected_rho, _ = brute_force_bootstrap(x, y, 300, 3)
-    np.testing.assert_allclose([row.pearson_low, row.pearson_high, row.spearman_low, row.spearman_high],
-                               [*expected_r, *expected_rho], atol=1e-12)
+    np.testing.assert_allclose(
+        [row.pearson_low, row.pearson_high, row.spearman_low, row.spearman_high], [*expected_r, *expected_rho], atol=1e-12
+    )
     assert row.pearson_low <= row.pearson_r <= row.pearson_high and row.resamples == 300
     table = correlation_table(records, measure_names=["recall"], resamples=300, seed=3)
     table.to_csv(tmp_path / "t.csv")
@@ -296,8 +325,9 @@ def test_evaluate_generators_writes_table_and_plots(tmp_path) -> None:
     real = generators["A"].decode(generators["A"].sample_prior(300, 5))
     np.save(tmp_path / "real.npy", real)
     out = tmp_path / "eval"
-    evaluations = evaluate_generators(generators, tmp_path / "real.npy", n=200, k=3, dwpr_n=40, interventions=3,
-                                      seed=0, out_dir=out, device="cpu")
+    evaluations = evaluate_generators(
+        generators, tmp_path / "real.npy", n=200, k=3, dwpr_n=40, interventions=3, seed=0, out_dir=out, device="cpu"
+    )
     assert [evaluation.name for evaluation in evaluations] == ["A", "B"]
     for name in ("results.csv", "results.md", "results.json", "precision_recall.png", "disentanglement.png"):
         assert (out / name).stat().st_size > 0
@@ -318,8 +348,22 @@ def test_cli_evaluate(tmp_path, cli) -> None:
     generator = make_generator("vae", horizon=4, action_dim=2, latent_dim=2, beta=1.0, device="cpu")
     generator.save(str(tmp_path / "vae.pt"))
     np.save(tmp_path / "real.npy", np.random.default_rng(0).normal(size=(120, 4, 2)).astype(np.float32))
-    args = ["evaluate", tmp_path / "vae.pt", "--data", tmp_path / "real.npy", "--out", tmp_path / "out", "--dwpr-n", 20,
-            "--k", 3, "--seed", 0, "--device", "cpu"]
+    args = [
+        "evaluate",
+        tmp_path / "vae.pt",
+        "--data",
+        tmp_path / "real.npy",
+        "--out",
+        tmp_path / "out",
+        "--dwpr-n",
+        20,
+        "--k",
+        3,
+        "--seed",
+        0,
+        "--device",
+        "cpu",
+    ]
     code, printed, err = cli(*args, "--n", 100)
     assert code == 0, err
     with open(tmp_path / "out" / "results.csv") as file:
@@ -340,12 +384,14 @@ def test_evaluate_generators_checks_its_arguments_first(tmp_path) -> None:
     real = generator.decode(generator.sample_prior(50, 0))
     calls = []
     generator.decode = lambda alpha: calls.append(alpha) or real  # any evaluation would decode
-    for kwargs, message in (({"n": 51}, "n = 51 is more than the 50 real trajectories"),
-                            ({"n": 0}, "n must be an integer >= 1, got 0"),
-                            ({"dwpr_n": 10**12}, "dwpr_n = 1000000000000 needs about"),
-                            ({"k": 2.5}, r"k must be an integer >= 1, got 2.5 \(float\)"),
-                            ({"seed": -1}, "seed must be an integer between 0 and"),
-                            ({"device": "bogus"}, "device must be 'auto' or a torch device")):
+    for kwargs, message in (
+        ({"n": 51}, "n = 51 is more than the 50 real trajectories"),
+        ({"n": 0}, "n must be an integer >= 1, got 0"),
+        ({"dwpr_n": 10**12}, "dwpr_n = 1000000000000 needs about"),
+        ({"k": 2.5}, r"k must be an integer >= 1, got 2.5 \(float\)"),
+        ({"seed": -1}, "seed must be an integer between 0 and"),
+        ({"device": "bogus"}, "device must be 'auto' or a torch device"),
+    ):
         with pytest.raises(ValueError, match=message):
             evaluate_generators([generator], real, **{"n": 40, "dwpr_n": 10, "out_dir": tmp_path / "out", **kwargs})
     (tmp_path / "file").write_text("")
@@ -368,10 +414,18 @@ def test_evaluate_generator_is_the_one_evaluation_and_independent_of_list_order(
     np.testing.assert_array_equal(real_subset(real_all, 120, seed=4), real)
     assert real_subset(real_all, 500, seed=4) is real_all
 
-    alone = evaluate_generator(generators["B"], real, n=90, k=3, dwpr_n=30, interventions=3, seed=4, name="B",
-                               device="cpu")
-    listed = evaluate_generators({"A": generators["A"], "B": generators["B"]}, real_all, n=120, k=3, dwpr_n=30,
-                                 interventions=3, seed=4, out_dir=tmp_path, device="cpu")
+    alone = evaluate_generator(generators["B"], real, n=90, k=3, dwpr_n=30, interventions=3, seed=4, name="B", device="cpu")
+    listed = evaluate_generators(
+        {"A": generators["A"], "B": generators["B"]},
+        real_all,
+        n=120,
+        k=3,
+        dwpr_n=30,
+        interventions=3,
+        seed=4,
+        out_dir=tmp_path,
+        device="cpu",
+    )
     # The list's real set is the same subset; each model's draws depend on the seed, not on its place in the list.
     again = evaluate_generator(generators["B"], real, n=120, k=3, dwpr_n=30, interventions=3, seed=4, device="cpu")
     assert listed[1].row() | {"model": "x"} == again.row() | {"model": "x"}
@@ -440,7 +494,7 @@ def test_prior_rollout_equals_a_loop_over_goals_and_draws_stepped_one_by_one() -
     env, expected = FastReachEnv(), []
     for g, goal in enumerate(goals):
         rewards = []
-        for alpha in np.clip(alphas[4 * g:4 * g + 4], -3, 3):  # GenRL's action box
+        for alpha in np.clip(alphas[4 * g : 4 * g + 4], -3, 3):  # GenRL's action box
             env.reset(options={"goal": goal})
             for action in generator.decode(alpha[None])[0]:
                 _, reward, terminated, _, _ = env.step(action)
@@ -478,12 +532,27 @@ def test_scorecard_ranks_converged_models_by_recall_or_a_measure_given_and_sets_
     from sb3_genrl.metrics.scorecard import NOT_CONVERGED_PRECISION, rank_key, ranked, scorecard_markdown
 
     def row(name, precision, recall, prior):
-        return {"model": name, "precision": precision, "recall": recall, "density": 1.0, "coverage": 0.5,
-                "delta_1": 0.5, "mean_delta": 0.4, "prior_median": prior, "prior_q25": prior - 0.1,
-                "prior_q75": prior + 0.1, "prior_episodes": 8, "prior_seconds": 0.5}
+        return {
+            "model": name,
+            "precision": precision,
+            "recall": recall,
+            "density": 1.0,
+            "coverage": 0.5,
+            "delta_1": 0.5,
+            "mean_delta": 0.4,
+            "prior_median": prior,
+            "prior_q25": prior - 0.1,
+            "prior_q75": prior + 0.1,
+            "prior_episodes": 8,
+            "prior_seconds": 0.5,
+        }
 
-    rows = [row("A", 0.9, 0.2, -0.3), row("B", NOT_CONVERGED_PRECISION - 0.01, 0.9, -0.01), row("C", 0.5, 0.4, -0.1),
-            row("D", NOT_CONVERGED_PRECISION, 0.6, -0.2)]
+    rows = [
+        row("A", 0.9, 0.2, -0.3),
+        row("B", NOT_CONVERGED_PRECISION - 0.01, 0.9, -0.01),
+        row("C", 0.5, 0.4, -0.1),
+        row("D", NOT_CONVERGED_PRECISION, 0.6, -0.2),
+    ]
     assert rank_key(rows) == "recall" and [r["model"] for r in ranked(rows)] == ["D", "C", "A", "B"]
     lines = scorecard_markdown(rows).splitlines()
     assert lines[0].startswith("Ranked by recall (higher is better)") and lines[-1].startswith("| 4 | B |")
@@ -494,8 +563,10 @@ def test_scorecard_ranks_converged_models_by_recall_or_a_measure_given_and_sets_
     assert [r["model"] for r in ranked(without_prior)] == ["D", "C", "A", "B"]
     assert "prior median" not in scorecard_markdown(without_prior)
     # a sparse 0/-1 reward: equal medians, ranked by the mean (the share solved), its success column shown
-    sparse = [row("E", 0.9, 0.5, -1.0) | {"prior_mean": -0.9, "prior_success": 0.1},
-              row("F", 0.9, 0.5, -1.0) | {"prior_mean": -0.6, "prior_success": 0.4}]
+    sparse = [
+        row("E", 0.9, 0.5, -1.0) | {"prior_mean": -0.9, "prior_success": 0.1},
+        row("F", 0.9, 0.5, -1.0) | {"prior_mean": -0.6, "prior_success": 0.4},
+    ]
     assert [r["model"] for r in ranked(sparse, "prior_median")] == ["F", "E"]
     assert "| prior success |" in scorecard_markdown(sparse) and "prior success" not in scorecard_markdown(rows)
     # ranked by another measure: the order follows it, the rule line names it, unconverged models still come last
@@ -517,8 +588,9 @@ def test_scorecard_ranks_converged_models_by_recall_or_a_measure_given_and_sets_
             ranked(rows, min_precision=bad)
 
 
-def test_genrl_evaluate_with_a_task_prints_the_ranked_scorecard_with_the_prior_rollout(tmp_path, cli,
-                                                                                        hockey_generator) -> None:
+def test_genrl_evaluate_with_a_task_prints_the_ranked_scorecard_with_the_prior_rollout(
+    tmp_path, cli, hockey_generator
+) -> None:
     import json
     import shutil
 
@@ -528,9 +600,31 @@ def test_genrl_evaluate_with_a_task_prints_the_ranked_scorecard_with_the_prior_r
     generator = load(hockey_generator, device="cpu")
     np.save(tmp_path / "real.npy", generator.decode(generator.sample_prior(60, np.random.default_rng(0))))
     shutil.copy(hockey_generator, tmp_path / "second.pt")
-    code, out, err = cli("evaluate", hockey_generator, tmp_path / "second.pt", "--data", tmp_path / "real.npy",
-                         "--n", 40, "--dwpr-n", 8, "--interventions", 2, "--task", "hockey", "--contexts", 3,
-                         "--draws", 2, "--prior-seed", 11, "--out", tmp_path / "eval", "--device", "cpu")
+    code, out, err = cli(
+        "evaluate",
+        hockey_generator,
+        tmp_path / "second.pt",
+        "--data",
+        tmp_path / "real.npy",
+        "--n",
+        40,
+        "--dwpr-n",
+        8,
+        "--interventions",
+        2,
+        "--task",
+        "hockey",
+        "--contexts",
+        3,
+        "--draws",
+        2,
+        "--prior-seed",
+        11,
+        "--out",
+        tmp_path / "eval",
+        "--device",
+        "cpu",
+    )
     assert code == 0, err
     expected = prior_rollout(generator, "hockey", contexts=3, draws=2, seed=11).summary()
     results = json.loads((tmp_path / "eval" / "results.json").read_text())
@@ -545,9 +639,30 @@ def test_genrl_evaluate_with_a_task_prints_the_ranked_scorecard_with_the_prior_r
     fetch = make_generator("VAE-FETCH", horizon=50, action_dim=4, device="cpu")
     fetch.save(str(tmp_path / "fetch.pt"))
     np.save(tmp_path / "fetch_real.npy", fetch.decode(fetch.sample_prior(60, np.random.default_rng(0))))
-    code, out, err = cli("evaluate", tmp_path / "fetch.pt", "--data", tmp_path / "fetch_real.npy", "--n", 40,
-                         "--dwpr-n", 8, "--interventions", 2, "--task", "fetch-reach", "--contexts", 3, "--draws", 2,
-                         "--prior-seed", 11, "--out", tmp_path / "fetch", "--device", "cpu")
+    code, out, err = cli(
+        "evaluate",
+        tmp_path / "fetch.pt",
+        "--data",
+        tmp_path / "fetch_real.npy",
+        "--n",
+        40,
+        "--dwpr-n",
+        8,
+        "--interventions",
+        2,
+        "--task",
+        "fetch-reach",
+        "--contexts",
+        3,
+        "--draws",
+        2,
+        "--prior-seed",
+        11,
+        "--out",
+        tmp_path / "fetch",
+        "--device",
+        "cpu",
+    )
     assert code == 0, err
     assert "fetch-reach has no fast path (play_trajectories): the prior rollout plays its 3 x 2 episodes" in out
     rollout = prior_rollout(fetch, "fetch-reach", contexts=3, draws=2, seed=11)

@@ -20,8 +20,9 @@ from sb3_genrl.data import dataset_info, load_actions
 
 REACH_HORIZON = 10
 REACH_LOW, REACH_HIGH = np.array([0.1, -0.5]), np.array([0.9, 0.5])
-_SENSORS = ('<clock/><framepos objtype="site" objname="tip"/><framelinvel objtype="site" objname="tip"/>'
-            + "".join(f'<jointvel joint="joint{i}"/>' for i in range(1, 8)))
+_SENSORS = '<clock/><framepos objtype="site" objname="tip"/><framelinvel objtype="site" objname="tip"/>' + "".join(
+    f'<jointvel joint="joint{i}"/>' for i in range(1, 8)
+)
 
 
 class ReachEnv(ArmTaskEnv):
@@ -33,12 +34,15 @@ class ReachEnv(ArmTaskEnv):
     goal_low, goal_high = REACH_LOW, REACH_HIGH
 
     def _mjcf(self) -> str:
-        return task_mjcf(name="reach", tool='<geom type="capsule" fromto="0 0 0 0 0 0.1" size="0.01"/>'
-                                            '<site name="tip" pos="0 0 0.1" size="0.01"/>',
-                         world='<geom name="floor" type="plane" size="3 3 0.1" material="grid"/>'
-                               '<body name="goal" mocap="true" pos="0.5 0 0.001"><geom type="cylinder" '
-                               'size="0.03 0.001" contype="0" conaffinity="0"/></body>',
-                         sensors=_SENSORS, camera='<camera name="overview" pos="0 -3 2" xyaxes="1 0 0 0 0.55 0.83"/>')
+        return task_mjcf(
+            name="reach",
+            tool='<geom type="capsule" fromto="0 0 0 0 0 0.1" size="0.01"/><site name="tip" pos="0 0 0.1" size="0.01"/>',
+            world='<geom name="floor" type="plane" size="3 3 0.1" material="grid"/>'
+            '<body name="goal" mocap="true" pos="0.5 0 0.001"><geom type="cylinder" '
+            'size="0.03 0.001" contype="0" conaffinity="0"/></body>',
+            sensors=_SENSORS,
+            camera='<camera name="overview" pos="0 -3 2" xyaxes="1 0 0 0 0.55 0.83"/>',
+        )
 
     def home_qpos(self) -> np.ndarray:
         return np.zeros(7)
@@ -67,9 +71,19 @@ def _tilt(rng: np.random.Generator) -> np.ndarray:
     return motion
 
 
-REACH = TaskSpec(name="reach", env_id="Toy/Reach-v0", env_class=ReachEnv, horizon=REACH_HORIZON, goal_low=REACH_LOW,
-                 goal_high=REACH_HIGH, in_goal_region=_in_box, cell_size=0.1, sample_expert=_tilt,
-                 perturbation_scales=np.full(7, 0.02), is_valid=lambda info: info["distance"] >= 0)
+REACH = TaskSpec(
+    name="reach",
+    env_id="Toy/Reach-v0",
+    env_class=ReachEnv,
+    horizon=REACH_HORIZON,
+    goal_low=REACH_LOW,
+    goal_high=REACH_HIGH,
+    in_goal_region=_in_box,
+    cell_size=0.1,
+    sample_expert=_tilt,
+    perturbation_scales=np.full(7, 0.02),
+    is_valid=lambda info: info["distance"] >= 0,
+)
 
 
 @pytest.fixture
@@ -101,8 +115,9 @@ def test_lookups_and_errors():
 def test_toy_task_through_the_cli(reach_task, tmp_path, capsys):
     data, generator, run = tmp_path / "demos", tmp_path / "vae.pt", tmp_path / "run"
     assert gym.make(REACH.env_id).spec.max_episode_steps == REACH_HORIZON
-    assert main(["demos", "--task", "reach", "--episodes", "40", "--out", str(data), "--threads", "1",
-                 "--no-progress-bar"]) == 0
+    assert (
+        main(["demos", "--task", "reach", "--episodes", "40", "--out", str(data), "--threads", "1", "--no-progress-bar"]) == 0
+    )
     info = dataset_info(data)
     assert (info["task"], info["env_id"], info["horizon"], info["episodes"]) == ("reach", REACH.env_id, 10, 40)
     actions = load_actions(data, task="reach", horizon=REACH_HORIZON)
@@ -112,15 +127,58 @@ def test_toy_task_through_the_cli(reach_task, tmp_path, capsys):
     coverage = json.loads((data / "coverage.json").read_text())
     assert coverage["cells"] == 8 * 10 and coverage["cell_size"] == 0.1  # the 0.8 m x 1.0 m box in 0.1 m cells
 
-    assert main(["train-generator", "--data", str(data), "--model", "vae", "--latent-dim", "2", "--beta", "0.01",
-                 "--epochs", "3", "--batch-size", "16", "--eval-every", "3", "--device", "cpu", "--no-progress-bar",
-                 "--out", str(generator)]) == 0
+    assert (
+        main(
+            [
+                "train-generator",
+                "--data",
+                str(data),
+                "--model",
+                "vae",
+                "--latent-dim",
+                "2",
+                "--beta",
+                "0.01",
+                "--epochs",
+                "3",
+                "--batch-size",
+                "16",
+                "--eval-every",
+                "3",
+                "--device",
+                "cpu",
+                "--no-progress-bar",
+                "--out",
+                str(generator),
+            ]
+        )
+        == 0
+    )
     from sb3_genrl.generative import load
 
     assert load(generator, device="cpu").horizon == REACH_HORIZON
 
-    assert main(["train-policy", "--task", "reach", "--generator", str(generator), "--episodes", "16",
-                 "--batch-episodes", "8", "--device", "cpu", "--no-progress-bar", "--out", str(run)]) == 0
+    assert (
+        main(
+            [
+                "train-policy",
+                "--task",
+                "reach",
+                "--generator",
+                str(generator),
+                "--episodes",
+                "16",
+                "--batch-episodes",
+                "8",
+                "--device",
+                "cpu",
+                "--no-progress-bar",
+                "--out",
+                str(run),
+            ]
+        )
+        == 0
+    )
     summary = json.loads((run / "summary.json").read_text())
     assert (summary["task"], summary["episodes"], summary["iterations"]) == ("reach", 16, 2)
     from sb3_genrl.genrl import GenRL, evaluate_on_goals
@@ -136,9 +194,12 @@ def test_task_names_only_in_the_task_modules_and_the_registry():
     root = Path(__file__).resolve().parents[1]
     allowed = {Path("envs/__init__.py")} | {Path(f"envs/{name}.py") for name in ("hockey", "basketball", "fetch")}
     pattern = re.compile(r'"(?:{})"'.format("|".join(TASKS)))
-    found = [str(path.relative_to(root)) for folder in ("sb3_genrl", "envs", "baselines")
-             for path in sorted((root / folder).rglob("*.py"))
-             if path.relative_to(root) not in allowed and pattern.search(path.read_text())]
+    found = [
+        str(path.relative_to(root))
+        for folder in ("sb3_genrl", "envs", "baselines")
+        for path in sorted((root / folder).rglob("*.py"))
+        if path.relative_to(root) not in allowed and pattern.search(path.read_text())
+    ]
     assert found == []
 
 
@@ -165,18 +226,64 @@ def with_genrl_entry(monkeypatch: pytest.MonkeyPatch, env_id: str, entry: dict) 
 
 def test_train_policy_takes_the_tasks_genrl_settings(reach_task, tmp_path, monkeypatch):
     data, generator = tmp_path / "demos", tmp_path / "vae.pt"
-    assert main(["demos", "--task", "reach", "--episodes", "16", "--out", str(data), "--threads", "1",
-                 "--no-progress-bar"]) == 0
-    assert main(["train-generator", "--data", str(data), "--model", "vae", "--latent-dim", "2", "--beta", "0.01",
-                 "--epochs", "1", "--batch-size", "16", "--eval-every", "1", "--device", "cpu", "--no-progress-bar",
-                 "--out", str(generator)]) == 0
+    assert (
+        main(["demos", "--task", "reach", "--episodes", "16", "--out", str(data), "--threads", "1", "--no-progress-bar"]) == 0
+    )
+    assert (
+        main(
+            [
+                "train-generator",
+                "--data",
+                str(data),
+                "--model",
+                "vae",
+                "--latent-dim",
+                "2",
+                "--beta",
+                "0.01",
+                "--epochs",
+                "1",
+                "--batch-size",
+                "16",
+                "--eval-every",
+                "1",
+                "--device",
+                "cpu",
+                "--no-progress-bar",
+                "--out",
+                str(generator),
+            ]
+        )
+        == 0
+    )
     tuned = {"target_kl": 0.02, "value_history": 2, "policy": "ContextStdPolicy", "policy_kwargs": {"net_arch": [16, 16]}}
     with_genrl_entry(monkeypatch, REACH.env_id, {"n_timesteps": 3000, "n_steps": 4, **tuned})
     settings, iterations = {}, {}
-    for name, extra in (("task", ["--batch-episodes", "8"]), ("library", ["--batch-episodes", "8", "--library-defaults"]),
-                        ("task_batch", [])):
-        assert main(["train-policy", "--task", "reach", "--generator", str(generator), "--episodes", "16",
-                     "--device", "cpu", "--no-progress-bar", "--out", str(tmp_path / name), *extra]) == 0
+    for name, extra in (
+        ("task", ["--batch-episodes", "8"]),
+        ("library", ["--batch-episodes", "8", "--library-defaults"]),
+        ("task_batch", []),
+    ):
+        assert (
+            main(
+                [
+                    "train-policy",
+                    "--task",
+                    "reach",
+                    "--generator",
+                    str(generator),
+                    "--episodes",
+                    "16",
+                    "--device",
+                    "cpu",
+                    "--no-progress-bar",
+                    "--out",
+                    str(tmp_path / name),
+                    *extra,
+                ]
+            )
+            == 0
+        )
         summary = json.loads((tmp_path / name / "summary.json").read_text())
         settings[name], iterations[name] = summary["genrl_settings"], summary["iterations"]
     # Without --batch-episodes the task's episodes per iteration apply; --batch-episodes overrides them.
@@ -206,9 +313,12 @@ def test_the_arms_workflows_run_on_the_arms_tasks_only(tmp_path, cli):
     fetch = [name for name in TASKS if name not in arm_tasks()]
     assert fetch, "the test command installs the robotics extra: the Fetch tasks must be registered"
     (tmp_path / "g.pt").write_bytes(b"")  # an input that exists: only --task is wrong
-    for command in (("play", "--out", tmp_path / "p"), ("study", "--scale", "smoke", "--out", tmp_path / "s"),
-                    ("video", "--generator", tmp_path / "g.pt", "--out", tmp_path / "v.gif"),
-                    ("compare", "--runs", tmp_path, "--out", tmp_path / "c")):
+    for command in (
+        ("play", "--out", tmp_path / "p"),
+        ("study", "--scale", "smoke", "--out", tmp_path / "s"),
+        ("video", "--generator", tmp_path / "g.pt", "--out", tmp_path / "v.gif"),
+        ("compare", "--runs", tmp_path, "--out", tmp_path / "c"),
+    ):
         code, _, err = cli(*command, "--task", fetch[0])
         assert code == 2 and f"invalid choice: '{fetch[0]}'" in err, (command, err)
     with pytest.raises(ValueError, match=f"unknown task '{fetch[0]}' for the study"):

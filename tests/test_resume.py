@@ -52,8 +52,9 @@ def test_recorded_settings_are_compared_and_each_difference_named(tmp_path: Path
     assert json.loads(record.read_text()) == wanted
     check_and_record(record, {"epochs": 2, "eval_every": 1, "shape": (2, 3)}, output_exists=True, folder=tmp_path)
     with pytest.raises(SettingsConflictError) as error:
-        check_and_record(record, {"epochs": 150, "eval_every": 1, "shape": [2, 3], "seed": 0}, output_exists=True,
-                         folder=tmp_path)
+        check_and_record(
+            record, {"epochs": 150, "eval_every": 1, "shape": [2, 3], "seed": 0}, output_exists=True, folder=tmp_path
+        )
     message = str(error.value)
     assert f"{tmp_path / 'stage'}: epochs 2 (recorded) vs 150 (this run), seed unset (recorded) vs 0" in message
     assert "eval_every" not in message and "--out" in message and "delete" in message
@@ -63,16 +64,18 @@ def test_recorded_settings_are_compared_and_each_difference_named(tmp_path: Path
     assert settings_conflicts(tmp_path / "new", None, wanted, output_exists=False) == []
 
 
-def test_lock_refuses_a_second_holder_and_is_released_when_it_dies(tmp_path: Path,
-                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+def test_lock_refuses_a_second_holder_and_is_released_when_it_dies(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     folder = tmp_path / "study"
-    holder = _python("""
+    holder = _python(
+        """
         import sys, time
         from sb3_genrl.study.state import folder_lock
         with folder_lock(sys.argv[1]):
             print("locked", flush=True)
             time.sleep(120)
-    """, str(folder))
+    """,
+        str(folder),
+    )
     try:
         assert holder.stdout.readline().strip() == "locked"
         with pytest.raises(FolderInUseError, match=f"{folder} is in use by another process \\(PID {holder.pid}"):
@@ -90,7 +93,8 @@ def test_lock_refuses_a_second_holder_and_is_released_when_it_dies(tmp_path: Pat
 
 def test_workers_exit_when_the_study_process_is_killed(tmp_path: Path) -> None:
     script = tmp_path / "parent.py"  # spawned workers import the jobs' module by its file
-    script.write_text(textwrap.dedent("""
+    script.write_text(
+        textwrap.dedent("""
         import os, time
 
         def job(seconds):
@@ -102,7 +106,8 @@ def test_workers_exit_when_the_study_process_is_killed(tmp_path: Path) -> None:
 
             for _ in _local_map(2)([(job, (120,)), (job, (120,))]):
                 pass
-    """))
+    """)
+    )
     parent = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True)
     workers = []
     try:
@@ -124,12 +129,23 @@ def test_workers_exit_when_the_study_process_is_killed(tmp_path: Path) -> None:
 
 def _write_small_dataset(path: Path) -> Path:
     n, t = 3, 4
-    arrays = {"observations": np.zeros((n, t + 1, 16), np.float32), "actions": np.zeros((n, t, 7), np.float32),
-              "rewards": np.zeros((n, t)), "terminations": np.ones((n, t), bool), "truncations": np.zeros((n, t), bool),
-              "reached": np.zeros((n, 2)), "sampled_goals": np.zeros((n, 2))}
-    return write_dataset(path, arrays, dataset_id="genrl/hockey-v0", genrl={"task": "hockey", "horizon": t},
-                         observation_space=spaces.Box(-np.inf, np.inf, (16,), np.float32),
-                         action_space=spaces.Box(-0.5, 0.5, (7,), np.float32))
+    arrays = {
+        "observations": np.zeros((n, t + 1, 16), np.float32),
+        "actions": np.zeros((n, t, 7), np.float32),
+        "rewards": np.zeros((n, t)),
+        "terminations": np.ones((n, t), bool),
+        "truncations": np.zeros((n, t), bool),
+        "reached": np.zeros((n, 2)),
+        "sampled_goals": np.zeros((n, 2)),
+    }
+    return write_dataset(
+        path,
+        arrays,
+        dataset_id="genrl/hockey-v0",
+        genrl={"task": "hockey", "horizon": t},
+        observation_space=spaces.Box(-np.inf, np.inf, (16,), np.float32),
+        action_space=spaces.Box(-0.5, 0.5, (7,), np.float32),
+    )
 
 
 def test_stale_partial_folders_of_dead_writers_are_removed_and_only_those(tmp_path: Path) -> None:
@@ -189,7 +205,8 @@ def test_unreachable_ray_address_fails_within_the_timeout_and_names_it(tmp_path:
     pytest.importorskip("ray")
     # Two addresses in one fresh process (Ray's global state stays out of this one): a closed port, and a port
     # that accepts connections but never answers, where only the time limit on ray.init helps.
-    probe = _python("""
+    probe = _python(
+        """
         import contextlib, io, socket, sys, time
         from sb3_genrl.cli import main
 
@@ -202,7 +219,9 @@ def test_unreachable_ray_address_fails_within_the_timeout_and_names_it(tmp_path:
                              "ray", "--address", address, "--ray-timeout", "4"])
             named = f"Ray cluster at {address} within 4 s" in error.getvalue()
             print(address, code, round(time.monotonic() - began, 1), named, flush=True)
-    """, str(tmp_path / "study"))
+    """,
+        str(tmp_path / "study"),
+    )
     out, _ = probe.communicate(timeout=120)
     lines = [line.split() for line in out.splitlines() if line.startswith("127.0.0.1:")]
     assert len(lines) == 2, out

@@ -36,8 +36,21 @@ def _csv_rows(path):
 
 @pytest.mark.slow
 def test_smoke_study_writes_every_table_and_plot_and_resumes(tmp_path, cli, monkeypatch):
-    code, out, err = cli("study", "--task", "hockey", "--scale", "smoke", "--models", *SMOKE_MODELS, "--workers", "1",
-                         "--device", "cpu", "--out", tmp_path)
+    code, out, err = cli(
+        "study",
+        "--task",
+        "hockey",
+        "--scale",
+        "smoke",
+        "--models",
+        *SMOKE_MODELS,
+        "--workers",
+        "1",
+        "--device",
+        "cpu",
+        "--out",
+        tmp_path,
+    )
     root = tmp_path / "hockey"
     assert code == 0, err
     assert f"wrote {root / 'report.md'}" in out
@@ -47,8 +60,10 @@ def test_smoke_study_writes_every_table_and_plot_and_resumes(tmp_path, cli, monk
         # Each model's row holds its own evaluation file's measures and its policies' best rewards.
         evaluation = json.loads((root / "evaluation" / f"{name}.json").read_text())
         assert all(row[m] == evaluation[m] for m in ("precision", "recall", "delta_1", "delta_2", "mean_delta"))
-        summaries = [json.loads((root / "policies" / name / f"seed{s}" / "summary.json").read_text())
-                     for s in range(SCALES["smoke"].seeds)]
+        summaries = [
+            json.loads((root / "policies" / name / f"seed{s}" / "summary.json").read_text())
+            for s in range(SCALES["smoke"].seeds)
+        ]
         assert row["rewards"] == [s["best_mean_reward"] for s in summaries] and row["score"] == max(row["rewards"])
         assert row["final"] == np.mean([s["final_mean_reward"] for s in summaries]) and row["half_score"] <= row["score"]
         assert [epoch for epoch, _ in row["selection"]] == [1, 2] and row["prior_median"] == evaluation["prior_median"]
@@ -67,16 +82,30 @@ def test_smoke_study_writes_every_table_and_plot_and_resumes(tmp_path, cli, monk
         assert (root / "plots" / f"{name}.png").stat().st_size > 1000
     # The comparison: GenRL with the best generator and each baseline, one seed each, their curves and table contacts.
     comparison = _csv_rows(root / "comparison" / "comparison.csv")
-    assert [row["method"] for row in comparison] == ["GenRL", "PPO (BC)", "SAC (prefilled)", "SAC (no prefill)",
-                                                     "SAC + HER", "PPO on latent", "SAC on latent", "TRPO on latent"]
+    assert [row["method"] for row in comparison] == [
+        "GenRL",
+        "PPO (BC)",
+        "SAC (prefilled)",
+        "SAC (no prefill)",
+        "SAC + HER",
+        "PPO on latent",
+        "SAC on latent",
+        "TRPO on latent",
+    ]
     assert all(row["seeds"] == "1" for row in comparison)
     for name in ("reward_vs_episodes.png", "table_contacts.png"):
         assert (root / "comparison" / name).stat().st_size > 1000
     best = max(rows.values(), key=lambda r: r["score"])
     report = (root / "report.md").read_text()
     assert f"Best generator: **{best['model']}** (best reward {best['score']:.3f}" in report
-    for section in ("Table 1", "The ranking's stability", "Tables 4-5", "Tables 2-3", "Generator training",
-                    "GenRL vs PPO vs SAC"):
+    for section in (
+        "Table 1",
+        "The ranking's stability",
+        "Tables 4-5",
+        "Tables 2-3",
+        "Generator training",
+        "GenRL vs PPO vs SAC",
+    ):
         assert f"## {section}" in report
 
     # The report states the settings the stages recorded.
@@ -84,8 +113,13 @@ def test_smoke_study_writes_every_table_and_plot_and_resumes(tmp_path, cli, monk
     assert f'"demo_episodes": {smoke.demo_episodes}, "generator_epochs": {smoke.generator_epochs},' in report
 
     # A rerun finds every result and recomputes nothing: the files are left as they were.
-    outputs = [*root.glob("policies/*/seed*/summary.json"), *root.glob("generators/*.pt"),
-               *root.glob("evaluation/*.json"), *root.glob("comparison/*/summary.json"), root / "demonstrations"]
+    outputs = [
+        *root.glob("policies/*/seed*/summary.json"),
+        *root.glob("generators/*.pt"),
+        *root.glob("evaluation/*.json"),
+        *root.glob("comparison/*/summary.json"),
+        root / "demonstrations",
+    ]
     stamps = {p: p.stat().st_mtime_ns for p in outputs}
     correlation = (root / "tables" / "correlation.csv").read_text()
     # ... and the jobs finishing in another order (as they do with workers) leaves the rows and intervals as they were
@@ -94,6 +128,7 @@ def test_smoke_study_writes_every_table_and_plot_and_resumes(tmp_path, cli, monk
     def reversed_map(workers):
         def run(jobs):
             yield from reversed([fn(*args) for fn, args in jobs])
+
         return run
 
     monkeypatch.setattr(runner, "_local_map", reversed_map)
@@ -109,8 +144,7 @@ def test_smoke_study_writes_every_table_and_plot_and_resumes(tmp_path, cli, monk
     assert f"{root / 'demonstrations'}: episodes {smoke.demo_episodes} (recorded) vs {small.demo_episodes}" in message
     assert f"{root / 'generators'}: epochs {smoke.generator_epochs} (recorded) vs {small.generator_epochs}" in message
     small_hockey = task_scale(small.as_dict(), "hockey")
-    assert f"{root / 'policies'}: episodes {smoke.policy_episodes} (recorded) vs {small_hockey['policy_episodes']}" \
-        in message
+    assert f"{root / 'policies'}: episodes {smoke.policy_episodes} (recorded) vs {small_hockey['policy_episodes']}" in message
     assert json.loads((tmp_path / "study.json").read_text())["scale"] == "smoke"
     assert stamps == {p: p.stat().st_mtime_ns for p in outputs}
 
@@ -155,11 +189,25 @@ def test_study_on_a_ray_cluster_started_with_ray_start(tmp_path):
     gcs, client, agent = _free_ports(3)
     token_env = {**os.environ, "RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN": secrets.token_hex(16)}
     temp = tempfile.mkdtemp(prefix="ray", dir="/tmp")
-    head = subprocess.Popen([str(Path(sys.executable).parent / "ray"), "start", "--head", f"--port={gcs}", "--num-cpus=2",
-                             "--include-dashboard=false", f"--ray-client-server-port={client}",
-                             f"--dashboard-agent-listen-port={agent}", "--disable-usage-stats", f"--temp-dir={temp}",
-                             "--block"], env=token_env, start_new_session=True, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL)
+    head = subprocess.Popen(
+        [
+            str(Path(sys.executable).parent / "ray"),
+            "start",
+            "--head",
+            f"--port={gcs}",
+            "--num-cpus=2",
+            "--include-dashboard=false",
+            f"--ray-client-server-port={client}",
+            f"--dashboard-agent-listen-port={agent}",
+            "--disable-usage-stats",
+            f"--temp-dir={temp}",
+            "--block",
+        ],
+        env=token_env,
+        start_new_session=True,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     try:
         _wait_for_port(gcs, 120)
         address = f"127.0.0.1:{gcs}"
@@ -169,8 +217,12 @@ def test_study_on_a_ray_cluster_started_with_ray_start(tmp_path):
         runs = {}
         for name, env, limit in (("refused", no_token, "5"), ("study", token_env, "30")):
             with open(tmp_path / f"{name}.err", "w") as stderr:
-                runs[name] = subprocess.Popen([sys.executable, "-c", RAY_STUDY, str(tmp_path / name), address, limit],
-                                              env=env, stdout=subprocess.DEVNULL, stderr=stderr)
+                runs[name] = subprocess.Popen(
+                    [sys.executable, "-c", RAY_STUDY, str(tmp_path / name), address, limit],
+                    env=env,
+                    stdout=subprocess.DEVNULL,
+                    stderr=stderr,
+                )
         for run in runs.values():
             run.wait(500)
         errors = {name: (tmp_path / f"{name}.err").read_text() for name in runs}
@@ -210,8 +262,21 @@ def test_study_rejects_bad_arguments(tmp_path):
 def test_quickstart_and_video(tmp_path, cli):
     out = tmp_path / "quick"
     # Without the quickstart's own video (offscreen rendering is slow on a CPU): the video command is tested below.
-    code, printed, err = cli("quickstart", "--out", out, "--demo-episodes", 200, "--epochs", 3, "--episodes", 64,
-                             "--no-progress-bar", "--device", "cpu", "--no-video")
+    code, printed, err = cli(
+        "quickstart",
+        "--out",
+        out,
+        "--demo-episodes",
+        200,
+        "--epochs",
+        3,
+        "--episodes",
+        64,
+        "--no-progress-bar",
+        "--device",
+        "cpu",
+        "--no-video",
+    )
     assert code == 0, err
     report = (out / "report.md").read_text()
     for name in ("policy/learning_curve.png", "evaluation/precision_recall.png", "vae.pt", "policy/genrl_policy.zip"):
@@ -237,8 +302,9 @@ def test_quickstart_and_video(tmp_path, cli):
     code, printed, _ = cli("video", "--task", "hockey", "--generator", out / "vae.pt", "--goals", 1, "--out", video)
     assert code == 0 and video.stat().st_size > 1000 and (tmp_path / "gen_strip.png").exists()
     assert len(re.search(r"rewards (.*)\)", printed).group(1).split(", ")) == 1
-    code, printed, _ = cli("video", "--task", "hockey", "--policy", out / "policy", "--goals", 2, "--seed", 7,
-                           "--out", tmp_path / "policy.mp4")
+    code, printed, _ = cli(
+        "video", "--task", "hockey", "--policy", out / "policy", "--goals", 2, "--seed", 7, "--out", tmp_path / "policy.mp4"
+    )
     assert code == 0 and (tmp_path / "policy.mp4").stat().st_size > 1000
     rewards = [float(r) for r in re.search(r"rewards (.*)\)", printed).group(1).split(", ")]
     expected = -policy_distances(out / "policy" / "genrl_policy.zip", "GenRL/Hockey-v0", 2, 7)
@@ -250,8 +316,19 @@ def test_quickstart_and_video(tmp_path, cli):
     # and does no work.
     outputs = [out / name for name in ("vae.pt", "evaluation/results.json", "policy/summary.json")]
     stamps = [path.stat().st_mtime_ns for path in outputs]
-    args = ["quickstart", "--out", out, "--demo-episodes", 200, "--episodes", 64, "--no-progress-bar", "--device", "cpu",
-            "--no-video"]
+    args = [
+        "quickstart",
+        "--out",
+        out,
+        "--demo-episodes",
+        200,
+        "--episodes",
+        64,
+        "--no-progress-bar",
+        "--device",
+        "cpu",
+        "--no-video",
+    ]
     code, _, err = cli(*args, "--epochs", 4)
     assert code == 2 and f"{out / 'vae.stage.json'}: epochs 3 (recorded) vs 4 (this run)" in err
     code, printed, err = cli(*args, "--epochs", 3)
@@ -272,8 +349,10 @@ def test_windowed_curve_and_mean_std_over_seeds():
     episodes, means = windowed_curve(np.arange(10.0), 4)
     np.testing.assert_array_equal(episodes, [4, 8])
     np.testing.assert_array_equal(means, [1.5, 5.5])
-    curves = [{"episodes": np.array([0.0, 10.0]), "mean_reward": np.array([0.0, 1.0])},
-              {"episodes": np.array([0.0, 10.0]), "mean_reward": np.array([0.0, 3.0])}]
+    curves = [
+        {"episodes": np.array([0.0, 10.0]), "mean_reward": np.array([0.0, 1.0])},
+        {"episodes": np.array([0.0, 10.0]), "mean_reward": np.array([0.0, 3.0])},
+    ]
     grid, mean, std = mean_std_over_seeds(curves, grid=np.array([0.0, 5.0, 10.0]))
     np.testing.assert_allclose(mean, [0.0, 1.0, 2.0])
     np.testing.assert_allclose(std, [0.0, 0.5, 1.0])
@@ -300,13 +379,32 @@ def test_the_quickstart_video_seed_stays_a_valid_seed_for_the_largest_seed():
 
 
 def _study_row(name: str, precision: float, score: float, half: float, final: float, prior: float) -> dict:
-    return {"model": name, "type": name[:3], "latent_dim": 2, "beta": 0.01, "info_weight": 0.1, "precision": precision,
-            "recall": 0.5 + score / 10, "delta_1": 0.5, "delta_2": 0.4, "mean_delta": 0.45 - half / 10,
-            "density": 1.0 + final, "coverage": 0.5, "prior_median": prior, "prior_q25": prior - 0.1,
-            "prior_q75": prior + 0.1, "best_epoch": 4, "selection": [[2, 5e-4], [4, 2e-5], [6, 3e-5]],
-            "rewards": [score, score - 0.1], "score": score, "half_rewards": [half], "half_score": half,
-            "final_rewards": [final], "final": final,
-            "cpu_seconds": {"generator": 3600.0, "evaluation": 36.0, "genrl": 7200.0}}
+    return {
+        "model": name,
+        "type": name[:3],
+        "latent_dim": 2,
+        "beta": 0.01,
+        "info_weight": 0.1,
+        "precision": precision,
+        "recall": 0.5 + score / 10,
+        "delta_1": 0.5,
+        "delta_2": 0.4,
+        "mean_delta": 0.45 - half / 10,
+        "density": 1.0 + final,
+        "coverage": 0.5,
+        "prior_median": prior,
+        "prior_q25": prior - 0.1,
+        "prior_q75": prior + 0.1,
+        "best_epoch": 4,
+        "selection": [[2, 5e-4], [4, 2e-5], [6, 3e-5]],
+        "rewards": [score, score - 0.1],
+        "score": score,
+        "half_rewards": [half],
+        "half_score": half,
+        "final_rewards": [final],
+        "final": final,
+        "cpu_seconds": {"generator": 3600.0, "evaluation": 36.0, "genrl": 7200.0},
+    }
 
 
 def test_the_report_leaves_unconverged_generators_out_of_the_correlations_and_states_the_stability(tmp_path):
@@ -331,12 +429,15 @@ def test_the_report_leaves_unconverged_generators_out_of_the_correlations_and_st
     recall = tables[("ALL", "recall")]
     assert int(recall["num_models"]) == 8
     assert float(recall["pearson_r"]) == pytest.approx(
-        pearsonr([r["recall"] for r in ranked], [r["score"] for r in ranked]).statistic, abs=1e-12)
+        pearsonr([r["recall"] for r in ranked], [r["score"] for r in ranked]).statistic, abs=1e-12
+    )
     final = {row["measure"]: row for row in _csv_rows(tmp_path / "tables" / "prediction_final.csv")}
-    assert sorted(final) == sorted(["precision", "recall", "delta_1", "delta_2", "mean_delta", "density", "coverage",
-                                    "prior_median"])
+    assert sorted(final) == sorted(
+        ["precision", "recall", "delta_1", "delta_2", "mean_delta", "density", "coverage", "prior_median"]
+    )
     assert float(final["prior_median"]["spearman_rho"]) == pytest.approx(
-        spearmanr([r["prior_median"] for r in ranked], [r["final"] for r in ranked]).statistic, abs=1e-12)
+        spearmanr([r["prior_median"] for r in ranked], [r["final"] for r in ranked]).statistic, abs=1e-12
+    )
     assert {row["group"] for row in final.values()} == {"ALL"}
     selection = {row["model"]: row for row in _csv_rows(tmp_path / "tables" / "selection.csv")}
     assert selection["GAN4"]["status"] == "not converged" and float(selection["VAE1"]["selection MSE kept"]) == 2e-5
@@ -352,8 +453,11 @@ def test_the_index_pools_the_tasks_as_paper_table_6_once_both_have_finished(tmp_
     from sb3_genrl.study.runner import _write_index
 
     rng = np.random.default_rng(1)
-    rows = {task: [_study_row(f"VAE{i}", 0.9, *rng.normal(size=4)) for i in range(1, 5)]
-            + [_study_row("GAN1", 0.1, 9.0, 9.0, 9.0, 9.0)] for task in ("hockey", "basketball")}  # GAN1: not converged
+    rows = {
+        task: [_study_row(f"VAE{i}", 0.9, *rng.normal(size=4)) for i in range(1, 5)]
+        + [_study_row("GAN1", 0.1, 9.0, 9.0, 9.0, 9.0)]
+        for task in ("hockey", "basketball")
+    }  # GAN1: not converged
     (tmp_path / "hockey").mkdir()
     (tmp_path / "hockey" / "results.json").write_text(json.dumps(rows["hockey"]))
     (tmp_path / "hockey" / "report.md").write_text("# hockey\n")
@@ -392,8 +496,11 @@ def test_each_task_runs_its_own_episodes_per_iteration_and_a_changed_budget_is_r
     for task in ("hockey", "basketball"):
         _, batch_episodes, _ = load_genrl_settings(get_task(task).env_id)
         resolved = task_scale(small, task)
-        assert resolved["batch_episodes"] == batch_episodes and resolved["policy_episodes"] == \
-            SCALES["small"].policy_episodes[task] and resolved["seeds"] == SCALES["small"].seeds[task]
+        assert (
+            resolved["batch_episodes"] == batch_episodes
+            and resolved["policy_episodes"] == SCALES["small"].policy_episodes[task]
+            and resolved["seeds"] == SCALES["small"].seeds[task]
+        )
     with pytest.raises(ValueError, match="not for 'hockey'"):
         task_scale({**small, "policy_episodes": {"basketball": 10}}, "hockey")
     # A study folder whose policies were recorded with hockey's settings refuses another budget or batch size.
@@ -406,7 +513,8 @@ def test_each_task_runs_its_own_episodes_per_iteration_and_a_changed_budget_is_r
     assert _conflicts("hockey", hockey, tmp_path) == []
     changed = task_scale(replace(SCALES["small"], batch_episodes=64).as_dict(), "hockey")
     [line] = [line for line in _conflicts("hockey", changed, tmp_path) if "policies" in line]
-    assert line.startswith(f"{tmp_path / 'policies'}: batch_episodes {hockey['batch_episodes']} (recorded) vs 64 (this "
-                           "run), genrl ")  # and the GenRL settings, whose n_steps is the batch
+    assert line.startswith(
+        f"{tmp_path / 'policies'}: batch_episodes {hockey['batch_episodes']} (recorded) vs 64 (this run), genrl "
+    )  # and the GenRL settings, whose n_steps is the batch
     fewer_draws = {**hockey, "prior_draws": 4}
     assert any("prior_draws 16 (recorded) vs 4" in line for line in _conflicts("hockey", fewer_draws, tmp_path))

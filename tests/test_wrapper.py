@@ -185,7 +185,6 @@ def test_on_paper_tasks(task):
     assert fast_result[4]["steps_played"] == slow_result[4]["steps_played"] == horizon
 
 
-
 def test_fast_path_reward_equals_the_step_path_reward_exactly_through_the_wrapper():
     """The fast path plays the task's own float64 goal, not the float32 context the policy observes."""
     from sb3_genrl.generative import make_generator

@@ -50,9 +50,30 @@ def trained(tmp_path_factory: pytest.TempPathFactory, hockey_generator: str) -> 
     """A zoo run of one iteration (16 episodes) of the file's hockey settings, in rl-zoo3's ``logs/`` layout, on one
     torch thread as ``genrl`` runs (another thread count rounds differently)."""
     logs = tmp_path_factory.mktemp("zoo") / "logs"
-    zoo("train", "--algo", "genrl", "--env", ENV_ID, "-n", 16, "--seed", 3, "--eval-freq", -1, "-f", logs,
-        "--save-freq", 16, "-tb", logs.parent / "tensorboard", "--device", "cpu", "--num-threads", 1,
-        *with_generator(hockey_generator))
+    zoo(
+        "train",
+        "--algo",
+        "genrl",
+        "--env",
+        ENV_ID,
+        "-n",
+        16,
+        "--seed",
+        3,
+        "--eval-freq",
+        -1,
+        "-f",
+        logs,
+        "--save-freq",
+        16,
+        "-tb",
+        logs.parent / "tensorboard",
+        "--device",
+        "cpu",
+        "--num-threads",
+        1,
+        *with_generator(hockey_generator),
+    )
     return logs
 
 
@@ -66,16 +87,35 @@ def test_train_saves_in_rl_zoo3s_layout_with_the_generator_it_used(trained, hock
     assert any((trained.parent / "tensorboard" / "GenRL-Hockey-v0").glob("*/events.out.tfevents.*"))  # -tb
     config = yaml.load((run / "GenRL-Hockey-v0" / "config.yml").read_text(), Loader=yaml.UnsafeLoader)
     (wrapper,) = config["env_wrapper"]
-    assert wrapper == {"sb3_genrl.zoo.latent_action": {
-        "generator": str(Path(hockey_generator).resolve()),
-        "generator_sha256": generator_digest(load_generator(Path(hockey_generator)))}}
+    assert wrapper == {
+        "sb3_genrl.zoo.latent_action": {
+            "generator": str(Path(hockey_generator).resolve()),
+            "generator_sha256": generator_digest(load_generator(Path(hockey_generator))),
+        }
+    }
     # the Monitor above the one-step episodes: one row per episode played
     assert len(np.loadtxt(run / "0.monitor.csv", delimiter=",", skiprows=2)) == 16
 
 
 def test_enjoy_plays_the_goals_of_the_packages_evaluation(trained, tmp_path):
-    zoo("enjoy", "--algo", "genrl", "--env", ENV_ID, "-f", trained, "--no-render", "-n", 12, "--seed", 5,
-        "--reward-log", tmp_path, "--device", "cpu")
+    zoo(
+        "enjoy",
+        "--algo",
+        "genrl",
+        "--env",
+        ENV_ID,
+        "-f",
+        trained,
+        "--no-render",
+        "-n",
+        12,
+        "--seed",
+        5,
+        "--reward-log",
+        tmp_path,
+        "--device",
+        "cpu",
+    )
     played = np.loadtxt(tmp_path / "0.monitor.csv", delimiter=",", skiprows=2)[:, 0]
     model = GenRL.load(trained / RUN / "GenRL-Hockey-v0.zip", device="cpu")
     np.testing.assert_allclose(played, one_at_a_time(model, 12, seed=5), atol=1e-5)  # the Monitor keeps 6 digits
@@ -90,15 +130,38 @@ def test_record_video_writes_one_frame_per_episode(trained, tmp_path):
 def test_the_zoo_and_train_policy_build_the_same_genrl_from_the_file(trained, hockey_generator, tmp_path, cli):
     from sb3_genrl.genrl.train import genrl_settings
 
-    code, _, err = cli("train-policy", "--task", "hockey", "--generator", hockey_generator, "--episodes", 16,
-                       "--seed", 3, "--device", "cpu", "--no-progress-bar", "--out", tmp_path / "run")
+    code, _, err = cli(
+        "train-policy",
+        "--task",
+        "hockey",
+        "--generator",
+        hockey_generator,
+        "--episodes",
+        16,
+        "--seed",
+        3,
+        "--device",
+        "cpu",
+        "--no-progress-bar",
+        "--out",
+        tmp_path / "run",
+    )
     assert code == 0, err
-    models = [GenRL.load(path, device="cpu") for path in (trained / RUN / "GenRL-Hockey-v0.zip",
-                                                          tmp_path / "run" / "genrl_policy.zip")]
+    models = [
+        GenRL.load(path, device="cpu")
+        for path in (trained / RUN / "GenRL-Hockey-v0.zip", tmp_path / "run" / "genrl_policy.zip")
+    ]
     names = [name for name in genrl_settings() if name not in ("policy_kwargs", "learning_rate")]
-    zoo_run, package_run = ({name: getattr(model, name) for name in names} | {
-        "policy": type(model.policy), "policy_kwargs": model.policy_kwargs, "episodes_per_iteration":
-        model.n_steps * model.n_envs, "learning_rate": model.lr_schedule(1.0)} for model in models)
+    zoo_run, package_run = (
+        {name: getattr(model, name) for name in names}
+        | {
+            "policy": type(model.policy),
+            "policy_kwargs": model.policy_kwargs,
+            "episodes_per_iteration": model.n_steps * model.n_envs,
+            "learning_rate": model.lr_schedule(1.0),
+        }
+        for model in models
+    )
     assert zoo_run == package_run
     entry = load_hyperparams("genrl", ENV_ID)
     assert zoo_run["hindsight_kwargs"] == entry["hindsight_kwargs"]
@@ -117,10 +180,34 @@ def test_a_small_study_tries_the_entry_first(hockey_generator, tmp_path):
     from sb3_genrl.zoo.sampler import SEARCH_SPACE, convert_genrl_params, entry_params
 
     storage = f"sqlite:///{tmp_path / 'study.db'}"
-    zoo("train", "--algo", "genrl", "--env", ENV_ID, "-optimize", "--n-trials", 2, "--n-timesteps", 16,
-        "--eval-episodes", 3, "--storage", storage, "--study-name", "tiny", "--seed", 0, "-f", tmp_path / "logs",
-        "--device", "cpu", "--no-optim-plots", "--optimization-log-path", tmp_path / "trials",
-        *with_generator(hockey_generator))
+    zoo(
+        "train",
+        "--algo",
+        "genrl",
+        "--env",
+        ENV_ID,
+        "-optimize",
+        "--n-trials",
+        2,
+        "--n-timesteps",
+        16,
+        "--eval-episodes",
+        3,
+        "--storage",
+        storage,
+        "--study-name",
+        "tiny",
+        "--seed",
+        0,
+        "-f",
+        tmp_path / "logs",
+        "--device",
+        "cpu",
+        "--no-optim-plots",
+        "--optimization-log-path",
+        tmp_path / "trials",
+        *with_generator(hockey_generator),
+    )
     trials = optuna.load_study(study_name="tiny", storage=storage).trials
     assert [trial.state for trial in trials] == [optuna.trial.TrialState.COMPLETE] * 2
     entry = load_hyperparams("genrl", ENV_ID)
@@ -130,8 +217,25 @@ def test_a_small_study_tries_the_entry_first(hockey_generator, tmp_path):
     assert set(trials[1].params) == set(SEARCH_SPACE)
     assert all(value <= 0 for value in (trial.value for trial in trials))  # minus a distance to the goals
     # the entry's and the best trial's saved policies on held-out goals, by the package's evaluation
-    assert held_out.main(["--env", ENV_ID, "--storage", storage, "--study-name", "tiny", "--trials",
-                          str(tmp_path / "trials"), "--goals", "4", "--out", str(tmp_path / "held_out.json")]) == 0
+    assert (
+        held_out.main(
+            [
+                "--env",
+                ENV_ID,
+                "--storage",
+                storage,
+                "--study-name",
+                "tiny",
+                "--trials",
+                str(tmp_path / "trials"),
+                "--goals",
+                "4",
+                "--out",
+                str(tmp_path / "held_out.json"),
+            ]
+        )
+        == 0
+    )
     result = json.loads((tmp_path / "held_out.json").read_text())
     best = max(range(2), key=lambda number: trials[number].value)
     assert (result["entry"]["trial"], result["best"]["trial"]) == (0, best)
@@ -150,8 +254,9 @@ def test_evaluations_replay_the_tuning_goals(hockey_generator):
     from sb3_genrl.zoo.experiment import TuningGoals
     from sb3_genrl.zoo.wrapper import latent_action
 
-    venv = TuningGoals(make_vec_env(ENV_ID, wrapper_class=latent_action, wrapper_kwargs={"generator": hockey_generator},
-                                    seed=0))
+    venv = TuningGoals(
+        make_vec_env(ENV_ID, wrapper_class=latent_action, wrapper_kwargs={"generator": hockey_generator}, seed=0)
+    )
     rng, task = np.random.default_rng(TUNING_GOAL_SEED), get_task("hockey").make_env()
     wanted = np.array([task.sample_goal(rng) for _ in range(3)], dtype=np.float32)
     for _ in range(2):  # each evaluation starts the same goals again
@@ -166,8 +271,11 @@ def test_a_missing_generator_names_the_command_that_makes_it(monkeypatch, tmp_pa
     from sb3_genrl.zoo import latent_action
 
     monkeypatch.setenv("SB3_GENRL_CACHE", str(tmp_path))
-    with pytest.raises(FileNotFoundError, match=r"generators/hockey/vae\.pt is not made yet: `python -m sb3_genrl\.zoo "
-                                                r"train --algo genrl --env GenRL/Hockey-v0` makes it"):
+    with pytest.raises(
+        FileNotFoundError,
+        match=r"generators/hockey/vae\.pt is not made yet: `python -m sb3_genrl\.zoo "
+        r"train --algo genrl --env GenRL/Hockey-v0` makes it",
+    ):
         latent_action(gym.make(ENV_ID))
     with pytest.raises(FileNotFoundError, match="no generator file"):
         latent_action(gym.make(ENV_ID), generator=tmp_path / "none.pt")
@@ -190,7 +298,11 @@ def test_the_cached_generator_is_the_quickstarts():
     stage = _stage_settings("hockey", 1, defaults["epochs"].default, 1, 2, {}, 1, 1, generators.SEED, False)["generator"]
     recorded = generators.generator_settings("hockey")
     assert (recorded["demo_episodes"], recorded["epochs"], recorded["preset"], recorded["eval_every"]) == (
-        defaults["demo_episodes"].default, stage["epochs"], stage["preset"], stage["eval_every"])
+        defaults["demo_episodes"].default,
+        stage["epochs"],
+        stage["preset"],
+        stage["eval_every"],
+    )
     assert recorded["seed"] == defaults["seed"].default == stage["seed"]
 
 
@@ -210,19 +322,38 @@ def test_a_demonstration_callback_gets_the_cached_generators_demonstrations(monk
     shutil.copy(hockey_generator, default_generator(ENV_ID))  # the cached generator, made before
     wrapper = resolved_wrapper(WRAPPER, ENV_ID, "cpu")
     callback = [{DEMONSTRATION_CALLBACK: {"fit_steps": 10}}]
-    with pytest.raises(FileNotFoundError, match=r"the cached generator's demonstrations .*generators/hockey/"
-                                                r"demonstrations are missing"):
+    with pytest.raises(
+        FileNotFoundError,
+        match=r"the cached generator's demonstrations .*generators/hockey/"
+        r"demonstrations are missing",
+    ):
         resolved_callback(callback, wrapper, ENV_ID)
     n, t = 3, 69
-    arrays = {"observations": np.zeros((n, t + 1, 2), np.float32), "actions": np.zeros((n, t, 7), np.float32),
-              "rewards": np.zeros((n, t)), "terminations": np.ones((n, t), bool), "truncations": np.zeros((n, t), bool),
-              "reached": np.zeros((n, 2)), "sampled_goals": np.zeros((n, 2))}
-    dataset = write_dataset(default_demonstrations(ENV_ID), arrays, dataset_id="genrl/hockey-v0",
-                            genrl={"task": "hockey", "horizon": t}, observation_space=spaces.Box(-1, 1, (2,), np.float32),
-                            action_space=spaces.Box(-0.5, 0.5, (7,), np.float32))
+    arrays = {
+        "observations": np.zeros((n, t + 1, 2), np.float32),
+        "actions": np.zeros((n, t, 7), np.float32),
+        "rewards": np.zeros((n, t)),
+        "terminations": np.ones((n, t), bool),
+        "truncations": np.zeros((n, t), bool),
+        "reached": np.zeros((n, 2)),
+        "sampled_goals": np.zeros((n, 2)),
+    }
+    dataset = write_dataset(
+        default_demonstrations(ENV_ID),
+        arrays,
+        dataset_id="genrl/hockey-v0",
+        genrl={"task": "hockey", "horizon": t},
+        observation_space=spaces.Box(-1, 1, (2,), np.float32),
+        action_space=spaces.Box(-0.5, 0.5, (7,), np.float32),
+    )
     (resolved,) = resolved_callback(callback, wrapper, ENV_ID)
-    assert resolved == {DEMONSTRATION_CALLBACK: {"fit_steps": 10, "dataset": str(dataset.resolve()),
-                                                 "dataset_fingerprint": dataset_fingerprint(dataset)}}
+    assert resolved == {
+        DEMONSTRATION_CALLBACK: {
+            "fit_steps": 10,
+            "dataset": str(dataset.resolve()),
+            "dataset_fingerprint": dataset_fingerprint(dataset),
+        }
+    }
     assert DemonstrationCallback(**resolved[DEMONSTRATION_CALLBACK]).dataset == str(dataset.resolve())
     with pytest.raises(ValueError, match="are not the ones this run was trained with"):
         DemonstrationCallback(**resolved[DEMONSTRATION_CALLBACK] | {"dataset_fingerprint": "0" * 16})

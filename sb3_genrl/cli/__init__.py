@@ -14,8 +14,18 @@ import sys
 import time
 from collections.abc import Callable
 
-WORKFLOW = ("play", "demos", "train-generator", "evaluate", "train-policy", "baseline", "compare", "video", "quickstart",
-            "study")
+WORKFLOW = (
+    "play",
+    "demos",
+    "train-generator",
+    "evaluate",
+    "train-policy",
+    "baseline",
+    "compare",
+    "video",
+    "quickstart",
+    "study",
+)
 # Errors that a bad argument or path raises in the library: printed as one line, exit status 2 (as argparse does).
 KNOWN_ERRORS = (ValueError, FileNotFoundError, PermissionError, FileExistsError, IsADirectoryError, NotADirectoryError)
 
@@ -26,15 +36,27 @@ def build_parser() -> argparse.ArgumentParser:
     from sb3_genrl.cli import parsers
 
     parser = argparse.ArgumentParser(
-        prog="genrl", description="GenRL for Stable-Baselines3: tasks, demonstrations, generators, evaluation, policies, "
-        "baselines and the paper's study.", epilog="The commands are listed in workflow order: play the scripted "
+        prog="genrl",
+        description="GenRL for Stable-Baselines3: tasks, demonstrations, generators, evaluation, policies, "
+        "baselines and the paper's study.",
+        epilog="The commands are listed in workflow order: play the scripted "
         "motions, make demonstrations, train a generator, evaluate it, train a GenRL policy, train baselines, compare "
-        "them, render a video; quickstart and study run the whole workflow. 'genrl COMMAND --help' for its options.")
+        "them, render a video; quickstart and study run the whole workflow. 'genrl COMMAND --help' for its options.",
+    )
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", title="commands (in workflow order)")
-    for add in (parsers.add_play, parsers.add_demos, parsers.add_train_generator, parsers.add_evaluate,
-                parsers.add_train_policy, parsers.add_baseline, parsers.add_compare, parsers.add_video,
-                parsers.add_quickstart, parsers.add_study):
+    for add in (
+        parsers.add_play,
+        parsers.add_demos,
+        parsers.add_train_generator,
+        parsers.add_evaluate,
+        parsers.add_train_policy,
+        parsers.add_baseline,
+        parsers.add_compare,
+        parsers.add_video,
+        parsers.add_quickstart,
+        parsers.add_study,
+    ):
         add(sub)
     return parser
 
@@ -67,8 +89,7 @@ def main(argv: list[str] | None = None) -> int:
     except RuntimeError as error:
         if "PytorchStreamWriter" not in str(error) and "unexpected pos" not in str(error):
             raise
-        return _fail(args.command, "error: torch could not write a file (is the disk full?): "
-                                   f"{str(error).splitlines()[0]}", 1)
+        return _fail(args.command, f"error: torch could not write a file (is the disk full?): {str(error).splitlines()[0]}", 1)
 
 
 def _fail(command: str, message: str, status: int) -> int:

@@ -21,29 +21,49 @@ def demos_command(args: argparse.Namespace) -> int:
     from sb3_genrl.envs.demonstrations import make_demonstrations
 
     began = time.perf_counter()
-    path = make_demonstrations(args.task, args.episodes, args.out, seed=args.seed, n_threads=args.threads,
-                               progress_bar=not args.no_progress_bar)
+    path = make_demonstrations(
+        args.task, args.episodes, args.out, seed=args.seed, n_threads=args.threads, progress_bar=not args.no_progress_bar
+    )
     info = dataset_info(path)
     report = json.loads((path / "coverage.json").read_text())
-    print(f"{info['episodes']} {info['task']} demonstrations ({info['drawn']} drawn) in {time.perf_counter() - began:.1f} s"
-          f" -> {path}")
-    print(f"coverage: {100 * report['coverage']:.1f}% of {report['cells']} goal-region cells of {report['cell_size']} m"
-          f" ({100 * report['in_region']:.1f}% of reached points in the region) -> {report['png']}")
+    print(
+        f"{info['episodes']} {info['task']} demonstrations ({info['drawn']} drawn) in {time.perf_counter() - began:.1f} s"
+        f" -> {path}"
+    )
+    print(
+        f"coverage: {100 * report['coverage']:.1f}% of {report['cells']} goal-region cells of {report['cell_size']} m"
+        f" ({100 * report['in_region']:.1f}% of reached points in the region) -> {report['png']}"
+    )
     return 0
 
 
 def train_generator_command(args: argparse.Namespace) -> int:
     from sb3_genrl.generative import train_generator
 
-    generator = train_generator(args.data, model=args.model, preset=args.preset, latent_dim=args.latent_dim,
-                                beta=args.beta, info_weight=args.info_weight, std_floor=args.std_floor, epochs=args.epochs,
-                                batch_size=args.batch_size, lr=args.lr, seed=args.seed, eval_every=args.eval_every,
-                                out=args.out, tensorboard_log=args.tensorboard_log and str(args.tensorboard_log),
-                                progress_bar=not args.no_progress_bar, device=args.device)
+    generator = train_generator(
+        args.data,
+        model=args.model,
+        preset=args.preset,
+        latent_dim=args.latent_dim,
+        beta=args.beta,
+        info_weight=args.info_weight,
+        std_floor=args.std_floor,
+        epochs=args.epochs,
+        batch_size=args.batch_size,
+        lr=args.lr,
+        seed=args.seed,
+        eval_every=args.eval_every,
+        out=args.out,
+        tensorboard_log=args.tensorboard_log and str(args.tensorboard_log),
+        progress_bar=not args.no_progress_bar,
+        device=args.device,
+    )
     best = next((entry for entry in generator.history if entry["epoch"] == generator.best_epoch), {})
-    print(f"{type(generator).__name__} (T={generator.horizon}, M={generator.action_dim}, N_alpha={generator.latent_dim})"
-          f" best epoch {generator.best_epoch}, selection MSE {best.get('selection_mse', float('nan')):.6g}"
-          f" -> {args.out}")
+    print(
+        f"{type(generator).__name__} (T={generator.horizon}, M={generator.action_dim}, N_alpha={generator.latent_dim})"
+        f" best epoch {generator.best_epoch}, selection MSE {best.get('selection_mse', float('nan')):.6g}"
+        f" -> {args.out}"
+    )
     return 0
 
 
@@ -54,28 +74,53 @@ def evaluate_command(args: argparse.Namespace) -> int:
 
     task = args.task
     if task is not None and not hasattr(get_task(task).env_class, "play_trajectories"):
-        print(f"{task} has no fast path (play_trajectories): the prior rollout plays its "
-              f"{args.contexts} x {args.draws} episodes through the step path")
-    evaluations = evaluate_generators(args.models, args.data, n=args.n, k=args.k, dwpr_n=args.dwpr_n,
-                                      interventions=args.interventions, seed=args.seed, out_dir=args.out,
-                                      device=args.device, task=task, contexts=args.contexts, draws=args.draws,
-                                      prior_seed=args.prior_seed, rank_by=args.rank_by,
-                                      min_precision=args.min_precision)
+        print(
+            f"{task} has no fast path (play_trajectories): the prior rollout plays its "
+            f"{args.contexts} x {args.draws} episodes through the step path"
+        )
+    evaluations = evaluate_generators(
+        args.models,
+        args.data,
+        n=args.n,
+        k=args.k,
+        dwpr_n=args.dwpr_n,
+        interventions=args.interventions,
+        seed=args.seed,
+        out_dir=args.out,
+        device=args.device,
+        task=task,
+        contexts=args.contexts,
+        draws=args.draws,
+        prior_seed=args.prior_seed,
+        rank_by=args.rank_by,
+        min_precision=args.min_precision,
+    )
     print(scorecard_markdown([evaluation.row() for evaluation in evaluations], args.rank_by, args.min_precision))
-    print(f"wrote {args.out}/scorecard.md, results.md, results.csv, results.json, precision_recall.png, "
-          "disentanglement.png")
+    print(f"wrote {args.out}/scorecard.md, results.md, results.csv, results.json, precision_recall.png, disentanglement.png")
     return 0
 
 
 def train_policy_command(args: argparse.Namespace) -> int:
     from sb3_genrl.genrl import train_policy
 
-    result = train_policy(args.task, str(args.generator), episodes=args.episodes, seed=args.seed, out_dir=args.out,
-                          n_envs=args.n_envs, device=args.device, progress_bar=not args.no_progress_bar,
-                          checkpoint_every=args.checkpoint_every or None, overwrite=args.overwrite,
-                          demonstrations=args.data and str(args.data), **policy_arguments(args))
-    print(f"GenRL on {args.task}: {result['episodes']} episodes, {result['iterations']} iterations, mean reward "
-          f"final {result['final_mean_reward']:.4g}, best {result['best_mean_reward']:.4g} -> {result['model_path']}")
+    result = train_policy(
+        args.task,
+        str(args.generator),
+        episodes=args.episodes,
+        seed=args.seed,
+        out_dir=args.out,
+        n_envs=args.n_envs,
+        device=args.device,
+        progress_bar=not args.no_progress_bar,
+        checkpoint_every=args.checkpoint_every or None,
+        overwrite=args.overwrite,
+        demonstrations=args.data and str(args.data),
+        **policy_arguments(args),
+    )
+    print(
+        f"GenRL on {args.task}: {result['episodes']} episodes, {result['iterations']} iterations, mean reward "
+        f"final {result['final_mean_reward']:.4g}, best {result['best_mean_reward']:.4g} -> {result['model_path']}"
+    )
     return 0
 
 
@@ -96,34 +141,56 @@ def policy_arguments(args: argparse.Namespace) -> dict:
     genrl_kwargs = lay_over({**genrl_kwargs, "e_step": args.e_step}, args.genrl_kwargs)
     source = "GenRL's defaults" if args.library_defaults else f"{args.task}'s entry in hyperparams/genrl.yml"
     name = f"argument --e-step/--genrl-kwargs: {source}, --e-step {args.e_step}" + (
-        ", --genrl-kwargs" if args.genrl_kwargs else "")
+        ", --genrl-kwargs" if args.genrl_kwargs else ""
+    )
     callback = genrl_kwargs.pop("callback", None)
     genrl_kwargs = check_genrl_settings(genrl_kwargs, name)
     callback_entries(callback, f"{name}: callback")
     batch_episodes = args.batch_episodes or batch_episodes
-    return genrl_kwargs | ({} if batch_episodes is None else {"batch_episodes": batch_episodes}) | (
-        {} if callback is None else {"callback": callback})
+    return (
+        genrl_kwargs
+        | ({} if batch_episodes is None else {"batch_episodes": batch_episodes})
+        | ({} if callback is None else {"callback": callback})
+    )
 
 
 def baseline_command(args: argparse.Namespace) -> int:
     from sb3_genrl.baselines.train import train_baseline
 
-    summary = train_baseline(args.algorithm, args.task, episodes=args.episodes, out_dir=args.out, seed=args.seed,
-                             demos=args.demos, demo_episodes=args.demo_episodes, generator=args.generator,
-                             bc_kwargs={"max_epochs": args.bc_max_epochs}, algorithm_kwargs=args.algorithm_kwargs,
-                             checkpoint_every=args.checkpoint_every or None, overwrite=args.overwrite,
-                             device=args.device, progress_bar=not args.no_progress_bar)
+    summary = train_baseline(
+        args.algorithm,
+        args.task,
+        episodes=args.episodes,
+        out_dir=args.out,
+        seed=args.seed,
+        demos=args.demos,
+        demo_episodes=args.demo_episodes,
+        generator=args.generator,
+        bc_kwargs={"max_epochs": args.bc_max_epochs},
+        algorithm_kwargs=args.algorithm_kwargs,
+        checkpoint_every=args.checkpoint_every or None,
+        overwrite=args.overwrite,
+        device=args.device,
+        progress_bar=not args.no_progress_bar,
+    )
     if "bc" in summary:
         bc, first = summary["bc"], summary["first_batch"]
-        print(f"behaviour cloning ({bc['epochs']} epochs, best {bc['best_epoch']}): mean distance to {bc['eval_goals']} "
-              f"held-out goals {bc['deterministic_distance']:.3f} m deterministic, {bc['sampled_distance']:.3f} m sampled;"
-              + (f" PPO's first batch ({first['episodes']} episodes) {first['mean_distance']:.3f} m"
-                 if first["episodes"] else ""))
+        print(
+            f"behaviour cloning ({bc['epochs']} epochs, best {bc['best_epoch']}): mean distance to {bc['eval_goals']} "
+            f"held-out goals {bc['deterministic_distance']:.3f} m deterministic, {bc['sampled_distance']:.3f} m sampled;"
+            + (
+                f" PPO's first batch ({first['episodes']} episodes) {first['mean_distance']:.3f} m"
+                if first["episodes"]
+                else ""
+            )
+        )
     final = summary["final_eval"]
-    print(f"{args.algorithm} on {args.task}: {summary['episodes_played']} episodes, final mean reward "
-          f"{summary['final_mean_reward']:.4g}, best {summary['best_mean_reward']:.4g}; the trained policy, "
-          f"deterministic: mean distance to {final['goals']} held-out goals {final['mean_distance']:.3f} m "
-          f"({final['object_unmoved']} of them with the object not moved) -> {args.out}")
+    print(
+        f"{args.algorithm} on {args.task}: {summary['episodes_played']} episodes, final mean reward "
+        f"{summary['final_mean_reward']:.4g}, best {summary['best_mean_reward']:.4g}; the trained policy, "
+        f"deterministic: mean distance to {final['goals']} held-out goals {final['mean_distance']:.3f} m "
+        f"({final['object_unmoved']} of them with the object not moved) -> {args.out}"
+    )
     return 0
 
 
@@ -137,8 +204,15 @@ def compare_command(args: argparse.Namespace) -> int:
 def video_command(args: argparse.Namespace) -> int:
     from sb3_genrl.video import record_video
 
-    result = record_video(args.task, args.out, policy=args.policy, generator=args.generator, goals=args.goals,
-                          seed=args.seed, trust_policy=args.trust_policy)
+    result = record_video(
+        args.task,
+        args.out,
+        policy=args.policy,
+        generator=args.generator,
+        goals=args.goals,
+        seed=args.seed,
+        trust_policy=args.trust_policy,
+    )
     print(f"wrote {result['video']} (rewards {', '.join(f'{r:.3f}' for r in result['rewards'])})")
     return 0
 
@@ -146,9 +220,18 @@ def video_command(args: argparse.Namespace) -> int:
 def quickstart_command(args: argparse.Namespace) -> int:
     from sb3_genrl.study.quickstart import quickstart
 
-    report = quickstart(args.out, task=args.task, demo_episodes=args.demo_episodes, epochs=args.epochs,
-                        policy_episodes=args.episodes, seed=args.seed, video=not args.no_video, device=args.device,
-                        progress_bar=not args.no_progress_bar, log=print)
+    report = quickstart(
+        args.out,
+        task=args.task,
+        demo_episodes=args.demo_episodes,
+        epochs=args.epochs,
+        policy_episodes=args.episodes,
+        seed=args.seed,
+        video=not args.no_video,
+        device=args.device,
+        progress_bar=not args.no_progress_bar,
+        log=print,
+    )
     print(f"wrote {report}")
     return 0
 
@@ -156,8 +239,17 @@ def quickstart_command(args: argparse.Namespace) -> int:
 def study_command(args: argparse.Namespace) -> int:
     from sb3_genrl.study import MODELS, run_study
 
-    report = run_study(args.task, args.scale, args.out, executor=args.executor, address=args.address,
-                       workers=args.workers, models=tuple(args.models) if args.models else MODELS, device=args.device,
-                       connect_timeout=args.ray_timeout, log=print)
+    report = run_study(
+        args.task,
+        args.scale,
+        args.out,
+        executor=args.executor,
+        address=args.address,
+        workers=args.workers,
+        models=tuple(args.models) if args.models else MODELS,
+        device=args.device,
+        connect_timeout=args.ray_timeout,
+        log=print,
+    )
     print(f"wrote {report}")
     return 0

@@ -28,14 +28,26 @@ from sb3_genrl.cli import commands
 from sb3_genrl.metrics.scorecard import NOT_CONVERGED_PRECISION, RANK_MEASURES
 
 
-def _task_option(parser: argparse.ArgumentParser, *, required: bool = True, default: str | None = None,
-                 extra: tuple[str, ...] = (), nargs: str | None = None, arm_only: bool = False) -> None:
+def _task_option(
+    parser: argparse.ArgumentParser,
+    *,
+    required: bool = True,
+    default: str | None = None,
+    extra: tuple[str, ...] = (),
+    nargs: str | None = None,
+    arm_only: bool = False,
+) -> None:
     from sb3_genrl.envs import TASKS, arm_tasks
 
-    parser.add_argument("--task", required=required, default=default, choices=(*(arm_tasks() if arm_only else TASKS),
-                                                                                  *extra), nargs=nargs,
-                        help=("a task on the package's arm" if arm_only else "a registered task")
-                        + (f" (default: {default})" if default else ""))
+    parser.add_argument(
+        "--task",
+        required=required,
+        default=default,
+        choices=(*(arm_tasks() if arm_only else TASKS), *extra),
+        nargs=nargs,
+        help=("a task on the package's arm" if arm_only else "a registered task")
+        + (f" (default: {default})" if default else ""),
+    )
 
 
 def _seed_option(parser: argparse.ArgumentParser, text: str = "seed of every random draw") -> None:
@@ -43,8 +55,12 @@ def _seed_option(parser: argparse.ArgumentParser, text: str = "seed of every ran
 
 
 def _device_option(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--device", type=option(check_device), default="auto",
-                        help="torch device: auto, cpu, cuda, cuda:N, mps (default: auto)")
+    parser.add_argument(
+        "--device",
+        type=option(check_device),
+        default="auto",
+        help="torch device: auto, cpu, cuda, cuda:N, mps (default: auto)",
+    )
 
 
 def _progress_option(parser: argparse.ArgumentParser) -> None:
@@ -52,9 +68,12 @@ def _progress_option(parser: argparse.ArgumentParser) -> None:
 
 
 def _overwrite_option(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--overwrite", action="store_true",
-                        help="replace a run already in --out (its files only); without it, the same command finishes or "
-                             "resumes that run and another run's folder is refused")
+    parser.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace a run already in --out (its files only); without it, the same command finishes or "
+        "resumes that run and another run's folder is refused",
+    )
 
 
 def add_play(sub: argparse._SubParsersAction) -> None:
@@ -69,8 +88,9 @@ def add_demos(sub: argparse._SubParsersAction) -> None:
     demos = sub.add_parser("demos", help="generate a task's demonstrations as a Minari dataset, with a coverage report")
     _task_option(demos)
     demos.add_argument("--episodes", type=EPISODES, default=40000, help="valid demonstrations to keep (paper: 40000)")
-    demos.add_argument("--out", required=True, type=option(_check_dataset_out),
-                       help="dataset folder to create (must not exist or be empty)")
+    demos.add_argument(
+        "--out", required=True, type=option(_check_dataset_out), help="dataset folder to create (must not exist or be empty)"
+    )
     _seed_option(demos)
     demos.add_argument("--threads", type=COUNT, default=None, help="simulation threads (default: available cores)")
     _progress_option(demos)
@@ -96,14 +116,20 @@ def add_train_generator(sub: argparse._SubParsersAction) -> None:
     gen = sub.add_parser("train-generator", help="train a beta-VAE or InfoGAN on demonstration trajectories")
     gen.add_argument("--data", required=True, type=EXISTING, help="demonstration dataset or .npy/.npz (N, T, M) array")
     gen.add_argument("--model", choices=("vae", "gan"), default=None, help="model kind (default: vae)")
-    gen.add_argument("--preset", type=str.upper, choices=tuple(PRESETS), default=None,
-                     help="paper table 1 model: VAE1..VAE9 or GAN1..GAN9")
+    gen.add_argument(
+        "--preset", type=str.upper, choices=tuple(PRESETS), default=None, help="paper table 1 model: VAE1..VAE9 or GAN1..GAN9"
+    )
     gen.add_argument("--latent-dim", type=COUNT, default=None, help="latent dimension N_alpha")
     gen.add_argument("--beta", type=option(check_non_negative_float, float), default=None, help="KL weight (beta-VAE)")
-    gen.add_argument("--info-weight", type=option(check_non_negative_float, float), default=None,
-                     help="information weight lambda (InfoGAN)")
-    gen.add_argument("--std-floor", type=option(check_positive_float, float), default=None,
-                     help="floor of each normalisation std as a fraction of the largest (default 0.05)")
+    gen.add_argument(
+        "--info-weight", type=option(check_non_negative_float, float), default=None, help="information weight lambda (InfoGAN)"
+    )
+    gen.add_argument(
+        "--std-floor",
+        type=option(check_positive_float, float),
+        default=None,
+        help="floor of each normalisation std as a fraction of the largest (default 0.05)",
+    )
     gen.add_argument("--epochs", type=COUNT, default=5000, help="training epochs (paper: 5000)")
     gen.add_argument("--batch-size", type=COUNT, default=256, help="minibatch size (paper: 256)")
     gen.add_argument("--lr", type=option(check_positive_float, float), default=2e-4, help="Adam learning rate (2e-4)")
@@ -117,11 +143,15 @@ def add_train_generator(sub: argparse._SubParsersAction) -> None:
 
 
 def add_evaluate(sub: argparse._SubParsersAction) -> None:
-    evaluate = sub.add_parser("evaluate", help="precision/recall, DwPR, density/coverage and, with --task, the prior "
-                              "rollout of trained generators: a ranked scorecard (paper section 5.2)")
+    evaluate = sub.add_parser(
+        "evaluate",
+        help="precision/recall, DwPR, density/coverage and, with --task, the prior "
+        "rollout of trained generators: a ranked scorecard (paper section 5.2)",
+    )
     evaluate.add_argument("models", nargs="+", type=EXISTING, metavar="MODEL_FILE", help="trained generator files")
-    evaluate.add_argument("--data", required=True, type=EXISTING,
-                          help="real trajectories: demonstration dataset or .npy/.npz (N, T, M) array")
+    evaluate.add_argument(
+        "--data", required=True, type=EXISTING, help="real trajectories: demonstration dataset or .npy/.npz (N, T, M) array"
+    )
     evaluate.add_argument("--out", required=True, type=OUT_DIR, help="output folder (results.csv/.md/.json, plots)")
     evaluate.add_argument("--n", type=COUNT, default=15000, help="real and generated samples, at most the data's (15000)")
     evaluate.add_argument("--dwpr-n", type=COUNT, default=10000, help="DwPR samples per intervention (paper: 10000)")
@@ -132,13 +162,22 @@ def add_evaluate(sub: argparse._SubParsersAction) -> None:
     _task_option(evaluate, required=False)
     evaluate.add_argument("--contexts", type=COUNT, default=64, help="prior rollout (with --task): goals (64)")
     evaluate.add_argument("--draws", type=COUNT, default=16, help="prior rollout: prior draws per goal (16)")
-    evaluate.add_argument("--prior-seed", type=SEED, default=4242,
-                          help="prior rollout: seed of its goals (4242: neither the final evaluations' nor the tuning's)")
-    evaluate.add_argument("--rank-by", default=None, choices=RANK_MEASURES,
-                          help="the measure the scorecard ranks by (default: recall)")
-    evaluate.add_argument("--min-precision", type=option(check_fraction, float), default=NOT_CONVERGED_PRECISION,
-                          help="precision below which a model is marked not converged and ranked last "
-                               f"(default: {NOT_CONVERGED_PRECISION}; 0: none, e.g. for a VAE with a small KL weight)")
+    evaluate.add_argument(
+        "--prior-seed",
+        type=SEED,
+        default=4242,
+        help="prior rollout: seed of its goals (4242: neither the final evaluations' nor the tuning's)",
+    )
+    evaluate.add_argument(
+        "--rank-by", default=None, choices=RANK_MEASURES, help="the measure the scorecard ranks by (default: recall)"
+    )
+    evaluate.add_argument(
+        "--min-precision",
+        type=option(check_fraction, float),
+        default=NOT_CONVERGED_PRECISION,
+        help="precision below which a model is marked not converged and ranked last "
+        f"(default: {NOT_CONVERGED_PRECISION}; 0: none, e.g. for a VAE with a small KL weight)",
+    )
     evaluate.set_defaults(func=commands.evaluate_command)
 
 
@@ -148,30 +187,52 @@ def add_train_policy(sub: argparse._SubParsersAction) -> None:
     policy = sub.add_parser("train-policy", help="train a GenRL policy over a generator's latent space (Algorithm 1)")
     _task_option(policy)
     policy.add_argument("--generator", required=True, type=EXISTING, help="file of a trained generator")
-    policy.add_argument("--data", type=EXISTING, default=None,
-                        help="the demonstration dataset, for a task whose settings learn from demonstrations (the "
-                             "Fetch tasks': their callback sb3_genrl.genrl.demonstrations.DemonstrationCallback); the "
-                             "generator's own dataset, as genrl demos wrote it")
+    policy.add_argument(
+        "--data",
+        type=EXISTING,
+        default=None,
+        help="the demonstration dataset, for a task whose settings learn from demonstrations (the "
+        "Fetch tasks': their callback sb3_genrl.genrl.demonstrations.DemonstrationCallback); the "
+        "generator's own dataset, as genrl demos wrote it",
+    )
     policy.add_argument("--episodes", type=EPISODES, required=True, help="episodes (trajectories played) in total")
     _seed_option(policy)
     policy.add_argument("--out", required=True, type=OUT_DIR, help="output folder (model, learning curve, logs)")
     policy.add_argument("--e-step", choices=("trpo", "kl_penalty"), default="trpo", help="E-step variant")
-    policy.add_argument("--batch-episodes", type=option(check_int, int, minimum=2), default=None,
-                        help="episodes per EM iteration N, at least 2 (default: the task's, or 64 with "
-                             "--library-defaults)")
-    policy.add_argument("--n-envs", type=COUNT, default=1,
-                        help="envs played at a time, a divisor of --batch-episodes (default 1): on the arm tasks "
-                             "in one threaded simulation call per step on all cores, on others one process each")
-    policy.add_argument("--library-defaults", action="store_true",
-                        help="GenRL's own defaults instead of the task's settings and batch_episodes "
-                             "(its entry in hyperparams/genrl.yml)")
-    policy.add_argument("--genrl-kwargs", type=json_object_argument, default={}, metavar="JSON",
-                        help="GenRL settings laid over the task's (or, with --library-defaults, GenRL's defaults), "
-                             "a mapping merged into a mapping, e.g. '{\"hindsight_kwargs\": {\"history\": 30}}' or "
-                             "'{\"hindsight_kwargs\": null}' (hindsight off); checked before any work")
-    policy.add_argument("--checkpoint-every", type=option(check_int, int, minimum=0), default=CHECKPOINT_EVERY,
-                        help="episodes between checkpoints; a rerun of the same command into the same --out resumes "
-                             f"from the last one (0: none; default {CHECKPOINT_EVERY})")
+    policy.add_argument(
+        "--batch-episodes",
+        type=option(check_int, int, minimum=2),
+        default=None,
+        help="episodes per EM iteration N, at least 2 (default: the task's, or 64 with --library-defaults)",
+    )
+    policy.add_argument(
+        "--n-envs",
+        type=COUNT,
+        default=1,
+        help="envs played at a time, a divisor of --batch-episodes (default 1): on the arm tasks "
+        "in one threaded simulation call per step on all cores, on others one process each",
+    )
+    policy.add_argument(
+        "--library-defaults",
+        action="store_true",
+        help="GenRL's own defaults instead of the task's settings and batch_episodes (its entry in hyperparams/genrl.yml)",
+    )
+    policy.add_argument(
+        "--genrl-kwargs",
+        type=json_object_argument,
+        default={},
+        metavar="JSON",
+        help="GenRL settings laid over the task's (or, with --library-defaults, GenRL's defaults), "
+        'a mapping merged into a mapping, e.g. \'{"hindsight_kwargs": {"history": 30}}\' or '
+        "'{\"hindsight_kwargs\": null}' (hindsight off); checked before any work",
+    )
+    policy.add_argument(
+        "--checkpoint-every",
+        type=option(check_int, int, minimum=0),
+        default=CHECKPOINT_EVERY,
+        help="episodes between checkpoints; a rerun of the same command into the same --out resumes "
+        f"from the last one (0: none; default {CHECKPOINT_EVERY})",
+    )
     _overwrite_option(policy)
     _device_option(policy)
     _progress_option(policy)
@@ -181,24 +242,40 @@ def add_train_policy(sub: argparse._SubParsersAction) -> None:
 def add_baseline(sub: argparse._SubParsersAction) -> None:
     from sb3_genrl.baselines import BASELINES
 
-    baseline = sub.add_parser("baseline", help="train PPO (BC), SAC (with or without prefilled buffer), SAC+HER, or a "
-                              "stock algorithm on the latent space")
+    baseline = sub.add_parser(
+        "baseline",
+        help="train PPO (BC), SAC (with or without prefilled buffer), SAC+HER, or a stock algorithm on the latent space",
+    )
     baseline.add_argument("algorithm", choices=BASELINES)
     _task_option(baseline, arm_only=True)
-    baseline.add_argument("--demos", type=EXISTING, default=None,
-                          help="demonstration dataset (ppo, sac, sac-no-prefill, sac-her)")
+    baseline.add_argument(
+        "--demos", type=EXISTING, default=None, help="demonstration dataset (ppo, sac, sac-no-prefill, sac-her)"
+    )
     baseline.add_argument("--demo-episodes", type=COUNT, default=None, help="use the first N demonstrations (default all)")
     baseline.add_argument("--generator", type=EXISTING, default=None, help="generator file (latent-ppo/-sac/-trpo)")
     baseline.add_argument("--episodes", type=EPISODES, required=True, help="budget of episodes")
     _seed_option(baseline)
-    baseline.add_argument("--algorithm-kwargs", type=json_object_argument, default=None, metavar="JSON",
-                          help="changes to the rl-zoo3 settings, as arguments of the SB3 class, e.g. "
-                               "'{\"target_kl\": 0.02}' for ppo (default: none)")
-    baseline.add_argument("--bc-max-epochs", type=COUNT, default=200,
-                          help="most behaviour cloning epochs; it stops earlier on its held-out loss (ppo)")
-    baseline.add_argument("--checkpoint-every", type=option(check_int, int, minimum=0), default=250,
-                          help="episodes between checkpoints of sac, sac-no-prefill and sac-her; a rerun into the same "
-                               "--out resumes from the last one (0: none; default 250)")
+    baseline.add_argument(
+        "--algorithm-kwargs",
+        type=json_object_argument,
+        default=None,
+        metavar="JSON",
+        help="changes to the rl-zoo3 settings, as arguments of the SB3 class, e.g. "
+        "'{\"target_kl\": 0.02}' for ppo (default: none)",
+    )
+    baseline.add_argument(
+        "--bc-max-epochs",
+        type=COUNT,
+        default=200,
+        help="most behaviour cloning epochs; it stops earlier on its held-out loss (ppo)",
+    )
+    baseline.add_argument(
+        "--checkpoint-every",
+        type=option(check_int, int, minimum=0),
+        default=250,
+        help="episodes between checkpoints of sac, sac-no-prefill and sac-her; a rerun into the same "
+        "--out resumes from the last one (0: none; default 250)",
+    )
     _overwrite_option(baseline)
     _device_option(baseline)
     _progress_option(baseline)
@@ -222,13 +299,21 @@ def add_video(sub: argparse._SubParsersAction) -> None:
     source = video.add_mutually_exclusive_group(required=True)
     source.add_argument("--policy", type=EXISTING, help="a GenRL run folder or model zip")
     source.add_argument("--generator", type=EXISTING, help="a generator file (random latent actions)")
-    video.add_argument("--trust-policy", action="store_true",
-                       help="unpickle the policy zip as SB3 does (runs code stored in it: only for trusted files)")
-    video.add_argument("--goals", type=option(check_int, int, minimum=1, maximum=MAX_VIDEO_EPISODES), default=6,
-                       help=f"episodes (goals) to show, at most {MAX_VIDEO_EPISODES} (default 6)")
+    video.add_argument(
+        "--trust-policy",
+        action="store_true",
+        help="unpickle the policy zip as SB3 does (runs code stored in it: only for trusted files)",
+    )
+    video.add_argument(
+        "--goals",
+        type=option(check_int, int, minimum=1, maximum=MAX_VIDEO_EPISODES),
+        default=6,
+        help=f"episodes (goals) to show, at most {MAX_VIDEO_EPISODES} (default 6)",
+    )
     _seed_option(video, "seed of the goals (and of the latent actions)")
-    video.add_argument("--out", required=True, type=option(check_output_file, suffixes=VIDEO_SUFFIXES),
-                       help="output file, .mp4 or .gif")
+    video.add_argument(
+        "--out", required=True, type=option(check_output_file, suffixes=VIDEO_SUFFIXES), help="output file, .mp4 or .gif"
+    )
     video.set_defaults(func=commands.video_command)
 
 
@@ -240,11 +325,18 @@ def add_quickstart(sub: argparse._SubParsersAction) -> None:
     quick = sub.add_parser("quickstart", help="demonstrations -> VAE -> evaluation -> GenRL policy -> report, in minutes")
     quick.add_argument("--out", required=True, type=OUT_DIR, help="output folder (a rerun resumes it)")
     _task_option(quick, required=False, default=DEFAULT_TASK)
-    quick.add_argument("--demo-episodes", type=option(check_int, int, minimum=MIN_DEMO_EPISODES, maximum=MAX_EPISODES),
-                       default=4000, help=f"demonstrations to generate, at least {MIN_DEMO_EPISODES} (default 4000)")
+    quick.add_argument(
+        "--demo-episodes",
+        type=option(check_int, int, minimum=MIN_DEMO_EPISODES, maximum=MAX_EPISODES),
+        default=4000,
+        help=f"demonstrations to generate, at least {MIN_DEMO_EPISODES} (default 4000)",
+    )
     quick.add_argument("--epochs", type=COUNT, default=300, help="beta-VAE training epochs (default 300)")
-    own = ", ".join(f"{name} {load_hyperparams('genrl', spec.env_id)['n_timesteps']}" for name, spec in TASKS.items()
-                    if spec.env_id in known_env_ids("genrl"))
+    own = ", ".join(
+        f"{name} {load_hyperparams('genrl', spec.env_id)['n_timesteps']}"
+        for name, spec in TASKS.items()
+        if spec.env_id in known_env_ids("genrl")
+    )
     quick.add_argument("--episodes", type=EPISODES, default=None, help=f"GenRL episodes (default: the task's own: {own})")
     _seed_option(quick)
     quick.add_argument("--no-video", action="store_true", help="skip rendering the policy")
@@ -262,8 +354,12 @@ def add_study(sub: argparse._SubParsersAction) -> None:
     study.add_argument("--out", required=True, type=OUT_DIR, help="study folder (a rerun resumes it)")
     study.add_argument("--executor", choices=("local", "ray"), default="local", help="worker processes or Ray tasks")
     study.add_argument("--address", default=None, help="Ray cluster address (ray executor)")
-    study.add_argument("--ray-timeout", type=option(check_positive_float, float), default=30.0,
-                       help="seconds to connect to --address (default 30)")
+    study.add_argument(
+        "--ray-timeout",
+        type=option(check_positive_float, float),
+        default=30.0,
+        help="seconds to connect to --address (default 30)",
+    )
     study.add_argument("--workers", type=COUNT, default=None, help="local worker processes (default: the cores)")
     study.add_argument("--models", nargs="+", choices=MODELS, default=None, help="a subset of VAE1..GAN9 (default all)")
     _device_option(study)

@@ -12,5 +12,13 @@ from sb3_genrl.data.minari_io import (
 )
 from sb3_genrl.data.trajectories import load_trajectories
 
-__all__ = ["dataset_info", "load_actions", "load_arrays", "load_reached", "load_trajectories", "load_transitions",
-           "read_metadata", "write_dataset"]
+__all__ = [
+    "dataset_info",
+    "load_actions",
+    "load_arrays",
+    "load_reached",
+    "load_trajectories",
+    "load_transitions",
+    "read_metadata",
+    "write_dataset",
+]

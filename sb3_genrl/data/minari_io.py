@@ -69,8 +69,9 @@ def read_metadata(path: str | os.PathLike[str]) -> dict[str, Any]:
     except (OSError, json.JSONDecodeError) as error:
         raise ValueError(f"cannot read the dataset metadata {str(data_dir / METADATA_FILE)!r}: {error}") from None
     if not isinstance(metadata, dict) or not isinstance(metadata.get("genrl"), dict):
-        raise ValueError(f"{str(path)!r} is a Minari dataset but not an sb3-genrl demonstration dataset "
-                         "(its metadata has no 'genrl' entry)")
+        raise ValueError(
+            f"{str(path)!r} is a Minari dataset but not an sb3-genrl demonstration dataset (its metadata has no 'genrl' entry)"
+        )
     return metadata
 
 
@@ -95,8 +96,9 @@ def _check_expected(info: dict[str, Any], path: str | os.PathLike[str], task: st
         raise ValueError(f"dataset {str(path)!r} has horizon {info.get('horizon')}, expected {horizon}")
 
 
-def load_arrays(path: str | os.PathLike[str], *, task: str | None = None, horizon: int | None = None,
-                keys: tuple[str, ...] = _ARRAY_KEYS) -> dict[str, np.ndarray]:
+def load_arrays(
+    path: str | os.PathLike[str], *, task: str | None = None, horizon: int | None = None, keys: tuple[str, ...] = _ARRAY_KEYS
+) -> dict[str, np.ndarray]:
     """All episodes of a dataset as stacked arrays (see the module docstring for their names and shapes).
 
     :param path: the dataset directory
@@ -117,8 +119,9 @@ def load_arrays(path: str | os.PathLike[str], *, task: str | None = None, horizo
     for key in set(keys) & set(_FINITE_KEYS):
         bad = int(np.size(arrays[key]) - np.count_nonzero(np.isfinite(arrays[key])))
         if bad:
-            raise ValueError(f"{str(source)!r} is damaged or was written wrongly: its {key} hold {bad} non-finite "
-                             "values (nan or inf)")
+            raise ValueError(
+                f"{str(source)!r} is damaged or was written wrongly: its {key} hold {bad} non-finite values (nan or inf)"
+            )
     return {key: arrays[key] for key in keys}
 
 
@@ -128,8 +131,9 @@ def _load_npz(arrays_file: Path, keys: tuple[str, ...]) -> dict[str, np.ndarray]
             missing = [key for key in keys if key not in stored.files]
             arrays = {key: stored[key] for key in keys if key in stored.files}
     except _READ_ERRORS as error:
-        raise ValueError(f"{str(arrays_file)!r} is damaged (truncated or overwritten?) and cannot be read: "
-                         f"{type(error).__name__}: {error}") from None
+        raise ValueError(
+            f"{str(arrays_file)!r} is damaged (truncated or overwritten?) and cannot be read: {type(error).__name__}: {error}"
+        ) from None
     if missing:
         raise ValueError(f"{str(arrays_file)!r} lacks the arrays {missing}")
     return arrays
@@ -145,8 +149,9 @@ def _check_hdf5_opens(hdf5_file: Path) -> None:
         with h5py.File(hdf5_file, "r") as storage:
             len(storage)
     except _READ_ERRORS as error:
-        raise ValueError(f"{str(hdf5_file)!r} is damaged (truncated or overwritten?) and cannot be opened: "
-                         f"{type(error).__name__}: {error}") from None
+        raise ValueError(
+            f"{str(hdf5_file)!r} is damaged (truncated or overwritten?) and cannot be opened: {type(error).__name__}: {error}"
+        ) from None
 
 
 def _load_with_minari(data_dir: Path) -> dict[str, np.ndarray]:
@@ -159,8 +164,10 @@ def _load_with_minari(data_dir: Path) -> dict[str, np.ndarray]:
         arrays = {key: np.stack([episode[key] for episode in episodes]) for key in _ARRAY_KEYS[:5]}
         metadata = list(storage.get_episode_metadata(range(storage.total_episodes)))
     except (ImportError, *_READ_ERRORS) as error:
-        raise ValueError(f"cannot read the episodes of {str(data_dir / HDF5_FILE)!r}: there is no {ARRAYS_FILE} and "
-                         f"Minari's storage failed, the file may be damaged ({type(error).__name__}: {error})") from None
+        raise ValueError(
+            f"cannot read the episodes of {str(data_dir / HDF5_FILE)!r}: there is no {ARRAYS_FILE} and "
+            f"Minari's storage failed, the file may be damaged ({type(error).__name__}: {error})"
+        ) from None
     for key in ("reached", "sampled_goals"):
         arrays[key] = np.array([m.get(key, [np.nan, np.nan]) for m in metadata], dtype=np.float64)
     return arrays
@@ -207,9 +214,17 @@ def load_transitions(path: str | os.PathLike[str], *, task: str | None = None) -
     }
 
 
-def write_dataset(path: str | os.PathLike[str], arrays: dict[str, np.ndarray], *, dataset_id: str,
-                  observation_space: gym.spaces.Box, action_space: gym.spaces.Box, genrl: dict[str, Any],
-                  description: str = "", extra_files: Callable[[Path], Any] | None = None) -> Path:
+def write_dataset(
+    path: str | os.PathLike[str],
+    arrays: dict[str, np.ndarray],
+    *,
+    dataset_id: str,
+    observation_space: gym.spaces.Box,
+    action_space: gym.spaces.Box,
+    genrl: dict[str, Any],
+    description: str = "",
+    extra_files: Callable[[Path], Any] | None = None,
+) -> Path:
     """Write a demonstration dataset atomically (temporary sibling directory, renamed at the end).
 
     The temporary directory ``.NAME.partial-PID-HEX`` of a killed writer is removed by the next write of ``path``
@@ -248,15 +263,27 @@ def write_dataset(path: str | os.PathLike[str], arrays: dict[str, np.ndarray], *
         has_hdf5 = importlib.util.find_spec("h5py") is not None
         if has_hdf5:
             _write_minari_hdf5(data_dir, arrays, observation_space, action_space)
-        metadata = json.loads((data_dir / METADATA_FILE).read_text()) if has_hdf5 else {
-            "data_format": "none", "jpeg_encoding": False,
-            "observation_space": serialize_space(observation_space), "action_space": serialize_space(action_space)}
+        metadata = (
+            json.loads((data_dir / METADATA_FILE).read_text())
+            if has_hdf5
+            else {
+                "data_format": "none",
+                "jpeg_encoding": False,
+                "observation_space": serialize_space(observation_space),
+                "action_space": serialize_space(action_space),
+            }
+        )
         import minari
 
-        metadata.update(dataset_id=dataset_id, total_episodes=int(n), total_steps=int(n * steps),
-                        minari_version=minari.__version__, description=description,
-                        algorithm_name="scripted expert with joint-velocity perturbations",
-                        genrl={**genrl, "episodes": int(n), "storage": ["npz"] + (["hdf5"] if has_hdf5 else [])})
+        metadata.update(
+            dataset_id=dataset_id,
+            total_episodes=int(n),
+            total_steps=int(n * steps),
+            minari_version=minari.__version__,
+            description=description,
+            algorithm_name="scripted expert with joint-velocity perturbations",
+            genrl={**genrl, "episodes": int(n), "storage": ["npz"] + (["hdf5"] if has_hdf5 else [])},
+        )
         (data_dir / METADATA_FILE).write_text(json.dumps(metadata, indent=1, default=_json_default))
         if extra_files is not None:
             extra_files(tmp)
@@ -279,7 +306,7 @@ def remove_stale_partials(path: str | os.PathLike[str]) -> list[Path]:
     path = Path(path).absolute()
     removed = []
     for candidate in path.parent.glob(f".{glob.escape(path.name)}.partial-*-*"):
-        pid = candidate.name[len(path.name) + len(".partial-") + 1:].split("-", 1)[0]
+        pid = candidate.name[len(path.name) + len(".partial-") + 1 :].split("-", 1)[0]
         if candidate.is_dir() and pid.isdigit() and not _running(int(pid)):
             shutil.rmtree(candidate, ignore_errors=True)
             removed.append(candidate)
@@ -302,21 +329,32 @@ def _running(pid: int) -> bool:
         return True
 
 
-def _write_minari_hdf5(data_dir: Path, arrays: dict[str, np.ndarray], observation_space: gym.spaces.Box,
-                       action_space: gym.spaces.Box) -> None:
+def _write_minari_hdf5(
+    data_dir: Path, arrays: dict[str, np.ndarray], observation_space: gym.spaces.Box, action_space: gym.spaces.Box
+) -> None:
     """Minari's own HDF5 episode storage, through its storage API."""
     from minari.data_collector.episode_buffer import EpisodeBuffer
     from minari.dataset.minari_storage import MinariStorage
 
-    storage = MinariStorage.new(data_dir, observation_space=observation_space, action_space=action_space,
-                                data_format="hdf5", jpeg_encoding=False)
-    buffers = (EpisodeBuffer(id=i, observations=arrays["observations"][i], actions=arrays["actions"][i],
-                             rewards=arrays["rewards"][i], terminations=arrays["terminations"][i],
-                             truncations=arrays["truncations"][i], infos={})
-               for i in range(len(arrays["actions"])))
+    storage = MinariStorage.new(
+        data_dir, observation_space=observation_space, action_space=action_space, data_format="hdf5", jpeg_encoding=False
+    )
+    buffers = (
+        EpisodeBuffer(
+            id=i,
+            observations=arrays["observations"][i],
+            actions=arrays["actions"][i],
+            rewards=arrays["rewards"][i],
+            terminations=arrays["terminations"][i],
+            truncations=arrays["truncations"][i],
+            infos={},
+        )
+        for i in range(len(arrays["actions"]))
+    )
     storage.update_episodes(buffers)
-    storage.update_episode_metadata([{"reached": r, "sampled_goals": g}
-                                     for r, g in zip(arrays["reached"], arrays["sampled_goals"], strict=True)])
+    storage.update_episode_metadata(
+        [{"reached": r, "sampled_goals": g} for r, g in zip(arrays["reached"], arrays["sampled_goals"], strict=True)]
+    )
 
 
 def _json_default(value: Any) -> Any:

@@ -25,8 +25,9 @@ def check_trajectories(trajectories: np.ndarray, horizon: int, action_dim: int) 
     if not np.issubdtype(array.dtype, np.number):
         raise ValueError(f"trajectories must be a numeric array, got dtype {array.dtype}")
     if array.ndim != 3 or array.shape[1:] != (horizon, action_dim):
-        raise ValueError(f"trajectories must have shape (N, {horizon}, {action_dim}) (N, horizon, action_dim), "
-                         f"got {array.shape}")
+        raise ValueError(
+            f"trajectories must have shape (N, {horizon}, {action_dim}) (N, horizon, action_dim), got {array.shape}"
+        )
     if array.shape[0] < 2:
         raise ValueError(f"at least 2 trajectories are needed for training, got {array.shape[0]}")
     if not np.all(np.isfinite(array)):
@@ -34,8 +35,9 @@ def check_trajectories(trajectories: np.ndarray, horizon: int, action_dim: int) 
     return array.astype(np.float32, copy=False)
 
 
-def split_train_validation(trajectories: np.ndarray, validation_fraction: float,
-                           rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+def split_train_validation(
+    trajectories: np.ndarray, validation_fraction: float, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
     """Randomly split trajectories into a training set and a held-out set used for model selection.
 
     :param trajectories: ``(N, T, M)`` array
@@ -51,8 +53,10 @@ def split_train_validation(trajectories: np.ndarray, validation_fraction: float,
     if validation_fraction > 0:
         n_held_out = max(n_held_out, 1)
     if n - n_held_out < 2:
-        raise ValueError(f"validation_fraction={validation_fraction} leaves {n - n_held_out} of {n} trajectories for "
-                         "training; at least 2 are needed")
+        raise ValueError(
+            f"validation_fraction={validation_fraction} leaves {n - n_held_out} of {n} trajectories for "
+            "training; at least 2 are needed"
+        )
     permutation = rng.permutation(n)
     return trajectories[permutation[n_held_out:]], trajectories[permutation[:n_held_out]]
 
@@ -97,7 +101,7 @@ def selection_mse(generated: np.ndarray, reference: np.ndarray, chunk_size: int 
     best = np.full(len(generated), np.inf)
     generated_norms = np.sum(generated**2, axis=1)
     for start in range(0, len(reference), chunk_size):
-        chunk = reference[start:start + chunk_size]
+        chunk = reference[start : start + chunk_size]
         squared = generated_norms[:, None] - 2.0 * generated @ chunk.T + np.sum(chunk**2, axis=1)[None, :]
         best = np.minimum(best, squared.min(axis=1))
     return float(np.maximum(best, 0.0).mean() / generated.shape[1])
@@ -107,5 +111,5 @@ def minibatch_indices(n: int, batch_size: int, permutation: np.ndarray) -> list[
     """Split a permutation of ``range(n)`` into minibatches, dropping a last batch of one (batch norm needs two)."""
     if batch_size < 2:
         raise ValueError(f"batch_size must be at least 2 (batch normalisation), got {batch_size}")
-    batches = [permutation[start:start + batch_size] for start in range(0, n, batch_size)]
+    batches = [permutation[start : start + batch_size] for start in range(0, n, batch_size)]
     return [batch for batch in batches if len(batch) >= 2]

@@ -47,35 +47,52 @@ class InfoGAN(TorchTrajectoryGenerator):
 
     decoder_name = "generator"
 
-    def __init__(self, horizon: int, action_dim: int, latent_dim: int, *, info_weight: float, noise_dim: int = 0,
-                 std_floor: float = STD_FLOOR, device: torch.device | str = "auto") -> None:
+    def __init__(
+        self,
+        horizon: int,
+        action_dim: int,
+        latent_dim: int,
+        *,
+        info_weight: float,
+        noise_dim: int = 0,
+        std_floor: float = STD_FLOOR,
+        device: torch.device | str = "auto",
+    ) -> None:
         if not 0 <= info_weight < math.inf:
             raise ValueError(f"info_weight must be non-negative and finite, got {info_weight}")
         if int(noise_dim) != noise_dim or noise_dim < 0:
             raise ValueError(f"noise_dim must be a non-negative integer, got {noise_dim!r}")
         self.info_weight = float(info_weight)
         self.noise_dim = int(noise_dim)
-        super().__init__(horizon=horizon, action_dim=action_dim, latent_dim=latent_dim, prior="uniform",
-                         std_floor=std_floor, device=device)
+        super().__init__(
+            horizon=horizon, action_dim=action_dim, latent_dim=latent_dim, prior="uniform", std_floor=std_floor, device=device
+        )
 
     def _hyperparameters(self) -> dict[str, Any]:
         return {"info_weight": self.info_weight, "noise_dim": self.noise_dim}
 
     def _build_networks(self) -> nn.ModuleDict:
         trajectory_size = self.horizon * self.action_dim
-        return nn.ModuleDict({"generator": make_decoder(self.latent_dim + self.noise_dim, trajectory_size),
-                              "discriminator": DiscriminatorWithQ(trajectory_size, self.latent_dim)})
+        return nn.ModuleDict(
+            {
+                "generator": make_decoder(self.latent_dim + self.noise_dim, trajectory_size),
+                "discriminator": DiscriminatorWithQ(trajectory_size, self.latent_dim),
+            }
+        )
 
     def _make_optimizers(self, lr: float) -> list[torch.optim.Optimizer]:
-        return [torch.optim.Adam(self.networks["discriminator"].parameters(), lr=lr, betas=GAN_ADAM_BETAS),
-                torch.optim.Adam(self.networks["generator"].parameters(), lr=lr, betas=GAN_ADAM_BETAS)]
+        return [
+            torch.optim.Adam(self.networks["discriminator"].parameters(), lr=lr, betas=GAN_ADAM_BETAS),
+            torch.optim.Adam(self.networks["generator"].parameters(), lr=lr, betas=GAN_ADAM_BETAS),
+        ]
 
     def _decoder_input(self, alpha: torch.Tensor) -> torch.Tensor:
         # Decoding fixes the incompressible noise (if any) to its prior mean 0.
         return torch.cat([alpha, alpha.new_zeros(len(alpha), self.noise_dim)], dim=1) if self.noise_dim else alpha
 
-    def _train_step(self, batch: torch.Tensor, optimizers: list[torch.optim.Optimizer],
-                    generator: torch.Generator) -> dict[str, float]:
+    def _train_step(
+        self, batch: torch.Tensor, optimizers: list[torch.optim.Optimizer], generator: torch.Generator
+    ) -> dict[str, float]:
         discriminator_optimizer, generator_optimizer = optimizers
         discriminator = self.networks["discriminator"]
         alpha = self._noise("uniform", (len(batch), self.latent_dim), generator)
@@ -86,8 +103,9 @@ class InfoGAN(TorchTrajectoryGenerator):
         # Discriminator and Q step: max over D of eq. 10, min over Q of the information term of eq. 11.
         real_logit, _ = discriminator(batch)
         fake_logit, q_mean = discriminator(fake.detach())
-        discriminator_loss = (F.binary_cross_entropy_with_logits(real_logit, ones)
-                              + F.binary_cross_entropy_with_logits(fake_logit, zeros))
+        discriminator_loss = F.binary_cross_entropy_with_logits(real_logit, ones) + F.binary_cross_entropy_with_logits(
+            fake_logit, zeros
+        )
         q_loss = gaussian_info_loss(q_mean, alpha)
         discriminator_optimizer.zero_grad()
         (discriminator_loss + self.info_weight * q_loss).backward()

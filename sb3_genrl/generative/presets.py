@@ -46,12 +46,12 @@ PRESETS: dict[str, dict[str, Any]] = _grid()
 # BetaVAE's path_weight) weighed with the per-step error lets its reconstructions reach their aims far more often;
 # its weight is the one whose mean fitted to the demonstrations solves the most tuning states over the four tasks
 # (all measured in docs/guide/tasks.md).
-TASK_PRESETS: dict[str, dict[str, Any]] = {"VAE-FETCH": {"model": "vae", "latent_dim": 10, "beta": 0.001,
-                                                         "path_weight": 1.0}}
+TASK_PRESETS: dict[str, dict[str, Any]] = {"VAE-FETCH": {"model": "vae", "latent_dim": 10, "beta": 0.001, "path_weight": 1.0}}
 
 
-def resolve_generator_spec(preset_or_kind: str, *, latent_dim: int | None = None, beta: float | None = None,
-                           info_weight: float | None = None) -> dict[str, Any]:
+def resolve_generator_spec(
+    preset_or_kind: str, *, latent_dim: int | None = None, beta: float | None = None, info_weight: float | None = None
+) -> dict[str, Any]:
     """Model kind and hyperparameters from a preset name (``"VAE1"``..``"GAN9"``, or one of :data:`TASK_PRESETS`) or a
     kind (``"vae"``, ``"gan"``).
 
@@ -70,21 +70,27 @@ def resolve_generator_spec(preset_or_kind: str, *, latent_dim: int | None = None
         return spec
     kind = preset_or_kind.lower()
     if kind not in MODEL_KINDS:
-        raise ValueError(f"unknown generator {preset_or_kind!r}; expected one of {MODEL_KINDS} or a preset "
-                         f"{list(PRESETS)}")
+        raise ValueError(f"unknown generator {preset_or_kind!r}; expected one of {MODEL_KINDS} or a preset {list(PRESETS)}")
     weight_name, unused_name = ("beta", "info_weight") if kind == "vae" else ("info_weight", "beta")
     if explicit[unused_name] is not None:
         raise ValueError(f"a {kind} model takes no {unused_name}")
     for name in ("latent_dim", weight_name):
         if explicit[name] is None:
-            raise ValueError(f"a {kind} model needs {name} (or use a preset such as "
-                             f"{'VAE1' if kind == 'vae' else 'GAN1'})")
+            raise ValueError(f"a {kind} model needs {name} (or use a preset such as {'VAE1' if kind == 'vae' else 'GAN1'})")
     return {"model": kind, "latent_dim": latent_dim, weight_name: explicit[weight_name]}
 
 
-def make_generator(preset_or_kind: str, *, horizon: int, action_dim: int, latent_dim: int | None = None,
-                   beta: float | None = None, info_weight: float | None = None, std_floor: float | None = None,
-                   device: torch.device | str = "auto") -> TorchTrajectoryGenerator:
+def make_generator(
+    preset_or_kind: str,
+    *,
+    horizon: int,
+    action_dim: int,
+    latent_dim: int | None = None,
+    beta: float | None = None,
+    info_weight: float | None = None,
+    std_floor: float | None = None,
+    device: torch.device | str = "auto",
+) -> TorchTrajectoryGenerator:
     """Build an untrained generator from a preset of paper table 1 or a model kind.
 
     :param preset_or_kind: ``"VAE1"``..``"VAE9"``, ``"GAN1"``..``"GAN9"``, ``"vae"`` or ``"gan"``

@@ -50,14 +50,21 @@ def check_savable(generator: TorchTrajectoryGenerator, path: str) -> None:
     """Raise a ``ValueError`` saying why, when ``generator`` is not worth saving: training ran but selected no
     checkpoint (every model-selection error was nan), or a weight or normalisation statistic is not finite."""
     if generator.history and generator.best_epoch is None:
-        raise ValueError(f"refusing to save the generator to {path!r}: training diverged, no checkpoint was selected "
-                         "(every model-selection MSE was nan); lower the learning rate or the loss weights")
-    bad = [name for name, tensor in generator.state_tensors().items()
-           if tensor.is_floating_point() and not bool(torch.isfinite(tensor).all())]
+        raise ValueError(
+            f"refusing to save the generator to {path!r}: training diverged, no checkpoint was selected "
+            "(every model-selection MSE was nan); lower the learning rate or the loss weights"
+        )
+    bad = [
+        name
+        for name, tensor in generator.state_tensors().items()
+        if tensor.is_floating_point() and not bool(torch.isfinite(tensor).all())
+    ]
     if bad:
-        raise ValueError(f"refusing to save the generator to {path!r}: training diverged, these tensors hold "
-                         f"non-finite values (nan or inf): {bad[:5]}{' ...' if len(bad) > 5 else ''}; lower the "
-                         "learning rate or the loss weights")
+        raise ValueError(
+            f"refusing to save the generator to {path!r}: training diverged, these tensors hold "
+            f"non-finite values (nan or inf): {bad[:5]}{' ...' if len(bad) > 5 else ''}; lower the "
+            "learning rate or the loss weights"
+        )
 
 
 def save_generator(generator: TorchTrajectoryGenerator, path: str | os.PathLike[str]) -> None:
@@ -88,25 +95,33 @@ def _read_payload(path: str) -> dict[str, Any]:
     try:
         payload = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as error:  # torch raises several types for foreign files (pickle, zip, runtime errors)
-        raise ValueError(f"{path!r} is not a sb3-genrl generator file: torch.load could not read it "
-                         f"({type(error).__name__}: {str(error).splitlines()[0] if str(error) else ''})") from None
+        raise ValueError(
+            f"{path!r} is not a sb3-genrl generator file: torch.load could not read it "
+            f"({type(error).__name__}: {str(error).splitlines()[0] if str(error) else ''})"
+        ) from None
     if not isinstance(payload, dict) or payload.get("format") != FORMAT_MARKER:
         raise ValueError(f"{path!r} is not a sb3-genrl generator file: it lacks the format marker {FORMAT_MARKER!r}")
     if payload.get("format_version") == 1:
-        raise ValueError(f"{path!r} predates checksums (generator file format version 1, written by sb3-genrl "
-                         f"{payload.get('sb3_genrl_version')}): its weights cannot be verified; train the generator "
-                         "again with this version")
+        raise ValueError(
+            f"{path!r} predates checksums (generator file format version 1, written by sb3-genrl "
+            f"{payload.get('sb3_genrl_version')}): its weights cannot be verified; train the generator "
+            "again with this version"
+        )
     if payload.get("format_version") != FORMAT_VERSION:
-        raise ValueError(f"{path!r} has generator file format version {payload.get('format_version')!r}; this "
-                         f"version of sb3-genrl reads version {FORMAT_VERSION}")
+        raise ValueError(
+            f"{path!r} has generator file format version {payload.get('format_version')!r}; this "
+            f"version of sb3-genrl reads version {FORMAT_VERSION}"
+        )
     missing = {*_TEXT_ENTRIES, "sha256", "state"} - set(payload)
     if missing:
         raise ValueError(f"{path!r} is a corrupt generator file: missing entries {sorted(missing)}")
     if not isinstance(payload["state"], dict) or not all(isinstance(v, torch.Tensor) for v in payload["state"].values()):
         raise ValueError(f"{path!r} is a corrupt generator file: its state is not a dictionary of tensors")
     if payload["sha256"] != payload_digest(payload):
-        raise ValueError(f"{path!r} is corrupt: the checksum (SHA-256) of its weights, normalisation statistics and "
-                         "configuration does not match the one stored when it was saved")
+        raise ValueError(
+            f"{path!r} is corrupt: the checksum (SHA-256) of its weights, normalisation statistics and "
+            "configuration does not match the one stored when it was saved"
+        )
     return payload
 
 

@@ -17,9 +17,14 @@ def sine_ramp_basis(horizon: int, action_dim: int) -> tuple[np.ndarray, np.ndarr
     return sine, ramp
 
 
-def sine_ramp_trajectories(n: int, horizon: int, action_dim: int, rng: np.random.Generator | int | None,
-                           amplitude_range: tuple[float, float] = (0.5, 1.5),
-                           slope_range: tuple[float, float] = (-1.0, 1.0)) -> tuple[np.ndarray, np.ndarray]:
+def sine_ramp_trajectories(
+    n: int,
+    horizon: int,
+    action_dim: int,
+    rng: np.random.Generator | int | None,
+    amplitude_range: tuple[float, float] = (0.5, 1.5),
+    slope_range: tuple[float, float] = (-1.0, 1.0),
+) -> tuple[np.ndarray, np.ndarray]:
     """Draw ``tau[t, j] = a * sin(2 pi t / T + phase_j) + b * t / T`` with ``a`` and ``b`` uniform.
 
     :param n: number of trajectories

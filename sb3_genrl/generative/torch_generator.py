@@ -63,8 +63,16 @@ class TorchTrajectoryGenerator(TrajectoryGenerator, abc.ABC):
 
     decoder_name: str = "decoder"
 
-    def __init__(self, *, horizon: int, action_dim: int, latent_dim: int, prior: Prior,
-                 std_floor: float = STD_FLOOR, device: torch.device | str = "auto") -> None:
+    def __init__(
+        self,
+        *,
+        horizon: int,
+        action_dim: int,
+        latent_dim: int,
+        prior: Prior,
+        std_floor: float = STD_FLOOR,
+        device: torch.device | str = "auto",
+    ) -> None:
         super().__init__(horizon=horizon, action_dim=action_dim, latent_dim=latent_dim, prior=prior)
         if not 0.0 <= std_floor <= 1.0:
             raise ValueError(f"std_floor must be in [0, 1] (a fraction of the largest std), got {std_floor!r}")
@@ -88,8 +96,9 @@ class TorchTrajectoryGenerator(TrajectoryGenerator, abc.ABC):
         """Fresh optimizers for one call to :meth:`fit`."""
 
     @abc.abstractmethod
-    def _train_step(self, batch: torch.Tensor, optimizers: list[torch.optim.Optimizer],
-                    generator: torch.Generator) -> dict[str, float]:
+    def _train_step(
+        self, batch: torch.Tensor, optimizers: list[torch.optim.Optimizer], generator: torch.Generator
+    ) -> dict[str, float]:
         """One gradient step on a normalised, flattened ``(B, T*M)`` batch; returns the losses to log."""
 
     @abc.abstractmethod
@@ -107,8 +116,13 @@ class TorchTrajectoryGenerator(TrajectoryGenerator, abc.ABC):
 
     def config(self) -> dict[str, Any]:
         """Constructor arguments that rebuild this model (without the device)."""
-        return {"horizon": self.horizon, "action_dim": self.action_dim, "latent_dim": self.latent_dim,
-                "std_floor": self.std_floor, **self._hyperparameters()}
+        return {
+            "horizon": self.horizon,
+            "action_dim": self.action_dim,
+            "latent_dim": self.latent_dim,
+            "std_floor": self.std_floor,
+            **self._hyperparameters(),
+        }
 
     def normalise(self, trajectories: torch.Tensor) -> torch.Tensor:
         """Raw ``(n, T, M)`` trajectories -> what the networks see, normalised and flattened ``(n, T*M)``."""
@@ -137,11 +151,21 @@ class TorchTrajectoryGenerator(TrajectoryGenerator, abc.ABC):
             return self.decode_torch(torch.as_tensor(alpha)).cpu().numpy().astype(np.float32, copy=False)
 
     # --- training ---------------------------------------------------------------------------------------------------
-    def fit(self: SelfTorchTrajectoryGenerator, trajectories: np.ndarray, *, epochs: int = EPOCHS,
-            batch_size: int = BATCH_SIZE, lr: float = LEARNING_RATE, seed: int | None = None,
-            validation_fraction: float = 0.1, tensorboard_log: str | None = None, progress_bar: bool = True,
-            device: torch.device | str | None = None, selection_samples: int = SELECTION_SAMPLES,
-            eval_every: int = 10) -> SelfTorchTrajectoryGenerator:
+    def fit(
+        self: SelfTorchTrajectoryGenerator,
+        trajectories: np.ndarray,
+        *,
+        epochs: int = EPOCHS,
+        batch_size: int = BATCH_SIZE,
+        lr: float = LEARNING_RATE,
+        seed: int | None = None,
+        validation_fraction: float = 0.1,
+        tensorboard_log: str | None = None,
+        progress_bar: bool = True,
+        device: torch.device | str | None = None,
+        selection_samples: int = SELECTION_SAMPLES,
+        eval_every: int = 10,
+    ) -> SelfTorchTrajectoryGenerator:
         """Train from a fresh initialisation drawn from ``seed`` and keep the best checkpoint (paper appendix B).
 
         Every ``eval_every`` epochs (and after the last one) ``selection_samples`` trajectories generated from a fixed
@@ -183,9 +207,19 @@ class TorchTrajectoryGenerator(TrajectoryGenerator, abc.ABC):
         selection_latents = self.sample_prior(selection_samples, rng)
         writer = _summary_writer(tensorboard_log)
         try:
-            best_state = self._train_epochs(train_tensor, held_out, selection_latents, optimizers, rng, noise_generator,
-                                            epochs=epochs, batch_size=batch_size, eval_every=eval_every,
-                                            progress_bar=progress_bar, writer=writer)
+            best_state = self._train_epochs(
+                train_tensor,
+                held_out,
+                selection_latents,
+                optimizers,
+                rng,
+                noise_generator,
+                epochs=epochs,
+                batch_size=batch_size,
+                eval_every=eval_every,
+                progress_bar=progress_bar,
+                writer=writer,
+            )
         finally:
             if writer is not None:
                 writer.close()
@@ -194,10 +228,21 @@ class TorchTrajectoryGenerator(TrajectoryGenerator, abc.ABC):
         self.networks.eval()
         return self
 
-    def _train_epochs(self, train: torch.Tensor, held_out: np.ndarray, selection_latents: np.ndarray,
-                      optimizers: list[torch.optim.Optimizer], rng: np.random.Generator,
-                      noise_generator: torch.Generator, *, epochs: int, batch_size: int, eval_every: int,
-                      progress_bar: bool, writer: Any) -> dict[str, torch.Tensor] | None:
+    def _train_epochs(
+        self,
+        train: torch.Tensor,
+        held_out: np.ndarray,
+        selection_latents: np.ndarray,
+        optimizers: list[torch.optim.Optimizer],
+        rng: np.random.Generator,
+        noise_generator: torch.Generator,
+        *,
+        epochs: int,
+        batch_size: int,
+        eval_every: int,
+        progress_bar: bool,
+        writer: Any,
+    ) -> dict[str, torch.Tensor] | None:
         """The epoch loop of :meth:`fit`, filling ``self.history`` and ``self.best_epoch``; returns the best weights."""
         self.history, self.best_epoch = [], None
         best_error, best_state = math.inf, None
@@ -224,8 +269,14 @@ class TorchTrajectoryGenerator(TrajectoryGenerator, abc.ABC):
             torch.manual_seed(seed)
             self.networks = self._build_networks().to(self.device)
 
-    def _train_epoch(self, train: torch.Tensor, batch_size: int, optimizers: list[torch.optim.Optimizer],
-                     rng: np.random.Generator, noise_generator: torch.Generator) -> dict[str, float]:
+    def _train_epoch(
+        self,
+        train: torch.Tensor,
+        batch_size: int,
+        optimizers: list[torch.optim.Optimizer],
+        rng: np.random.Generator,
+        noise_generator: torch.Generator,
+    ) -> dict[str, float]:
         """One pass over the shuffled training split; returns the losses averaged over its samples."""
         self.networks.train()
         sums: dict[str, float] = defaultdict(float)
@@ -262,10 +313,11 @@ class TorchTrajectoryGenerator(TrajectoryGenerator, abc.ABC):
             raise ValueError(f"missing normalisation statistics {error}") from None
         expected = (self.horizon, self.action_dim)
         if tuple(mean.shape) != expected or tuple(std.shape) != expected:
-            raise ValueError(f"normalisation statistics must have shape {expected}, got "
-                             f"{tuple(mean.shape)} and {tuple(std.shape)}")
+            raise ValueError(
+                f"normalisation statistics must have shape {expected}, got {tuple(mean.shape)} and {tuple(std.shape)}"
+            )
         prefix = "networks."
-        networks_state = {key[len(prefix):]: value for key, value in state.items() if key.startswith(prefix)}
+        networks_state = {key[len(prefix) :]: value for key, value in state.items() if key.startswith(prefix)}
         if len(networks_state) != len(state):
             raise ValueError(f"unexpected entries {sorted(set(state) - {prefix + key for key in networks_state})}")
         try:

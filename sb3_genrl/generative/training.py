@@ -22,13 +22,27 @@ from sb3_genrl.generative.presets import (
 from sb3_genrl.generative.torch_generator import TorchTrajectoryGenerator
 
 
-def train_generator(data: np.ndarray | str | os.PathLike[str], *, model: str | None = None, preset: str | None = None,
-                    latent_dim: int | None = None, beta: float | None = None, info_weight: float | None = None,
-                    std_floor: float | None = None, epochs: int = EPOCHS, batch_size: int = BATCH_SIZE,
-                    lr: float = LEARNING_RATE, seed: int | None = 0,
-                    validation_fraction: float = 0.1, eval_every: int = 10, selection_samples: int = SELECTION_SAMPLES,
-                    out: str | os.PathLike[str] | None = None, tensorboard_log: str | None = None,
-                    progress_bar: bool = False, device: torch.device | str = "auto") -> TorchTrajectoryGenerator:
+def train_generator(
+    data: np.ndarray | str | os.PathLike[str],
+    *,
+    model: str | None = None,
+    preset: str | None = None,
+    latent_dim: int | None = None,
+    beta: float | None = None,
+    info_weight: float | None = None,
+    std_floor: float | None = None,
+    epochs: int = EPOCHS,
+    batch_size: int = BATCH_SIZE,
+    lr: float = LEARNING_RATE,
+    seed: int | None = 0,
+    validation_fraction: float = 0.1,
+    eval_every: int = 10,
+    selection_samples: int = SELECTION_SAMPLES,
+    out: str | os.PathLike[str] | None = None,
+    tensorboard_log: str | None = None,
+    progress_bar: bool = False,
+    device: torch.device | str = "auto",
+) -> TorchTrajectoryGenerator:
     """Build a generator (by preset or kind), fit it on trajectories and optionally save it.
 
     The horizon and number of joints are read from the data.
@@ -54,8 +68,12 @@ def train_generator(data: np.ndarray | str | os.PathLike[str], *, model: str | N
     :param device: torch device or ``"auto"``
     :return: the trained generator
     """
-    for name, value in (("epochs", epochs), ("batch_size", batch_size), ("eval_every", eval_every),
-                        ("selection_samples", selection_samples)):
+    for name, value in (
+        ("epochs", epochs),
+        ("batch_size", batch_size),
+        ("eval_every", eval_every),
+        ("selection_samples", selection_samples),
+    ):
         check_positive_int(value, name)
     check_positive_float(lr, "lr")
     check_device(device)
@@ -72,12 +90,29 @@ def train_generator(data: np.ndarray | str | os.PathLike[str], *, model: str | N
     else:
         spec = {"preset_or_kind": model or "vae"}
     trajectories = load_trajectories(data)
-    generator = make_generator(**spec, horizon=trajectories.shape[1], action_dim=trajectories.shape[2],
-                               latent_dim=latent_dim, beta=beta, info_weight=info_weight, std_floor=std_floor,
-                               device=device)
-    generator.fit(trajectories, epochs=epochs, batch_size=batch_size, lr=lr, seed=seed,
-                  validation_fraction=validation_fraction, tensorboard_log=tensorboard_log, progress_bar=progress_bar,
-                  device=device, selection_samples=selection_samples, eval_every=eval_every)
+    generator = make_generator(
+        **spec,
+        horizon=trajectories.shape[1],
+        action_dim=trajectories.shape[2],
+        latent_dim=latent_dim,
+        beta=beta,
+        info_weight=info_weight,
+        std_floor=std_floor,
+        device=device,
+    )
+    generator.fit(
+        trajectories,
+        epochs=epochs,
+        batch_size=batch_size,
+        lr=lr,
+        seed=seed,
+        validation_fraction=validation_fraction,
+        tensorboard_log=tensorboard_log,
+        progress_bar=progress_bar,
+        device=device,
+        selection_samples=selection_samples,
+        eval_every=eval_every,
+    )
     if out is not None:
         generator.save(os.fspath(out))
     return generator
@@ -90,6 +125,8 @@ def _refuse_input_as_output(data: Any, out: str | os.PathLike[str]) -> None:
         return
     data_path, out_path = Path(data).resolve(), Path(out).resolve()
     if out_path == data_path or (data_path.is_dir() and data_path in out_path.parents):
-        raise ValueError(f"out {os.fspath(out)!r} is {'the data file' if out_path == data_path else 'inside the dataset'} "
-                         f"{os.fspath(data)!r}: writing the generator there would overwrite its training data; choose "
-                         "another path")
+        raise ValueError(
+            f"out {os.fspath(out)!r} is {'the data file' if out_path == data_path else 'inside the dataset'} "
+            f"{os.fspath(data)!r}: writing the generator there would overwrite its training data; choose "
+            "another path"
+        )

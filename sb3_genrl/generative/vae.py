@@ -50,15 +50,25 @@ class BetaVAE(TorchTrajectoryGenerator):
 
     decoder_name = "decoder"
 
-    def __init__(self, horizon: int, action_dim: int, latent_dim: int, *, beta: float,
-                 std_floor: float = STD_FLOOR, path_weight: float = 0.0, device: torch.device | str = "auto") -> None:
+    def __init__(
+        self,
+        horizon: int,
+        action_dim: int,
+        latent_dim: int,
+        *,
+        beta: float,
+        std_floor: float = STD_FLOOR,
+        path_weight: float = 0.0,
+        device: torch.device | str = "auto",
+    ) -> None:
         if not 0 <= beta < math.inf:
             raise ValueError(f"beta must be non-negative and finite, got {beta}")
         if not 0 <= path_weight < math.inf:
             raise ValueError(f"path_weight must be non-negative and finite, got {path_weight}")
         self.beta, self.path_weight = float(beta), float(path_weight)
-        super().__init__(horizon=horizon, action_dim=action_dim, latent_dim=latent_dim, prior="normal",
-                         std_floor=std_floor, device=device)
+        super().__init__(
+            horizon=horizon, action_dim=action_dim, latent_dim=latent_dim, prior="normal", std_floor=std_floor, device=device
+        )
 
     def _hyperparameters(self) -> dict[str, Any]:
         # (path_weight only where set: the files of eq. 9's models stay as they were)
@@ -66,8 +76,12 @@ class BetaVAE(TorchTrajectoryGenerator):
 
     def _build_networks(self) -> nn.ModuleDict:
         trajectory_size = self.horizon * self.action_dim
-        return nn.ModuleDict({"encoder": GaussianEncoder(trajectory_size, self.latent_dim),
-                              "decoder": make_decoder(self.latent_dim, trajectory_size)})
+        return nn.ModuleDict(
+            {
+                "encoder": GaussianEncoder(trajectory_size, self.latent_dim),
+                "decoder": make_decoder(self.latent_dim, trajectory_size),
+            }
+        )
 
     def _make_optimizers(self, lr: float) -> list[torch.optim.Optimizer]:
         return [torch.optim.Adam(self.networks.parameters(), lr=lr)]
@@ -85,8 +99,9 @@ class BetaVAE(TorchTrajectoryGenerator):
             mean, log_std = self.networks["encoder"](normalised)
         return mean.cpu().numpy(), log_std.cpu().numpy()
 
-    def _train_step(self, batch: torch.Tensor, optimizers: list[torch.optim.Optimizer],
-                    generator: torch.Generator) -> dict[str, float]:
+    def _train_step(
+        self, batch: torch.Tensor, optimizers: list[torch.optim.Optimizer], generator: torch.Generator
+    ) -> dict[str, float]:
         (optimizer,) = optimizers
         # Approximate posterior q(alpha | tau) and a reparameterised sample alpha = mean + std * eps.
         mean, log_std = self.networks["encoder"](batch)

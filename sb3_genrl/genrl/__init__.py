@@ -6,5 +6,12 @@ from sb3_genrl.genrl.policies import MlpPolicy, MultiInputPolicy
 from sb3_genrl.genrl.settings import check_genrl_settings
 from sb3_genrl.genrl.train import evaluate_on_goals, train_policy
 
-__all__ = ["GenRL", "HindsightRelabelling", "MlpPolicy", "MultiInputPolicy", "check_genrl_settings", "evaluate_on_goals",
-           "train_policy"]
+__all__ = [
+    "GenRL",
+    "HindsightRelabelling",
+    "MlpPolicy",
+    "MultiInputPolicy",
+    "check_genrl_settings",
+    "evaluate_on_goals",
+    "train_policy",
+]

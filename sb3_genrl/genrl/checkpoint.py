@@ -89,19 +89,30 @@ class GenRLCheckpoint(BaseCallback):
     def save(self) -> None:
         """Write the model, its memories and random states, and the state naming them, as one unit."""
         model, env = self.model, self.model.get_env()
-        memories = {"value_memory": list(model._value_memory),
-                    "hindsight_memory": [] if model.hindsight is None else list(model.hindsight.memory),
-                    "hindsight_kept_pulls": None if model.hindsight is None else model.hindsight.kept_pulls,
-                    "hindsight_solved": [] if model.hindsight is None else list(model.hindsight.solved),
-                    "hindsight_initial_mean": None if model.hindsight is None else model.hindsight.initial_mean,
-                    "random_states": _global_random_states(model),
-                    "env_random_states": env.env_method("random_states_before_reset"),
-                    "logger": _pending_logs(model.logger)}
-        write_checkpoint(self.folder, {"model": (MODEL, lambda path: OnPolicyAlgorithm.save(model, path)),
-                                       "memories": (MEMORIES, lambda path: th.save(memories, path))}, {
-            "identity": self.identity, "episodes": int(model.num_timesteps),
-            "monitor_seconds": time.time() - _monitor_start(env), "cpu_seconds": env.env_method("cpu_seconds"),
-            "resumed_at_episodes": self._resumed})
+        memories = {
+            "value_memory": list(model._value_memory),
+            "hindsight_memory": [] if model.hindsight is None else list(model.hindsight.memory),
+            "hindsight_kept_pulls": None if model.hindsight is None else model.hindsight.kept_pulls,
+            "hindsight_solved": [] if model.hindsight is None else list(model.hindsight.solved),
+            "hindsight_initial_mean": None if model.hindsight is None else model.hindsight.initial_mean,
+            "random_states": _global_random_states(model),
+            "env_random_states": env.env_method("random_states_before_reset"),
+            "logger": _pending_logs(model.logger),
+        }
+        write_checkpoint(
+            self.folder,
+            {
+                "model": (MODEL, lambda path: OnPolicyAlgorithm.save(model, path)),
+                "memories": (MEMORIES, lambda path: th.save(memories, path)),
+            },
+            {
+                "identity": self.identity,
+                "episodes": int(model.num_timesteps),
+                "monitor_seconds": time.time() - _monitor_start(env),
+                "cpu_seconds": env.env_method("cpu_seconds"),
+                "resumed_at_episodes": self._resumed,
+            },
+        )
 
 
 def resume_state(folder: pathlib.Path, identity: dict[str, Any]) -> dict[str, Any] | None:
@@ -110,8 +121,7 @@ def resume_state(folder: pathlib.Path, identity: dict[str, Any]) -> dict[str, An
     return state if state is not None and state["identity"] == identity else None
 
 
-def resume_genrl(state: dict[str, Any], env: Any, generator: TrajectoryGenerator | str, device: Any,
-                 logger: Logger) -> GenRL:
+def resume_genrl(state: dict[str, Any], env: Any, generator: TrajectoryGenerator | str, device: Any, logger: Logger) -> GenRL:
     """The model as the checkpoint ``state`` left it, on ``env`` (a new monitored env of the run, its envs wrapped in
     :class:`RandomStateRecorder`), which is reset to draw the checkpoint's contexts again, with ``logger`` holding the
     values the stopped run had not written yet."""
@@ -131,8 +141,11 @@ def resume_genrl(state: dict[str, Any], env: Any, generator: TrajectoryGenerator
     venv.unwrapped._reset_seeds()  # no seed at this reset (loading seeded the env): the restored states draw
     observations = venv.reset()
     if not _equal(observations, model._last_obs):
-        warnings.warn("the resumed env did not draw the checkpoint's contexts again: the resumed run is not the "
-                      "uninterrupted one bit for bit", stacklevel=2)
+        warnings.warn(
+            "the resumed env did not draw the checkpoint's contexts again: the resumed run is not the "
+            "uninterrupted one bit for bit",
+            stacklevel=2,
+        )
         model._last_obs = observations
     _set_global_random_states(model, memories["random_states"])
     model.set_logger(logger)
@@ -180,9 +193,13 @@ def _global_random_states(model: GenRL) -> dict[str, Any]:
     name, keys, position, has_gauss, cached = np.random.get_state()  # noqa: NPY002 (SB3 seeds the global one)
     version, internal, gauss = random.getstate()
     space = model.action_space._np_random
-    return {"torch": th.get_rng_state(), "cuda": th.cuda.get_rng_state_all() if th.cuda.is_available() else [],
-            "numpy": (name, th.from_numpy(keys.astype(np.int64)), position, has_gauss, cached),
-            "python": (version, internal, gauss), "action_space": None if space is None else space.bit_generator.state}
+    return {
+        "torch": th.get_rng_state(),
+        "cuda": th.cuda.get_rng_state_all() if th.cuda.is_available() else [],
+        "numpy": (name, th.from_numpy(keys.astype(np.int64)), position, has_gauss, cached),
+        "python": (version, internal, gauss),
+        "action_space": None if space is None else space.bit_generator.state,
+    }
 
 
 def _set_global_random_states(model: GenRL, states: dict[str, Any]) -> None:
@@ -200,17 +217,24 @@ def _set_global_random_states(model: GenRL, states: dict[str, Any]) -> None:
 def _pending_logs(logger: Any) -> dict[str, Any]:
     """What SB3's logger holds and has not written yet (the last update's ``train/`` values: SB3 writes them with the
     next batch's ``rollout/`` values)."""
-    values = {key: value.item() if isinstance(value, np.generic) else value for key, value in logger.name_to_value.items()
-              if isinstance(value, int | float | str | np.generic)}
-    return {"values": values, "counts": {key: int(logger.name_to_count[key]) for key in values},
-            "excluded": {key: logger.name_to_excluded.get(key) for key in values}}
+    values = {
+        key: value.item() if isinstance(value, np.generic) else value
+        for key, value in logger.name_to_value.items()
+        if isinstance(value, int | float | str | np.generic)
+    }
+    return {
+        "values": values,
+        "counts": {key: int(logger.name_to_count[key]) for key in values},
+        "excluded": {key: logger.name_to_excluded.get(key) for key in values},
+    }
 
 
 def _restore_pending_logs(logs: dict[str, Any], logger: Logger) -> None:
     logger.name_to_value.update(logs["values"])
     logger.name_to_count.update(logs["counts"])
-    logger.name_to_excluded.update({key: tuple(value) if value is not None else value
-                                    for key, value in logs["excluded"].items()})
+    logger.name_to_excluded.update(
+        {key: tuple(value) if value is not None else value for key, value in logs["excluded"].items()}
+    )
 
 
 def _monitor_start(venv: Any) -> float:
@@ -239,6 +263,9 @@ def _to_device(value: Any, device: th.device) -> Any:
 
 def _equal(first: Any, second: Any) -> bool:
     if isinstance(first, dict):
-        return isinstance(second, dict) and first.keys() == second.keys() and all(
-            _equal(first[key], second[key]) for key in first)
+        return (
+            isinstance(second, dict)
+            and first.keys() == second.keys()
+            and all(_equal(first[key], second[key]) for key in first)
+        )
     return second is not None and np.array_equal(first, second)

@@ -40,9 +40,11 @@ from stable_baselines3.common.policies import ActorCriticPolicy
 from sb3_genrl.genrl.regression import fit_mean
 
 DEMONSTRATION_CALLBACK = "sb3_genrl.genrl.demonstrations.DemonstrationCallback"
-NO_DATASET = ("learn from demonstrations (the callback {name}) and need their dataset: give it "
-              "(train_policy(..., demonstrations=DIR), genrl train-policy --data DIR), the dataset the generator was "
-              "trained on, or one made by `genrl demos --task {task} --episodes 4000 --out DIR`")
+NO_DATASET = (
+    "learn from demonstrations (the callback {name}) and need their dataset: give it "
+    "(train_policy(..., demonstrations=DIR), genrl train-policy --data DIR), the dataset the generator was "
+    "trained on, or one made by `genrl demos --task {task} --episodes 4000 --out DIR`"
+)
 
 
 class DemonstrationCallback(BaseCallback):
@@ -61,14 +63,24 @@ class DemonstrationCallback(BaseCallback):
     :param verbose: 1: print the fit's losses
     """
 
-    def __init__(self, dataset: str | os.PathLike | None = None, *, fit_steps: int = 4000, keep: bool = True,
-                 learning_rate: float = 1e-3, batch_size: int = 256, dataset_fingerprint: str | None = None,
-                 verbose: int = 0) -> None:
+    def __init__(
+        self,
+        dataset: str | os.PathLike | None = None,
+        *,
+        fit_steps: int = 4000,
+        keep: bool = True,
+        learning_rate: float = 1e-3,
+        batch_size: int = 256,
+        dataset_fingerprint: str | None = None,
+        verbose: int = 0,
+    ) -> None:
         super().__init__(verbose)
         check_demonstration_settings(fit_steps=fit_steps, keep=keep, learning_rate=learning_rate, batch_size=batch_size)
         if dataset is None:
-            raise ValueError("DemonstrationCallback(dataset=None): settings that "
-                             + NO_DATASET.format(name=DEMONSTRATION_CALLBACK, task="TASK"))
+            raise ValueError(
+                "DemonstrationCallback(dataset=None): settings that "
+                + NO_DATASET.format(name=DEMONSTRATION_CALLBACK, task="TASK")
+            )
         from sb3_genrl.data import load_arrays
 
         self.dataset, self.fit_steps, self.keep = os.fspath(dataset), int(fit_steps), bool(keep)
@@ -78,8 +90,10 @@ class DemonstrationCallback(BaseCallback):
             from sb3_genrl.study.state import dataset_fingerprint as fingerprint
 
             if fingerprint(self.dataset) != dataset_fingerprint:
-                raise ValueError(f"the demonstrations {self.dataset} are not the ones this run was trained with "
-                                 f"(fingerprint {dataset_fingerprint}): they were changed or made again")
+                raise ValueError(
+                    f"the demonstrations {self.dataset} are not the ones this run was trained with "
+                    f"(fingerprint {dataset_fingerprint}): they were changed or made again"
+                )
         self.contexts, self.actions = arrays["observations"][:, 0], arrays["actions"]
         self.fit: dict[str, float] = {}  # the fit's demonstrations, steps and losses, once it has run
 
@@ -88,41 +102,64 @@ class DemonstrationCallback(BaseCallback):
         the env's context space; raises ``ValueError`` naming what does not fit."""
         name = f"demonstrations {self.dataset}"
         if generator is None or not callable(getattr(generator, "encode", None)):
-            raise ValueError(f"{name}: their latent actions are the generator's posterior means, which needs a generator "
-                             f"with an encoder (a beta-VAE); got {type(generator).__name__}")
+            raise ValueError(
+                f"{name}: their latent actions are the generator's posterior means, which needs a generator "
+                f"with an encoder (a beta-VAE); got {type(generator).__name__}"
+            )
         shape = (generator.horizon, generator.action_dim)
         if self.actions.shape[1:] != shape:
-            raise ValueError(f"{name}: trajectories of shape {self.actions.shape[1:]} (steps, action dimension), but the "
-                             f"generator makes {shape}: the dataset of another task, or a generator trained on other data")
+            raise ValueError(
+                f"{name}: trajectories of shape {self.actions.shape[1:]} (steps, action dimension), but the "
+                f"generator makes {shape}: the dataset of another task, or a generator trained on other data"
+            )
         if not isinstance(context_space, spaces.Box) or self.contexts.shape[1:] != context_space.shape:
-            raise ValueError(f"{name}: each demonstration's context is its first observation, of shape "
-                             f"{self.contexts.shape[1:]}, but the env's context space is {context_space}: the "
-                             "demonstrations of another task, or of a task whose first observation is not its context")
+            raise ValueError(
+                f"{name}: each demonstration's context is its first observation, of shape "
+                f"{self.contexts.shape[1:]}, but the env's context space is {context_space}: the "
+                "demonstrations of another task, or of a task whose first observation is not its context"
+            )
         latents = np.clip(generator.encode(self.actions)[0], -latent_clip, latent_clip)
         return th.as_tensor(self.contexts, dtype=th.float32), th.as_tensor(latents, dtype=th.float32)
 
-    def check(self, generator: Any, context_space: spaces.Space, latent_clip: float, hindsight: bool,
-              ) -> tuple[th.Tensor, th.Tensor]:
+    def check(
+        self,
+        generator: Any,
+        context_space: spaces.Space,
+        latent_clip: float,
+        hindsight: bool,
+    ) -> tuple[th.Tensor, th.Tensor]:
         """:meth:`pulls`, refused (before any work) also for ``keep`` without GenRL's hindsight relabelling."""
         if self.keep and not hindsight:
-            raise ValueError("DemonstrationCallback(keep=True) keeps the demonstrations among the hindsight "
-                             "relabelling's pulls, which needs GenRL's hindsight_kwargs (or keep=False)")
+            raise ValueError(
+                "DemonstrationCallback(keep=True) keeps the demonstrations among the hindsight "
+                "relabelling's pulls, which needs GenRL's hindsight_kwargs (or keep=False)"
+            )
         return self.pulls(generator, context_space, latent_clip)
 
     def _on_training_start(self) -> None:
         model = self.model
-        contexts, latents = (tensor.to(model.device) for tensor in self.check(
-            model.generator, model.observation_space, model.latent_clip, model.hindsight is not None))
+        contexts, latents = (
+            tensor.to(model.device)
+            for tensor in self.check(model.generator, model.observation_space, model.latent_clip, model.hindsight is not None)
+        )
         if self.fit_steps and model.num_timesteps == 0 and model._n_updates == 0:  # a fresh run, never a resumed one
-            self.fit = fit_mean_to_demonstrations(model.policy, contexts, latents, steps=self.fit_steps,
-                                                  learning_rate=self.learning_rate, batch_size=self.batch_size)
+            self.fit = fit_mean_to_demonstrations(
+                model.policy,
+                contexts,
+                latents,
+                steps=self.fit_steps,
+                learning_rate=self.learning_rate,
+                batch_size=self.batch_size,
+            )
             if model.policy_average is not None:  # the average starts from the fitted policy too
                 model.policy_average.load_state_dict(model.policy.state_dict())
             for key, value in self.fit.items():
                 self.logger.record(f"demonstrations/{key}", value)
             if self.verbose:
-                print(f"policy mean fitted to {self.fit['demonstrations']} demonstrations: loss "
-                      f"{self.fit['first_loss']:.4g} -> {self.fit['last_loss']:.4g}")
+                print(
+                    f"policy mean fitted to {self.fit['demonstrations']} demonstrations: loss "
+                    f"{self.fit['first_loss']:.4g} -> {self.fit['last_loss']:.4g}"
+                )
         if self.keep and model.hindsight.kept_pulls is None:  # (a resumed run's checkpoint holds them already)
             model.hindsight.keep_pulls(contexts, latents, th.zeros(len(latents), device=model.device))
 
@@ -130,8 +167,15 @@ class DemonstrationCallback(BaseCallback):
         return True
 
 
-def fit_mean_to_demonstrations(policy: ActorCriticPolicy, contexts: th.Tensor, latents: th.Tensor, *, steps: int,
-                               learning_rate: float = 1e-3, batch_size: int = 256) -> dict[str, float]:
+def fit_mean_to_demonstrations(
+    policy: ActorCriticPolicy,
+    contexts: th.Tensor,
+    latents: th.Tensor,
+    *,
+    steps: int,
+    learning_rate: float = 1e-3,
+    batch_size: int = 256,
+) -> dict[str, float]:
     """Fit the policy's mean to ``latents`` at ``contexts`` by ``steps`` steps of a new Adam over its mean's
     parameters (:func:`~sb3_genrl.genrl.regression.fit_mean`), in training mode.
 
@@ -139,8 +183,12 @@ def fit_mean_to_demonstrations(policy: ActorCriticPolicy, contexts: th.Tensor, l
         ``last_loss`` (the mean of the last 100 minibatches')
     """
     losses = fit_mean(policy, contexts, latents, steps=steps, learning_rate=learning_rate, batch_size=batch_size)
-    return {"demonstrations": len(latents), "steps": int(steps), "first_loss": float(losses[0]),
-            "last_loss": float(np.mean(losses[-100:]))}
+    return {
+        "demonstrations": len(latents),
+        "steps": int(steps),
+        "first_loss": float(losses[0]),
+        "last_loss": float(np.mean(losses[-100:])),
+    }
 
 
 def check_demonstration_settings(*, fit_steps: Any, keep: Any, learning_rate: Any, batch_size: Any) -> None:
@@ -176,10 +224,16 @@ def callback_entries(spec: Any, name: str = "callback") -> list[tuple[str, dict[
             parameters = inspect.signature(DemonstrationCallback.__init__).parameters
             unknown = sorted(set(kwargs) - (set(parameters) - {"self"}))
             if unknown:
-                raise ValueError(f"{name}: {', '.join(map(repr, unknown))} not among DemonstrationCallback's arguments "
-                                 f"({', '.join(key for key in parameters if key != 'self')})")
-            check_demonstration_settings(**{key: kwargs.get(key, parameters[key].default)
-                                            for key in ("fit_steps", "keep", "learning_rate", "batch_size")})
+                raise ValueError(
+                    f"{name}: {', '.join(map(repr, unknown))} not among DemonstrationCallback's arguments "
+                    f"({', '.join(key for key in parameters if key != 'self')})"
+                )
+            check_demonstration_settings(
+                **{
+                    key: kwargs.get(key, parameters[key].default)
+                    for key in ("fit_steps", "keep", "learning_rate", "batch_size")
+                }
+            )
         entries.append((path, dict(kwargs)))
     return entries
 
@@ -196,13 +250,15 @@ def with_dataset(spec: Any, dataset: str | os.PathLike, fingerprint: str | None 
     for path, kwargs in callback_entries(spec):
         if path == DEMONSTRATION_CALLBACK and kwargs.get("dataset") is None:
             kwargs = {**kwargs, "dataset": os.fspath(dataset)} | (
-                {} if fingerprint is None else {"dataset_fingerprint": fingerprint})
+                {} if fingerprint is None else {"dataset_fingerprint": fingerprint}
+            )
         filled.append({path: kwargs})
     return filled
 
 
-def build_callbacks(spec: Any, *, demonstrations: str | os.PathLike | None = None, what: str = "these settings",
-                    task: str = "TASK") -> list[BaseCallback]:
+def build_callbacks(
+    spec: Any, *, demonstrations: str | os.PathLike | None = None, what: str = "these settings", task: str = "TASK"
+) -> list[BaseCallback]:
     """The callbacks of rl-zoo3's ``callback`` setting ``spec`` (as rl-zoo3 builds them), a
     :class:`DemonstrationCallback` without a dataset given ``demonstrations``.
 
@@ -215,8 +271,10 @@ def build_callbacks(spec: Any, *, demonstrations: str | os.PathLike | None = Non
     """
     if demonstrations is not None:
         if not uses_demonstrations(spec):
-            raise ValueError(f"demonstrations {os.fspath(demonstrations)!r} given, but {what} do not learn from "
-                             f"demonstrations: add the callback {DEMONSTRATION_CALLBACK} to them")
+            raise ValueError(
+                f"demonstrations {os.fspath(demonstrations)!r} given, but {what} do not learn from "
+                f"demonstrations: add the callback {DEMONSTRATION_CALLBACK} to them"
+            )
         spec = with_dataset(spec, demonstrations)
     callbacks = []
     for path, kwargs in callback_entries(spec):

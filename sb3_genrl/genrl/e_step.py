@@ -38,8 +38,9 @@ def variational_copy(policy: ActorCriticPolicy, previous: ActorCriticPolicy | No
     return previous
 
 
-def surrogate(q: ActorCriticPolicy, pi: ActorCriticPolicy, batch: Batch,
-              pi_distribution: Distribution | None = None) -> tuple[th.Tensor, th.Tensor]:
+def surrogate(
+    q: ActorCriticPolicy, pi: ActorCriticPolicy, batch: Batch, pi_distribution: Distribution | None = None
+) -> tuple[th.Tensor, th.Tensor]:
     """Eq. 5's terms: E_{alpha ~ pi}[q(alpha|s) / pi(alpha|s) A(s, alpha)] and E_s[KL(q(.|s) || pi(.|s))].
 
     :param q: the variational policy (gradients flow through it)
@@ -56,8 +57,9 @@ def surrogate(q: ActorCriticPolicy, pi: ActorCriticPolicy, batch: Batch,
     return (ratio * advantages).mean(), kl_divergence(q_distribution, pi_distribution).mean()
 
 
-def _candidate(q: ActorCriticPolicy, pi: ActorCriticPolicy, batch: Batch,
-               pi_distribution: Distribution) -> tuple[float, float] | None:
+def _candidate(
+    q: ActorCriticPolicy, pi: ActorCriticPolicy, batch: Batch, pi_distribution: Distribution
+) -> tuple[float, float] | None:
     """Eq. 5's surrogate and KL for a line-search candidate, or ``None`` when its distribution is invalid."""
     try:
         objective, kl = surrogate(q, pi, batch, pi_distribution)
@@ -67,8 +69,17 @@ def _candidate(q: ActorCriticPolicy, pi: ActorCriticPolicy, batch: Batch,
     return (objective_value, kl_value) if np.isfinite(objective_value) and np.isfinite(kl_value) else None
 
 
-def trpo_e_step(q: ActorCriticPolicy, pi: ActorCriticPolicy, batch: Batch, *, target_kl: float, cg_max_steps: int,
-                cg_damping: float, line_search_shrinking_factor: float, line_search_max_iter: int) -> dict[str, float]:
+def trpo_e_step(
+    q: ActorCriticPolicy,
+    pi: ActorCriticPolicy,
+    batch: Batch,
+    *,
+    target_kl: float,
+    cg_max_steps: int,
+    cg_damping: float,
+    line_search_shrinking_factor: float,
+    line_search_max_iter: int,
+) -> dict[str, float]:
     """E-step, TRPO variant: maximise eq. 5's surrogate subject to KL(q || pi) < target_kl (Schulman et al. 2015).
 
     ``q``'s actor parameters are changed in place; when no step is acceptable (no candidate improves the surrogate
@@ -111,19 +122,30 @@ def trpo_e_step(q: ActorCriticPolicy, pi: ActorCriticPolicy, batch: Batch, *, ta
         else:  # no acceptable step: q stays equal to pi
             vector_to_parameters(phi_0, params)
             fraction = 0.0
-    return {"policy_objective": new_objective, "line_search_success": float(fraction > 0),
-            "accepted_fraction": fraction, "step_size": fraction * max_step}
+    return {
+        "policy_objective": new_objective,
+        "line_search_success": float(fraction > 0),
+        "accepted_fraction": fraction,
+        "step_size": fraction * max_step,
+    }
 
 
-def kl_hessian_product(q: ActorCriticPolicy, observations: th.Tensor, pi_distribution: Distribution, kl: th.Tensor,
-                       ) -> tuple[list[th.nn.Parameter], Callable[[th.Tensor], th.Tensor]]:
+def kl_hessian_product(
+    q: ActorCriticPolicy,
+    observations: th.Tensor,
+    pi_distribution: Distribution,
+    kl: th.Tensor,
+) -> tuple[list[th.nn.Parameter], Callable[[th.Tensor], th.Tensor]]:
     """The parameters the KL depends on (``q``'s actor's, in order), and ``v -> H v`` for ``H`` the KL's Hessian in
     them at ``q = pi``: with :data:`ANALYTIC_FISHER`, the analytic Fisher-vector product of a diagonal Gaussian
     (:mod:`sb3_genrl.genrl.fisher`) where the policy's structure is a known one, else the double backward pass
     through autograd's graph of ``kl``."""
     named = actor_parameters(q)
-    fisher = (gaussian_fisher(q, observations, pi_distribution.distribution.stddev, named)  # type: ignore[attr-defined]
-              if ANALYTIC_FISHER else None)
+    fisher = (
+        gaussian_fisher(q, observations, pi_distribution.distribution.stddev, named)  # type: ignore[attr-defined]
+        if ANALYTIC_FISHER
+        else None
+    )
     if fisher is not None:
         return named, fisher
     grads_kl = th.autograd.grad(kl, named, create_graph=True, allow_unused=True)
@@ -132,8 +154,16 @@ def kl_hessian_product(q: ActorCriticPolicy, observations: th.Tensor, pi_distrib
     return params, lambda vector: flat_grad((grad_kl * vector).sum(), params, retain_graph=True)
 
 
-def kl_penalty_e_step(q: ActorCriticPolicy, pi: ActorCriticPolicy, batch: Batch, *, kl_coef: float, n_epochs: int,
-                      batch_size: int, learning_rate: float) -> dict[str, float]:
+def kl_penalty_e_step(
+    q: ActorCriticPolicy,
+    pi: ActorCriticPolicy,
+    batch: Batch,
+    *,
+    kl_coef: float,
+    n_epochs: int,
+    batch_size: int,
+    learning_rate: float,
+) -> dict[str, float]:
     """E-step, KL-penalty variant: eq. 5 taken literally, E[q/pi A] - kl_coef KL(q || pi), by Adam on minibatches.
 
     :return: ``policy_objective``, the penalised objective on the whole batch after the last epoch

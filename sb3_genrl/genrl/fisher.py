@@ -49,11 +49,18 @@ class GaussianFisher:
     :param parameters: the parameters in the order of the flat vectors (exactly the mean's and the log std's)
     """
 
-    def __init__(self, layers: list[Layer], spread: nn.Parameter | nn.Linear, features: th.Tensor, std: th.Tensor,
-                 parameters: Sequence[nn.Parameter]) -> None:
+    def __init__(
+        self,
+        layers: list[Layer],
+        spread: nn.Parameter | nn.Linear,
+        features: th.Tensor,
+        std: th.Tensor,
+        parameters: Sequence[nn.Parameter],
+    ) -> None:
         self.slices, self.numel = _slices(parameters), sum(parameter.numel() for parameter in parameters)
-        self.layers = [(linear.weight.detach(), linear.bias.detach(), id(linear.weight), id(linear.bias))
-                       for linear, _ in layers]
+        self.layers = [
+            (linear.weight.detach(), linear.bias.detach(), id(linear.weight), id(linear.bias)) for linear, _ in layers
+        ]
         self.spread, self.features = spread, features
         n = std.numel()  # the KL's terms: contexts times latent dimensions
         self.mean_weight = 1.0 / (n * std.pow(2))  # the KL's second derivative in the mean, over its terms
@@ -83,8 +90,9 @@ class GaussianFisher:
         """Add ``J_mu^T diag(1 / (N d sigma^2)) J_mu vector`` to ``product``."""
         tangent = None  # the inputs' tangent: none, the features are fixed
         for index, (weight, bias, weight_key, bias_key) in enumerate(self.layers):
-            direction = th.addmm(self._view(vector, bias_key, bias.shape), self.inputs[index],
-                                 self._view(vector, weight_key, weight.shape).t())
+            direction = th.addmm(
+                self._view(vector, bias_key, bias.shape), self.inputs[index], self._view(vector, weight_key, weight.shape).t()
+            )
             if tangent is not None:
                 direction.addmm_(tangent, weight.t())
             tangent = direction if self.slopes[index] is None else direction.mul_(self.slopes[index])
@@ -102,12 +110,14 @@ class GaussianFisher:
         """Add ``2 J_l^T J_l vector / (N d)`` to ``product``."""
         if isinstance(self.spread, nn.Parameter):  # the same log std for every context: J_l = I for each of them
             key = id(self.spread)
-            self._view(product, key, self.spread.shape).add_(self._view(vector, key, self.spread.shape),
-                                                             alpha=self.spread_weight * len(self.features))
+            self._view(product, key, self.spread.shape).add_(
+                self._view(vector, key, self.spread.shape), alpha=self.spread_weight * len(self.features)
+            )
             return
         weight, bias = self.spread.weight, self.spread.bias
-        tangent = th.addmm(self._view(vector, id(bias), bias.shape), self.features,
-                           self._view(vector, id(weight), weight.shape).t()).mul_(self.spread_weight)
+        tangent = th.addmm(
+            self._view(vector, id(bias), bias.shape), self.features, self._view(vector, id(weight), weight.shape).t()
+        ).mul_(self.spread_weight)
         self._view(product, id(weight), weight.shape).addmm_(tangent.t(), self.features)
         self._view(product, id(bias), bias.shape).add_(tangent.sum(0))
 
@@ -124,8 +134,9 @@ def _slope(activation: type[nn.Module] | None, output: th.Tensor) -> th.Tensor |
     return (output > 0).to(output.dtype)
 
 
-def gaussian_fisher(policy: ActorCriticPolicy, observations: th.Tensor, std: th.Tensor,
-                    parameters: Sequence[nn.Parameter]) -> GaussianFisher | None:
+def gaussian_fisher(
+    policy: ActorCriticPolicy, observations: th.Tensor, std: th.Tensor, parameters: Sequence[nn.Parameter]
+) -> GaussianFisher | None:
     """The analytic ``v -> H v`` of ``policy``'s KL at ``observations`` over ``parameters`` (its actor's), or
     ``None`` when the policy is not of a known structure (see the module doc).
 
@@ -141,7 +152,8 @@ def gaussian_fisher(policy: ActorCriticPolicy, observations: th.Tensor, std: th.
     if not isinstance(spread, nn.Parameter | nn.Linear) or (isinstance(spread, nn.Linear) and spread.bias is None):
         return None
     known = [p for linear, _ in layers for p in (linear.weight, linear.bias)] + list(
-        [spread] if isinstance(spread, nn.Parameter) else [spread.weight, spread.bias])
+        [spread] if isinstance(spread, nn.Parameter) else [spread.weight, spread.bias]
+    )
     if sorted(map(id, known)) != sorted(map(id, parameters)) or len(known) != len(parameters):
         return None
     with th.no_grad():

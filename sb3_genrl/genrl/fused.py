@@ -61,9 +61,15 @@ class FlatAdam:
         self.steps = float(states[0]["step"]) if states[0] else 0.0
         with th.no_grad():
             self.vector = th.cat([parameter.detach().reshape(-1) for parameter in self.parameters])
-            self.exp_avg, self.exp_avg_sq = (th.cat([(state[key] if state else th.zeros_like(p)).reshape(-1)
-                                                     for p, state in zip(self.parameters, states, strict=True)])
-                                             for key in ("exp_avg", "exp_avg_sq"))
+            self.exp_avg, self.exp_avg_sq = (
+                th.cat(
+                    [
+                        (state[key] if state else th.zeros_like(p)).reshape(-1)
+                        for p, state in zip(self.parameters, states, strict=True)
+                    ]
+                )
+                for key in ("exp_avg", "exp_avg_sq")
+            )
         self.grad = th.zeros_like(self.vector)
 
     @classmethod
@@ -76,9 +82,11 @@ class FlatAdam:
         if len(groups) != 1 or not ids <= {id(p) for p in groups[0]["params"]}:
             return None
         group = groups[0]
-        if (any(group.get(key) for key in ("weight_decay", "amsgrad", "maximize", "capturable", "fused", "differentiable"))
-                or isinstance(group["lr"], th.Tensor)
-                or any(isinstance(beta, th.Tensor) for beta in group["betas"])):
+        if (
+            any(group.get(key) for key in ("weight_decay", "amsgrad", "maximize", "capturable", "fused", "differentiable"))
+            or isinstance(group["lr"], th.Tensor)
+            or any(isinstance(beta, th.Tensor) for beta in group["betas"])
+        ):
             return None
         states = [optimizer.state.get(parameter, {}) for parameter in parameters]
         if any(bool(state) != bool(states[0]) for state in states):
@@ -116,12 +124,13 @@ class FlatAdam:
             return
         with th.no_grad():
             for parameter, value, exp_avg, exp_avg_sq, grad in zip(
-                    self.parameters, *(self.views(t) for t in (self.vector, self.exp_avg, self.exp_avg_sq, self.grad)),
-                    strict=True):
+                self.parameters, *(self.views(t) for t in (self.vector, self.exp_avg, self.exp_avg_sq, self.grad)), strict=True
+            ):
                 parameter.copy_(value)
                 state = self.optimizer.state[parameter]
-                state["step"] = th.tensor(self.steps, dtype=th.get_default_dtype()) if not state else state["step"].fill_(
-                    self.steps)
+                state["step"] = (
+                    th.tensor(self.steps, dtype=th.get_default_dtype()) if not state else state["step"].fill_(self.steps)
+                )
                 state["exp_avg"] = exp_avg.clone()
                 state["exp_avg_sq"] = exp_avg_sq.clone()
                 parameter.grad = grad.clone()

@@ -44,13 +44,16 @@ def check_model_data(path: Any, data: dict[str, Any] | None) -> None:
     fails later with a shape error)."""
     if not data:
         kind = " (a generator file: load it with sb3_genrl.generative.load)" if _is_generator_file(path) else ""
-        raise ValueError(f"{path} is not an SB3 model zip{kind}; a GenRL model is the .zip that GenRL.save and genrl "
-                         "train-policy write")
+        raise ValueError(
+            f"{path} is not an SB3 model zip{kind}; a GenRL model is the .zip that GenRL.save and genrl train-policy write"
+        )
     if "n_em_iterations" not in data:
         policy = data.get("policy_class")
         name = getattr(policy, "__name__", None) or "another algorithm's"
-        raise ValueError(f"{path} is not a GenRL model: it holds a {name} policy of another algorithm (no GenRL "
-                         "settings); load it with that algorithm's load()")
+        raise ValueError(
+            f"{path} is not a GenRL model: it holds a {name} policy of another algorithm (no GenRL "
+            "settings); load it with that algorithm's load()"
+        )
 
 
 def _is_generator_file(path: Any) -> bool:
@@ -64,9 +67,12 @@ def _is_generator_file(path: Any) -> bool:
         return False
 
 
-def saved_generator(path: str | pathlib.Path | io.BufferedIOBase, data: dict[str, Any],
-                    generator: TrajectoryGenerator | str | None, device: th.device | str,
-                    ) -> tuple[TrajectoryGenerator | None, str | None]:
+def saved_generator(
+    path: str | pathlib.Path | io.BufferedIOBase,
+    data: dict[str, Any],
+    generator: TrajectoryGenerator | str | None,
+    device: th.device | str,
+) -> tuple[TrajectoryGenerator | None, str | None]:
     """The generator of a model loaded from ``path`` whose saved ``data`` is given, and its file: ``generator`` when
     given (a file is loaded onto ``device``), else the file ``data`` names, else :func:`generator_file` of ``path``;
     ``(None, None)`` when there is none. One that is not the generator the model recorded is refused
@@ -83,7 +89,6 @@ def saved_generator(path: str | pathlib.Path | io.BufferedIOBase, data: dict[str
     return generator, generator_path  # type: ignore[return-value]
 
 
-
 def generator_digest(generator: TrajectoryGenerator | None) -> str | None:
     """The SHA-256 (hex) of a generator's content: its class, configuration, weights and normalisation statistics,
     what decoding depends on (not its training history or the file it came from, so a generator and its file, or two
@@ -93,9 +98,17 @@ def generator_digest(generator: TrajectoryGenerator | None) -> str | None:
         return None
     from sb3_genrl.generative.serialization import payload_digest
 
-    return payload_digest({"format_version": "content", "format": "", "class": type(generator).__name__,
-                           "sb3_genrl_version": "", "config": json.dumps(generator.config()), "history": "",
-                           "state": generator.state_tensors()})
+    return payload_digest(
+        {
+            "format_version": "content",
+            "format": "",
+            "class": type(generator).__name__,
+            "sb3_genrl_version": "",
+            "config": json.dumps(generator.config()),
+            "history": "",
+            "state": generator.state_tensors(),
+        }
+    )
 
 
 def describe_generator(generator: TrajectoryGenerator, path: str | os.PathLike | None = None) -> str:
@@ -103,12 +116,16 @@ def describe_generator(generator: TrajectoryGenerator, path: str | os.PathLike |
     name it."""
     digest, shape = generator_digest(generator), (generator.latent_dim, generator.horizon, generator.action_dim)
     content = f"SHA-256 {digest[:16]}..." if digest else f"object {id(generator):#x}"
-    return (f"{type(generator).__name__}" + (f" from {os.fspath(path)!r}" if path is not None else "")
-            + f" ((latent_dim, T, M) = {shape}, {content})")
+    return (
+        f"{type(generator).__name__}"
+        + (f" from {os.fspath(path)!r}" if path is not None else "")
+        + f" ((latent_dim, T, M) = {shape}, {content})"
+    )
 
 
-def check_recorded_generator(generator: TrajectoryGenerator | None, recorded: str | None,
-                             path: str | os.PathLike | None, model: Any) -> None:
+def check_recorded_generator(
+    generator: TrajectoryGenerator | None, recorded: str | None, path: str | os.PathLike | None, model: Any
+) -> None:
     """Refuse a generator whose content is not the one a saved model ``model`` recorded (``recorded``: its
     :func:`generator_digest`) - e.g. a generator file replaced by another ``train-generator`` run since the policy was
     trained on it. A model saved without a record (an older version, a generator of unknown content) is not checked.
@@ -117,9 +134,11 @@ def check_recorded_generator(generator: TrajectoryGenerator | None, recorded: st
     """
     digest = generator_digest(generator)
     if recorded is not None and digest is not None and digest != recorded:
-        raise ValueError(f"the generator {describe_generator(generator, path)} is not the one {model} was trained with "
-                         f"(SHA-256 {recorded[:16]}...): a policy decodes its latent actions with its own generator; "
-                         "pass the generator it was trained with")
+        raise ValueError(
+            f"the generator {describe_generator(generator, path)} is not the one {model} was trained with "
+            f"(SHA-256 {recorded[:16]}...): a policy decodes its latent actions with its own generator; "
+            "pass the generator it was trained with"
+        )
 
 
 def check_same_generator(given: TrajectoryGenerator | None, env: Any, given_path: str | None) -> None:
@@ -135,9 +154,11 @@ def check_same_generator(given: TrajectoryGenerator | None, env: Any, given_path
     else:
         same = digests[0] == digests[1]
     if not same:
-        raise ValueError(f"the generator given, {describe_generator(given, given_path)}, is not the one wrapping the "
-                         f"env, {describe_generator(wrapped)}: GenRL plays the env's; pass that one, or no generator "
-                         "(the env's is used)")
+        raise ValueError(
+            f"the generator given, {describe_generator(given, given_path)}, is not the one wrapping the "
+            f"env, {describe_generator(wrapped)}: GenRL plays the env's; pass that one, or no generator "
+            "(the env's is used)"
+        )
 
 
 def wrapped_generator(env: Any) -> tuple[TrajectoryGenerator | None, bool]:

@@ -100,7 +100,10 @@ class GenRL(OnPolicyAlgorithm):
     """
 
     policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = {
-        "MlpPolicy": MlpPolicy, "MultiInputPolicy": MultiInputPolicy, "ContextStdPolicy": ContextStdPolicy}
+        "MlpPolicy": MlpPolicy,
+        "MultiInputPolicy": MultiInputPolicy,
+        "ContextStdPolicy": ContextStdPolicy,
+    }
     policy: ActorCriticPolicy
     # States saved only when their setting is on (see _get_torch_save_params and set_parameters)
     OPTIONAL_STATES: ClassVar[tuple[str, ...]] = ("policy_average", "hindsight.optimizer")
@@ -143,18 +146,39 @@ class GenRL(OnPolicyAlgorithm):
             if generator is not None:
                 raise TypeError("GenRL(env, generator, generator=...) got the generator twice")
             policy, env, generator = "MlpPolicy", policy, env  # type: ignore[assignment]
-        self.hindsight_kwargs = check_genrl_settings(dict(  # the values SB3 does not check itself
-            e_step=e_step, n_em_iterations=n_em_iterations, value_history=value_history, batch_size=batch_size,
-            policy_averaging=policy_averaging, max_log_std_change=max_log_std_change,
-            hindsight_kwargs=hindsight_kwargs))["hindsight_kwargs"]
+        self.hindsight_kwargs = check_genrl_settings(
+            dict(  # the values SB3 does not check itself
+                e_step=e_step,
+                n_em_iterations=n_em_iterations,
+                value_history=value_history,
+                batch_size=batch_size,
+                policy_averaging=policy_averaging,
+                max_log_std_change=max_log_std_change,
+                hindsight_kwargs=hindsight_kwargs,
+            )
+        )["hindsight_kwargs"]
         env, policy_kwargs = self._latent_env(env, generator, latent_clip, policy_kwargs, device)
         super().__init__(
-            self._fitting_policy(policy, env), env, learning_rate=learning_rate, n_steps=n_steps,  # type: ignore[arg-type]
-            gamma=1.0, gae_lambda=1.0,  # one-step episodes: no discounting, A = r - V(s0)
-            ent_coef=0.0, vf_coef=0.0,  # the value function is fitted separately (Algorithm 1, last line)
-            max_grad_norm=0.0, use_sde=False, sde_sample_freq=-1, stats_window_size=stats_window_size,
-            tensorboard_log=tensorboard_log, policy_kwargs=policy_kwargs, verbose=verbose, seed=seed, device=device,
-            _init_setup_model=False, supported_action_spaces=(spaces.Box,))
+            self._fitting_policy(policy, env),
+            env,
+            learning_rate=learning_rate,
+            n_steps=n_steps,  # type: ignore[arg-type]
+            gamma=1.0,
+            gae_lambda=1.0,  # one-step episodes: no discounting, A = r - V(s0)
+            ent_coef=0.0,
+            vf_coef=0.0,  # the value function is fitted separately (Algorithm 1, last line)
+            max_grad_norm=0.0,
+            use_sde=False,
+            sde_sample_freq=-1,
+            stats_window_size=stats_window_size,
+            tensorboard_log=tensorboard_log,
+            policy_kwargs=policy_kwargs,
+            verbose=verbose,
+            seed=seed,
+            device=device,
+            _init_setup_model=False,
+            supported_action_spaces=(spaces.Box,),
+        )
         if normalize_advantage and self.env is not None and self.n_steps * self.env.num_envs < 2:
             raise SettingError(f"normalize_advantage needs n_steps * n_envs >= 2 episodes, got {self.n_steps * self.n_envs}")
         self.e_step, self.n_em_iterations, self.normalize_advantage = e_step, int(n_em_iterations), normalize_advantage
@@ -169,16 +193,20 @@ class GenRL(OnPolicyAlgorithm):
     def _setup_model(self) -> None:
         super()._setup_model()
         extractor = self.policy.pi_features_extractor
-        if (isinstance(self.policy, ContextStdPolicy) and self.max_log_std_change is not None
-                and not (isinstance(extractor, BoxScaler) and extractor.all_bounded)):
-            raise ValueError("max_log_std_change with ContextStdPolicy bounds the log std's change over all contexts, "
-                             "which needs a bounded Box context scaled by BoxScaler (the default for Box contexts); got "
-                             f"{type(extractor).__name__} on {self.observation_space}")
+        if (
+            isinstance(self.policy, ContextStdPolicy)
+            and self.max_log_std_change is not None
+            and not (isinstance(extractor, BoxScaler) and extractor.all_bounded)
+        ):
+            raise ValueError(
+                "max_log_std_change with ContextStdPolicy bounds the log std's change over all contexts, "
+                "which needs a bounded Box context scaled by BoxScaler (the default for Box contexts); got "
+                f"{type(extractor).__name__} on {self.observation_space}"
+            )
         # (observations, returns) of the last value_history batches, for the value-function fit
         self._value_memory: collections.deque[tuple[Any, th.Tensor]] = collections.deque(maxlen=self.value_history)
         self.policy_average = None if self.policy_averaging is None else averaged_copy(self.policy)
-        self.hindsight = (None if self.hindsight_kwargs is None
-                          else HindsightRelabelling(self.policy, **self.hindsight_kwargs))
+        self.hindsight = None if self.hindsight_kwargs is None else HindsightRelabelling(self.policy, **self.hindsight_kwargs)
 
     def train(self) -> None:
         """One EM iteration (Algorithm 1) on the N episodes in the rollout buffer."""
@@ -197,8 +225,9 @@ class GenRL(OnPolicyAlgorithm):
         batch = (observations, actions, log_prob_pi, (advantages - advantage_mean) / advantage_std)
         stats: dict[str, float] = {}
         if self.hindsight is not None:  # the relabelled pulls join the E-step's batch
-            batch, stats["hindsight_pulls"] = self.hindsight.extend_batch(batch, self.rollout_buffer, advantage_mean,
-                                                                          advantage_std)
+            batch, stats["hindsight_pulls"] = self.hindsight.extend_batch(
+                batch, self.rollout_buffer, advantage_mean, advantage_std
+            )
 
         log_std_before = log_std_parameters(self.policy)
         for _ in range(self.n_em_iterations):  # Algorithm 1's inner loop: repeat E-step and M-step on the batch
@@ -246,11 +275,25 @@ class GenRL(OnPolicyAlgorithm):
     def _e_step(self, q: ActorCriticPolicy, batch: tuple[th.Tensor, th.Tensor, th.Tensor, th.Tensor]) -> dict[str, float]:
         """E-step (eq. 4-5) on ``q``, a copy of the policy: the TRPO step or the KL-penalty variant."""
         if self.e_step == "trpo":
-            return trpo_e_step(q, self.policy, batch, target_kl=self.target_kl, cg_max_steps=self.cg_max_steps,
-                               cg_damping=self.cg_damping, line_search_shrinking_factor=self.line_search_shrinking_factor,
-                               line_search_max_iter=self.line_search_max_iter)
-        return kl_penalty_e_step(q, self.policy, batch, kl_coef=self.kl_coef, n_epochs=self.n_e_step_epochs,
-                                 batch_size=self.batch_size, learning_rate=self.e_step_learning_rate)
+            return trpo_e_step(
+                q,
+                self.policy,
+                batch,
+                target_kl=self.target_kl,
+                cg_max_steps=self.cg_max_steps,
+                cg_damping=self.cg_damping,
+                line_search_shrinking_factor=self.line_search_shrinking_factor,
+                line_search_max_iter=self.line_search_max_iter,
+            )
+        return kl_penalty_e_step(
+            q,
+            self.policy,
+            batch,
+            kl_coef=self.kl_coef,
+            n_epochs=self.n_e_step_epochs,
+            batch_size=self.batch_size,
+            learning_rate=self.e_step_learning_rate,
+        )
 
     def _pi(self, observations: th.Tensor) -> Distribution:
         """The fixed policy pi_theta(.|s) (no gradient)."""
@@ -261,8 +304,7 @@ class GenRL(OnPolicyAlgorithm):
         """Fit ``V`` to the returns of the last ``value_history`` batches; the minibatch losses."""
         data = next(self.rollout_buffer.get(batch_size=None))
         self._value_memory.append((data.observations, data.returns))
-        return fit_value_function(self.policy, self._value_memory, epochs=self.n_critic_updates,
-                                  batch_size=self.batch_size)
+        return fit_value_function(self.policy, self._value_memory, epochs=self.n_critic_updates, batch_size=self.batch_size)
 
     def collect_rollouts(self, env: Any, callback: Any, rollout_buffer: Any, n_rollout_steps: int) -> bool:
         if self.hindsight is not None:
@@ -274,8 +316,13 @@ class GenRL(OnPolicyAlgorithm):
         if self.hindsight is not None:  # refused at the first pull, not after a rollout
             self.hindsight.add_infos(infos)
 
-    def predict(self, observation: np.ndarray | dict[str, np.ndarray], state: Any = None, episode_start: Any = None,
-                deterministic: bool = False) -> tuple[np.ndarray, Any]:
+    def predict(
+        self,
+        observation: np.ndarray | dict[str, np.ndarray],
+        state: Any = None,
+        episode_start: Any = None,
+        deterministic: bool = False,
+    ) -> tuple[np.ndarray, Any]:
         """Like SB3's ``predict``; with ``policy_averaging``, the averaged policy acts."""
         return (self.policy_average or self.policy).predict(observation, state, episode_start, deterministic)
 
@@ -288,8 +335,15 @@ class GenRL(OnPolicyAlgorithm):
         trajectories = self.generator.decode(self.generator.check_latent(alpha))
         return np.asarray(trajectories[0] if single else trajectories)
 
-    def learn(self: SelfGenRL, total_timesteps: int, callback: MaybeCallback = None, log_interval: int = 1,
-              tb_log_name: str = "GenRL", reset_num_timesteps: bool = True, progress_bar: bool = False) -> SelfGenRL:
+    def learn(
+        self: SelfGenRL,
+        total_timesteps: int,
+        callback: MaybeCallback = None,
+        log_interval: int = 1,
+        tb_log_name: str = "GenRL",
+        reset_num_timesteps: bool = True,
+        progress_bar: bool = False,
+    ) -> SelfGenRL:
         """Train for ``total_timesteps`` episodes (one step = one episode = one trajectory played)."""
         return super().learn(total_timesteps, callback, log_interval, tb_log_name, reset_num_timesteps, progress_bar)
 
@@ -311,15 +365,19 @@ class GenRL(OnPolicyAlgorithm):
     def _excluded_save_params(self) -> list[str]:
         return [*super()._excluded_save_params(), "generator", "_value_memory", "policy_average", "hindsight", "_q"]
 
-    def set_parameters(self, load_path_or_dict: str | dict[str, Any], exact_match: bool = True,
-                       device: th.device | str = "auto") -> None:
+    def set_parameters(
+        self, load_path_or_dict: str | dict[str, Any], exact_match: bool = True, device: th.device | str = "auto"
+    ) -> None:
         """Like SB3's, for a model whose ``policy_averaging`` or hindsight regression was switched on or off at load:
         the saved state of a setting now off is dropped, one now on but not saved starts afresh (the average from the
         loaded policy, the regression's Adam without moments). The regression's learning rate is this model's."""
         from stable_baselines3.common.save_util import load_from_zip_file
 
-        params = dict(load_path_or_dict if isinstance(load_path_or_dict, dict)
-                      else load_from_zip_file(load_path_or_dict, device=device, load_data=False)[1])
+        params = dict(
+            load_path_or_dict
+            if isinstance(load_path_or_dict, dict)
+            else load_from_zip_file(load_path_or_dict, device=device, load_data=False)[1]
+        )
         fresh = []
         for name in self.OPTIONAL_STATES:
             if self._optional_state(name) is None:
@@ -347,9 +405,18 @@ class GenRL(OnPolicyAlgorithm):
             super().save(tmp, exclude=exclude, include=include)
 
     @classmethod
-    def load(cls: type[SelfGenRL], path: str | pathlib.Path | io.BufferedIOBase, env: GymEnv | None = None,  # type: ignore[override]
-             device: th.device | str = "auto", custom_objects: dict[str, Any] | None = None, print_system_info: bool = False,
-             force_reset: bool = True, *, generator: TrajectoryGenerator | str | None = None, **kwargs: Any) -> SelfGenRL:
+    def load(
+        cls: type[SelfGenRL],
+        path: str | pathlib.Path | io.BufferedIOBase,
+        env: GymEnv | None = None,  # type: ignore[override]
+        device: th.device | str = "auto",
+        custom_objects: dict[str, Any] | None = None,
+        print_system_info: bool = False,
+        force_reset: bool = True,
+        *,
+        generator: TrajectoryGenerator | str | None = None,
+        **kwargs: Any,
+    ) -> SelfGenRL:
         """Load like SB3. The generator is ``generator`` when given, else the saved path or ``<name>.generator.pt``
         (refused when its SHA-256 is not the model's ``generator_sha256``); without any, the model still predicts
         latent actions and ``predict_trajectory`` raises. A file that is not a GenRL model zip is refused."""
@@ -370,8 +437,14 @@ class GenRL(OnPolicyAlgorithm):
             model.generator_path = generator_path
         return model
 
-    def _latent_env(self, env: Any, generator: TrajectoryGenerator | str | None, latent_clip: float,
-                    policy_kwargs: dict[str, Any] | None, device: th.device | str) -> tuple[Any, dict[str, Any]]:
+    def _latent_env(
+        self,
+        env: Any,
+        generator: TrajectoryGenerator | str | None,
+        latent_clip: float,
+        policy_kwargs: dict[str, Any] | None,
+        device: th.device | str,
+    ) -> tuple[Any, dict[str, Any]]:
         """Set ``generator``, ``generator_path`` and ``generator_sha256``; the env in its latent-action wrapper, and the
         policy arguments completed (:func:`~sb3_genrl.genrl.policies.completed_policy_kwargs`). A generator given as a
         file is loaded onto ``device``; one given beside an env that wraps another is refused."""

@@ -30,16 +30,27 @@ from sb3_genrl.genrl.regression import fit_mean, mean_parameters, regress_mean
 from sb3_genrl.genrl.value import use_foreach
 
 Batch = tuple[th.Tensor, th.Tensor, th.Tensor, th.Tensor]  # observations, actions, log pi(actions), advantages
-DEFAULTS: dict[str, Any] = {"history": 1, "regression_steps": 0, "regression_lr": 1e-3, "regression_batch_size": 256,
-                            "regression_weighted": False, "refit_every": 0, "refit_start": None,
-                            "refit_steps": 4000}
-NO_HINDSIGHT_INFO = ("hindsight_kwargs needs every pull's info['hindsight']: (context, reward) or None. "
-                     "LatentActionWrapper reports it when the task defines hindsight(info) and the context is the task's "
-                     "get_context(), and for any goal-conditioned env (a Dict observation with observation, achieved_goal "
-                     "and desired_goal, and compute_reward); this env's info has no such key")
-NO_SUCCESS_INFO = ("hindsight_kwargs['refit_every'] refits the policy's mean to the pulls that solved their own context, "
-                   "which needs every pull's info['is_success'] (the goal-conditioned envs report it); this env's info "
-                   "has no such key")
+DEFAULTS: dict[str, Any] = {
+    "history": 1,
+    "regression_steps": 0,
+    "regression_lr": 1e-3,
+    "regression_batch_size": 256,
+    "regression_weighted": False,
+    "refit_every": 0,
+    "refit_start": None,
+    "refit_steps": 4000,
+}
+NO_HINDSIGHT_INFO = (
+    "hindsight_kwargs needs every pull's info['hindsight']: (context, reward) or None. "
+    "LatentActionWrapper reports it when the task defines hindsight(info) and the context is the task's "
+    "get_context(), and for any goal-conditioned env (a Dict observation with observation, achieved_goal "
+    "and desired_goal, and compute_reward); this env's info has no such key"
+)
+NO_SUCCESS_INFO = (
+    "hindsight_kwargs['refit_every'] refits the policy's mean to the pulls that solved their own context, "
+    "which needs every pull's info['is_success'] (the goal-conditioned envs report it); this env's info "
+    "has no such key"
+)
 
 
 def check_hindsight_kwargs(hindsight_kwargs: Mapping[str, Any]) -> dict[str, Any]:
@@ -53,11 +64,15 @@ def check_hindsight_kwargs(hindsight_kwargs: Mapping[str, Any]) -> dict[str, Any
         raise ValueError(f"hindsight_kwargs must be a dict or None, got {hindsight_kwargs!r}")
     unknown = sorted(set(hindsight_kwargs) - set(DEFAULTS))
     if unknown:
-        raise ValueError(f"hindsight_kwargs: {', '.join(map(repr, unknown))} not among its settings "
-                         f"({', '.join(DEFAULTS)})")
+        raise ValueError(f"hindsight_kwargs: {', '.join(map(repr, unknown))} not among its settings ({', '.join(DEFAULTS)})")
     settings = DEFAULTS | dict(hindsight_kwargs)
-    for key, minimum in (("history", 1), ("regression_steps", 0), ("regression_batch_size", 1), ("refit_every", 0),
-                         ("refit_steps", 1)):
+    for key, minimum in (
+        ("history", 1),
+        ("regression_steps", 0),
+        ("regression_batch_size", 1),
+        ("refit_every", 0),
+        ("refit_steps", 1),
+    ):
         value = settings[key]
         if isinstance(value, bool) or int(value) != value or value < minimum:
             raise ValueError(f"hindsight_kwargs['{key}'] must be an integer >= {minimum}, got {value!r}")
@@ -69,11 +84,13 @@ def check_hindsight_kwargs(hindsight_kwargs: Mapping[str, Any]) -> dict[str, Any
     if not settings["regression_lr"] > 0:
         raise ValueError(f"hindsight_kwargs['regression_lr'] must be positive, got {settings['regression_lr']!r}")
     if not isinstance(settings["regression_weighted"], bool | np.bool_):
-        raise ValueError(f"hindsight_kwargs['regression_weighted'] must be True or False, got "
-                         f"{settings['regression_weighted']!r}")
+        raise ValueError(
+            f"hindsight_kwargs['regression_weighted'] must be True or False, got {settings['regression_weighted']!r}"
+        )
     if settings["regression_weighted"] and not settings["regression_steps"]:
-        raise ValueError("hindsight_kwargs['regression_weighted'] weights the regression's pulls, which needs "
-                         "regression_steps > 0")
+        raise ValueError(
+            "hindsight_kwargs['regression_weighted'] weights the regression's pulls, which needs regression_steps > 0"
+        )
     return dict(hindsight_kwargs)
 
 
@@ -93,16 +110,33 @@ class HindsightRelabelling:
     :param refit_steps: Adam steps of each refit (default 4000), with ``regression_lr`` and ``regression_batch_size``
     """
 
-    def __init__(self, policy: ActorCriticPolicy, *, history: int = 1, regression_steps: int = 0,
-                 regression_lr: float = 1e-3, regression_batch_size: int = 256, regression_weighted: bool = False,
-                 refit_every: int = 0, refit_start: int | None = None, refit_steps: int = 4000) -> None:
-        check_hindsight_kwargs({"history": history, "regression_steps": regression_steps, "regression_lr": regression_lr,
-                                "regression_batch_size": regression_batch_size,
-                                "regression_weighted": regression_weighted, "refit_every": refit_every,
-                                "refit_start": refit_start, "refit_steps": refit_steps})
+    def __init__(
+        self,
+        policy: ActorCriticPolicy,
+        *,
+        history: int = 1,
+        regression_steps: int = 0,
+        regression_lr: float = 1e-3,
+        regression_batch_size: int = 256,
+        regression_weighted: bool = False,
+        refit_every: int = 0,
+        refit_start: int | None = None,
+        refit_steps: int = 4000,
+    ) -> None:
+        check_hindsight_kwargs(
+            {
+                "history": history,
+                "regression_steps": regression_steps,
+                "regression_lr": regression_lr,
+                "regression_batch_size": regression_batch_size,
+                "regression_weighted": regression_weighted,
+                "refit_every": refit_every,
+                "refit_start": refit_start,
+                "refit_steps": refit_steps,
+            }
+        )
         if not isinstance(policy.observation_space, spaces.Box):
-            raise ValueError(f"hindsight_kwargs relabels Box contexts; this env's context space is "
-                             f"{policy.observation_space}")
+            raise ValueError(f"hindsight_kwargs relabels Box contexts; this env's context space is {policy.observation_space}")
         self.policy, self.history = policy, int(history)
         self.regression_steps, self.regression_lr = int(regression_steps), regression_lr
         self.regression_batch_size, self.regression_weighted = int(regression_batch_size), bool(regression_weighted)
@@ -117,8 +151,7 @@ class HindsightRelabelling:
         # (contexts, latent actions) of the pulls that solved their own context, one entry per batch, for the whole run
         self.solved: list[tuple[th.Tensor, th.Tensor]] = []
         # the weights of the policy's mean as it was made, from which every refit starts (None without refits)
-        self.initial_mean = ([parameter.detach().clone() for parameter in mean_parameters(policy)]
-                             if self.refit_every else None)
+        self.initial_mean = [parameter.detach().clone() for parameter in mean_parameters(policy)] if self.refit_every else None
 
     def reset(self) -> None:
         """Forget the pull infos of the rollout before (a rollout starts)."""
@@ -132,8 +165,9 @@ class HindsightRelabelling:
             raise ValueError(NO_SUCCESS_INFO)
         self.pull_infos.append(infos)
 
-    def extend_batch(self, batch: Batch, rollout_buffer: RolloutBuffer, advantage_mean: th.Tensor | float,
-                     advantage_std: th.Tensor | float) -> tuple[Batch, float]:
+    def extend_batch(
+        self, batch: Batch, rollout_buffer: RolloutBuffer, advantage_mean: th.Tensor | float, advantage_std: th.Tensor | float
+    ) -> tuple[Batch, float]:
         """The E-step's batch with the relabelled pulls of this rollout and of the ``history - 1`` before it joined.
 
         Each joins as (context', latent action, log-probability under the current policy at context',
@@ -163,8 +197,15 @@ class HindsightRelabelling:
         if not len(contexts):
             return []
         use_foreach(self.optimizer)  # type: ignore[arg-type]
-        return regress_mean(self.policy, self.optimizer, contexts, actions, steps=self.regression_steps,  # type: ignore[arg-type]
-                            batch_size=self.regression_batch_size, weighted=self.regression_weighted)
+        return regress_mean(
+            self.policy,
+            self.optimizer,
+            contexts,
+            actions,
+            steps=self.regression_steps,  # type: ignore[arg-type]
+            batch_size=self.regression_batch_size,
+            weighted=self.regression_weighted,
+        )
 
     def refit(self, rollout_buffer: RolloutBuffer, episodes: int) -> dict[str, float]:
         """Keep this rollout's pulls that solved their own context (``info["is_success"]``); when the run's episode
@@ -194,8 +235,14 @@ class HindsightRelabelling:
         with th.no_grad():
             for parameter, initial in zip(mean_parameters(self.policy), self.initial_mean, strict=True):  # type: ignore[arg-type]
                 parameter.copy_(initial)
-        losses = fit_mean(self.policy, contexts, actions, steps=self.refit_steps, learning_rate=self.regression_lr,
-                          batch_size=self.regression_batch_size)
+        losses = fit_mean(
+            self.policy,
+            contexts,
+            actions,
+            steps=self.refit_steps,
+            learning_rate=self.regression_lr,
+            batch_size=self.regression_batch_size,
+        )
         return {"refit_pairs": float(len(actions)), "refit_loss": float(np.mean(losses[-100:]))}
 
     def _refits_due(self, episodes: int) -> int:
@@ -214,8 +261,10 @@ class HindsightRelabelling:
         space, n = self.policy.observation_space, len(rewards)
         shapes = (tuple(contexts.shape), tuple(actions.shape), tuple(rewards.shape))
         if shapes != ((n, *space.shape), (n, *self.policy.action_space.shape), (n,)):
-            raise ValueError(f"keep_pulls: contexts, actions and rewards of shapes {shapes}, expected "
-                             f"(n, *{space.shape}), (n, *{self.policy.action_space.shape}) and (n,)")
+            raise ValueError(
+                f"keep_pulls: contexts, actions and rewards of shapes {shapes}, expected "
+                f"(n, *{space.shape}), (n, *{self.policy.action_space.shape}) and (n,)"
+            )
         device = self.policy.device
         self.kept_pulls = (contexts.to(device, th.float32), actions.to(device, th.float32), rewards.to(device, th.float32))
 
@@ -233,8 +282,12 @@ class HindsightRelabelling:
     def _solving_pulls(self, buffer: RolloutBuffer) -> tuple[th.Tensor, th.Tensor]:
         """This rollout's pulls that solved their own context: contexts and latent actions as played (clipped)."""
         self._check_rollout(buffer)
-        rows = [env_index * buffer.buffer_size + step for step, infos in enumerate(self.pull_infos)
-                for env_index, info in enumerate(infos) if info["is_success"]]  # as get() flattened the buffer
+        rows = [
+            env_index * buffer.buffer_size + step
+            for step, infos in enumerate(self.pull_infos)
+            for env_index, info in enumerate(infos)
+            if info["is_success"]
+        ]  # as get() flattened the buffer
         space, device = self.policy.action_space, self.policy.device
         actions = np.clip(buffer.actions[rows], space.low, space.high).astype(np.float32)  # type: ignore[attr-defined]
         return (th.as_tensor(buffer.observations[rows], device=device).float(), th.as_tensor(actions, device=device))
@@ -255,6 +308,8 @@ class HindsightRelabelling:
                     actions.append(buffer.actions[env_index * buffer.buffer_size + step])  # as get() flattened it
                     rewards.append(float(reward))
         action_shape = (len(actions), *self.policy.action_space.shape)  # also when no pull was relabelled
-        return (th.as_tensor(np.array(contexts, dtype=space.dtype).reshape(-1, *space.shape), device=device),
-                th.as_tensor(np.array(actions, dtype=np.float32).reshape(action_shape), device=device),
-                th.as_tensor(np.array(rewards, dtype=np.float32), device=device))
+        return (
+            th.as_tensor(np.array(contexts, dtype=space.dtype).reshape(-1, *space.shape), device=device),
+            th.as_tensor(np.array(actions, dtype=np.float32).reshape(action_shape), device=device),
+            th.as_tensor(np.array(rewards, dtype=np.float32), device=device),
+        )

@@ -31,20 +31,62 @@ from sb3_genrl.genrl.policies import BoxScaler, ContextStdPolicy, MlpPolicy, Mul
 from sb3_genrl.wrappers import LatentActionWrapper
 
 # What a prediction does not need: SB3 rebuilds it (schedules, buffer classes) or leaves it empty until learn().
-_LEFT_EMPTY = ("lr_schedule", "clip_range", "clip_range_vf", "rollout_buffer_class", "_last_obs", "_last_episode_starts",
-               "_last_original_obs", "ep_info_buffer", "ep_success_buffer")
+_LEFT_EMPTY = (
+    "lr_schedule",
+    "clip_range",
+    "clip_range_vf",
+    "rollout_buffer_class",
+    "_last_obs",
+    "_last_episode_starts",
+    "_last_original_obs",
+    "ep_info_buffer",
+    "ep_success_buffer",
+)
 # Classes a policy's keyword arguments may name, by the text SB3 writes for them beside the pickle.
-_ALLOWED_CLASSES = {str(cls): cls for cls in (
-    BoxScaler, FlattenExtractor, CombinedExtractor, th.nn.Tanh, th.nn.ReLU, th.nn.ELU, th.nn.LeakyReLU, th.nn.GELU,
-    th.nn.SiLU, th.optim.Adam, th.optim.AdamW, th.optim.SGD, th.optim.RMSprop)}
+_ALLOWED_CLASSES = {
+    str(cls): cls
+    for cls in (
+        BoxScaler,
+        FlattenExtractor,
+        CombinedExtractor,
+        th.nn.Tanh,
+        th.nn.ReLU,
+        th.nn.ELU,
+        th.nn.LeakyReLU,
+        th.nn.GELU,
+        th.nn.SiLU,
+        th.optim.Adam,
+        th.optim.AdamW,
+        th.optim.SGD,
+        th.optim.RMSprop,
+    )
+}
 _POLICIES = {f"{cls.__module__}.{cls.__qualname__}": cls for cls in (MlpPolicy, MultiInputPolicy, ContextStdPolicy)}
 # The pickle opcodes of a reference to a class by its module and name, and nothing else
-_REFERENCE_OPCODES = {"PROTO", "FRAME", "SHORT_BINUNICODE", "BINUNICODE", "UNICODE", "MEMOIZE", "BINPUT", "LONG_BINPUT",
-                      "PUT", "STACK_GLOBAL", "GLOBAL", "STOP"}
+_REFERENCE_OPCODES = {
+    "PROTO",
+    "FRAME",
+    "SHORT_BINUNICODE",
+    "BINUNICODE",
+    "UNICODE",
+    "MEMOIZE",
+    "BINPUT",
+    "LONG_BINPUT",
+    "PUT",
+    "STACK_GLOBAL",
+    "GLOBAL",
+    "STOP",
+}
 
 
-def load_policy(path: str | os.PathLike, env: gym.Env, *, generator: TrajectoryGenerator | str | None = None,
-                device: th.device | str = "cpu", trust: bool = False) -> GenRL:
+def load_policy(
+    path: str | os.PathLike,
+    env: gym.Env,
+    *,
+    generator: TrajectoryGenerator | str | None = None,
+    device: th.device | str = "cpu",
+    trust: bool = False,
+) -> GenRL:
     """Load a GenRL model zip for ``env``'s task, unpickling nothing from the zip unless ``trust`` is set.
 
     :param path: the ``.zip`` written by :meth:`GenRL.save <sb3_genrl.GenRL.save>`
@@ -69,11 +111,14 @@ def load_policy(path: str | os.PathLike, env: gym.Env, *, generator: TrajectoryG
         elif key == "policy_class":
             custom_objects[key] = _policy_class(entry, path)
         elif key == "policy_kwargs":
-            custom_objects[key] = {name: _allowed_value(value, name, path) for name, value in entry.items()
-                                   if not name.startswith(":")}
+            custom_objects[key] = {
+                name: _allowed_value(value, name, path) for name, value in entry.items() if not name.startswith(":")
+            }
         else:
-            raise ValueError(f"{path} holds a pickled {key!r}, which cannot be loaded without unpickling it; load it "
-                             "with trust=True (genrl video --trust-policy) only if you trust the file's source")
+            raise ValueError(
+                f"{path} holds a pickled {key!r}, which cannot be loaded without unpickling it; load it "
+                "with trust=True (genrl video --trust-policy) only if you trust the file's source"
+            )
     _check_space(data, "observation_space", latent_env.observation_space, path)
     _check_space(data, "action_space", latent_env.action_space, path)
     return GenRL.load(path, device=device, custom_objects=custom_objects, generator=generator)
@@ -90,8 +135,9 @@ def _read_data(path: str) -> dict[str, Any]:
         raise ValueError(f"{path} is not an SB3 model zip ({error})") from None
 
 
-def _resolve_generator(path: str, data: dict[str, Any], generator: TrajectoryGenerator | str | None,
-                       device: th.device | str) -> TrajectoryGenerator:
+def _resolve_generator(
+    path: str, data: dict[str, Any], generator: TrajectoryGenerator | str | None, device: th.device | str
+) -> TrajectoryGenerator:
     """The given generator, else the file the zip names, else ``<name>.generator.pt`` beside the zip, onto ``device``;
     refused when it is not the one the policy was trained with."""
     if isinstance(generator, TrajectoryGenerator):
@@ -102,16 +148,19 @@ def _resolve_generator(path: str, data: dict[str, Any], generator: TrajectoryGen
             generator = load_generator(os.fspath(candidate), device)
             check_recorded_generator(generator, data.get("generator_sha256"), candidate, path)  # the file named here
             return generator
-    raise ValueError(f"no generator for {path}: none of {[str(c) for c in candidates if c is not None]} exists; "
-                     "pass the generator file")
+    raise ValueError(
+        f"no generator for {path}: none of {[str(c) for c in candidates if c is not None]} exists; pass the generator file"
+    )
 
 
 def _policy_class(entry: dict[str, Any], path: str) -> type:
     """The allowed policy class that the pickled class reference names, read without unpickling it."""
     name = _class_reference(entry.get(":serialized:"))
     if name not in _POLICIES:
-        raise ValueError(f"{path} uses a policy class ({name or 'not a plain class reference'}) that cannot be loaded "
-                         "without unpickling it; use trust=True only if you trust the file's source")
+        raise ValueError(
+            f"{path} uses a policy class ({name or 'not a plain class reference'}) that cannot be loaded "
+            "without unpickling it; use trust=True only if you trust the file's source"
+        )
     return _POLICIES[name]
 
 
@@ -139,8 +188,10 @@ def _allowed_value(value: Any, name: str, path: str) -> Any:
     """A policy keyword argument: JSON values as they are, classes from the allow-list."""
     if isinstance(value, str) and value.startswith("<class "):
         if value not in _ALLOWED_CLASSES:
-            raise ValueError(f"{path}: policy_kwargs[{name!r}] is {value}, which is not among the classes loaded without "
-                             "unpickling; use trust=True only if you trust the file's source")
+            raise ValueError(
+                f"{path}: policy_kwargs[{name!r}] is {value}, which is not among the classes loaded without "
+                "unpickling; use trust=True only if you trust the file's source"
+            )
         return _ALLOWED_CLASSES[value]
     if isinstance(value, str) and value.startswith("<"):
         raise ValueError(f"{path}: policy_kwargs[{name!r}] ({value}) cannot be loaded without unpickling it")
@@ -154,5 +205,7 @@ def _check_space(data: dict[str, Any], key: str, space: gym.spaces.Space, path: 
         raise ValueError(f"{path} has no {key}")
     saved = (tuple(entry.get("_shape") or ()), entry.get("dtype"))
     if saved != (space.shape, str(space.dtype)):
-        raise ValueError(f"{path} was trained with {key} of shape and dtype {saved}, not {(space.shape, str(space.dtype))}"
-                         ": another task or generator")
+        raise ValueError(
+            f"{path} was trained with {key} of shape and dtype {saved}, not {(space.shape, str(space.dtype))}"
+            ": another task or generator"
+        )

@@ -47,8 +47,9 @@ def default_log_std_init(prior: Prior) -> float:
     return 0.0 if prior == "normal" else float(np.log(1.0 / np.sqrt(3.0)))
 
 
-def completed_policy_kwargs(policy_kwargs: dict[str, Any] | None, prior: Prior | None,
-                            observation_space: spaces.Space | None) -> dict[str, Any]:
+def completed_policy_kwargs(
+    policy_kwargs: dict[str, Any] | None, prior: Prior | None, observation_space: spaces.Space | None
+) -> dict[str, Any]:
     """GenRL's policy arguments: ``policy_kwargs`` with, where not given, the prior's spread as ``log_std_init``
     (:func:`default_log_std_init`) and, for a Box context that is not an image, :class:`BoxScaler` (an image keeps
     SB3's own extractor and its division by 255: NatureCNN for ``"CnnPolicy"``, a flatten for ``"MlpPolicy"``)."""

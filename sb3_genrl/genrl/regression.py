@@ -43,8 +43,16 @@ def fixed_features(policy: ActorCriticPolicy, contexts: th.Tensor) -> th.Tensor 
         return policy.extract_features(contexts, extractor)
 
 
-def regress_mean(policy: ActorCriticPolicy, optimizer: th.optim.Optimizer, contexts: th.Tensor, actions: th.Tensor, *,
-                 steps: int, batch_size: int, weighted: bool = False) -> list[float]:
+def regress_mean(
+    policy: ActorCriticPolicy,
+    optimizer: th.optim.Optimizer,
+    contexts: th.Tensor,
+    actions: th.Tensor,
+    *,
+    steps: int,
+    batch_size: int,
+    weighted: bool = False,
+) -> list[float]:
     """Fit the policy's mean to ``actions`` at ``contexts`` by ``steps`` steps of ``optimizer`` (over
     :func:`mean_parameters`) on minibatches of ``batch_size`` pairs drawn with replacement.
 
@@ -80,8 +88,9 @@ def regress_mean(policy: ActorCriticPolicy, optimizer: th.optim.Optimizer, conte
     return th.stack(losses).tolist() if losses else []
 
 
-def fit_mean(policy: ActorCriticPolicy, contexts: th.Tensor, actions: th.Tensor, *, steps: int, learning_rate: float,
-             batch_size: int) -> list[float]:
+def fit_mean(
+    policy: ActorCriticPolicy, contexts: th.Tensor, actions: th.Tensor, *, steps: int, learning_rate: float, batch_size: int
+) -> list[float]:
     """Fit the policy's mean to ``actions`` at ``contexts`` by ``steps`` steps of a new Adam over its mean
     (:func:`regress_mean`), in training mode; the loss of every minibatch."""
     optimizer = th.optim.Adam(mean_parameters(policy), lr=learning_rate)
@@ -104,8 +113,9 @@ def fused_mean(policy: ActorCriticPolicy, optimizer: th.optim.Optimizer) -> tupl
     return None if adam is None else (FlatMlp(layers, adam), adam)
 
 
-def fused_regression(mlp: FlatMlp, adam: FlatAdam, features: th.Tensor, actions: th.Tensor, *, steps: int,
-                     batch_size: int) -> list[float]:
+def fused_regression(
+    mlp: FlatMlp, adam: FlatAdam, features: th.Tensor, actions: th.Tensor, *, steps: int, batch_size: int
+) -> list[float]:
     """:func:`regress_mean`'s unweighted steps on fixed features, fused (:mod:`sb3_genrl.genrl.fused`): the same draws
     of minibatches (one ``randint`` call for all steps draws what one call per step would), the same arithmetic.
 

@@ -10,8 +10,17 @@ from typing import Any
 from sb3_genrl.genrl.hindsight import check_hindsight_kwargs
 
 # GenRL arguments that say what to train on, where or how verbosely it runs, not what it computes
-NOT_SETTINGS = ("self", "env", "generator", "seed", "device", "verbose", "tensorboard_log", "stats_window_size",
-                "_init_setup_model")
+NOT_SETTINGS = (
+    "self",
+    "env",
+    "generator",
+    "seed",
+    "device",
+    "verbose",
+    "tensorboard_log",
+    "stats_window_size",
+    "_init_setup_model",
+)
 
 
 def check_genrl_settings(settings: Mapping[str, Any], name: str | None = None) -> dict[str, Any]:
@@ -32,24 +41,34 @@ def check_genrl_settings(settings: Mapping[str, Any], name: str | None = None) -
     known = set(inspect.signature(GenRL.__init__).parameters) - set(NOT_SETTINGS)
     unknown = sorted(set(settings) - known)
     if unknown:
-        raise ValueError(f"{prefix}{', '.join(map(repr, unknown))} "
-                         f"{'is not a GenRL setting' if len(unknown) == 1 else 'are not GenRL settings'} "
-                         f"(known: {', '.join(sorted(known))})")
+        raise ValueError(
+            f"{prefix}{', '.join(map(repr, unknown))} "
+            f"{'is not a GenRL setting' if len(unknown) == 1 else 'are not GenRL settings'} "
+            f"(known: {', '.join(sorted(known))})"
+        )
     policy = settings.get("policy", "MlpPolicy")
     if isinstance(policy, str) and policy not in GenRL.policy_aliases:
         raise ValueError(f"{prefix}unknown policy {policy!r} (known: {', '.join(GenRL.policy_aliases)})")
     defaults = inspect.signature(GenRL.__init__).parameters
     try:
-        checked = _check_values(**{key: settings.get(key, defaults[key].default)
-                                   for key in inspect.signature(_check_values).parameters})
+        checked = _check_values(
+            **{key: settings.get(key, defaults[key].default) for key in inspect.signature(_check_values).parameters}
+        )
     except ValueError as error:
         raise ValueError(f"{prefix}{error}") from None
     return {**settings, **checked}
 
 
-def _check_values(*, e_step: str, n_em_iterations: int, value_history: int, batch_size: int,
-                  max_log_std_change: float | None, policy_averaging: float | None,
-                  hindsight_kwargs: Mapping[str, Any] | None) -> dict[str, Any]:
+def _check_values(
+    *,
+    e_step: str,
+    n_em_iterations: int,
+    value_history: int,
+    batch_size: int,
+    max_log_std_change: float | None,
+    policy_averaging: float | None,
+    hindsight_kwargs: Mapping[str, Any] | None,
+) -> dict[str, Any]:
     """Refuse the values of the GenRL settings that SB3 does not check itself; the hindsight settings as a dict."""
     if e_step not in ("trpo", "kl_penalty"):
         raise ValueError(f"e_step must be 'trpo' or 'kl_penalty', got {e_step!r}")
@@ -57,15 +76,18 @@ def _check_values(*, e_step: str, n_em_iterations: int, value_history: int, batc
         if isinstance(value, bool) or int(value) != value or value < 1:
             raise ValueError(f"{key} must be a positive integer, got {value!r}")
     if max_log_std_change is not None and not max_log_std_change >= 0:
-        raise ValueError(f"max_log_std_change must be >= 0 (0: the spread stays as it starts) or None, got "
-                         f"{max_log_std_change!r}")
+        raise ValueError(
+            f"max_log_std_change must be >= 0 (0: the spread stays as it starts) or None, got {max_log_std_change!r}"
+        )
     if policy_averaging is not None and not 0 < policy_averaging < 1:
         raise ValueError(f"policy_averaging must be between 0 and 1 (exclusive) or None, got {policy_averaging!r}")
     if hindsight_kwargs is None:
         return {}
     if e_step != "trpo":
-        raise ValueError("hindsight_kwargs needs e_step='trpo': a relabelled pull that pi makes unlikely at its new "
-                         "context has a ratio q/pi that grows exponentially as q moves towards it, faster than the KL "
-                         "penalty grows, so the KL-penalty E-step's objective has no maximum (TRPO's step keeps the KL "
-                         "bound)")
+        raise ValueError(
+            "hindsight_kwargs needs e_step='trpo': a relabelled pull that pi makes unlikely at its new "
+            "context has a ratio q/pi that grows exponentially as q moves towards it, faster than the KL "
+            "penalty grows, so the KL-penalty E-step's objective has no maximum (TRPO's step keeps the KL "
+            "bound)"
+        )
     return {"hindsight_kwargs": check_hindsight_kwargs(hindsight_kwargs)}

@@ -46,8 +46,12 @@ from sb3_genrl.utils import atomic_write_json, folder_lock
 from sb3_genrl.wrappers import LatentActionWrapper
 
 
-def evaluate_on_goals(model: GenRL, task: str, goals: int = 100, seed: int = 0,
-                      ) -> tuple[np.ndarray, np.ndarray, list[dict[str, Any]]]:
+def evaluate_on_goals(
+    model: GenRL,
+    task: str,
+    goals: int = 100,
+    seed: int = 0,
+) -> tuple[np.ndarray, np.ndarray, list[dict[str, Any]]]:
     """Play the policy's deterministic latent actions for ``goals`` random goals through the task's fast path.
 
     :param model: a trained GenRL model with its generator
@@ -79,12 +83,26 @@ def _resolve_env_id(task: str) -> tuple[str, str]:
     return spec.env_id, spec.name
 
 
-def train_policy(task: str, generator: TrajectoryGenerator | str, *, episodes: int, seed: int = 0,
-                 out_dir: str | os.PathLike, e_step: EStep = "trpo", batch_episodes: int = 64, n_envs: int = 1,
-                 device: str = "auto", progress_bar: bool = False, verbose: int = 0,
-                 checkpoint_every: int | None = CHECKPOINT_EVERY, overwrite: bool = False, n_threads: int | None = None,
-                 demonstrations: str | os.PathLike | None = None, callback: Any = None,
-                 **genrl_kwargs: Any) -> dict[str, Any]:
+def train_policy(
+    task: str,
+    generator: TrajectoryGenerator | str,
+    *,
+    episodes: int,
+    seed: int = 0,
+    out_dir: str | os.PathLike,
+    e_step: EStep = "trpo",
+    batch_episodes: int = 64,
+    n_envs: int = 1,
+    device: str = "auto",
+    progress_bar: bool = False,
+    verbose: int = 0,
+    checkpoint_every: int | None = CHECKPOINT_EVERY,
+    overwrite: bool = False,
+    n_threads: int | None = None,
+    demonstrations: str | os.PathLike | None = None,
+    callback: Any = None,
+    **genrl_kwargs: Any,
+) -> dict[str, Any]:
     """Train a GenRL policy for ``episodes`` episodes on ``task`` and write everything to ``out_dir``.
 
     Writes ``genrl_policy.zip`` (the model; a generator given as a path is kept as its ``generator_path``),
@@ -125,24 +143,49 @@ def train_policy(task: str, generator: TrajectoryGenerator | str, *, episodes: i
         ``best_mean_reward``, ``genrl_settings``: every GenRL hyperparameter in effect, see :func:`genrl_settings`)
     """
     env_id, task_name = _resolve_env_id(task)
-    _check_arguments(episodes, batch_episodes, n_envs, seed, device, checkpoint_every, n_threads,
-                     {"e_step": e_step, **genrl_kwargs})
+    _check_arguments(
+        episodes, batch_episodes, n_envs, seed, device, checkpoint_every, n_threads, {"e_step": e_step, **genrl_kwargs}
+    )
     out = check_output_dir(out_dir)
     callbacks = build_callbacks(callback, demonstrations=demonstrations, what=f"the settings of {task_name}", task=task)
     # Built first: a generator that does not fit the task is refused before anything is written.
     env = LatentActionWrapper(gym.make(env_id), _as_generator(generator))
-    arguments = {"e_step": e_step, "seed": seed, "device": device, "verbose": verbose,
-                 **run_settings(genrl_kwargs, batch_episodes, n_envs)}
-    identity = {"algorithm": "genrl", "task": task_name, "episodes": int(episodes), "seed": seed, "n_envs": n_envs,
-                "batch_episodes": batch_episodes, "generator_sha256": generator_digest(env.generator),
-                "genrl_settings": genrl_settings(arguments), **_callback_identity(callback, callbacks, env, arguments)}
-    return _open_and_run(env, generator, out, identity, arguments, checkpoint_every, progress_bar, env_id, n_threads,
-                         callbacks, overwrite)
+    arguments = {
+        "e_step": e_step,
+        "seed": seed,
+        "device": device,
+        "verbose": verbose,
+        **run_settings(genrl_kwargs, batch_episodes, n_envs),
+    }
+    identity = {
+        "algorithm": "genrl",
+        "task": task_name,
+        "episodes": int(episodes),
+        "seed": seed,
+        "n_envs": n_envs,
+        "batch_episodes": batch_episodes,
+        "generator_sha256": generator_digest(env.generator),
+        "genrl_settings": genrl_settings(arguments),
+        **_callback_identity(callback, callbacks, env, arguments),
+    }
+    return _open_and_run(
+        env, generator, out, identity, arguments, checkpoint_every, progress_bar, env_id, n_threads, callbacks, overwrite
+    )
 
 
-def _open_and_run(env: LatentActionWrapper, generator: TrajectoryGenerator | str, out: pathlib.Path,
-                  identity: dict[str, Any], arguments: dict[str, Any], checkpoint_every: int | None, progress_bar: bool,
-                  env_id: str, n_threads: int | None, callbacks: list[Any], overwrite: bool) -> dict[str, Any]:
+def _open_and_run(
+    env: LatentActionWrapper,
+    generator: TrajectoryGenerator | str,
+    out: pathlib.Path,
+    identity: dict[str, Any],
+    arguments: dict[str, Any],
+    checkpoint_every: int | None,
+    progress_bar: bool,
+    env_id: str,
+    n_threads: int | None,
+    callbacks: list[Any],
+    overwrite: bool,
+) -> dict[str, Any]:
     """:func:`_run` in ``out``, locked, unless ``out`` holds another run (refused) or this one finished (its summary)."""
     with folder_lock(out):  # one run at a time in out; another run's files are refused, never mixed in
         try:
@@ -153,12 +196,12 @@ def _open_and_run(env: LatentActionWrapper, generator: TrajectoryGenerator | str
         if finished is not None:  # this very run, finished: nothing to do
             env.close()
             return finished
-        return _run(env, generator, out, identity, arguments, checkpoint_every, progress_bar, env_id, n_threads,
-                    callbacks)
+        return _run(env, generator, out, identity, arguments, checkpoint_every, progress_bar, env_id, n_threads, callbacks)
 
 
-def _callback_identity(callback: Any, callbacks: list[Any], env: LatentActionWrapper,
-                       arguments: dict[str, Any]) -> dict[str, Any]:
+def _callback_identity(
+    callback: Any, callbacks: list[Any], env: LatentActionWrapper, arguments: dict[str, Any]
+) -> dict[str, Any]:
     """What the run's callbacks add to its recorded settings (nothing without any): their settings and the
     fingerprints of their demonstrations, which are checked against the env and the settings first (``env`` is closed
     when they are refused)."""
@@ -170,33 +213,67 @@ def _callback_identity(callback: Any, callbacks: list[Any], env: LatentActionWra
     datasets = []
     for demonstrations in (item for item in callbacks if isinstance(item, DemonstrationCallback)):
         try:
-            demonstrations.check(env.generator, env.observation_space, settings["latent_clip"],
-                                 settings.get("hindsight_kwargs") is not None)
+            demonstrations.check(
+                env.generator, env.observation_space, settings["latent_clip"], settings.get("hindsight_kwargs") is not None
+            )
         except ValueError:
             env.close()
             raise
         datasets.append(dataset_fingerprint(demonstrations.dataset))
-    return {"callback": _json_value([{path: {key: value for key, value in kwargs.items() if key != "dataset"}}
-                                     for path, kwargs in callback_entries(callback)]), "demonstrations": datasets}
+    return {
+        "callback": _json_value(
+            [
+                {path: {key: value for key, value in kwargs.items() if key != "dataset"}}
+                for path, kwargs in callback_entries(callback)
+            ]
+        ),
+        "demonstrations": datasets,
+    }
 
 
-def _run(env: LatentActionWrapper, generator: TrajectoryGenerator | str, out: pathlib.Path, identity: dict[str, Any],
-         arguments: dict[str, Any], checkpoint_every: int | None, progress_bar: bool, env_id: str,
-         n_threads: int | None = None, callbacks: list[Any] | None = None) -> dict[str, Any]:
+def _run(
+    env: LatentActionWrapper,
+    generator: TrajectoryGenerator | str,
+    out: pathlib.Path,
+    identity: dict[str, Any],
+    arguments: dict[str, Any],
+    checkpoint_every: int | None,
+    progress_bar: bool,
+    env_id: str,
+    n_threads: int | None = None,
+    callbacks: list[Any] | None = None,
+) -> dict[str, Any]:
     """Train the run ``identity`` in ``out`` (from its checkpoint when it has one) with ``callbacks``; its summary,
     written last."""
     state = resume_state(out / CHECKPOINT_DIR, identity)  # this unfinished run's checkpoint, if any
     if state is not None:
         keep_episodes(out, state["episodes"])
     checkpointing = None if checkpoint_every is None else (int(checkpoint_every), identity)
-    model = _train(_training_env(env, identity["n_envs"], out, append=state is not None, n_threads=n_threads), generator,
-                   identity["episodes"], out, progress_bar, arguments, state, checkpointing, callbacks or [])
-    curve = write_learning_curve(out / MONITOR_FILE, out, window=identity["batch_episodes"],
-                                 title=f"GenRL on {env_id} (seed {identity['seed']})")
-    result = {key: identity[key] for key in ("algorithm", "task", "seed", "n_envs")} | _output_paths(out) | {
-        "episodes": int(model.num_timesteps), "iterations": len(curve["episodes"]),
-        "final_mean_reward": float(curve["mean_reward"][-1]), "best_mean_reward": float(np.max(curve["mean_reward"])),
-        "genrl_settings": identity["genrl_settings"]}
+    model = _train(
+        _training_env(env, identity["n_envs"], out, append=state is not None, n_threads=n_threads),
+        generator,
+        identity["episodes"],
+        out,
+        progress_bar,
+        arguments,
+        state,
+        checkpointing,
+        callbacks or [],
+    )
+    curve = write_learning_curve(
+        out / MONITOR_FILE, out, window=identity["batch_episodes"], title=f"GenRL on {env_id} (seed {identity['seed']})"
+    )
+    result = (
+        {key: identity[key] for key in ("algorithm", "task", "seed", "n_envs")}
+        | _output_paths(out)
+        | {
+            "episodes": int(model.num_timesteps),
+            "iterations": len(curve["episodes"]),
+            "final_mean_reward": float(curve["mean_reward"][-1]),
+            "best_mean_reward": float(np.max(curve["mean_reward"])),
+            "genrl_settings": identity["genrl_settings"],
+        }
+    )
     if state is not None:
         result["resumed_at_episodes"] = [*state.get("resumed_at_episodes", []), state["episodes"]]
     atomic_write_json(out / SUMMARY, result)
@@ -205,13 +282,20 @@ def _run(env: LatentActionWrapper, generator: TrajectoryGenerator | str, out: pa
 
 
 # What a run writes in its folder (besides summary.json, checkpoint/ and run_record.json; see sb3_genrl.run_folder)
-OUTPUTS = ("genrl_policy.zip", "genrl_policy.generator.pt", "learning_curve.csv", "learning_curve.png", MONITOR_FILE,
-           LOG_DIR)
+OUTPUTS = ("genrl_policy.zip", "genrl_policy.generator.pt", "learning_curve.csv", "learning_curve.png", MONITOR_FILE, LOG_DIR)
 
 
-def _train(env: Any, generator: TrajectoryGenerator | str, episodes: int, out: pathlib.Path, progress_bar: bool,
-           genrl_kwargs: dict[str, Any], state: dict[str, Any] | None, checkpointing: tuple[int, dict] | None,
-           callbacks: list[Any]) -> GenRL:
+def _train(
+    env: Any,
+    generator: TrajectoryGenerator | str,
+    episodes: int,
+    out: pathlib.Path,
+    progress_bar: bool,
+    genrl_kwargs: dict[str, Any],
+    state: dict[str, Any] | None,
+    checkpointing: tuple[int, dict] | None,
+    callbacks: list[Any],
+) -> GenRL:
     """Train GenRL on ``env`` with SB3's logger in ``out`` and ``callbacks``, from the checkpoint ``state`` (``None``:
     from the start), checkpointing every ``checkpointing[0]`` episodes; save it there, and close ``env``."""
     try:
@@ -223,8 +307,13 @@ def _train(env: Any, generator: TrajectoryGenerator | str, episodes: int, out: p
             model = resume_genrl(state, env, generator, genrl_kwargs["device"], logger)
         if checkpointing is not None:  # after the others: a checkpoint saves what they set at the same call
             callbacks = [*callbacks, GenRLCheckpoint(out / CHECKPOINT_DIR, *checkpointing, state)]
-        model.learn(total_timesteps=episodes - model.num_timesteps, progress_bar=progress_bar, tb_log_name="GenRL",
-                    reset_num_timesteps=state is None, callback=CallbackList(callbacks) if callbacks else None)
+        model.learn(
+            total_timesteps=episodes - model.num_timesteps,
+            progress_bar=progress_bar,
+            tb_log_name="GenRL",
+            reset_num_timesteps=state is None,
+            callback=CallbackList(callbacks) if callbacks else None,
+        )
         model.logger.dump(model.num_timesteps)  # SB3 dumps before each update: this writes the last one's logs
         model.logger.close()
         model.save(out / "genrl_policy.zip")
@@ -253,18 +342,30 @@ genrl_kwargs_override_argument = genrl_kwargs_argument
 def make_genrl(env: Any, generator: TrajectoryGenerator | str | None = None, **genrl_kwargs: Any) -> GenRL:
     """``GenRL`` with settings that may name the policy (``"policy"``, as a task's ``genrl_kwargs`` may)."""
     if "callback" in genrl_kwargs:  # a task's entry that names callbacks (task_settings puts them among its settings)
-        raise ValueError("callback is not a GenRL setting but learn()'s: build the callbacks with "
-                         "sb3_genrl.genrl.demonstrations.build_callbacks and give them to learn(callback=...)")
+        raise ValueError(
+            "callback is not a GenRL setting but learn()'s: build the callbacks with "
+            "sb3_genrl.genrl.demonstrations.build_callbacks and give them to learn(callback=...)"
+        )
     policy = genrl_kwargs.pop("policy", "MlpPolicy")
     return GenRL(policy, env, generator, **genrl_kwargs)
 
 
-MAIN_GUARD = ("n_envs > 1 plays the envs in their own processes, which import the script that started them: a script "
-              "must run its work under `if __name__ == \"__main__\":`, as any script with SB3's SubprocVecEnv")
+MAIN_GUARD = (
+    "n_envs > 1 plays the envs in their own processes, which import the script that started them: a script "
+    'must run its work under `if __name__ == "__main__":`, as any script with SB3\'s SubprocVecEnv'
+)
 
 
-def _check_arguments(episodes: int, batch_episodes: int, n_envs: int, seed: int, device: str,
-                     checkpoint_every: int | None, n_threads: int | None, genrl_kwargs: dict[str, Any]) -> None:
+def _check_arguments(
+    episodes: int,
+    batch_episodes: int,
+    n_envs: int,
+    seed: int,
+    device: str,
+    checkpoint_every: int | None,
+    n_threads: int | None,
+    genrl_kwargs: dict[str, Any],
+) -> None:
     check_episodes(episodes)
     if checkpoint_every is not None:
         check_positive_int(checkpoint_every, "checkpoint_every")
@@ -279,13 +380,16 @@ def _check_arguments(episodes: int, batch_episodes: int, n_envs: int, seed: int,
     check_seed(seed)
     check_device(device)
     if "n_steps" in genrl_kwargs:  # the learning curve's window and the summary's iterations follow batch_episodes
-        raise ValueError(f"n_steps={genrl_kwargs['n_steps']!r}: give the episodes per iteration as batch_episodes "
-                         "(n_steps is batch_episodes / n_envs)")
+        raise ValueError(
+            f"n_steps={genrl_kwargs['n_steps']!r}: give the episodes per iteration as batch_episodes "
+            "(n_steps is batch_episodes / n_envs)"
+        )
     check_genrl_settings(genrl_kwargs)
 
 
-def _training_env(env: LatentActionWrapper, n_envs: int, out: pathlib.Path, *, append: bool = False,
-                  n_threads: int | None = None) -> Any:
+def _training_env(
+    env: LatentActionWrapper, n_envs: int, out: pathlib.Path, *, append: bool = False, n_threads: int | None = None
+) -> Any:
     """The monitored training env: ``env`` itself, or ``n_envs`` copies of it played together
     (:class:`~sb3_genrl.vec_env.BatchedLatentVecEnv` on ``n_threads``, for a task with a fast path) or in their own
     processes, each under a :class:`~sb3_genrl.genrl.checkpoint.RandomStateRecorder` (``append``: a resumed run adds
@@ -310,13 +414,17 @@ def _training_env(env: LatentActionWrapper, n_envs: int, out: pathlib.Path, *, a
     keys = (*EPISODE_INFO, "cpu_seconds")
     monitor = VecMonitor(venv, None if append else str(out / MONITOR_FILE), info_keywords=keys)
     if append:  # SB3's VecMonitor always starts a new file
-        monitor.results_writer = ResultsWriter(str(out / MONITOR_FILE), header={"t_start": monitor.t_start},
-                                               extra_keys=keys, override_existing=False)
+        monitor.results_writer = ResultsWriter(
+            str(out / MONITOR_FILE), header={"t_start": monitor.t_start}, extra_keys=keys, override_existing=False
+        )
     return monitor
 
 
-def _episode_env(spec: gym.envs.registration.EnvSpec, generator: TrajectoryGenerator, own_process: bool = True,
-                 ) -> gym.Env:
+def _episode_env(
+    spec: gym.envs.registration.EnvSpec,
+    generator: TrajectoryGenerator,
+    own_process: bool = True,
+) -> gym.Env:
     """One env of the training VecEnv (in its own process for a ``SubprocVecEnv``): the latent-action task with the
     Monitor's info keys."""
     if own_process:
@@ -368,8 +476,11 @@ def genrl_settings(genrl_kwargs: dict[str, Any] | None = None) -> dict[str, Any]
     ``callback`` is not a GenRL setting and is left out."""
     import inspect
 
-    defaults = {name: parameter.default for name, parameter in inspect.signature(GenRL.__init__).parameters.items()
-                if parameter.default is not inspect.Parameter.empty and name != "policy"}
+    defaults = {
+        name: parameter.default
+        for name, parameter in inspect.signature(GenRL.__init__).parameters.items()
+        if parameter.default is not inspect.Parameter.empty and name != "policy"
+    }
     settings = defaults | dict(genrl_kwargs or {})
     policy = settings.pop("policy", "MlpPolicy")
     if policy not in ("MlpPolicy", MlpPolicy):
@@ -378,8 +489,13 @@ def genrl_settings(genrl_kwargs: dict[str, Any] | None = None) -> dict[str, Any]
 
 
 def _output_paths(out: pathlib.Path) -> dict[str, str]:
-    files = {"model_path": "genrl_policy.zip", "csv_path": "learning_curve.csv", "png_path": "learning_curve.png",
-             "episodes_csv_path": MONITOR_FILE, "log_dir": LOG_DIR}
+    files = {
+        "model_path": "genrl_policy.zip",
+        "csv_path": "learning_curve.csv",
+        "png_path": "learning_curve.png",
+        "episodes_csv_path": MONITOR_FILE,
+        "log_dir": LOG_DIR,
+    }
     return {key: str(out / name) for key, name in files.items()}
 
 

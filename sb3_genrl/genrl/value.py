@@ -69,8 +69,9 @@ def fused_value(policy: ActorCriticPolicy, observations: Any) -> tuple[FlatMlp, 
     return FlatMlp(layers, adam), adam, features
 
 
-def fused_value_fit(mlp: FlatMlp, adam: FlatAdam, features: th.Tensor, returns: th.Tensor, *, epochs: int,
-                    batch_size: int) -> list[float]:
+def fused_value_fit(
+    mlp: FlatMlp, adam: FlatAdam, features: th.Tensor, returns: th.Tensor, *, epochs: int, batch_size: int
+) -> list[float]:
     """:func:`fit_value_function`'s steps on fixed features, fused (:mod:`sb3_genrl.genrl.fused`): the same
     shuffles, the same arithmetic (the mean squared error's gradient by ``mse_loss_backward``, as autograd takes it).
 

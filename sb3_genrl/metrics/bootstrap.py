@@ -68,8 +68,9 @@ def _interval(values: np.ndarray, resamples: int) -> Interval:
     return Interval(float(low), float(high), len(defined), resamples)
 
 
-def bootstrap_correlations(x: np.ndarray, y: np.ndarray, *, resamples: int = DEFAULT_RESAMPLES,
-                           seed: int = BOOTSTRAP_SEED) -> tuple[Interval, Interval]:
+def bootstrap_correlations(
+    x: np.ndarray, y: np.ndarray, *, resamples: int = DEFAULT_RESAMPLES, seed: int = BOOTSTRAP_SEED
+) -> tuple[Interval, Interval]:
     """95% percentile bootstrap intervals of Pearson's R and of Spearman's rho between paired values.
 
     :param x: one value per model

@@ -25,8 +25,21 @@ from sb3_genrl.utils import atomic_write_text
 # The five measures of a generator (paper section 5.2): the one list every table, report and correlation uses.
 MEASURES = ("precision", "recall", "delta_1", "delta_2", "mean_delta")
 ALL_MODELS = "ALL"
-_COLUMNS = ("group", "measure", "num_models", "pearson_r", "p_value", "pearson_low", "pearson_high", "spearman_rho",
-            "spearman_p", "spearman_low", "spearman_high", "resamples", "note")
+_COLUMNS = (
+    "group",
+    "measure",
+    "num_models",
+    "pearson_r",
+    "p_value",
+    "pearson_low",
+    "pearson_high",
+    "spearman_rho",
+    "spearman_p",
+    "spearman_low",
+    "spearman_high",
+    "resamples",
+    "note",
+)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -79,11 +92,33 @@ class CorrelationTable:
     def to_markdown(self, digits: int = 3) -> str:
         """A Markdown table, one line per (group, measure), values rounded to ``digits`` decimals, each coefficient
         with its 95% bootstrap interval."""
-        rows = [(row.group, row.measure, row.num_models, row.pearson_r, _interval(row.pearson_low, row.pearson_high),
-                 row.p_value, row.spearman_rho, _interval(row.spearman_low, row.spearman_high), row.spearman_p,
-                 row.note) for row in self.rows]
-        header = ("group", "measure", "models", "Pearson's R", "95% interval", "p-value", "Spearman's rho",
-                  "95% interval", "p-value", "note")
+        rows = [
+            (
+                row.group,
+                row.measure,
+                row.num_models,
+                row.pearson_r,
+                _interval(row.pearson_low, row.pearson_high),
+                row.p_value,
+                row.spearman_rho,
+                _interval(row.spearman_low, row.spearman_high),
+                row.spearman_p,
+                row.note,
+            )
+            for row in self.rows
+        ]
+        header = (
+            "group",
+            "measure",
+            "models",
+            "Pearson's R",
+            "95% interval",
+            "p-value",
+            "Spearman's rho",
+            "95% interval",
+            "p-value",
+            "note",
+        )
         return markdown_table(header, rows, digits=digits, align="llrrlrrlrl") + "\n"
 
     def to_csv(self, path: str | os.PathLike) -> None:
@@ -92,8 +127,16 @@ class CorrelationTable:
         writer = csv.writer(table)
         writer.writerow(_COLUMNS)
         for row in self.rows:
-            writer.writerow([row.group, row.measure, row.num_models, *(repr(getattr(row, name)) for name in _COLUMNS[3:11]),
-                             row.resamples, row.note])
+            writer.writerow(
+                [
+                    row.group,
+                    row.measure,
+                    row.num_models,
+                    *(repr(getattr(row, name)) for name in _COLUMNS[3:11]),
+                    row.resamples,
+                    row.note,
+                ]
+            )
         atomic_write_text(path, table.getvalue(), newline="")
 
 
@@ -113,8 +156,14 @@ def pearson(x: np.ndarray, y: np.ndarray) -> tuple[float, float, str]:
     return float(result.statistic), float(result.pvalue), ""
 
 
-def _records(measures: Sequence[Mapping] | Mapping[str, Mapping[str, float]], scores: Mapping[str, float] | None,
-             model_types: Mapping[str, str] | None, score_key: str, type_key: str, model_key: str) -> list[dict]:
+def _records(
+    measures: Sequence[Mapping] | Mapping[str, Mapping[str, float]],
+    scores: Mapping[str, float] | None,
+    model_types: Mapping[str, str] | None,
+    score_key: str,
+    type_key: str,
+    model_key: str,
+) -> list[dict]:
     if isinstance(measures, Mapping):
         if scores is None:
             raise ValueError("scores (model name -> policy score) are required when measures is a mapping")
@@ -136,11 +185,19 @@ def _records(measures: Sequence[Mapping] | Mapping[str, Mapping[str, float]], sc
     return records
 
 
-def correlation_table(measures: Sequence[Mapping] | Mapping[str, Mapping[str, float]],
-                      scores: Mapping[str, float] | None = None, model_types: Mapping[str, str] | None = None, *,
-                      measure_names: Sequence[str] | None = None, score_key: str = "score", type_key: str = "type",
-                      model_key: str = "model", include_all: bool = True, resamples: int = DEFAULT_RESAMPLES,
-                      seed: int = BOOTSTRAP_SEED) -> CorrelationTable:
+def correlation_table(
+    measures: Sequence[Mapping] | Mapping[str, Mapping[str, float]],
+    scores: Mapping[str, float] | None = None,
+    model_types: Mapping[str, str] | None = None,
+    *,
+    measure_names: Sequence[str] | None = None,
+    score_key: str = "score",
+    type_key: str = "type",
+    model_key: str = "model",
+    include_all: bool = True,
+    resamples: int = DEFAULT_RESAMPLES,
+    seed: int = BOOTSTRAP_SEED,
+) -> CorrelationTable:
     """Pearson's R and p-value of each measure against the policy score, per model type and for all models, with
     Spearman's rho and 95% bootstrap intervals of both.
 
@@ -196,13 +253,19 @@ def correlation_table(measures: Sequence[Mapping] | Mapping[str, Mapping[str, fl
     return CorrelationTable(tuple(rows))
 
 
-def _row(group: str, measure: str, x: np.ndarray, y: np.ndarray, r: float, p: float, note: str, resamples: int,
-         seed: int) -> CorrelationRow:
+def _row(
+    group: str, measure: str, x: np.ndarray, y: np.ndarray, r: float, p: float, note: str, resamples: int, seed: int
+) -> CorrelationRow:
     rho, rho_p = spearman(x, y)
     intervals = {}
     if resamples > 0:
         pearson_ci, spearman_ci = bootstrap_correlations(x, y, resamples=resamples, seed=seed)
-        intervals = {"pearson_low": pearson_ci.low, "pearson_high": pearson_ci.high,
-                     "spearman_low": spearman_ci.low, "spearman_high": spearman_ci.high}
-    return CorrelationRow(group, measure, len(x), r, p, note, spearman_rho=rho, spearman_p=rho_p,
-                          resamples=resamples, **intervals)
+        intervals = {
+            "pearson_low": pearson_ci.low,
+            "pearson_high": pearson_ci.high,
+            "spearman_low": spearman_ci.low,
+            "spearman_high": spearman_ci.high,
+        }
+    return CorrelationRow(
+        group, measure, len(x), r, p, note, spearman_rho=rho, spearman_p=rho_p, resamples=resamples, **intervals
+    )

@@ -52,8 +52,9 @@ class DensityCoverage:
     num_generated: int
 
 
-def real_balls_holding(real: _PreparedSet, real_sq_radii: torch.Tensor, generated: _PreparedSet, block: int
-                       ) -> tuple[torch.Tensor, torch.Tensor]:
+def real_balls_holding(
+    real: _PreparedSet, real_sq_radii: torch.Tensor, generated: _PreparedSet, block: int
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Per generated sample, how many real balls hold it; per real sample, whether its ball holds a generated one.
 
     Block ``(i, j)`` holds the float32 margins ``|x_i - y_j|^2 - r_i^2``; margins within the rounding bound of 0 are
@@ -84,9 +85,15 @@ def real_balls_holding(real: _PreparedSet, real_sq_radii: torch.Tensor, generate
     return counts, covered
 
 
-def density_coverage(real: np.ndarray, generated: np.ndarray, k: int = 3, *, batch_size: int | None = None,
-                     device: torch.device | str = "auto", memory_budget_mb: float = DEFAULT_MEMORY_BUDGET_MB
-                     ) -> DensityCoverage:
+def density_coverage(
+    real: np.ndarray,
+    generated: np.ndarray,
+    k: int = 3,
+    *,
+    batch_size: int | None = None,
+    device: torch.device | str = "auto",
+    memory_budget_mb: float = DEFAULT_MEMORY_BUDGET_MB,
+) -> DensityCoverage:
     """Density and coverage (Naeem et al. 2020) of ``generated`` against ``real``, exactly.
 
     :param real: real samples ``(N, D)`` or ``(N, T, M)`` (flattened per sample)
@@ -100,5 +107,10 @@ def density_coverage(real: np.ndarray, generated: np.ndarray, k: int = 3, *, bat
     real_set, gen_set, k, block = prepared_sets(real, generated, k, batch_size, device, memory_budget_mb)
     with torch.no_grad():
         counts, covered = real_balls_holding(real_set, squared_radii(real_set, k, block), gen_set, block)
-    return DensityCoverage(density=float(counts.double().mean()) / k, coverage=float(covered.double().mean()), k=k,
-                           num_real=len(real_set.original), num_generated=len(gen_set.original))
+    return DensityCoverage(
+        density=float(counts.double().mean()) / k,
+        coverage=float(covered.double().mean()),
+        k=k,
+        num_real=len(real_set.original),
+        num_generated=len(gen_set.original),
+    )

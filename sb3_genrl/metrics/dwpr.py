@@ -84,8 +84,8 @@ def decode_batched(generator: TrajectoryGenerator, latents: np.ndarray, batch_si
     """Decode ``(n, latent_dim)`` latents in batches into a ``(n, horizon * action_dim)`` float32 array."""
     out = np.empty((len(latents), generator.horizon * generator.action_dim), dtype=np.float32)
     for start in range(0, len(latents), batch_size):
-        batch = np.asarray(generator.decode(latents[start:start + batch_size]))
-        out[start:start + len(batch)] = batch.reshape(len(batch), -1)
+        batch = np.asarray(generator.decode(latents[start : start + batch_size]))
+        out[start : start + len(batch)] = batch.reshape(len(batch), -1)
     return out
 
 
@@ -96,10 +96,18 @@ def top_two(delta: np.ndarray) -> tuple[float, float]:
     return float(ordered[0]), second
 
 
-def dwpr(generator: TrajectoryGenerator, n: int = DEFAULT_DWPR_SAMPLES, interventions: int = DEFAULT_INTERVENTIONS,
-         k: int = 3, *, seed: int | np.random.Generator | None = 0, intervention_values: np.ndarray | None = None,
-         batch_size: int | None = None, device: torch.device | str = "auto",
-         memory_budget_mb: float = DEFAULT_MEMORY_BUDGET_MB) -> DwPR:
+def dwpr(
+    generator: TrajectoryGenerator,
+    n: int = DEFAULT_DWPR_SAMPLES,
+    interventions: int = DEFAULT_INTERVENTIONS,
+    k: int = 3,
+    *,
+    seed: int | np.random.Generator | None = 0,
+    intervention_values: np.ndarray | None = None,
+    batch_size: int | None = None,
+    device: torch.device | str = "auto",
+    memory_budget_mb: float = DEFAULT_MEMORY_BUDGET_MB,
+) -> DwPR:
     """Disentanglement with precision and recall of a generator (paper section 5.2.2).
 
     The reference set holds ``n * D`` trajectories decoded from prior samples. For each latent dimension ``l`` and
@@ -133,12 +141,22 @@ def dwpr(generator: TrajectoryGenerator, n: int = DEFAULT_DWPR_SAMPLES, interven
     precision, recall = _precision_recall_per_dimension(generator, values, n, k, rng, torch_device, block)
     delta = precision - recall  # eq. (disentanglement)
     delta_1, delta_2 = top_two(delta)
-    return DwPR(delta=delta, precision=precision, recall=recall, delta_1=delta_1, delta_2=delta_2,
-                mean_delta=(delta_1 + delta_2) / 2, intervention_values=values, n=int(n), k=int(k))
+    return DwPR(
+        delta=delta,
+        precision=precision,
+        recall=recall,
+        delta_1=delta_1,
+        delta_2=delta_2,
+        mean_delta=(delta_1 + delta_2) / 2,
+        intervention_values=values,
+        n=int(n),
+        k=int(k),
+    )
 
 
-def _checked_intervention_values(generator: TrajectoryGenerator, n: int, interventions: int, k: int,
-                                 intervention_values: np.ndarray | None) -> np.ndarray:
+def _checked_intervention_values(
+    generator: TrajectoryGenerator, n: int, interventions: int, k: int, intervention_values: np.ndarray | None
+) -> np.ndarray:
     """Check :func:`dwpr`'s ``n``, ``k`` and interventions; return the ``(D,)`` float32 intervention values."""
     if int(n) != n or n < 1:
         raise ValueError(f"n must be a positive integer, got {n!r}")
@@ -154,9 +172,15 @@ def _checked_intervention_values(generator: TrajectoryGenerator, n: int, interve
     return values
 
 
-def _precision_recall_per_dimension(generator: TrajectoryGenerator, values: np.ndarray, n: int, k: int,
-                                    rng: np.random.Generator, torch_device: torch.device,
-                                    block: int) -> tuple[np.ndarray, np.ndarray]:
+def _precision_recall_per_dimension(
+    generator: TrajectoryGenerator,
+    values: np.ndarray,
+    n: int,
+    k: int,
+    rng: np.random.Generator,
+    torch_device: torch.device,
+    block: int,
+) -> tuple[np.ndarray, np.ndarray]:
     """Return the ``(latent_dim,)`` precision and recall of each dimension's intervened set against the reference."""
     size = n * len(values)
     reference = as_points(decode_batched(generator, generator.sample_prior(size, rng)), "reference trajectories")
@@ -175,8 +199,9 @@ def _precision_recall_per_dimension(generator: TrajectoryGenerator, values: np.n
                 reference_set = prepare(reference, shift, scale, torch_device)
             intervened_set = prepare(intervened, shift, scale, torch_device)
             intervened_radii = squared_radii(intervened_set, k, block)
-            inside_reference, reference_inside = membership(reference_set, reference_radii, intervened_set,
-                                                            intervened_radii, block)
+            inside_reference, reference_inside = membership(
+                reference_set, reference_radii, intervened_set, intervened_radii, block
+            )
             precision[dim] = float(inside_reference.double().mean())
             recall[dim] = float(reference_inside.double().mean())
     return precision, recall

@@ -66,29 +66,49 @@ class GeneratorEvaluation:
     def row(self) -> dict[str, float | str]:
         """The table row: the model's name, its :data:`~sb3_genrl.metrics.MEASURES`, density and coverage, and the
         prior rollout's :data:`PRIOR_COLUMNS` when there is one."""
-        values = (self.precision_recall.precision, self.precision_recall.recall, self.dwpr.delta_1, self.dwpr.delta_2,
-                  self.dwpr.mean_delta)
+        values = (
+            self.precision_recall.precision,
+            self.precision_recall.recall,
+            self.dwpr.delta_1,
+            self.dwpr.delta_2,
+            self.dwpr.mean_delta,
+        )
         summary = {} if self.prior is None else self.prior.summary()
         prior = {key: summary[key] for key in (*PRIOR_COLUMNS, PRIOR_SUCCESS) if key in summary}
-        return {"model": self.name, **dict(zip(MEASURES, values, strict=True)),
-                "density": self.density_coverage.density, "coverage": self.density_coverage.coverage, **prior}
+        return {
+            "model": self.name,
+            **dict(zip(MEASURES, values, strict=True)),
+            "density": self.density_coverage.density,
+            "coverage": self.density_coverage.coverage,
+            **prior,
+        }
 
     def details(self) -> dict[str, Any]:
         """The row plus the per-dimension DwPR values and the sample sizes (JSON-ready)."""
-        return {**self.row(), "delta": self.dwpr.delta.tolist(), "dwpr_precision": self.dwpr.precision.tolist(),
-                "dwpr_recall": self.dwpr.recall.tolist(), "intervention_values": self.dwpr.intervention_values.tolist(),
-                "k": self.dwpr.k, "num_real": self.precision_recall.num_real,
-                "num_generated": self.precision_recall.num_generated, "dwpr_n": self.dwpr.n,
-                **({} if self.prior is None else {**self.prior.summary(), "prior_best": self.prior.best.tolist()})}
+        return {
+            **self.row(),
+            "delta": self.dwpr.delta.tolist(),
+            "dwpr_precision": self.dwpr.precision.tolist(),
+            "dwpr_recall": self.dwpr.recall.tolist(),
+            "intervention_values": self.dwpr.intervention_values.tolist(),
+            "k": self.dwpr.k,
+            "num_real": self.precision_recall.num_real,
+            "num_generated": self.precision_recall.num_generated,
+            "dwpr_n": self.dwpr.n,
+            **({} if self.prior is None else {**self.prior.summary(), "prior_best": self.prior.best.tolist()}),
+        }
 
 
-def _named_generators(models: Sequence[str | os.PathLike | TrajectoryGenerator] | Mapping[str, str | os.PathLike
-                      | TrajectoryGenerator]) -> list[tuple[str, str | os.PathLike | TrajectoryGenerator]]:
+def _named_generators(
+    models: Sequence[str | os.PathLike | TrajectoryGenerator] | Mapping[str, str | os.PathLike | TrajectoryGenerator],
+) -> list[tuple[str, str | os.PathLike | TrajectoryGenerator]]:
     if isinstance(models, Mapping):
         named = list(models.items())
     else:
-        named = [(Path(model).stem if isinstance(model, str | os.PathLike) else f"{type(model).__name__}{index + 1}", model)
-                 for index, model in enumerate(models)]
+        named = [
+            (Path(model).stem if isinstance(model, str | os.PathLike) else f"{type(model).__name__}{index + 1}", model)
+            for index, model in enumerate(models)
+        ]
     names = [name for name, _ in named]
     if len(set(names)) != len(names):
         raise ValueError(f"model names must be unique, got {names}; pass a mapping name -> model")
@@ -106,8 +126,12 @@ def _as_generator(model: str | os.PathLike | TrajectoryGenerator, device: torch.
     return load(model, device=device)
 
 
-def write_results(evaluations: Sequence[GeneratorEvaluation], out_dir: str | os.PathLike,
-                  rank_by: str | None = None, min_precision: float | None = None) -> None:
+def write_results(
+    evaluations: Sequence[GeneratorEvaluation],
+    out_dir: str | os.PathLike,
+    rank_by: str | None = None,
+    min_precision: float | None = None,
+) -> None:
     """Write ``results.csv``, ``results.md``, ``scorecard.md`` (ranked by ``rank_by``,
     :func:`~sb3_genrl.metrics.scorecard.rank_key`, with models below ``min_precision`` last; None: the default
     threshold), the two scatter plots and, last, ``results.json`` into ``out_dir`` (each file atomically)."""
@@ -124,19 +148,32 @@ def write_results(evaluations: Sequence[GeneratorEvaluation], out_dir: str | os.
     table = io.StringIO()
     writer = csv.DictWriter(table, fieldnames=columns)
     writer.writeheader()
-    writer.writerows({key: repr(row[key]) if isinstance(row[key], float) else row[key] for key in columns}
-                     for row in rows)
+    writer.writerows({key: repr(row[key]) if isinstance(row[key], float) else row[key] for key in columns} for row in rows)
     atomic_write_text(out / "results.csv", table.getvalue(), newline="")
-    markdown = markdown_table(columns, [[row[column] for column in columns] for row in rows],
-                              align="l" + "r" * (len(columns) - 1))
+    markdown = markdown_table(
+        columns, [[row[column] for column in columns] for row in rows], align="l" + "r" * (len(columns) - 1)
+    )
     atomic_write_text(out / "results.md", markdown + "\n")
     atomic_write_text(out / "scorecard.md", scorecard_markdown(rows, rank_by, min_precision) + "\n")
     labels = [str(row["model"]) for row in rows]
-    labelled_scatter([row["precision"] for row in rows], [row["recall"] for row in rows], labels,
-                     out / "precision_recall.png", xlabel="precision", ylabel="recall", title="Precision and recall")
-    labelled_scatter([row["delta_1"] for row in rows], [row["mean_delta"] for row in rows], labels,
-                     out / "disentanglement.png", xlabel="delta_1", ylabel="mean delta (delta tilde)",
-                     title="Disentanglement (DwPR)")
+    labelled_scatter(
+        [row["precision"] for row in rows],
+        [row["recall"] for row in rows],
+        labels,
+        out / "precision_recall.png",
+        xlabel="precision",
+        ylabel="recall",
+        title="Precision and recall",
+    )
+    labelled_scatter(
+        [row["delta_1"] for row in rows],
+        [row["mean_delta"] for row in rows],
+        labels,
+        out / "disentanglement.png",
+        xlabel="delta_1",
+        ylabel="mean delta (delta tilde)",
+        title="Disentanglement (DwPR)",
+    )
     details = [evaluation.details() for evaluation in evaluations]
     atomic_write_json(out / "results.json", details)  # last: its presence marks a complete evaluation
 
@@ -157,11 +194,23 @@ def real_subset(real: np.ndarray, n: int, seed: int | np.random.SeedSequence = 0
     return real[np.sort(np.random.default_rng(seed).choice(len(real), size=n, replace=False))]
 
 
-def evaluate_generator(generator: TrajectoryGenerator, real: np.ndarray, *, n: int = DEFAULT_SAMPLES, k: int = 3,
-                       dwpr_n: int = DEFAULT_DWPR_SAMPLES, interventions: int = DEFAULT_INTERVENTIONS, seed: int = 0,
-                       name: str = "model", device: torch.device | str = "auto", batch_size: int | None = None,
-                       task: str | None = None, contexts: int = DEFAULT_CONTEXTS, draws: int = DEFAULT_DRAWS,
-                       prior_seed: int = PRIOR_ROLLOUT_SEED) -> GeneratorEvaluation:
+def evaluate_generator(
+    generator: TrajectoryGenerator,
+    real: np.ndarray,
+    *,
+    n: int = DEFAULT_SAMPLES,
+    k: int = 3,
+    dwpr_n: int = DEFAULT_DWPR_SAMPLES,
+    interventions: int = DEFAULT_INTERVENTIONS,
+    seed: int = 0,
+    name: str = "model",
+    device: torch.device | str = "auto",
+    batch_size: int | None = None,
+    task: str | None = None,
+    contexts: int = DEFAULT_CONTEXTS,
+    draws: int = DEFAULT_DRAWS,
+    prior_seed: int = PRIOR_ROLLOUT_SEED,
+) -> GeneratorEvaluation:
     """Precision/recall, density and coverage of ``n`` prior samples of one generator against ``real``, and its DwPR.
 
     This is the one evaluation of a generator: :func:`evaluate_generators` (``genrl evaluate``, the quickstart)
@@ -186,8 +235,10 @@ def evaluate_generator(generator: TrajectoryGenerator, real: np.ndarray, *, n: i
     if np.ndim(real) != 3:
         raise ValueError(f"real trajectories must have shape (N, T, M), got {np.shape(real)}")
     if (generator.horizon, generator.action_dim) != real.shape[1:]:
-        raise ValueError(f"model {name!r} generates (horizon, action_dim) = {(generator.horizon, generator.action_dim)}"
-                         f", the real trajectories have {real.shape[1:]}")
+        raise ValueError(
+            f"model {name!r} generates (horizon, action_dim) = {(generator.horizon, generator.action_dim)}"
+            f", the real trajectories have {real.shape[1:]}"
+        )
     prior_rng, dwpr_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
     generated = decode_batched(generator, generator.sample_prior(n, prior_rng))
     pr = precision_recall(real, generated, k, batch_size=batch_size, device=device)
@@ -197,9 +248,22 @@ def evaluate_generator(generator: TrajectoryGenerator, real: np.ndarray, *, n: i
     return GeneratorEvaluation(name, pr, disentanglement, dc, prior)
 
 
-def _check_settings(named: list, *, n: int, k: int, dwpr_n: int, interventions: int, seed: int,
-                    device: torch.device | str, task: str | None, contexts: int, draws: int, prior_seed: int,
-                    rank_by: str | None, min_precision: float | None) -> None:
+def _check_settings(
+    named: list,
+    *,
+    n: int,
+    k: int,
+    dwpr_n: int,
+    interventions: int,
+    seed: int,
+    device: torch.device | str,
+    task: str | None,
+    contexts: int,
+    draws: int,
+    prior_seed: int,
+    rank_by: str | None,
+    min_precision: float | None,
+) -> None:
     """Refuse :func:`evaluate_generators`' arguments before any work, naming the one at fault."""
     if not named:
         raise ValueError("no models given")
@@ -214,13 +278,25 @@ def _check_settings(named: list, *, n: int, k: int, dwpr_n: int, interventions: 
         check_fraction(min_precision, "min_precision")
 
 
-def evaluate_generators(models: Sequence[str | os.PathLike | TrajectoryGenerator] | Mapping[str, str | os.PathLike
-                        | TrajectoryGenerator], data: str | os.PathLike | np.ndarray, *, n: int = DEFAULT_SAMPLES,
-                        k: int = 3, dwpr_n: int = DEFAULT_DWPR_SAMPLES, interventions: int = DEFAULT_INTERVENTIONS,
-                        seed: int = 0, out_dir: str | os.PathLike, device: torch.device | str = "auto",
-                        batch_size: int | None = None, task: str | None = None, contexts: int = DEFAULT_CONTEXTS,
-                        draws: int = DEFAULT_DRAWS, prior_seed: int = PRIOR_ROLLOUT_SEED,
-                        rank_by: str | None = None, min_precision: float | None = None) -> list[GeneratorEvaluation]:
+def evaluate_generators(
+    models: Sequence[str | os.PathLike | TrajectoryGenerator] | Mapping[str, str | os.PathLike | TrajectoryGenerator],
+    data: str | os.PathLike | np.ndarray,
+    *,
+    n: int = DEFAULT_SAMPLES,
+    k: int = 3,
+    dwpr_n: int = DEFAULT_DWPR_SAMPLES,
+    interventions: int = DEFAULT_INTERVENTIONS,
+    seed: int = 0,
+    out_dir: str | os.PathLike,
+    device: torch.device | str = "auto",
+    batch_size: int | None = None,
+    task: str | None = None,
+    contexts: int = DEFAULT_CONTEXTS,
+    draws: int = DEFAULT_DRAWS,
+    prior_seed: int = PRIOR_ROLLOUT_SEED,
+    rank_by: str | None = None,
+    min_precision: float | None = None,
+) -> list[GeneratorEvaluation]:
     """Precision/recall, density/coverage against real trajectories and DwPR of each generator, written as each
     model completes.
 
@@ -255,8 +331,21 @@ def evaluate_generators(models: Sequence[str | os.PathLike | TrajectoryGenerator
     :return: the evaluations, in model order
     """
     named = _named_generators(models)
-    _check_settings(named, n=n, k=k, dwpr_n=dwpr_n, interventions=interventions, seed=seed, device=device, task=task,
-                    contexts=contexts, draws=draws, prior_seed=prior_seed, rank_by=rank_by, min_precision=min_precision)
+    _check_settings(
+        named,
+        n=n,
+        k=k,
+        dwpr_n=dwpr_n,
+        interventions=interventions,
+        seed=seed,
+        device=device,
+        task=task,
+        contexts=contexts,
+        draws=draws,
+        prior_seed=prior_seed,
+        rank_by=rank_by,
+        min_precision=min_precision,
+    )
     out = check_output_dir(out_dir)
     real = load_trajectories(data)
     _check_sample_sizes(real, n, dwpr_n, interventions)
@@ -264,10 +353,24 @@ def evaluate_generators(models: Sequence[str | os.PathLike | TrajectoryGenerator
     out.mkdir(parents=True, exist_ok=True)
     evaluations: list[GeneratorEvaluation] = []
     for name, model in named:
-        evaluations.append(evaluate_generator(_as_generator(model, device), real, n=n, k=k, dwpr_n=dwpr_n,
-                                              interventions=interventions, seed=seed, name=name, device=device,
-                                              batch_size=batch_size, task=task, contexts=contexts, draws=draws,
-                                              prior_seed=prior_seed))
+        evaluations.append(
+            evaluate_generator(
+                _as_generator(model, device),
+                real,
+                n=n,
+                k=k,
+                dwpr_n=dwpr_n,
+                interventions=interventions,
+                seed=seed,
+                name=name,
+                device=device,
+                batch_size=batch_size,
+                task=task,
+                contexts=contexts,
+                draws=draws,
+                prior_seed=prior_seed,
+            )
+        )
         write_results(evaluations, out, rank_by, min_precision)
     return evaluations
 
@@ -300,5 +403,7 @@ def _check_sample_sizes(real: np.ndarray, n: int, dwpr_n: int, interventions: in
     needed = 2 * dwpr_n * interventions * int(np.prod(real.shape[1:])) * 4
     available = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
     if needed > available:
-        raise ValueError(f"dwpr_n = {dwpr_n} needs about {needed / 2**30:.0f} GiB for its decoded trajectories, more "
-                         f"than this machine's {available / 2**30:.0f} GiB of memory")
+        raise ValueError(
+            f"dwpr_n = {dwpr_n} needs about {needed / 2**30:.0f} GiB for its decoded trajectories, more "
+            f"than this machine's {available / 2**30:.0f} GiB of memory"
+        )

@@ -11,8 +11,16 @@ from matplotlib.figure import Figure
 from sb3_genrl.utils import atomic_path
 
 
-def labelled_scatter(x: Sequence[float], y: Sequence[float], labels: Sequence[str], path: str | os.PathLike, *,
-                     xlabel: str, ylabel: str, title: str = "") -> None:
+def labelled_scatter(
+    x: Sequence[float],
+    y: Sequence[float],
+    labels: Sequence[str],
+    path: str | os.PathLike,
+    *,
+    xlabel: str,
+    ylabel: str,
+    title: str = "",
+) -> None:
     """Save a scatter plot of ``(x, y)`` with each point annotated by its label as a PNG (written atomically).
 
     Drawn with the Agg canvas directly, so the caller's pyplot backend and state are left alone.

@@ -106,13 +106,15 @@ def power_of_two_scale(point_sets: Sequence[tuple[str, np.ndarray]], shift: np.n
     for _, points in point_sets:
         step = _rows_per_chunk(points.shape[1])
         for start in range(0, len(points), step):
-            largest = max(largest, float(np.abs(points[start:start + step] - shift).max()))
+            largest = max(largest, float(np.abs(points[start : start + step] - shift).max()))
     dim = point_sets[0][1].shape[1]
     limit = float(np.sqrt(np.finfo(np.float64).max / (16 * dim)))
     if largest > limit:
         names = " and ".join(name for name, _ in point_sets)
-        raise ValueError(f"{names} samples lie up to {largest:.3g} from the real mean: their squared distances would "
-                         f"overflow float64 (the limit for {dim} values per sample is {limit:.3g}); rescale the samples")
+        raise ValueError(
+            f"{names} samples lie up to {largest:.3g} from the real mean: their squared distances would "
+            f"overflow float64 (the limit for {dim} values per sample is {limit:.3g}); rescale the samples"
+        )
     return 1.0 if largest == 0 else float(np.ldexp(1.0, -np.frexp(largest)[1]))
 
 
@@ -125,8 +127,8 @@ def prepare(points: np.ndarray, shift: np.ndarray, scale: float, device: torch.d
     sq_norms = torch.empty(len(original), dtype=torch.float32, device=device)
     step = _rows_per_chunk(original.shape[1])
     for start in range(0, len(original), step):
-        centred[start:start + step] = (original[start:start + step].double() - shift_t) * scale
-        sq_norms[start:start + step] = (centred[start:start + step].double() ** 2).sum(1)
+        centred[start : start + step] = (original[start : start + step].double() - shift_t) * scale
+        sq_norms[start : start + step] = (centred[start : start + step].double() ** 2).sum(1)
     return _PreparedSet(original, centred, sq_norms, scale * scale)
 
 
@@ -141,8 +143,9 @@ def _float32_floor(dim: int) -> float:
     return (2 * dim + 16) * _SUBNORMAL32
 
 
-def _pair_factors(a: _PreparedSet, a_offset: torch.Tensor, b: _PreparedSet, b_offset: torch.Tensor
-                  ) -> tuple[torch.Tensor, torch.Tensor]:
+def _pair_factors(
+    a: _PreparedSet, a_offset: torch.Tensor, b: _PreparedSet, b_offset: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Factors with ``left[i] . right[j] = a_offset[i] + b_offset[j] - 2 a_i . b_j``.
 
     One float32 matrix product of blocks of these factors gives a block of squared distances (offsets ``|x|^2``)
@@ -157,8 +160,8 @@ def _direct_sq_pairs(a: torch.Tensor, b: torch.Tensor, a_rows: torch.Tensor, b_r
     """Float64 squared distances ``|a[a_rows[p]] - b[b_rows[p]]|^2`` as the direct sum of squared differences."""
     out = torch.empty(len(a_rows), dtype=torch.float64, device=a.device)
     for p0 in range(0, len(a_rows), chunk):
-        diff = a[a_rows[p0:p0 + chunk]].double() - b[b_rows[p0:p0 + chunk]].double()
-        out[p0:p0 + chunk] = (diff * diff).sum(1)
+        diff = a[a_rows[p0 : p0 + chunk]].double() - b[b_rows[p0 : p0 + chunk]].double()
+        out[p0 : p0 + chunk] = (diff * diff).sum(1)
     return out
 
 
@@ -176,27 +179,29 @@ def _row_chunk(block: int, num_others: int) -> int:
     return max(1, block * block // num_others)
 
 
-def _merge_topk(values: torch.Tensor, indices: torch.Tensor, new_values: torch.Tensor, new_indices: torch.Tensor,
-                keep: int) -> tuple[torch.Tensor, torch.Tensor]:
+def _merge_topk(
+    values: torch.Tensor, indices: torch.Tensor, new_values: torch.Tensor, new_indices: torch.Tensor, keep: int
+) -> tuple[torch.Tensor, torch.Tensor]:
     best = torch.topk(torch.cat([values, new_values], dim=1), keep, dim=1, largest=False)
     return best.values, torch.gather(torch.cat([indices, new_indices], dim=1), 1, best.indices)
 
 
-def _exact_sq_radii_rows(points: _PreparedSet, factors: tuple[torch.Tensor, torch.Tensor], rows: torch.Tensor, k: int,
-                         tol: torch.Tensor, block: int) -> torch.Tensor:
+def _exact_sq_radii_rows(
+    points: _PreparedSet, factors: tuple[torch.Tensor, torch.Tensor], rows: torch.Tensor, k: int, tol: torch.Tensor, block: int
+) -> torch.Tensor:
     """Exact squared k-th neighbour distances of ``rows``: every neighbour whose float32 value is within twice the
     error bound of the float32 k-th value is a candidate, and the candidates are compared by direct distances."""
     left, right = factors
     exact = torch.empty(len(rows), dtype=torch.float64, device=rows.device)
     step = _row_chunk(block, len(right))
     for r0 in range(0, len(rows), step):
-        r = rows[r0:r0 + step]
+        r = rows[r0 : r0 + step]
         sq = torch.mm(left[r], right.T)
         sq[torch.arange(len(r), device=sq.device), r] = torch.inf
         kth = torch.topk(sq, k, dim=1, largest=False).values[:, -1]
         r_idx, c_idx = (sq <= (kth + 2 * tol[r])[:, None]).nonzero(as_tuple=True)
         values = _direct_sq_pairs(points.original, points.original, r[r_idx], c_idx, step)
-        exact[r0:r0 + step] = _kth_per_row(r_idx, values, len(r), k)
+        exact[r0 : r0 + step] = _kth_per_row(r_idx, values, len(r), k)
     return exact
 
 
@@ -225,8 +230,9 @@ def squared_radii(points: _PreparedSet, k: int, block: int) -> torch.Tensor:
             values[i0:i1], indices[i0:i1] = _merge_topk(values[i0:i1], indices[i0:i1], best.values, best.indices + j0, keep)
             if j0 != i0:
                 best = torch.topk(sq.T.contiguous(), min(keep, i1 - i0), dim=1, largest=False)
-                values[j0:j1], indices[j0:j1] = _merge_topk(values[j0:j1], indices[j0:j1], best.values,
-                                                            best.indices + i0, keep)
+                values[j0:j1], indices[j0:j1] = _merge_topk(
+                    values[j0:j1], indices[j0:j1], best.values, best.indices + i0, keep
+                )
     tol = _float32_tolerance(dim) * (points.sq_norms + points.sq_norms.max()) + _float32_floor(dim)
     certain = (values[:, k] - values[:, k - 1]) > 2 * tol if keep > k else torch.ones(n, dtype=torch.bool, device=device)
     # Among the first k candidates of a certain row, only those within twice the bound of the k-th can be the
@@ -240,25 +246,27 @@ def squared_radii(points: _PreparedSet, k: int, block: int) -> torch.Tensor:
     return exact
 
 
-def _exact_inside(points: _PreparedSet, rows: torch.Tensor, others: _PreparedSet, other_sq_radii: torch.Tensor,
-                  tol: torch.Tensor, block: int) -> torch.Tensor:
+def _exact_inside(
+    points: _PreparedSet, rows: torch.Tensor, others: _PreparedSet, other_sq_radii: torch.Tensor, tol: torch.Tensor, block: int
+) -> torch.Tensor:
     """Exact test of ``rows`` of ``points`` against the balls of ``others``: margins clear of 0 by the float32 bound
     ``tol`` decide, the others are settled by direct distances."""
     left, right = _pair_factors(points, points.sq_norms, others, others.sq_norms - (other_sq_radii * others.sq_scale).float())
     inside = torch.zeros(len(rows), dtype=torch.bool, device=rows.device)
     step = _row_chunk(block, len(right))
     for r0 in range(0, len(rows), step):
-        r = rows[r0:r0 + step]
+        r = rows[r0 : r0 + step]
         margin = torch.mm(left[r], right.T)
-        inside[r0:r0 + step] = (margin < -tol[r, None]).any(1)
+        inside[r0 : r0 + step] = (margin < -tol[r, None]).any(1)
         r_idx, c_idx = (margin.abs() <= tol[r, None]).nonzero(as_tuple=True)
         direct = _direct_sq_pairs(points.original, others.original, r[r_idx], c_idx, step)
         inside[r0 + r_idx[direct <= other_sq_radii[c_idx]]] = True
     return inside
 
 
-def membership(real: _PreparedSet, real_sq_radii: torch.Tensor, generated: _PreparedSet, generated_sq_radii: torch.Tensor,
-               block: int) -> tuple[torch.Tensor, torch.Tensor]:
+def membership(
+    real: _PreparedSet, real_sq_radii: torch.Tensor, generated: _PreparedSet, generated_sq_radii: torch.Tensor, block: int
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Which generated samples lie in the real manifold and which real samples lie in the generated one.
 
     One pass over the real-generated float32 blocks keeps, for each sample, the smallest margin
@@ -288,11 +296,14 @@ def membership(real: _PreparedSet, real_sq_radii: torch.Tensor, generated: _Prep
     gen_margin += r_gen
     real_margin += r_real
     results = []
-    for points, margin, own_radii, others, other_radii in ((generated, gen_margin, r_gen, real, real_sq_radii),
-                                                           (real, real_margin, r_real, generated, generated_sq_radii)):
+    for points, margin, own_radii, others, other_radii in (
+        (generated, gen_margin, r_gen, real, real_sq_radii),
+        (real, real_margin, r_real, generated, generated_sq_radii),
+    ):
         dim = points.centred.shape[1]
-        tol = _float32_tolerance(dim) * (points.sq_norms + own_radii + others.sq_norms.max()
-                                         + (other_radii.max() * others.sq_scale).float()) + _float32_floor(dim)
+        tol = _float32_tolerance(dim) * (
+            points.sq_norms + own_radii + others.sq_norms.max() + (other_radii.max() * others.sq_scale).float()
+        ) + _float32_floor(dim)
         inside = margin < -tol
         rows = (margin.abs() <= tol).nonzero(as_tuple=True)[0]
         if len(rows):
@@ -306,20 +317,30 @@ def _checked_sets(real: np.ndarray, generated: np.ndarray, k: int) -> tuple[np.n
     real_points = as_points(real, "real")
     gen_points = as_points(generated, "generated")
     if real_points.shape[1] != gen_points.shape[1]:
-        raise ValueError(f"real and generated samples must have the same size, got {real_points.shape[1]} "
-                         f"and {gen_points.shape[1]} values per sample")
+        raise ValueError(
+            f"real and generated samples must have the same size, got {real_points.shape[1]} "
+            f"and {gen_points.shape[1]} values per sample"
+        )
     if int(k) != k or k < 1:
         raise ValueError(f"k must be a positive integer, got {k!r}")
     k = int(k)
     smallest = min(len(real_points), len(gen_points))
     if k >= smallest:
-        raise ValueError(f"k must be smaller than both set sizes (a point is not its own neighbour), got k={k} "
-                         f"with {len(real_points)} real and {len(gen_points)} generated samples")
+        raise ValueError(
+            f"k must be smaller than both set sizes (a point is not its own neighbour), got k={k} "
+            f"with {len(real_points)} real and {len(gen_points)} generated samples"
+        )
     return real_points, gen_points, k
 
 
-def prepared_sets(real: np.ndarray, generated: np.ndarray, k: int, batch_size: int | None, device: torch.device | str,
-                  memory_budget_mb: float) -> tuple[_PreparedSet, _PreparedSet, int, int]:
+def prepared_sets(
+    real: np.ndarray,
+    generated: np.ndarray,
+    k: int,
+    batch_size: int | None,
+    device: torch.device | str,
+    memory_budget_mb: float,
+) -> tuple[_PreparedSet, _PreparedSet, int, int]:
     """Both sets checked (:func:`_checked_sets`), centred on the real mean and scaled by one power of two, on the
     device; with ``k`` as an int and the edge length of the distance blocks."""
     real_points, gen_points, k = _checked_sets(real, generated, k)
@@ -330,9 +351,16 @@ def prepared_sets(real: np.ndarray, generated: np.ndarray, k: int, batch_size: i
     return prepare(real_points, shift, scale, torch_device), prepare(gen_points, shift, scale, torch_device), k, block
 
 
-def precision_recall(real: np.ndarray, generated: np.ndarray, k: int = 3, *, batch_size: int | None = None,
-                     device: torch.device | str = "auto", return_radii: bool = False,
-                     memory_budget_mb: float = DEFAULT_MEMORY_BUDGET_MB) -> PrecisionRecall:
+def precision_recall(
+    real: np.ndarray,
+    generated: np.ndarray,
+    k: int = 3,
+    *,
+    batch_size: int | None = None,
+    device: torch.device | str = "auto",
+    return_radii: bool = False,
+    memory_budget_mb: float = DEFAULT_MEMORY_BUDGET_MB,
+) -> PrecisionRecall:
     """Improved precision and recall (Kynkaanniemi et al. 2019) of ``generated`` against ``real``, exactly.
 
     A sample's radius is the distance to its ``k``-th nearest neighbour in its own set, excluding exactly the

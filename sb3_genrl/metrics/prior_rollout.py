@@ -62,10 +62,19 @@ class PriorRollout:
         solved by some draw where the env reports success (JSON-ready)."""
         q25, median, q75 = np.percentile(self.best, [25, 50, 75])
         success = {} if self.solved is None else {"prior_success": float(np.mean(self.solved))}
-        return {"prior_median": float(median), "prior_q25": float(q25), "prior_q75": float(q75),
-                "prior_mean": float(np.mean(self.best)), **success, "prior_contexts": len(self.best),
-                "prior_draws": self.draws, "prior_seed": self.seed, "prior_episodes": self.episodes,
-                "prior_seconds": self.seconds, "prior_cpu_seconds": self.cpu_seconds}
+        return {
+            "prior_median": float(median),
+            "prior_q25": float(q25),
+            "prior_q75": float(q75),
+            "prior_mean": float(np.mean(self.best)),
+            **success,
+            "prior_contexts": len(self.best),
+            "prior_draws": self.draws,
+            "prior_seed": self.seed,
+            "prior_episodes": self.episodes,
+            "prior_seconds": self.seconds,
+            "prior_cpu_seconds": self.cpu_seconds,
+        }
 
 
 def _latent_env(task: str | gym.Env, generator: TrajectoryGenerator) -> Any:
@@ -80,8 +89,15 @@ def _latent_env(task: str | gym.Env, generator: TrajectoryGenerator) -> Any:
     return LatentActionWrapper(env, generator)
 
 
-def prior_rollout(generator: TrajectoryGenerator, task: str | gym.Env, *, contexts: int | np.ndarray = DEFAULT_CONTEXTS,
-                  draws: int = DEFAULT_DRAWS, seed: int = PRIOR_ROLLOUT_SEED, n_threads: int = 1) -> PriorRollout:
+def prior_rollout(
+    generator: TrajectoryGenerator,
+    task: str | gym.Env,
+    *,
+    contexts: int | np.ndarray = DEFAULT_CONTEXTS,
+    draws: int = DEFAULT_DRAWS,
+    seed: int = PRIOR_ROLLOUT_SEED,
+    n_threads: int = 1,
+) -> PriorRollout:
     """The best reward that ``draws`` prior draws reach for each goal (see the module's description).
 
     :param generator: the trained generator
@@ -115,8 +131,7 @@ def prior_rollout(generator: TrajectoryGenerator, task: str | gym.Env, *, contex
         alphas = generator.sample_prior(len(goals) * draws, latent_rng)  # goal g plays draws g*draws .. (g+1)*draws-1
         rewards, _ = env.play_batch(alphas, np.repeat(goals, draws, axis=0), n_threads=n_threads)
         best = rewards.reshape(len(goals), draws).max(axis=1)
-        return PriorRollout(best, draws, seed, len(goals) * draws, time.perf_counter() - wall,
-                            time.process_time() - cpu)
+        return PriorRollout(best, draws, seed, len(goals) * draws, time.perf_counter() - wall, time.process_time() - cpu)
     finally:
         env.close()
 
@@ -126,8 +141,10 @@ def _step_path_rollout(env: Any, generator: TrajectoryGenerator, contexts: Any, 
     from sb3_genrl.checks import check_positive_int
 
     if np.ndim(contexts) != 0:
-        raise ValueError(f"{type(env.unwrapped).__name__} has no fast path: its contexts are reset states, so contexts "
-                         f"must be a count, got an array of shape {np.shape(contexts)}")
+        raise ValueError(
+            f"{type(env.unwrapped).__name__} has no fast path: its contexts are reset states, so contexts "
+            f"must be a count, got an array of shape {np.shape(contexts)}"
+        )
     count = check_positive_int(contexts, "contexts")
     wall, cpu = time.perf_counter(), time.process_time()
     latent_rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0])
@@ -139,6 +156,9 @@ def _step_path_rollout(env: Any, generator: TrajectoryGenerator, contexts: Any, 
         _, rewards[index], _, _, info = env.step(alpha)
         successes.append(info.get("is_success"))
     best = rewards.reshape(count, draws).max(axis=1)
-    solved = (None if any(success is None for success in successes)
-              else np.asarray(successes, dtype=float).reshape(count, draws).max(axis=1) > 0)
+    solved = (
+        None
+        if any(success is None for success in successes)
+        else np.asarray(successes, dtype=float).reshape(count, draws).max(axis=1) > 0
+    )
     return PriorRollout(best, draws, seed, count * draws, time.perf_counter() - wall, time.process_time() - cpu, solved)

@@ -32,8 +32,6 @@ def converged(row: Mapping[str, Any], min_precision: float = NOT_CONVERGED_PRECI
     return math.isfinite(precision) and precision >= min_precision
 
 
-
-
 # prior_success needs no entry: on a 0/-1 reward the median's ties are broken by the mean, i.e. by the share solved
 RANK_MEASURES = (*_COLUMNS, "prior_median")
 DEFAULT_RANK = "recall"
@@ -52,8 +50,9 @@ def rank_key(rows: Sequence[Mapping[str, Any]], by: str | None = None) -> str:
     return by
 
 
-def ranked(rows: Sequence[Mapping[str, Any]], by: str | None = None,
-           min_precision: float = NOT_CONVERGED_PRECISION) -> list[Mapping[str, Any]]:
+def ranked(
+    rows: Sequence[Mapping[str, Any]], by: str | None = None, min_precision: float = NOT_CONVERGED_PRECISION
+) -> list[Mapping[str, Any]]:
     """The rows, converged models (:func:`converged` at ``min_precision``) first, each part by :func:`rank_key` from
     best to worst (ties in given order; the prior rollout's ties broken by its mean)."""
     key = rank_key(rows, by)
@@ -70,8 +69,9 @@ def ranked(rows: Sequence[Mapping[str, Any]], by: str | None = None,
     return sorted(rows, key=order)
 
 
-def scorecard_markdown(rows: Sequence[Mapping[str, Any]], by: str | None = None,
-                       min_precision: float = NOT_CONVERGED_PRECISION) -> str:
+def scorecard_markdown(
+    rows: Sequence[Mapping[str, Any]], by: str | None = None, min_precision: float = NOT_CONVERGED_PRECISION
+) -> str:
     """The ranked scorecard as a Markdown table (no final newline), with a line saying how it is ranked.
 
     :param rows: one mapping per generator (``GeneratorEvaluation.row()``)
@@ -82,18 +82,31 @@ def scorecard_markdown(rows: Sequence[Mapping[str, Any]], by: str | None = None,
     min_precision = check_fraction(min_precision, "min_precision")
     prior = bool(rows) and all("prior_median" in row for row in rows)
     success = prior and all("prior_success" in row for row in rows)  # an env that reports info["is_success"]
-    header = ["rank", "model", *_COLUMNS, *(("prior median", "prior quartiles") if prior else ()),
-              *(("prior success",) if success else ()), *(("prior cost",) if prior else ()), "status"]
+    header = [
+        "rank",
+        "model",
+        *_COLUMNS,
+        *(("prior median", "prior quartiles") if prior else ()),
+        *(("prior success",) if success else ()),
+        *(("prior cost",) if prior else ()),
+        "status",
+    ]
     table = []
     for index, row in enumerate(ranked(rows, key, min_precision), start=1):
         cells: list[Any] = [index, row["model"], *(row[column] for column in _COLUMNS)]
         if prior:
-            cells += [row["prior_median"], f"{row['prior_q25']:.3f} .. {row['prior_q75']:.3f}",
-                      *([row["prior_success"]] if success else []),
-                      f"{row['prior_episodes']} episodes, {row['prior_seconds']:.1f} s"]
+            cells += [
+                row["prior_median"],
+                f"{row['prior_q25']:.3f} .. {row['prior_q75']:.3f}",
+                *([row["prior_success"]] if success else []),
+                f"{row['prior_episodes']} episodes, {row['prior_seconds']:.1f} s",
+            ]
         table.append([*cells, "ok" if converged(row, min_precision) else "not converged"])
     by = "the prior rollout: the median over goals of the best reward of the prior draws" if key == "prior_median" else key
     rule = f"Ranked by {by} (higher is better)"
-    rule += (f"; a model with precision below {min_precision:g} is not converged and ranked last." if min_precision > 0
-             else "; no precision threshold.")
+    rule += (
+        f"; a model with precision below {min_precision:g} is not converged and ranked last."
+        if min_precision > 0
+        else "; no precision threshold."
+    )
     return rule + "\n\n" + markdown_table(header, table, align="rl" + "r" * (len(header) - 3) + "l")

@@ -16,10 +16,12 @@ from typing import Any
 
 DEFAULT_CONNECT_TIMEOUT = 30.0  # seconds
 
-AUTH_HINT = ("If the cluster uses token authentication (Ray 2.52 and later; `ray start --head` turns it on when a "
-             "token exists, e.g. ~/.ray/auth_token), set RAY_AUTH_MODE=token and the cluster's token "
-             "(RAY_AUTH_TOKEN, or RAY_AUTH_TOKEN_PATH, or the default file ~/.ray/auth_token) before running genrl; "
-             "a cluster started with RAY_AUTH_MODE=disabled needs RAY_AUTH_MODE=disabled here too.")
+AUTH_HINT = (
+    "If the cluster uses token authentication (Ray 2.52 and later; `ray start --head` turns it on when a "
+    "token exists, e.g. ~/.ray/auth_token), set RAY_AUTH_MODE=token and the cluster's token "
+    "(RAY_AUTH_TOKEN, or RAY_AUTH_TOKEN_PATH, or the default file ~/.ray/auth_token) before running genrl; "
+    "a cluster started with RAY_AUTH_MODE=disabled needs RAY_AUTH_MODE=disabled here too."
+)
 
 
 class RayConnectionError(ConnectionError, ValueError):
@@ -65,8 +67,10 @@ def connect_ray(address: str | None, timeout: float = DEFAULT_CONNECT_TIMEOUT, *
     try:
         socket.create_connection((host, port), timeout=timeout).close()
     except OSError as error:
-        raise RayConnectionError(f"cannot reach the Ray cluster at {target} within {timeout:g} s: {error}. Is the head "
-                                 "running (`ray start --head --port=PORT`) and is the address right?") from None
+        raise RayConnectionError(
+            f"cannot reach the Ray cluster at {target} within {timeout:g} s: {error}. Is the head "
+            "running (`ray start --head --port=PORT`) and is the address right?"
+        ) from None
     outcome: dict[str, BaseException] = {}
 
     def init() -> None:
@@ -79,8 +83,10 @@ def connect_ray(address: str | None, timeout: float = DEFAULT_CONNECT_TIMEOUT, *
     thread.start()
     thread.join(max(timeout - (time.monotonic() - began), 1.0))
     if thread.is_alive():
-        raise RayConnectionError(f"no connection to the Ray cluster at {target} within {timeout:g} s (the address "
-                                 f"accepts connections, but Ray did not answer). {AUTH_HINT}")
+        raise RayConnectionError(
+            f"no connection to the Ray cluster at {target} within {timeout:g} s (the address "
+            f"accepts connections, but Ray did not answer). {AUTH_HINT}"
+        )
     if "error" in outcome:
         error = outcome["error"]
         raise RayConnectionError(f"cannot connect to the Ray cluster at {target}: {error}. {AUTH_HINT}") from error

@@ -37,8 +37,9 @@ K = 3  # neighbourhood size of precision/recall and DwPR (paper: 3)
 INTERVENTIONS = 5  # DwPR interventions per latent dimension (paper: 5)
 
 
-def generator_job(task: str, name: str, scale: dict[str, Any], dataset: str, task_dir: str, device: str = "auto",
-                  torch_threads: int = 1) -> dict[str, Any]:
+def generator_job(
+    task: str, name: str, scale: dict[str, Any], dataset: str, task_dir: str, device: str = "auto", torch_threads: int = 1
+) -> dict[str, Any]:
     """Train generator ``name`` (a paper table 1 preset), evaluate it and train GenRL with ``scale["seeds"]`` seeds.
 
     :param task: a task name from :data:`sb3_genrl.envs.TASKS`
@@ -68,8 +69,15 @@ def generator_job(task: str, name: str, scale: dict[str, Any], dataset: str, tas
     model_path = root / "generators" / f"{name}.pt"
     if not model_path.exists():  # the file is written atomically: it exists only once training is complete
         start = time.process_time()
-        train_generator(dataset, preset=name, epochs=scale["generator_epochs"], eval_every=scale["eval_every"],
-                        seed=GENERATOR_SEED, out=model_path, device=device)
+        train_generator(
+            dataset,
+            preset=name,
+            epochs=scale["generator_epochs"],
+            eval_every=scale["eval_every"],
+            seed=GENERATOR_SEED,
+            out=model_path,
+            device=device,
+        )
         atomic_write_json(model_path.with_suffix(".time.json"), {"cpu_seconds": time.process_time() - start})
     generator = load(model_path, device=device)
     fingerprint = file_fingerprint(model_path)
@@ -78,23 +86,37 @@ def generator_job(task: str, name: str, scale: dict[str, Any], dataset: str, tas
 
     # GenRL (paper 6.1.3): one policy per seed, all from this generator file.
     policies = root / "policies" / name
-    check_and_record(policies / STAGE_FILE, {"generator": fingerprint}, folder=root,
-                     output_exists=any(policies.glob("seed*/summary.json")))
-    runs = [_policy_rewards(task, model_path, seed, scale, policies / f"seed{seed}", device)
-            for seed in range(scale["seeds"])]
+    check_and_record(
+        policies / STAGE_FILE, {"generator": fingerprint}, folder=root, output_exists=any(policies.glob("seed*/summary.json"))
+    )
+    runs = [_policy_rewards(task, model_path, seed, scale, policies / f"seed{seed}", device) for seed in range(scale["seeds"])]
     rewards, half, final = ([run[key] for run in runs] for key in ("best", "half", "final"))
-    cpu_seconds = {"generator": _recorded_seconds(model_path.with_suffix(".time.json")),
-                   "evaluation": evaluation.get("cpu_seconds", math.nan), "genrl": sum(run["cpu_seconds"] for run in runs)}
+    cpu_seconds = {
+        "generator": _recorded_seconds(model_path.with_suffix(".time.json")),
+        "evaluation": evaluation.get("cpu_seconds", math.nan),
+        "genrl": sum(run["cpu_seconds"] for run in runs),
+    }
 
     spec = PRESETS[name]
-    return {"model": name, "type": "VAE" if name.startswith("VAE") else "GAN", "latent_dim": spec["latent_dim"],
-            "beta": spec.get("beta"), "info_weight": spec.get("info_weight"),
-            **{key: evaluation[key] for key in (*MEASURES, *SCORECARD_MEASURES)},
-            "prior_q25": evaluation["prior_q25"], "prior_q75": evaluation["prior_q75"],
-            "best_epoch": generator.best_epoch,
-            "selection": [[record["epoch"], record["selection_mse"]] for record in generator.history],
-            "rewards": rewards, "score": float(np.max(rewards)), "half_rewards": half, "half_score": float(np.max(half)),
-            "final_rewards": final, "final": float(np.mean(final)), "cpu_seconds": cpu_seconds}
+    return {
+        "model": name,
+        "type": "VAE" if name.startswith("VAE") else "GAN",
+        "latent_dim": spec["latent_dim"],
+        "beta": spec.get("beta"),
+        "info_weight": spec.get("info_weight"),
+        **{key: evaluation[key] for key in (*MEASURES, *SCORECARD_MEASURES)},
+        "prior_q25": evaluation["prior_q25"],
+        "prior_q75": evaluation["prior_q75"],
+        "best_epoch": generator.best_epoch,
+        "selection": [[record["epoch"], record["selection_mse"]] for record in generator.history],
+        "rewards": rewards,
+        "score": float(np.max(rewards)),
+        "half_rewards": half,
+        "half_score": float(np.max(half)),
+        "final_rewards": final,
+        "final": float(np.mean(final)),
+        "cpu_seconds": cpu_seconds,
+    }
 
 
 def _recorded_seconds(path: pathlib.Path) -> float:
@@ -102,8 +124,16 @@ def _recorded_seconds(path: pathlib.Path) -> float:
     return float(json.loads(path.read_text())["cpu_seconds"]) if path.is_file() else math.nan
 
 
-def _evaluation(task: str, generator: Any, name: str, fingerprint: str, scale: dict[str, Any], dataset: str,
-                root: pathlib.Path, device: str) -> dict[str, Any]:
+def _evaluation(
+    task: str,
+    generator: Any,
+    name: str,
+    fingerprint: str,
+    scale: dict[str, Any],
+    dataset: str,
+    root: pathlib.Path,
+    device: str,
+) -> dict[str, Any]:
     """Precision/recall against the fixed real subset and DwPR (paper 5.2), density, coverage and the prior rollout,
     or the stored result of this file."""
     from sb3_genrl.data import load_actions
@@ -116,10 +146,21 @@ def _evaluation(task: str, generator: Any, name: str, fingerprint: str, scale: d
         return stored
     start = time.process_time()
     real = real_subset(load_actions(dataset), scale["pr_samples"], EVALUATION_SEED)
-    result = evaluate_generator(generator, real, n=scale["pr_samples"], k=K, dwpr_n=scale["dwpr_samples"],
-                                interventions=INTERVENTIONS, seed=EVALUATION_SEED, name=name, device=device, task=task,
-                                contexts=scale["prior_contexts"], draws=scale["prior_draws"],
-                                prior_seed=PRIOR_ROLLOUT_SEED)
+    result = evaluate_generator(
+        generator,
+        real,
+        n=scale["pr_samples"],
+        k=K,
+        dwpr_n=scale["dwpr_samples"],
+        interventions=INTERVENTIONS,
+        seed=EVALUATION_SEED,
+        name=name,
+        device=device,
+        task=task,
+        contexts=scale["prior_contexts"],
+        draws=scale["prior_draws"],
+        prior_seed=PRIOR_ROLLOUT_SEED,
+    )
     evaluation = {**result.details(), "generator": fingerprint, "cpu_seconds": time.process_time() - start}
     evaluation.pop("prior_best")  # per goal: not needed by the report
     atomic_write_json(path, evaluation)
@@ -135,20 +176,32 @@ def task_genrl_kwargs(task: str) -> dict[str, Any]:
     return task_settings(task)[2]
 
 
-def _policy_rewards(task: str, model_path: pathlib.Path, seed: int, scale: dict[str, Any], run_dir: pathlib.Path,
-                    device: str) -> dict[str, float]:
+def _policy_rewards(
+    task: str, model_path: pathlib.Path, seed: int, scale: dict[str, Any], run_dir: pathlib.Path, device: str
+) -> dict[str, float]:
     """One GenRL run's best iteration mean reward, the best within the first half of its budget (from its learning
     curve), its final iteration's and its CPU seconds (its Monitor file's, the process that played and learned)."""
     from sb3_genrl.curves import MONITOR_FILE, read_curve, read_monitor
     from sb3_genrl.genrl import train_policy
 
     if not (run_dir / "summary.json").exists():
-        train_policy(task, str(model_path), episodes=scale["policy_episodes"], seed=seed, out_dir=run_dir,
-                     batch_episodes=scale["batch_episodes"], device=device, **task_genrl_kwargs(task))
+        train_policy(
+            task,
+            str(model_path),
+            episodes=scale["policy_episodes"],
+            seed=seed,
+            out_dir=run_dir,
+            batch_episodes=scale["batch_episodes"],
+            device=device,
+            **task_genrl_kwargs(task),
+        )
     summary = json.loads((run_dir / "summary.json").read_text())
-    return {"best": float(summary["best_mean_reward"]), "final": float(summary["final_mean_reward"]),
-            "half": half_budget_best(read_curve(run_dir / "learning_curve.csv"), scale["policy_episodes"]),
-            "cpu_seconds": float(read_monitor(run_dir / MONITOR_FILE)["cpu_seconds"][-1])}
+    return {
+        "best": float(summary["best_mean_reward"]),
+        "final": float(summary["final_mean_reward"]),
+        "half": half_budget_best(read_curve(run_dir / "learning_curve.csv"), scale["policy_episodes"]),
+        "cpu_seconds": float(read_monitor(run_dir / MONITOR_FILE)["cpu_seconds"][-1]),
+    }
 
 
 def half_budget_best(curve: dict[str, np.ndarray], episodes: int) -> float:
@@ -158,8 +211,19 @@ def half_budget_best(curve: dict[str, np.ndarray], episodes: int) -> float:
     return float(np.max(curve["mean_reward"][within]) if within.any() else curve["mean_reward"][0])
 
 
-def baseline_job(algorithm: str, task: str, seed: int, episodes: int, dataset: str, demo_episodes: int, run_dir: str,
-                 device: str = "auto", torch_threads: int = 1, generator: str | None = None, bc_eval_goals: int = 100) -> str:
+def baseline_job(
+    algorithm: str,
+    task: str,
+    seed: int,
+    episodes: int,
+    dataset: str,
+    demo_episodes: int,
+    run_dir: str,
+    device: str = "auto",
+    torch_threads: int = 1,
+    generator: str | None = None,
+    bc_eval_goals: int = 100,
+) -> str:
     """One run of the comparison: a feedback baseline on the demonstrations (PPO with behaviour cloning, SAC with and
     without them in its buffer, SAC + HER) or a stock algorithm on the latent space of ``generator``
     (``latent-ppo``, ``latent-sac``, ``latent-trpo``); skipped when already done."""
@@ -170,7 +234,16 @@ def baseline_job(algorithm: str, task: str, seed: int, episodes: int, dataset: s
     torch.set_num_threads(torch_threads)
     if not (pathlib.Path(run_dir) / "summary.json").exists():
         latent = algorithm.startswith("latent-")
-        train_baseline(algorithm, task, episodes=episodes, out_dir=run_dir, seed=seed,
-                       demos=None if latent else dataset, demo_episodes=None if latent else demo_episodes,
-                       generator=generator if latent else None, eval_goals=bc_eval_goals, device=device)
+        train_baseline(
+            algorithm,
+            task,
+            episodes=episodes,
+            out_dir=run_dir,
+            seed=seed,
+            demos=None if latent else dataset,
+            demo_episodes=None if latent else demo_episodes,
+            generator=generator if latent else None,
+            eval_goals=bc_eval_goals,
+            device=device,
+        )
     return run_dir

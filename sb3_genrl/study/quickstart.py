@@ -40,10 +40,21 @@ MIN_DEMO_EPISODES = 4
 VIDEO = {"goals": 4, "width": 320, "height": 240, "fps": 20}
 
 
-def quickstart(out_dir: str | os.PathLike, *, task: str, demo_episodes: int = DEMO_EPISODES, epochs: int = GENERATOR_EPOCHS,
-               policy_episodes: int | None = None, pr_samples: int = 1000, dwpr_samples: int = 500, seed: int = 0,
-               video: bool = True, device: str = "auto", progress_bar: bool = True,
-               log: Callable[[str], None] | None = None) -> pathlib.Path:
+def quickstart(
+    out_dir: str | os.PathLike,
+    *,
+    task: str,
+    demo_episodes: int = DEMO_EPISODES,
+    epochs: int = GENERATOR_EPOCHS,
+    policy_episodes: int | None = None,
+    pr_samples: int = 1000,
+    dwpr_samples: int = 500,
+    seed: int = 0,
+    video: bool = True,
+    device: str = "auto",
+    progress_bar: bool = True,
+    log: Callable[[str], None] | None = None,
+) -> pathlib.Path:
     """Run the whole GenRL workflow at a small size and write ``report.md`` in ``out_dir``.
 
     Each stage is skipped when its output exists, so a rerun resumes. Each stage also records the settings that
@@ -77,23 +88,36 @@ def quickstart(out_dir: str | os.PathLike, *, task: str, demo_episodes: int = DE
     episodes, batch_episodes, genrl_kwargs = task_settings(task)
     policy_episodes = episodes if policy_episodes is None else policy_episodes
     video = video and get_task(task).video  # a task without the arm tasks' renderer is not filmed
-    _check_counts(demo_episodes=demo_episodes, epochs=epochs, policy_episodes=policy_episodes, pr_samples=pr_samples,
-                  dwpr_samples=dwpr_samples)
+    _check_counts(
+        demo_episodes=demo_episodes,
+        epochs=epochs,
+        policy_episodes=policy_episodes,
+        pr_samples=pr_samples,
+        dwpr_samples=dwpr_samples,
+    )
     if batch_episodes % QUICKSTART_ENVS:
-        raise ValueError(f"task {task!r}: the quickstart plays its GenRL episodes in {QUICKSTART_ENVS} envs at a time, "
-                         f"so the task's batch_episodes ({batch_episodes}) must be a multiple of {QUICKSTART_ENVS}")
+        raise ValueError(
+            f"task {task!r}: the quickstart plays its GenRL episodes in {QUICKSTART_ENVS} envs at a time, "
+            f"so the task's batch_episodes ({batch_episodes}) must be a multiple of {QUICKSTART_ENVS}"
+        )
     check_seed(seed)
     check_device(device)
     check_output_dir(out_dir)
     # The models are small: one torch thread is as fast as several and leaves the other cores to MuJoCo.
     torch.set_num_threads(1)
     out = pathlib.Path(out_dir)
-    settings = _stage_settings(task, demo_episodes, epochs, policy_episodes, batch_episodes, genrl_kwargs, pr_samples,
-                               dwpr_samples, seed, video)
+    settings = _stage_settings(
+        task, demo_episodes, epochs, policy_episodes, batch_episodes, genrl_kwargs, pr_samples, dwpr_samples, seed, video
+    )
     with folder_lock(out):
-        refuse_conflicts(out, [line for name, wanted in settings.items()
-                               for line in settings_conflicts(*_recorded(out, name), wanted,
-                                                              output_exists=_done(out, name))])
+        refuse_conflicts(
+            out,
+            [
+                line
+                for name, wanted in settings.items()
+                for line in settings_conflicts(*_recorded(out, name), wanted, output_exists=_done(out, name))
+            ],
+        )
         log = log or (lambda _line: None)
         timings = _run_stages(out, settings, device, progress_bar, log)
         return _write_report(out, task, seed, video, timings, log)
@@ -110,32 +134,56 @@ def _check_counts(*, demo_episodes: int, epochs: int, policy_episodes: int, pr_s
         check_int(value, name, minimum=MIN_DEMO_EPISODES, maximum=MAX_EPISODES)
 
 
-def _stage_settings(task: str, demo_episodes: int, epochs: int, policy_episodes: int, batch_episodes: int,
-                    genrl_kwargs: dict[str, Any], pr_samples: int, dwpr_samples: int, seed: int,
-                    video: bool) -> dict[str, dict[str, Any]]:
+def _stage_settings(
+    task: str,
+    demo_episodes: int,
+    epochs: int,
+    policy_episodes: int,
+    batch_episodes: int,
+    genrl_kwargs: dict[str, Any],
+    pr_samples: int,
+    dwpr_samples: int,
+    seed: int,
+    video: bool,
+) -> dict[str, dict[str, Any]]:
     """What each stage is made with: recorded beside its output, and compared with the record on a rerun."""
     import sb3_genrl
     from sb3_genrl.genrl.train import genrl_settings, run_settings
 
     return {
         "demonstrations": {"task": task, "episodes": demo_episodes, "seed": seed, "version": sb3_genrl.__version__},
-        "generator": {"preset": quickstart_preset(task), "epochs": epochs, "eval_every": GENERATOR_EVAL_EVERY,
-                      "seed": seed},
+        "generator": {"preset": quickstart_preset(task), "epochs": epochs, "eval_every": GENERATOR_EVAL_EVERY, "seed": seed},
         # precision/recall compares at most as many samples as there are demonstrations
         "evaluation": {"n": min(pr_samples, demo_episodes), "dwpr_n": dwpr_samples, "k": 3, "interventions": 5, "seed": seed},
-        "policy": {"task": task, "episodes": policy_episodes, "batch_episodes": batch_episodes,
-                   "n_envs": QUICKSTART_ENVS, "seed": seed, "genrl_kwargs": genrl_kwargs,
-                   # every GenRL setting in effect, defaults included, as train_policy runs them
-                   "genrl": genrl_settings(run_settings(genrl_kwargs, batch_episodes, QUICKSTART_ENVS))},
-        **({"video": {**VIDEO, "seed": sub_seed(seed, 1)}} if video else {})}
+        "policy": {
+            "task": task,
+            "episodes": policy_episodes,
+            "batch_episodes": batch_episodes,
+            "n_envs": QUICKSTART_ENVS,
+            "seed": seed,
+            "genrl_kwargs": genrl_kwargs,
+            # every GenRL setting in effect, defaults included, as train_policy runs them
+            "genrl": genrl_settings(run_settings(genrl_kwargs, batch_episodes, QUICKSTART_ENVS)),
+        },
+        **({"video": {**VIDEO, "seed": sub_seed(seed, 1)}} if video else {}),
+    }
 
 
 # Where each stage writes (checked for "done") and where it records its settings.
-_OUTPUTS = {"demonstrations": ("demonstrations",), "generator": ("vae.pt",), "evaluation": ("evaluation/results.json",),
-            "policy": ("policy/summary.json",), "video": ("policy.gif", "policy_strip.png")}  # a stage is done when all exist
+_OUTPUTS = {
+    "demonstrations": ("demonstrations",),
+    "generator": ("vae.pt",),
+    "evaluation": ("evaluation/results.json",),
+    "policy": ("policy/summary.json",),
+    "video": ("policy.gif", "policy_strip.png"),
+}  # a stage is done when all exist
 STAGE_TIMES = "stage_times.json"  # seconds each stage took when it was made, kept for the report of a resumed run
-_RECORDS = {"generator": "vae.stage.json", "evaluation": "evaluation/stage.json", "policy": "policy/stage.json",
-            "video": "video.stage.json"}
+_RECORDS = {
+    "generator": "vae.stage.json",
+    "evaluation": "evaluation/stage.json",
+    "policy": "policy/stage.json",
+    "video": "video.stage.json",
+}
 
 
 def _read_stage_times(out: pathlib.Path) -> dict[str, float]:
@@ -162,8 +210,9 @@ def _recorded(out: pathlib.Path, stage: str) -> tuple[pathlib.Path, dict[str, An
     return out / _RECORDS[stage], read_settings(out / _RECORDS[stage])
 
 
-def _run_stages(out: pathlib.Path, settings: dict[str, dict[str, Any]], device: str, progress_bar: bool,
-                log: Callable[[str], None]) -> dict[str, float]:
+def _run_stages(
+    out: pathlib.Path, settings: dict[str, dict[str, Any]], device: str, progress_bar: bool, log: Callable[[str], None]
+) -> dict[str, float]:
     from sb3_genrl.envs.demonstrations import make_demonstrations
     from sb3_genrl.generative import train_generator
     from sb3_genrl.genrl import train_policy
@@ -171,8 +220,9 @@ def _run_stages(out: pathlib.Path, settings: dict[str, dict[str, Any]], device: 
     from sb3_genrl.metrics import evaluate_generators
 
     dataset, model_path, policy = out / "demonstrations", out / "vae.pt", out / "policy"
-    demos, generator, evaluation, policy_stage = (settings[name] for name in (
-        "demonstrations", "generator", "evaluation", "policy"))
+    demos, generator, evaluation, policy_stage = (
+        settings[name] for name in ("demonstrations", "generator", "evaluation", "policy")
+    )
     timings: dict[str, float] = {}
 
     made_in = _read_stage_times(out)
@@ -190,37 +240,84 @@ def _run_stages(out: pathlib.Path, settings: dict[str, dict[str, Any]], device: 
         log(f"{name}: {'done' if not done else 'already there'} ({time.perf_counter() - start:.0f} s)")
 
     def train() -> None:  # the file is written atomically: it exists only once training is complete
-        train_generator(dataset, preset=generator["preset"], epochs=generator["epochs"],
-                        eval_every=generator["eval_every"], seed=generator["seed"], out=model_path, progress_bar=progress_bar,
-                        device=device, tensorboard_log=str(out / "tensorboard"))
+        train_generator(
+            dataset,
+            preset=generator["preset"],
+            epochs=generator["epochs"],
+            eval_every=generator["eval_every"],
+            seed=generator["seed"],
+            out=model_path,
+            progress_bar=progress_bar,
+            device=device,
+            tensorboard_log=str(out / "tensorboard"),
+        )
 
-    stage("demonstrations", {}, lambda: make_demonstrations(demos["task"], demos["episodes"], dataset,
-                                                            seed=demos["seed"], progress_bar=progress_bar))
+    stage(
+        "demonstrations",
+        {},
+        lambda: make_demonstrations(demos["task"], demos["episodes"], dataset, seed=demos["seed"], progress_bar=progress_bar),
+    )
     stage("generator", {"dataset": dataset_fingerprint(dataset)}, train)
     made_from = {"dataset": dataset_fingerprint(dataset), "generator": file_fingerprint(model_path)}
-    stage("evaluation", made_from, lambda: evaluate_generators(
-        {generator["preset"]: model_path}, dataset, n=evaluation["n"], k=evaluation["k"], dwpr_n=evaluation["dwpr_n"],
-        interventions=evaluation["interventions"], seed=evaluation["seed"], out_dir=out / "evaluation", device=device))
+    stage(
+        "evaluation",
+        made_from,
+        lambda: evaluate_generators(
+            {generator["preset"]: model_path},
+            dataset,
+            n=evaluation["n"],
+            k=evaluation["k"],
+            dwpr_n=evaluation["dwpr_n"],
+            interventions=evaluation["interventions"],
+            seed=evaluation["seed"],
+            out_dir=out / "evaluation",
+            device=device,
+        ),
+    )
     policy_made_from, demonstrations = {"generator": made_from["generator"]}, None
     if uses_demonstrations(policy_stage["genrl_kwargs"].get("callback")):  # (the Fetch tasks') the generator's own
         policy_made_from["dataset"], demonstrations = made_from["dataset"], dataset
-    stage("policy", policy_made_from, lambda: train_policy(
-        policy_stage["task"], str(model_path), episodes=policy_stage["episodes"],
-        batch_episodes=policy_stage["batch_episodes"], n_envs=policy_stage["n_envs"], seed=policy_stage["seed"],
-        out_dir=policy, device=device, demonstrations=demonstrations,
-        progress_bar=progress_bar, **policy_stage["genrl_kwargs"]))
+    stage(
+        "policy",
+        policy_made_from,
+        lambda: train_policy(
+            policy_stage["task"],
+            str(model_path),
+            episodes=policy_stage["episodes"],
+            batch_episodes=policy_stage["batch_episodes"],
+            n_envs=policy_stage["n_envs"],
+            seed=policy_stage["seed"],
+            out_dir=policy,
+            device=device,
+            demonstrations=demonstrations,
+            progress_bar=progress_bar,
+            **policy_stage["genrl_kwargs"],
+        ),
+    )
     if "video" in settings:
         from sb3_genrl.video import record_video
 
         shown = settings["video"]
-        stage("video", {"policy": file_fingerprint(policy / "genrl_policy.zip")}, lambda: record_video(
-            policy_stage["task"], out / "policy.gif", policy=policy, goals=shown["goals"], seed=shown["seed"],
-            width=shown["width"], height=shown["height"], fps=shown["fps"]))
+        stage(
+            "video",
+            {"policy": file_fingerprint(policy / "genrl_policy.zip")},
+            lambda: record_video(
+                policy_stage["task"],
+                out / "policy.gif",
+                policy=policy,
+                goals=shown["goals"],
+                seed=shown["seed"],
+                width=shown["width"],
+                height=shown["height"],
+                fps=shown["fps"],
+            ),
+        )
     return timings
 
 
-def _write_report(out: pathlib.Path, task: str, seed: int, video: bool, timings: dict[str, float],
-                  log: Callable[[str], None]) -> pathlib.Path:
+def _write_report(
+    out: pathlib.Path, task: str, seed: int, video: bool, timings: dict[str, float], log: Callable[[str], None]
+) -> pathlib.Path:
     """``report.md``, with every number read from what the stages recorded."""
     from sb3_genrl.data import dataset_info
     from sb3_genrl.generative import load
@@ -233,22 +330,30 @@ def _write_report(out: pathlib.Path, task: str, seed: int, video: bool, timings:
     coverage_file = dataset / "coverage.json"
     coverage = json.loads(coverage_file.read_text()) if coverage_file.is_file() else {}
     generator = load(out / "vae.pt", device="cpu")
-    lines = [f"# GenRL quickstart: {task}", "",
-             f"1. **Demonstrations**: {dataset_info(dataset)['episodes']} valid episodes from the scripted expert and its"
-             " perturbations" + (f" (goal-region coverage {coverage['coverage']:.1%})" if "coverage" in coverage else "")
-             + ".",
-             f"2. **Generator**: beta-VAE (preset {generator_settings['preset']}: N_alpha = {generator.latent_dim}, "
-             f"beta = {generator.beta}), {generator_settings['epochs']} epochs, "
-             f"best checkpoint at epoch {generator.best_epoch}.",
-             f"3. **Evaluation**: {_measure_line(measures)}.",
-             f"4. **GenRL**: {summary['episodes']} episodes; best iteration mean reward {summary['best_mean_reward']:.3f},"
-             f" final {summary['final_mean_reward']:.3f}; {score}.", "",
-             "![learning curve](policy/learning_curve.png)", "",
-             "![precision and recall](evaluation/precision_recall.png)", ""]
+    lines = [
+        f"# GenRL quickstart: {task}",
+        "",
+        f"1. **Demonstrations**: {dataset_info(dataset)['episodes']} valid episodes from the scripted expert and its"
+        " perturbations" + (f" (goal-region coverage {coverage['coverage']:.1%})" if "coverage" in coverage else "") + ".",
+        f"2. **Generator**: beta-VAE (preset {generator_settings['preset']}: N_alpha = {generator.latent_dim}, "
+        f"beta = {generator.beta}), {generator_settings['epochs']} epochs, "
+        f"best checkpoint at epoch {generator.best_epoch}.",
+        f"3. **Evaluation**: {_measure_line(measures)}.",
+        f"4. **GenRL**: {summary['episodes']} episodes; best iteration mean reward {summary['best_mean_reward']:.3f},"
+        f" final {summary['final_mean_reward']:.3f}; {score}.",
+        "",
+        "![learning curve](policy/learning_curve.png)",
+        "",
+        "![precision and recall](evaluation/precision_recall.png)",
+        "",
+    ]
     if video:
         lines += ["![policy](policy.gif)", "", "![policy frames](policy_strip.png)", ""]
-    lines += ["Stage times (s, as each stage took when it was made): "
-              + ", ".join(f"{k} {v:.0f}" if math.isfinite(v) else f"{k} not recorded" for k, v in timings.items()), ""]
+    lines += [
+        "Stage times (s, as each stage took when it was made): "
+        + ", ".join(f"{k} {v:.0f}" if math.isfinite(v) else f"{k} not recorded" for k, v in timings.items()),
+        "",
+    ]
     report = out / "report.md"
     atomic_write_text(report, "\n".join(lines))
     log(f"GenRL on {task}: {score_line}")
@@ -265,12 +370,17 @@ def _policy_score(out: pathlib.Path, task: str, seed: int) -> tuple[str, str]:
     spec = get_task(task)
     if spec.evaluate is not None:
         success = spec.evaluate(model, task, episodes=100, seed=seed + EVAL_GOAL_SEED)["success_rate"]
-        return (f"the trained policy's own success rate from 100 new initial states (deterministic): **{success:.0%}**",
-                f"the deterministic policy's success rate from 100 new initial states is {success:.0%}")
+        return (
+            f"the trained policy's own success rate from 100 new initial states (deterministic): **{success:.0%}**",
+            f"the deterministic policy's success rate from 100 new initial states is {success:.0%}",
+        )
     _, rewards, _ = evaluate_on_goals(model, task, goals=100, seed=seed + EVAL_GOAL_SEED)
     distance = float(-rewards.mean())
-    return (f"the trained policy's own mean distance to 100 new goals (deterministic): **{distance:.3f} m** "
-            f"({distance * 100:.1f} cm)", f"the deterministic policy's mean distance to 100 new goals is {distance:.3f} m")
+    return (
+        f"the trained policy's own mean distance to 100 new goals (deterministic): **{distance:.3f} m** "
+        f"({distance * 100:.1f} cm)",
+        f"the deterministic policy's mean distance to 100 new goals is {distance:.3f} m",
+    )
 
 
 def quickstart_preset(task: str) -> str:

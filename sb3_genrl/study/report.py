@@ -48,27 +48,65 @@ def _write_plots(task: str, rows: list[dict[str, Any]], root: pathlib.Path, plot
             if runs:
                 series[r["model"]] = mean_std_over_seeds([read_curve(p) for p in runs])
         if series:
-            plot_curves(series, plots / f"learning_curves_{kind.lower()}.png", ylabel="mean reward per iteration",
-                        title=f"{task}: GenRL with each {kind} (mean +- std over seeds)")
+            plot_curves(
+                series,
+                plots / f"learning_curves_{kind.lower()}.png",
+                ylabel="mean reward per iteration",
+                title=f"{task}: GenRL with each {kind} (mean +- std over seeds)",
+            )
     for kind in ("VAE", "GAN"):
-        series = {r["model"]: ([e for e, _ in r["selection"]], [m for _, m in r["selection"]], None)
-                  for r in rows if r["type"] == kind and r["selection"]}
+        series = {
+            r["model"]: ([e for e, _ in r["selection"]], [m for _, m in r["selection"]], None)
+            for r in rows
+            if r["type"] == kind and r["selection"]
+        }
         if series:
-            plot_curves(series, plots / f"selection_{kind.lower()}.png", xlabel="epoch",
-                        ylabel="model-selection MSE (held-out)", title=f"{task}: each {kind}'s training",
-                        log_y=True)
+            plot_curves(
+                series,
+                plots / f"selection_{kind.lower()}.png",
+                xlabel="epoch",
+                ylabel="model-selection MSE (held-out)",
+                title=f"{task}: each {kind}'s training",
+                log_y=True,
+            )
     names = [r["model"] for r in rows]
-    labelled_scatter([r["precision"] for r in rows], [r["recall"] for r in rows], names, plots / "precision_recall.png",
-                     xlabel="precision", ylabel="recall", title=f"{task}: precision and recall")
-    labelled_scatter([r["delta_1"] for r in rows], [r["mean_delta"] for r in rows], names,
-                     plots / "disentanglement.png", xlabel="delta_1", ylabel="mean delta (delta tilde)",
-                     title=f"{task}: disentanglement (DwPR)")
-    labelled_scatter([r["recall"] for r in rows], [r["score"] for r in rows], names, plots / "recall_vs_reward.png",
-                     xlabel="recall", ylabel="best GenRL reward", title=f"{task}: recall against policy reward")
+    labelled_scatter(
+        [r["precision"] for r in rows],
+        [r["recall"] for r in rows],
+        names,
+        plots / "precision_recall.png",
+        xlabel="precision",
+        ylabel="recall",
+        title=f"{task}: precision and recall",
+    )
+    labelled_scatter(
+        [r["delta_1"] for r in rows],
+        [r["mean_delta"] for r in rows],
+        names,
+        plots / "disentanglement.png",
+        xlabel="delta_1",
+        ylabel="mean delta (delta tilde)",
+        title=f"{task}: disentanglement (DwPR)",
+    )
+    labelled_scatter(
+        [r["recall"] for r in rows],
+        [r["score"] for r in rows],
+        names,
+        plots / "recall_vs_reward.png",
+        xlabel="recall",
+        ylabel="best GenRL reward",
+        title=f"{task}: recall against policy reward",
+    )
 
 
-def write_task_report(task: str, rows: list[dict[str, Any]], task_dir: str | pathlib.Path, *,
-                      scale: dict[str, Any], comparison: pathlib.Path | None = None) -> pathlib.Path:
+def write_task_report(
+    task: str,
+    rows: list[dict[str, Any]],
+    task_dir: str | pathlib.Path,
+    *,
+    scale: dict[str, Any],
+    comparison: pathlib.Path | None = None,
+) -> pathlib.Path:
     """Tables 1-5 for one task (Markdown and CSV), the stability, the selection curves, the plots, and ``report.md``
     linking them."""
     root = pathlib.Path(task_dir)
@@ -103,12 +141,22 @@ def write_all_tasks_report(rows_by_task: dict[str, list[dict[str, Any]]], out_di
     table.to_csv(out / "all_tasks.csv")
     counts = ", ".join(f"{task} {sum(converged(r) for r in rows)}" for task, rows in rows_by_task.items())
     path = out / "all_tasks.md"
-    atomic_write_text(path, "\n".join([
-        "# GenRL study: all tasks (paper table 6)", "",
-        f"Each measure against GenRL's best reward over the converged generators of every task together ({counts}), "
-        "pooled as the paper pools them: each task's own rewards, so a difference between the tasks' rewards and "
-        "measures is part of each coefficient. Each coefficient has its 95% percentile bootstrap interval over the "
-        "models.", "", table.to_markdown().rstrip("\n"), ""]))
+    atomic_write_text(
+        path,
+        "\n".join(
+            [
+                "# GenRL study: all tasks (paper table 6)",
+                "",
+                f"Each measure against GenRL's best reward over the converged generators of every task together ({counts}), "
+                "pooled as the paper pools them: each task's own rewards, so a difference between the tasks' rewards and "
+                "measures is part of each coefficient. Each coefficient has its 95% percentile bootstrap interval over the "
+                "models.",
+                "",
+                table.to_markdown().rstrip("\n"),
+                "",
+            ]
+        ),
+    )
     return path
 
 
@@ -116,44 +164,97 @@ def _significant(header: list[str], table: list[list[Any]], prefix: str) -> tupl
     """The table with the float cells of the columns named ``prefix...`` given to 3 significant digits: errors
     far below 0.001 would otherwise all read 0.000."""
     columns = {i for i, name in enumerate(header) if name.startswith(prefix)}
-    return header, [[f"{v:.3g}" if i in columns and isinstance(v, float) else v for i, v in enumerate(row)]
-                    for row in table]
+    return header, [[f"{v:.3g}" if i in columns and isinstance(v, float) else v for i, v in enumerate(row)] for row in table]
 
 
-def _report_lines(task: str, rows: list[dict[str, Any]], scale: dict[str, Any], markdown: dict[str, str],
-                  steady: dict[str, Any], comparison: pathlib.Path | None, root: pathlib.Path) -> list[str]:
+def _report_lines(
+    task: str,
+    rows: list[dict[str, Any]],
+    scale: dict[str, Any],
+    markdown: dict[str, str],
+    steady: dict[str, Any],
+    comparison: pathlib.Path | None,
+    root: pathlib.Path,
+) -> list[str]:
     best = max(rows, key=lambda r: r["score"])
-    intervals = ("Each coefficient has its 95% percentile bootstrap interval over the models (resampled with "
-                 "replacement, seed 0, the number of resamples in the CSV).")
-    lines = [f"# GenRL study: {task}", "",
-             f"Settings (as recorded with each stage): `{json.dumps(scale)}`", "",
-             f"Best generator: **{best['model']}** (best reward {best['score']:.3f}, i.e. {-best['score'] * 100:.1f} cm).",
-             "", excluded_line(rows), "", cpu_line(rows), "", "## Table 1: generators and GenRL reward", "",
-             "Best reward = the highest mean reward of a GenRL iteration, over all seeds (paper section 6.1.3); at "
-             "half budget: the same within the first half of the episodes; final: the last iteration's, mean over "
-             "seeds.", "", markdown["table1_models"], "",
-             "## The ranking's stability", "", stability_line(steady), "",
-             "## Tables 4-5: precision, recall and disentanglement", "",
-             "With density and coverage (Naeem et al., 2020) and the prior rollout (the best reward of "
-             f"{scale.get('prior_draws')} prior draws for each of {scale.get('prior_contexts')} held-out goals: "
-             "median and quartiles over the goals).", "", markdown["measures"], "",
-             "## Tables 2-3: correlation of each measure with the best reward", "", intervals, "",
-             markdown["correlation"], "",
-             "## Which measure predicts GenRL's reward", "",
-             "Every measure against the best reward and against the final reward, over all converged generators.", "",
-             "Against the best reward:", "", markdown["prediction_best"], "",
-             "Against the final reward:", "", markdown["prediction_final"], "",
-             "## Generator training", "",
-             "The model-selection error (paper appendix B: 100 generated against held-out trajectories) at each "
-             "evaluation of each generator's training; the epoch kept is the one of the smallest.", "",
-             markdown["selection"], "",
-             "![VAE training](plots/selection_vae.png) ![GAN training](plots/selection_gan.png)", "",
-             "## Plots", "",
-             "![VAE learning curves](plots/learning_curves_vae.png)", "",
-             "![GAN learning curves](plots/learning_curves_gan.png)", "",
-             "![precision and recall](plots/precision_recall.png) ![disentanglement](plots/disentanglement.png)", "",
-             "![recall vs reward](plots/recall_vs_reward.png)", ""]
+    intervals = (
+        "Each coefficient has its 95% percentile bootstrap interval over the models (resampled with "
+        "replacement, seed 0, the number of resamples in the CSV)."
+    )
+    lines = [
+        f"# GenRL study: {task}",
+        "",
+        f"Settings (as recorded with each stage): `{json.dumps(scale)}`",
+        "",
+        f"Best generator: **{best['model']}** (best reward {best['score']:.3f}, i.e. {-best['score'] * 100:.1f} cm).",
+        "",
+        excluded_line(rows),
+        "",
+        cpu_line(rows),
+        "",
+        "## Table 1: generators and GenRL reward",
+        "",
+        "Best reward = the highest mean reward of a GenRL iteration, over all seeds (paper section 6.1.3); at "
+        "half budget: the same within the first half of the episodes; final: the last iteration's, mean over "
+        "seeds.",
+        "",
+        markdown["table1_models"],
+        "",
+        "## The ranking's stability",
+        "",
+        stability_line(steady),
+        "",
+        "## Tables 4-5: precision, recall and disentanglement",
+        "",
+        "With density and coverage (Naeem et al., 2020) and the prior rollout (the best reward of "
+        f"{scale.get('prior_draws')} prior draws for each of {scale.get('prior_contexts')} held-out goals: "
+        "median and quartiles over the goals).",
+        "",
+        markdown["measures"],
+        "",
+        "## Tables 2-3: correlation of each measure with the best reward",
+        "",
+        intervals,
+        "",
+        markdown["correlation"],
+        "",
+        "## Which measure predicts GenRL's reward",
+        "",
+        "Every measure against the best reward and against the final reward, over all converged generators.",
+        "",
+        "Against the best reward:",
+        "",
+        markdown["prediction_best"],
+        "",
+        "Against the final reward:",
+        "",
+        markdown["prediction_final"],
+        "",
+        "## Generator training",
+        "",
+        "The model-selection error (paper appendix B: 100 generated against held-out trajectories) at each "
+        "evaluation of each generator's training; the epoch kept is the one of the smallest.",
+        "",
+        markdown["selection"],
+        "",
+        "![VAE training](plots/selection_vae.png) ![GAN training](plots/selection_gan.png)",
+        "",
+        "## Plots",
+        "",
+        "![VAE learning curves](plots/learning_curves_vae.png)",
+        "",
+        "![GAN learning curves](plots/learning_curves_gan.png)",
+        "",
+        "![precision and recall](plots/precision_recall.png) ![disentanglement](plots/disentanglement.png)",
+        "",
+        "![recall vs reward](plots/recall_vs_reward.png)",
+        "",
+    ]
     if comparison is not None:
-        lines += ["## GenRL vs PPO vs SAC", "", comparison.read_text().split("\n", 2)[2].replace(
-            "](", f"]({comparison.parent.relative_to(root)}/"), ""]
+        lines += [
+            "## GenRL vs PPO vs SAC",
+            "",
+            comparison.read_text().split("\n", 2)[2].replace("](", f"]({comparison.parent.relative_to(root)}/"),
+            "",
+        ]
     return lines

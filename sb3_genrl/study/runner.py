@@ -47,9 +47,19 @@ MODELS = tuple(f"VAE{i}" for i in range(1, 10)) + tuple(f"GAN{i}" for i in range
 DEMONSTRATION_SEED = 0
 
 
-def run_study(task: str, scale: str | StudyScale, out_dir: str | os.PathLike, *, executor: str = "local",
-              address: str | None = None, workers: int | None = None, models: tuple[str, ...] = MODELS, device: str = "auto",
-              connect_timeout: float = DEFAULT_CONNECT_TIMEOUT, log: Callable[[str], None] | None = None) -> pathlib.Path:
+def run_study(
+    task: str,
+    scale: str | StudyScale,
+    out_dir: str | os.PathLike,
+    *,
+    executor: str = "local",
+    address: str | None = None,
+    workers: int | None = None,
+    models: tuple[str, ...] = MODELS,
+    device: str = "auto",
+    connect_timeout: float = DEFAULT_CONNECT_TIMEOUT,
+    log: Callable[[str], None] | None = None,
+) -> pathlib.Path:
     """Run the paper's experiments at a scale and write ``report.md`` (per task, and an index for ``task="all"``).
 
     Results are written as they complete and finished work is skipped on a rerun, so an interrupted study resumes.
@@ -89,12 +99,17 @@ def run_study(task: str, scale: str | StudyScale, out_dir: str | os.PathLike, *,
     out = check_output_dir(out_dir)
     log = log or (lambda _line: None)
     with folder_lock(out):
-        refuse_conflicts(out, [line for name in tasks
-                               for line in _conflicts(name, task_scale(settings, name), out / name)])
-        run = _ray_map(address, connect_timeout) if executor == "ray" else \
-            _local_map(workers or len(os.sched_getaffinity(0)))
-        atomic_write_json(out / "study.json", {"task": task, "scale": "custom" if isinstance(scale, StudyScale) else scale,
-                                        **settings, "packages": package_versions()})
+        refuse_conflicts(out, [line for name in tasks for line in _conflicts(name, task_scale(settings, name), out / name)])
+        run = _ray_map(address, connect_timeout) if executor == "ray" else _local_map(workers or len(os.sched_getaffinity(0)))
+        atomic_write_json(
+            out / "study.json",
+            {
+                "task": task,
+                "scale": "custom" if isinstance(scale, StudyScale) else scale,
+                **settings,
+                "packages": package_versions(),
+            },
+        )
         reports = [_run_task(name, task_scale(settings, name), out / name, run, models, device, log) for name in tasks]
         index = _write_index(out)
     return reports[0] if len(reports) == 1 else index
@@ -118,36 +133,61 @@ def _write_index(out: pathlib.Path) -> pathlib.Path:
 def _demonstration_settings(task: str, scale: dict[str, Any]) -> dict[str, Any]:
     import sb3_genrl
 
-    return {"task": task, "episodes": scale["demo_episodes"], "seed": DEMONSTRATION_SEED,
-            "version": sb3_genrl.__version__}
+    return {"task": task, "episodes": scale["demo_episodes"], "seed": DEMONSTRATION_SEED, "version": sb3_genrl.__version__}
 
 
-def _stages(task: str, task_dir: pathlib.Path, scale: dict[str, Any],
-            dataset: str | None) -> list[tuple[pathlib.Path, dict, bool]]:
+def _stages(
+    task: str, task_dir: pathlib.Path, scale: dict[str, Any], dataset: str | None
+) -> list[tuple[pathlib.Path, dict, bool]]:
     """Each stage's record, this run's settings for it and whether it has output. ``dataset`` is the fingerprint
     of the demonstrations (None: not known yet, left out of the settings)."""
     from sb3_genrl.genrl.train import genrl_settings
 
     made_from = {} if dataset is None else {"dataset": dataset}
-    generators, evaluation, policies, comparison = (task_dir / name for name in (
-        "generators", "evaluation", "policies", "comparison"))
+    generators, evaluation, policies, comparison = (
+        task_dir / name for name in ("generators", "evaluation", "policies", "comparison")
+    )
     stages = [
-        (generators / STAGE_FILE, {"epochs": scale["generator_epochs"], "eval_every": scale["eval_every"],
-                                   "seed": GENERATOR_SEED, **made_from}, any(generators.glob("*.pt"))),
-        (evaluation / STAGE_FILE, {"n": scale["pr_samples"], "dwpr_n": scale["dwpr_samples"], "k": K,
-                                   "interventions": INTERVENTIONS, "seed": EVALUATION_SEED,
-                                   "prior_contexts": scale["prior_contexts"], "prior_draws": scale["prior_draws"],
-                                   "prior_seed": PRIOR_ROLLOUT_SEED, **made_from},
-         any(path.name != STAGE_FILE for path in evaluation.glob("*.json"))),
-        (policies / STAGE_FILE, {"episodes": scale["policy_episodes"], "batch_episodes": scale["batch_episodes"],
-                                 "genrl_kwargs": task_genrl_kwargs(task),
-                                 # every GenRL setting in effect, GenRL's defaults included
-                                 "genrl": genrl_settings({**task_genrl_kwargs(task), "n_steps": scale["batch_episodes"]})},
-         any(policies.glob("*/seed*/summary.json")))]
+        (
+            generators / STAGE_FILE,
+            {"epochs": scale["generator_epochs"], "eval_every": scale["eval_every"], "seed": GENERATOR_SEED, **made_from},
+            any(generators.glob("*.pt")),
+        ),
+        (
+            evaluation / STAGE_FILE,
+            {
+                "n": scale["pr_samples"],
+                "dwpr_n": scale["dwpr_samples"],
+                "k": K,
+                "interventions": INTERVENTIONS,
+                "seed": EVALUATION_SEED,
+                "prior_contexts": scale["prior_contexts"],
+                "prior_draws": scale["prior_draws"],
+                "prior_seed": PRIOR_ROLLOUT_SEED,
+                **made_from,
+            },
+            any(path.name != STAGE_FILE for path in evaluation.glob("*.json")),
+        ),
+        (
+            policies / STAGE_FILE,
+            {
+                "episodes": scale["policy_episodes"],
+                "batch_episodes": scale["batch_episodes"],
+                "genrl_kwargs": task_genrl_kwargs(task),
+                # every GenRL setting in effect, GenRL's defaults included
+                "genrl": genrl_settings({**task_genrl_kwargs(task), "n_steps": scale["batch_episodes"]}),
+            },
+            any(policies.glob("*/seed*/summary.json")),
+        ),
+    ]
     if scale["baseline_episodes"] > 0:
-        stages.append((comparison / STAGE_FILE, {"episodes": scale["baseline_episodes"],
-                                                 "demo_episodes": scale["demo_episodes"], **made_from},
-                       any(comparison.glob("*/summary.json"))))
+        stages.append(
+            (
+                comparison / STAGE_FILE,
+                {"episodes": scale["baseline_episodes"], "demo_episodes": scale["demo_episodes"], **made_from},
+                any(comparison.glob("*/summary.json")),
+            )
+        )
     return stages
 
 
@@ -179,9 +219,11 @@ def _run_task(task: str, scale: dict[str, Any], task_dir: pathlib.Path, run, mod
     rows = []
     for row in run(jobs):
         rows.append(row)
-        log(f"{task}: {row['model']} precision {row['precision']:.3f} recall {row['recall']:.3f} "
+        log(
+            f"{task}: {row['model']} precision {row['precision']:.3f} recall {row['recall']:.3f} "
             f"mean delta {row['mean_delta']:.3f} coverage {row['coverage']:.3f} prior median {row['prior_median']:.3f} "
-            f"best reward {row['score']:.3f} (half budget {row['half_score']:.3f}) final {row['final']:.3f}")
+            f"best reward {row['score']:.3f} (half budget {row['half_score']:.3f}) final {row['final']:.3f}"
+        )
     # the jobs finish in any order; the models' order makes the tables and the bootstrap intervals reproducible
     rows.sort(key=lambda row: list(models).index(row["model"]))
     atomic_write_json(task_dir / "results.json", rows)
@@ -194,33 +236,61 @@ def _run_task(task: str, scale: dict[str, Any], task_dir: pathlib.Path, run, mod
         runs_dir = task_dir / "comparison"
         generator = str(task_dir / "generators" / f"{best}.pt")
         record, wanted, exists = stages[3]
-        check_and_record(record, {**wanted, "generator": f"{best} {file_fingerprint(generator)}"},
-                         output_exists=exists, folder=task_dir)
-        jobs = [(baseline_job, (algorithm, task, seed, scale["baseline_episodes"], str(dataset), scale["demo_episodes"],
-                                str(runs_dir / f"{algorithm}_seed{seed}"), device, 1, generator,
-                                scale["bc_eval_goals"]))
-                for algorithm in BASELINES for seed in range(scale["seeds"])]
+        check_and_record(
+            record, {**wanted, "generator": f"{best} {file_fingerprint(generator)}"}, output_exists=exists, folder=task_dir
+        )
+        jobs = [
+            (
+                baseline_job,
+                (
+                    algorithm,
+                    task,
+                    seed,
+                    scale["baseline_episodes"],
+                    str(dataset),
+                    scale["demo_episodes"],
+                    str(runs_dir / f"{algorithm}_seed{seed}"),
+                    device,
+                    1,
+                    generator,
+                    scale["bc_eval_goals"],
+                ),
+            )
+            for algorithm in BASELINES
+            for seed in range(scale["seeds"])
+        ]
         baseline_runs = list(run(jobs))
         genrl_runs = [str(task_dir / "policies" / best / f"seed{seed}") for seed in range(scale["seeds"])]
         comparison = compare_runs(genrl_runs + baseline_runs, runs_dir, task=task)
         log(f"{task}: GenRL ({best}) vs PPO vs SAC in {comparison}")
-    return write_task_report(task, rows, task_dir, scale=_recorded_scale(task_dir, dataset, rows, comparison),
-                             comparison=comparison)
+    return write_task_report(
+        task, rows, task_dir, scale=_recorded_scale(task_dir, dataset, rows, comparison), comparison=comparison
+    )
 
 
-def _recorded_scale(task_dir: pathlib.Path, dataset: pathlib.Path, rows: list[dict[str, Any]],
-                    comparison: pathlib.Path | None) -> dict[str, Any]:
+def _recorded_scale(
+    task_dir: pathlib.Path, dataset: pathlib.Path, rows: list[dict[str, Any]], comparison: pathlib.Path | None
+) -> dict[str, Any]:
     """The settings the report states, read from what the stages recorded (not from this run's request)."""
     from sb3_genrl.data import dataset_info
 
-    generators, evaluation, policies = (read_settings(task_dir / name / STAGE_FILE)
-                                        for name in ("generators", "evaluation", "policies"))
+    generators, evaluation, policies = (
+        read_settings(task_dir / name / STAGE_FILE) for name in ("generators", "evaluation", "policies")
+    )
     baselines = read_settings(task_dir / "comparison" / STAGE_FILE) if comparison is not None else {"episodes": 0}
-    return {"demo_episodes": dataset_info(dataset)["episodes"], "generator_epochs": generators["epochs"],
-            "eval_every": generators["eval_every"], "pr_samples": evaluation["n"], "dwpr_samples": evaluation["dwpr_n"],
-            "prior_contexts": evaluation["prior_contexts"], "prior_draws": evaluation["prior_draws"],
-            "policy_episodes": policies["episodes"], "batch_episodes": policies["batch_episodes"],
-            "seeds": min(len(row["rewards"]) for row in rows), "baseline_episodes": baselines["episodes"]}
+    return {
+        "demo_episodes": dataset_info(dataset)["episodes"],
+        "generator_epochs": generators["epochs"],
+        "eval_every": generators["eval_every"],
+        "pr_samples": evaluation["n"],
+        "dwpr_samples": evaluation["dwpr_n"],
+        "prior_contexts": evaluation["prior_contexts"],
+        "prior_draws": evaluation["prior_draws"],
+        "policy_episodes": policies["episodes"],
+        "batch_episodes": policies["batch_episodes"],
+        "seeds": min(len(row["rewards"]) for row in rows),
+        "baseline_episodes": baselines["episodes"],
+    }
 
 
 def _local_map(workers: int):
@@ -232,8 +302,12 @@ def _local_map(workers: int):
         import multiprocessing
 
         # The workers exit when this process dies (even on kill -9), so none finishes a stale job after it.
-        with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                                 initializer=exit_with_parent, initargs=(os.getpid(),)) as pool:
+        with ProcessPoolExecutor(
+            max_workers=workers,
+            mp_context=multiprocessing.get_context("spawn"),
+            initializer=exit_with_parent,
+            initargs=(os.getpid(),),
+        ) as pool:
             futures = [pool.submit(fn, *args) for fn, args in jobs]
             for future in as_completed(futures):
                 yield future.result()

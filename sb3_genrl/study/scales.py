@@ -72,20 +72,46 @@ def task_scale(scale: Mapping[str, Any], task: str) -> dict[str, Any]:
 
 SCALES: dict[str, StudyScale] = {
     # Seconds per generator: checks that every stage runs and every table and plot is written (one seed).
-    "smoke": StudyScale(demo_episodes=160, generator_epochs=2, eval_every=1, pr_samples=100, dwpr_samples=40,
-                        policy_episodes=32, seeds=1, baseline_episodes=2, bc_eval_goals=2, prior_contexts=4,
-                        prior_draws=2),
+    "smoke": StudyScale(
+        demo_episodes=160,
+        generator_epochs=2,
+        eval_every=1,
+        pr_samples=100,
+        dwpr_samples=40,
+        policy_episodes=32,
+        seeds=1,
+        baseline_episodes=2,
+        bc_eval_goals=2,
+        prior_contexts=4,
+        prior_draws=2,
+    ),
     # A few hours of a 2-core CPU per task (docs/guide/study.md has the estimate from measured stage times): 600
     # epochs let the InfoGANs train (150 left most below precision 0.15); each task plays its own episodes per
     # iteration, and basketball's settings anneal the policy's spread over many more episodes than hockey's need,
     # so it runs 2 seeds of 12000 where hockey runs 3 of 1024.
-    "small": StudyScale(demo_episodes=4000, generator_epochs=600, eval_every=25, pr_samples=2000, dwpr_samples=1000,
-                        policy_episodes={_HOCKEY: 1024, _BASKETBALL: 12000}, seeds={_HOCKEY: 3, _BASKETBALL: 2},
-                        baseline_episodes=192),
+    "small": StudyScale(
+        demo_episodes=4000,
+        generator_epochs=600,
+        eval_every=25,
+        pr_samples=2000,
+        dwpr_samples=1000,
+        policy_episodes={_HOCKEY: 1024, _BASKETBALL: 12000},
+        seeds={_HOCKEY: 3, _BASKETBALL: 2},
+        baseline_episodes=192,
+    ),
     # The paper's sizes (sections 6.1.2-6.1.4) and each task's budget of hyperparams/genrl.yml: a GPU or a cluster.
     # The baselines run the budget of benchmarks/baselines.py (3000 episodes, 3 seeds; their settings are the
     # library's defaults there and here).
-    "paper": StudyScale(demo_episodes=40000, generator_epochs=5000, eval_every=50, pr_samples=15000, dwpr_samples=10000,
-                        policy_episodes={_HOCKEY: 3000, _BASKETBALL: 20000}, seeds=3, baseline_episodes=3000,
-                        prior_contexts=100, prior_draws=100),
+    "paper": StudyScale(
+        demo_episodes=40000,
+        generator_epochs=5000,
+        eval_every=50,
+        pr_samples=15000,
+        dwpr_samples=10000,
+        policy_episodes={_HOCKEY: 3000, _BASKETBALL: 20000},
+        seeds=3,
+        baseline_episodes=3000,
+        prior_contexts=100,
+        prior_draws=100,
+    ),
 }

@@ -49,16 +49,17 @@ def read_settings(record: str | os.PathLike) -> dict[str, Any] | None:
     try:
         value = json.loads(record.read_text())
     except (OSError, json.JSONDecodeError) as error:
-        raise ValueError(f"cannot read the recorded settings {str(record)!r}: {error}; delete the stage folder to "
-                         "redo it") from None
+        raise ValueError(
+            f"cannot read the recorded settings {str(record)!r}: {error}; delete the stage folder to redo it"
+        ) from None
     if not isinstance(value, dict):
-        raise ValueError(f"{str(record)!r} holds no settings (a JSON object was expected); delete the stage folder "
-                         "to redo it")
+        raise ValueError(f"{str(record)!r} holds no settings (a JSON object was expected); delete the stage folder to redo it")
     return value
 
 
-def settings_conflicts(where: str | os.PathLike, recorded: Mapping[str, Any] | None, wanted: Mapping[str, Any], *,
-                       output_exists: bool = True) -> list[str]:
+def settings_conflicts(
+    where: str | os.PathLike, recorded: Mapping[str, Any] | None, wanted: Mapping[str, Any], *, output_exists: bool = True
+) -> list[str]:
     """The differences between a stage's recorded settings and a run's, one line each (empty when they agree).
 
     Only the keys of ``wanted`` are compared, so a check can leave out what is not known yet (a fingerprint of an
@@ -72,8 +73,11 @@ def settings_conflicts(where: str | os.PathLike, recorded: Mapping[str, Any] | N
     """
     if recorded is None:
         return [f"{where}: no recorded settings (written by an older version of sb3-genrl)"] if output_exists else []
-    differing = [f"{key} {_show(recorded[key]) if key in recorded else 'unset'} (recorded) vs {_show(value)} (this run)"
-                 for key, value in wanted.items() if key not in recorded or _normal(recorded[key]) != _normal(value)]
+    differing = [
+        f"{key} {_show(recorded[key]) if key in recorded else 'unset'} (recorded) vs {_show(value)} (this run)"
+        for key, value in wanted.items()
+        if key not in recorded or _normal(recorded[key]) != _normal(value)
+    ]
     return [f"{where}: {', '.join(differing)}"] if differing else []
 
 
@@ -96,11 +100,13 @@ def refuse_conflicts(folder: str | os.PathLike, conflicts: list[str]) -> None:
         raise SettingsConflictError(
             f"{folder} holds results made with other settings than this run's:\n  {lines}\nNothing was changed. "
             "Rerun with the recorded settings, choose another output folder (--out), or delete the folders named "
-            "above (and the stages made from them) to redo them with the new settings.")
+            "above (and the stages made from them) to redo them with the new settings."
+        )
 
 
-def check_and_record(record: str | os.PathLike, wanted: Mapping[str, Any], *, output_exists: bool,
-                     folder: str | os.PathLike) -> None:
+def check_and_record(
+    record: str | os.PathLike, wanted: Mapping[str, Any], *, output_exists: bool, folder: str | os.PathLike
+) -> None:
     """Refuse when ``record`` holds other settings than ``wanted``; otherwise write ``wanted`` to it.
 
     :param record: the stage's ``stage.json``
@@ -110,8 +116,12 @@ def check_and_record(record: str | os.PathLike, wanted: Mapping[str, Any], *, ou
     """
     record = Path(record)
     recorded = read_settings(record)
-    refuse_conflicts(folder, settings_conflicts(record.parent if record.name == STAGE_FILE else record, recorded,
-                                                wanted, output_exists=output_exists))
+    refuse_conflicts(
+        folder,
+        settings_conflicts(
+            record.parent if record.name == STAGE_FILE else record, recorded, wanted, output_exists=output_exists
+        ),
+    )
     if recorded is None:
         atomic_write_json(record, dict(wanted))
 

@@ -106,7 +106,7 @@ def resolved_wrapper(env_wrapper: Any, env_id: str, device: Any = "auto") -> Any
     wrappers = env_wrapper if isinstance(env_wrapper, list) else [env_wrapper]
     resolved = []
     for wrapper in wrappers:
-        name, kwargs = (next(iter(wrapper.items())) if isinstance(wrapper, dict) else (wrapper, {}))
+        name, kwargs = next(iter(wrapper.items())) if isinstance(wrapper, dict) else (wrapper, {})
         if name != WRAPPER:
             resolved.append(wrapper)
             continue
@@ -134,11 +134,15 @@ def resolved_callback(callback: Any, wrapper: list[Any], env_id: str) -> list[di
         return [{path: kwargs} for path, kwargs in entries]
     generator = next(item[WRAPPER]["generator"] for item in wrapper if isinstance(item, dict) and WRAPPER in item)
     if generator != str(default_generator(env_id).resolve()):
-        raise ValueError(f"{env_id}: the settings learn from demonstrations ({DEMONSTRATION_CALLBACK}) and the "
-                         f"generator {generator} is not the cached one, whose demonstrations are known: give the "
-                         f"generator's dataset, -params \"callback:[{{'{DEMONSTRATION_CALLBACK}': {{'dataset': 'DIR'}}}}]\"")
+        raise ValueError(
+            f"{env_id}: the settings learn from demonstrations ({DEMONSTRATION_CALLBACK}) and the "
+            f"generator {generator} is not the cached one, whose demonstrations are known: give the "
+            f"generator's dataset, -params \"callback:[{{'{DEMONSTRATION_CALLBACK}': {{'dataset': 'DIR'}}}}]\""
+        )
     dataset = default_demonstrations(env_id)
     if not (dataset.is_dir() and any(dataset.iterdir())):
-        raise FileNotFoundError(f"{env_id}: the cached generator's demonstrations {dataset} are missing: remove "
-                                f"{dataset.parent} to make both again")
+        raise FileNotFoundError(
+            f"{env_id}: the cached generator's demonstrations {dataset} are missing: remove "
+            f"{dataset.parent} to make both again"
+        )
     return with_dataset(callback, str(dataset.resolve()), dataset_fingerprint(dataset))

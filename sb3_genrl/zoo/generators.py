@@ -43,12 +43,20 @@ def generator_settings(task: str) -> dict[str, object]:
     from sb3_genrl.envs import get_task
     from sb3_genrl.study.quickstart import quickstart_preset
 
-    return {"task": get_task(task).name, "demo_episodes": DEMO_EPISODES, "preset": quickstart_preset(task),
-            "epochs": GENERATOR_EPOCHS, "eval_every": GENERATOR_EVAL_EVERY, "seed": SEED, "version": sb3_genrl.__version__}
+    return {
+        "task": get_task(task).name,
+        "demo_episodes": DEMO_EPISODES,
+        "preset": quickstart_preset(task),
+        "epochs": GENERATOR_EPOCHS,
+        "eval_every": GENERATOR_EVAL_EVERY,
+        "seed": SEED,
+        "version": sb3_genrl.__version__,
+    }
 
 
-def build_default_generator(task: str, *, device: str = "auto", progress_bar: bool = True,
-                            log: Callable[[str], None] = print) -> pathlib.Path:
+def build_default_generator(
+    task: str, *, device: str = "auto", progress_bar: bool = True, log: Callable[[str], None] = print
+) -> pathlib.Path:
     """Make the task's quickstart generator into the cache unless it is there: demonstrations, then the beta-VAE.
 
     :param task: a task name or Gymnasium id
@@ -70,10 +78,17 @@ def build_default_generator(task: str, *, device: str = "auto", progress_bar: bo
             return path
         dataset = default_demonstrations(task)
         if not (dataset.is_dir() and any(dataset.iterdir())):
-            log(f"{settings['task']}: no generator in {folder} yet; making the quickstart's: {DEMO_EPISODES} "
-                "demonstrations")
+            log(f"{settings['task']}: no generator in {folder} yet; making the quickstart's: {DEMO_EPISODES} demonstrations")
             make_demonstrations(task, DEMO_EPISODES, dataset, seed=SEED, progress_bar=progress_bar)
         log(f"{settings['task']}: training the generator {settings['preset']} for {GENERATOR_EPOCHS} epochs -> {path}")
-        train_generator(dataset, preset=str(settings["preset"]), epochs=GENERATOR_EPOCHS,
-                        eval_every=GENERATOR_EVAL_EVERY, seed=SEED, out=path, progress_bar=progress_bar, device=device)
+        train_generator(
+            dataset,
+            preset=str(settings["preset"]),
+            epochs=GENERATOR_EPOCHS,
+            eval_every=GENERATOR_EVAL_EVERY,
+            seed=SEED,
+            out=path,
+            progress_bar=progress_bar,
+            device=device,
+        )
     return path

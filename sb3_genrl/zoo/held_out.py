@@ -41,20 +41,32 @@ def compare(env_id: str, storage: str, study_name: str, trials_folder: str, goal
         raise ValueError(f"study {study_name!r} has no complete trial of the task entry's settings (its first trial)")
     best = max(complete, key=lambda trial: trial.value)
     result: dict[str, Any] = {
-        "env_id": env_id, "study_name": study_name, "command": study.user_attrs.get("command"),
-        "held_out_goals": goals, "held_out_goal_seed": EVAL_GOAL_SEED, "python": platform.python_version(),
-        "trials": [{"number": trial.number, "state": trial.state.name, "tuning_mean_reward": trial.value,
-                    "params": trial.params} for trial in study.trials]}
+        "env_id": env_id,
+        "study_name": study_name,
+        "command": study.user_attrs.get("command"),
+        "held_out_goals": goals,
+        "held_out_goal_seed": EVAL_GOAL_SEED,
+        "python": platform.python_version(),
+        "trials": [
+            {"number": trial.number, "state": trial.state.name, "tuning_mean_reward": trial.value, "params": trial.params}
+            for trial in study.trials
+        ],
+    }
     for name, trial in (("entry", entry), ("best", best)):
         model_path = os.path.join(trials_folder, f"trial_{trial.number}", "best_model.zip")
         distances = held_out_distances(model_path, env_id, goals)
         enjoyed = -enjoy_rewards(model_path, env_id, goals)
-        result[name] = {"trial": trial.number, "tuning_mean_reward": trial.value,
-                        "genrl_kwargs": convert_genrl_params(trial.params), "held_out_mean_m": float(distances.mean()),
-                        "held_out_median_m": float(np.median(distances)), "held_out_max_m": float(distances.max()),
-                        "enjoy_mean_m": float(enjoyed.mean()),
-                        "enjoy_max_difference_m": float(np.abs(enjoyed - distances).max()),
-                        "enjoy_goals_differing_by_over_1mm": int(np.sum(np.abs(enjoyed - distances) > 1e-3))}
+        result[name] = {
+            "trial": trial.number,
+            "tuning_mean_reward": trial.value,
+            "genrl_kwargs": convert_genrl_params(trial.params),
+            "held_out_mean_m": float(distances.mean()),
+            "held_out_median_m": float(np.median(distances)),
+            "held_out_max_m": float(distances.max()),
+            "enjoy_mean_m": float(enjoyed.mean()),
+            "enjoy_max_difference_m": float(np.abs(enjoyed - distances).max()),
+            "enjoy_goals_differing_by_over_1mm": int(np.sum(np.abs(enjoyed - distances) > 1e-3)),
+        }
     result["better"] = "best" if result["best"]["held_out_mean_m"] < result["entry"]["held_out_mean_m"] else "entry"
     return result
 
@@ -90,8 +102,31 @@ def enjoy_rewards(model_path: str, env_id: str, goals: int) -> np.ndarray:
         shutil.copy(model_path, run / "best_model.zip")
         (run / EnvironmentName(env_id) / "config.yml").write_text(yaml.dump({"env_wrapper": [wrapper]}))
         (run / EnvironmentName(env_id) / "args.yml").write_text(yaml.dump({"env_kwargs": None}))
-        zoo(["enjoy", "--algo", "genrl", "--env", env_id, "-f", folder, "--exp-id", "1", "--load-best", "--no-render",
-             "-n", str(goals), "--seed", str(EVAL_GOAL_SEED), "--reward-log", folder, "--device", "cpu", "--verbose", "0"])
+        zoo(
+            [
+                "enjoy",
+                "--algo",
+                "genrl",
+                "--env",
+                env_id,
+                "-f",
+                folder,
+                "--exp-id",
+                "1",
+                "--load-best",
+                "--no-render",
+                "-n",
+                str(goals),
+                "--seed",
+                str(EVAL_GOAL_SEED),
+                "--reward-log",
+                folder,
+                "--device",
+                "cpu",
+                "--verbose",
+                "0",
+            ]
+        )
         return np.loadtxt(pathlib.Path(folder) / "0.monitor.csv", delimiter=",", skiprows=2, ndmin=2)[:, 0]
 
 
@@ -112,8 +147,10 @@ def main(argv: list[str] | None = None) -> int:
     atomic_write_json(args.out, result)
     for name in ("entry", "best"):
         row = result[name]
-        print(f"{name}: trial {row['trial']}, tuning mean reward {row['tuning_mean_reward']:.4f}, held-out mean "
-              f"distance {row['held_out_mean_m']:.4f} m")
+        print(
+            f"{name}: trial {row['trial']}, tuning mean reward {row['tuning_mean_reward']:.4f}, held-out mean "
+            f"distance {row['held_out_mean_m']:.4f} m"
+        )
     print(f"better on the held-out goals: {result['better']}; wrote {args.out}")
     return 0
 

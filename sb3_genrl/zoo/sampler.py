@@ -53,14 +53,20 @@ def entry_params(hyperparams: dict[str, Any]) -> dict[str, Any] | None:
     from sb3_genrl.genrl.genrl import GenRL
 
     defaults = {name: parameter.default for name, parameter in inspect.signature(GenRL.__init__).parameters.items()}
-    settings = {name: hyperparams.get(name, defaults[name]) for name in
-                ("target_kl", "n_em_iterations", "value_history", "max_log_std_change")}
+    settings = {
+        name: hyperparams.get(name, defaults[name])
+        for name in ("target_kl", "n_em_iterations", "value_history", "max_log_std_change")
+    }
     hindsight = hyperparams.get("hindsight_kwargs")
     if hindsight is None:
         return None
     n_steps = int(hyperparams.get("n_steps", defaults["n_steps"]))
-    params = {**settings, "n_steps_pow": round(math.log2(n_steps)), "hindsight_history": hindsight.get("history", 1),
-              "hindsight_regression_steps": hindsight.get("regression_steps", 0)}
+    params = {
+        **settings,
+        "n_steps_pow": round(math.log2(n_steps)),
+        "hindsight_history": hindsight.get("history", 1),
+        "hindsight_regression_steps": hindsight.get("regression_steps", 0),
+    }
     if 2 ** params["n_steps_pow"] != n_steps or not all(_inside(name, value) for name, value in params.items()):
         return None
     return params

@@ -44,8 +44,9 @@ class ZooLatentActionWrapper(LatentActionWrapper):
         return frame
 
 
-def latent_action(env: gym.Env, generator: str | os.PathLike | None = None, generator_sha256: str | None = None,
-                  latent_clip: float = 3.0) -> gym.Env:
+def latent_action(
+    env: gym.Env, generator: str | os.PathLike | None = None, generator_sha256: str | None = None, latent_clip: float = 3.0
+) -> gym.Env:
     """``env`` in the latent-action wrapper with the generator named in the settings (rl-zoo3's ``env_wrapper``).
 
     :param env: the task as rl-zoo3 makes it (in SB3's ``Monitor``, which is moved above the wrapper)
@@ -63,8 +64,10 @@ def latent_action(env: gym.Env, generator: str | os.PathLike | None = None, gene
         from sb3_genrl.genrl.generator_files import generator_digest
 
         if generator_digest(loaded) != generator_sha256:
-            raise ValueError(f"the generator {path} is not the one this run was trained with (content SHA-256 "
-                             f"{generator_sha256[:12]}...): it was changed or rebuilt; train again, or restore it")
+            raise ValueError(
+                f"the generator {path} is not the one this run was trained with (content SHA-256 "
+                f"{generator_sha256[:12]}...): it was changed or rebuilt; train again, or restore it"
+            )
     wrapped = ZooLatentActionWrapper(task_env, loaded, latent_clip=latent_clip)
     if monitor is None:
         return wrapped
@@ -82,9 +85,11 @@ def resolve_generator(generator: str | os.PathLike | None, env_id: str | None) -
             raise ValueError("sb3_genrl.zoo.latent_action: an env without a Gymnasium id needs its generator file")
         path = default_generator(env_id)
         if not path.is_file():
-            raise FileNotFoundError(f"{env_id}'s generator {path} is not made yet: `python -m sb3_genrl.zoo train "
-                                    f"--algo genrl --env {env_id}` makes it first (the quickstart's stages), or give "
-                                    "a generator file as the wrapper's `generator`")
+            raise FileNotFoundError(
+                f"{env_id}'s generator {path} is not made yet: `python -m sb3_genrl.zoo train "
+                f"--algo genrl --env {env_id}` makes it first (the quickstart's stages), or give "
+                "a generator file as the wrapper's `generator`"
+            )
         return path
     path = pathlib.Path(generator).expanduser()
     if not path.is_file():

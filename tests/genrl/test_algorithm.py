@@ -40,8 +40,17 @@ def test_train_logs_and_kl_bound():
     model = GenRL(FastReachEnv(), LinearGenerator(), seed=0, target_kl=0.02)
     model.learn(128)
     logs = model.logger.name_to_value
-    for key in ("mean_reward", "max_reward", "kl", "entropy", "value_loss", "policy_objective", "line_search_success",
-                "step_size", "accepted_fraction"):
+    for key in (
+        "mean_reward",
+        "max_reward",
+        "kl",
+        "entropy",
+        "value_loss",
+        "policy_objective",
+        "line_search_success",
+        "step_size",
+        "accepted_fraction",
+    ):
         assert np.isfinite(logs[f"train/{key}"]), key
     assert 0 < logs["train/kl"] < 0.02
     assert logs["train/max_reward"] >= logs["train/mean_reward"]
@@ -82,8 +91,14 @@ def test_bad_arguments_raise():
 
 
 def test_works_with_step_by_step_env_and_n_envs():
-    env = DummyVecEnv([lambda: LatentActionWrapper(ReachEnv(), LinearGenerator(), context=lambda obs: obs[:2],
-                                                   context_space=ContextReachEnv.context_space)] * 2)
+    env = DummyVecEnv(
+        [
+            lambda: LatentActionWrapper(
+                ReachEnv(), LinearGenerator(), context=lambda obs: obs[:2], context_space=ContextReachEnv.context_space
+            )
+        ]
+        * 2
+    )
     model = GenRL(env, e_step="kl_penalty", n_steps=16, seed=1).learn(64)
     assert model.num_timesteps == 64 and model.rollout_buffer.buffer_size * model.n_envs == 32
 
@@ -92,8 +107,9 @@ def test_same_seed_same_run():
     runs = []
     for _ in range(2):
         model = GenRL(FastReachEnv(), LinearGenerator(), seed=7).learn(192)
-        runs.append((th.nn.utils.parameters_to_vector(model.policy.parameters()).detach(),
-                     model.rollout_buffer.actions.copy()))
+        runs.append(
+            (th.nn.utils.parameters_to_vector(model.policy.parameters()).detach(), model.rollout_buffer.actions.copy())
+        )
     th.testing.assert_close(runs[0][0], runs[1][0], rtol=0, atol=0)
     np.testing.assert_array_equal(runs[0][1], runs[1][1])
     other = GenRL(FastReachEnv(), LinearGenerator(), seed=8).learn(192)

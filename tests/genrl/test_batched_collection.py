@@ -46,9 +46,11 @@ def test_a_batched_step_gives_the_step_paths_rewards_and_infos():
 
     th.manual_seed(0)
     generator = make_generator("VAE1", horizon=69, action_dim=7, device="cpu")
-    envs = {"batched": BatchedLatentVecEnv(hockey_envs(generator, 3), n_threads=2),
-            "one by one": DummyVecEnv(hockey_envs(generator, 3)),
-            "step by step": DummyVecEnv(hockey_envs(generator, 3, use_fast_path=False))}
+    envs = {
+        "batched": BatchedLatentVecEnv(hockey_envs(generator, 3), n_threads=2),
+        "one by one": DummyVecEnv(hockey_envs(generator, 3)),
+        "step by step": DummyVecEnv(hockey_envs(generator, 3, use_fast_path=False)),
+    }
     actions = np.random.default_rng(1).normal(size=(2, 3, generator.latent_dim)).astype(np.float32)
     results = {}
     for name, venv in envs.items():
@@ -65,8 +67,7 @@ def test_a_batched_step_gives_the_step_paths_rewards_and_infos():
     for name in ("one by one", "step by step"):
         observations, steps = results[name]
         np.testing.assert_array_equal(np.stack(observations), np.stack(batched_observations))
-        for (reward, done, infos), (batched_reward, batched_done, batched_infos) in zip(steps, batched_steps,
-                                                                                         strict=True):
+        for (reward, done, infos), (batched_reward, batched_done, batched_infos) in zip(steps, batched_steps, strict=True):
             np.testing.assert_array_equal(reward, batched_reward)
             np.testing.assert_array_equal(done, batched_done)
             for info, batched_info in zip(infos, batched_infos, strict=True):
@@ -84,13 +85,24 @@ def test_genrl_on_the_batched_env_learns_as_on_dummy_vec_env_with_monitor_and_ev
     """GenRL (hindsight, value history) on a monitored batched env: the same parameters, bit for bit, as on SB3's
     DummyVecEnv; one fast-path call per step of all 4 envs; every episode in the Monitor file with the rollouts'
     rewards; EvalCallback evaluates on a batched env as on any VecEnv."""
-    settings = dict(n_steps=4, batch_size=8, seed=2, value_history=2, n_critic_updates=2, hindsight_kwargs={"history": 2,
-                                                                                     "regression_steps": 4})
+    settings = dict(
+        n_steps=4,
+        batch_size=8,
+        seed=2,
+        value_history=2,
+        n_critic_updates=2,
+        hindsight_kwargs={"history": 2, "regression_steps": 4},
+    )
     parameters = {}
     for name, venv_class in (("dummy", DummyVecEnv), ("batched", BatchedLatentVecEnv)):
         venv = VecMonitor(venv_class(_toy_envs(4)), str(tmp_path / name), info_keywords=("reward",))
-        evaluation = EvalCallback(VecMonitor(venv_class(_toy_envs(2))), n_eval_episodes=4, eval_freq=4,
-                                  log_path=str(tmp_path / f"{name}_eval"), verbose=0)
+        evaluation = EvalCallback(
+            VecMonitor(venv_class(_toy_envs(2))),
+            n_eval_episodes=4,
+            eval_freq=4,
+            log_path=str(tmp_path / f"{name}_eval"),
+            verbose=0,
+        )
         CountingReachEnv.calls = []
         model = GenRL(venv, **settings).learn(32, callback=evaluation)
         parameters[name] = th.cat([p.detach().flatten() for p in model.policy.parameters()])
@@ -108,8 +120,12 @@ def test_a_batched_env_refuses_envs_without_the_fast_path_and_bad_thread_counts(
     with pytest.raises(ValueError, match="fast path"):
         BatchedLatentVecEnv([lambda: LatentActionWrapper(ReachEnv(), LinearGenerator())])
     with pytest.raises(ValueError, match="same task"):
-        BatchedLatentVecEnv([lambda: LatentActionWrapper(FastReachEnv(), LinearGenerator()),
-                             lambda: LatentActionWrapper(CountingReachEnv(), LinearGenerator())])
+        BatchedLatentVecEnv(
+            [
+                lambda: LatentActionWrapper(FastReachEnv(), LinearGenerator()),
+                lambda: LatentActionWrapper(CountingReachEnv(), LinearGenerator()),
+            ]
+        )
     for bad in (0, 1.5, True):
         with pytest.raises(ValueError, match="n_threads must be a positive integer"):
             BatchedLatentVecEnv(_toy_envs(1), n_threads=bad)

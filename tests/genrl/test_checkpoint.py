@@ -38,17 +38,25 @@ def _parameters(path) -> dict[str, np.ndarray]:
 
 
 @pytest.mark.parametrize("n_envs", [1, 2])
-def test_a_stopped_run_resumed_with_the_same_command_ends_as_the_run_not_stopped(hindsight_task, tmp_path, monkeypatch,
-                                                                                n_envs):
-    settings = {"episodes": 192, "seed": 3, "batch_episodes": 32, "n_envs": n_envs, "value_history": 2,
-                "policy_averaging": 0.9, "hindsight_kwargs": {"history": 2, "regression_steps": 4,
-                                                                  "refit_every": 64, "refit_start": 32, "refit_steps": 20},
-                "checkpoint_every": 64}
+def test_a_stopped_run_resumed_with_the_same_command_ends_as_the_run_not_stopped(
+    hindsight_task, tmp_path, monkeypatch, n_envs
+):
+    settings = {
+        "episodes": 192,
+        "seed": 3,
+        "batch_episodes": 32,
+        "n_envs": n_envs,
+        "value_history": 2,
+        "policy_averaging": 0.9,
+        "hindsight_kwargs": {"history": 2, "regression_steps": 4, "refit_every": 64, "refit_start": 32, "refit_steps": 20},
+        "checkpoint_every": 64,
+    }
     whole = train_policy("fast-reach", LinearGenerator(), out_dir=tmp_path / "whole", **settings)
 
     learn = GenRL.train
-    monkeypatch.setattr(GenRL, "train", lambda model: learn(model) if model._n_updates < 3 else (_ for _ in ()).throw(
-        _Killed()))  # killed in the fourth update: the last checkpoint is at 64 episodes (two updates)
+    monkeypatch.setattr(
+        GenRL, "train", lambda model: learn(model) if model._n_updates < 3 else (_ for _ in ()).throw(_Killed())
+    )  # killed in the fourth update: the last checkpoint is at 64 episodes (two updates)
     with pytest.raises(_Killed):
         train_policy("fast-reach", LinearGenerator(), out_dir=tmp_path / "stopped", **settings)
     state = json.loads((tmp_path / "stopped" / "checkpoint" / "state.json").read_text())
@@ -58,9 +66,9 @@ def test_a_stopped_run_resumed_with_the_same_command_ends_as_the_run_not_stopped
     resumed = train_policy("fast-reach", LinearGenerator(), out_dir=tmp_path / "stopped", **settings)
 
     assert resumed["resumed_at_episodes"] == [64] and not (tmp_path / "stopped" / "checkpoint").exists()
-    assert {key: value for key, value in resumed.items() if "path" not in key and key != "log_dir"
-            and key != "resumed_at_episodes"} == {key: value for key, value in whole.items()
-                                                 if "path" not in key and key != "log_dir"}
+    assert {
+        key: value for key, value in resumed.items() if "path" not in key and key != "log_dir" and key != "resumed_at_episodes"
+    } == {key: value for key, value in whole.items() if "path" not in key and key != "log_dir"}
     # The same episodes (the Monitor's rewards and goals) and the same parameters, bit for bit.
     rows = [read_monitor(tmp_path / name / MONITOR_FILE) for name in ("whole", "stopped")]
     assert len(rows[1]["return"]) == 192
@@ -73,8 +81,14 @@ def test_a_stopped_run_resumed_with_the_same_command_ends_as_the_run_not_stopped
     # The training log: the rows up to the checkpoint (the first update's: SB3 writes an update's values with the next
     # batch's) and the resumed run's, from the second update on, are those of the run not stopped.
     logs = tmp_path / "stopped" / "logs"
-    whole_log, early, late = (_progress(path) for path in (tmp_path / "whole" / "logs" / "progress.csv",
-                                                            logs / "progress.until_episode_64.csv", logs / "progress.csv"))
+    whole_log, early, late = (
+        _progress(path)
+        for path in (
+            tmp_path / "whole" / "logs" / "progress.csv",
+            logs / "progress.until_episode_64.csv",
+            logs / "progress.csv",
+        )
+    )
     for key in ("train/mean_reward", "train/kl"):
         assert len(whole_log[key]) == 6 and early[key][:1] + late[key] == whole_log[key]
 

@@ -38,13 +38,24 @@ def _dataset(path, contexts: np.ndarray, latents: np.ndarray, horizon: int = HOR
     n = len(contexts)
     actions = LinearGenerator(horizon).decode(latents)
     observations = np.repeat(contexts[:, None, :], horizon + 1, axis=1).astype(np.float32)
-    arrays = {"observations": observations, "actions": actions, "rewards": np.zeros((n, horizon)),
-              "terminations": np.ones((n, horizon), bool), "truncations": np.zeros((n, horizon), bool),
-              "reached": contexts.astype(np.float64), "sampled_goals": contexts.astype(np.float64)}
+    arrays = {
+        "observations": observations,
+        "actions": actions,
+        "rewards": np.zeros((n, horizon)),
+        "terminations": np.ones((n, horizon), bool),
+        "truncations": np.zeros((n, horizon), bool),
+        "reached": contexts.astype(np.float64),
+        "sampled_goals": contexts.astype(np.float64),
+    }
     dim = contexts.shape[1]
-    return write_dataset(path, arrays, dataset_id="genrl/fast-reach-v0", genrl={"task": "fast-reach", "horizon": horizon},
-                         observation_space=spaces.Box(-np.inf, np.inf, (dim,), np.float32),
-                         action_space=spaces.Box(-1.0, 1.0, (2,), np.float32))
+    return write_dataset(
+        path,
+        arrays,
+        dataset_id="genrl/fast-reach-v0",
+        genrl={"task": "fast-reach", "horizon": horizon},
+        observation_space=spaces.Box(-np.inf, np.inf, (dim,), np.float32),
+        action_space=spaces.Box(-1.0, 1.0, (2,), np.float32),
+    )
 
 
 @pytest.fixture
@@ -52,7 +63,7 @@ def demos(tmp_path):
     """Demonstrations whose latent actions are a non-linear function of the context plus noise."""
     rng = np.random.default_rng(0)
     contexts = rng.uniform(-0.8, 0.8, (N, 2)).astype(np.float32)
-    latents = (np.sin(3 * contexts) + contexts @ np.array([[0.5, -1.0], [1.0, 0.2]]) + 0.1 * rng.normal(size=(N, 2)))
+    latents = np.sin(3 * contexts) + contexts @ np.array([[0.5, -1.0], [1.0, 0.2]]) + 0.1 * rng.normal(size=(N, 2))
     return _dataset(tmp_path / "demos", contexts, latents.astype(np.float32)), contexts, latents
 
 
@@ -76,7 +87,8 @@ def test_the_fit_lowers_the_loss_and_reaches_the_least_squares_mean(demos):
     assert callback.fit["demonstrations"] == N and callback.fit["steps"] == 3000
     best = np.mean((least_squares - latents) ** 2)
     assert callback.fit["last_loss"] < 0.2 * callback.fit["first_loss"] and callback.fit["last_loss"] == pytest.approx(
-        best, rel=0.1)
+        best, rel=0.1
+    )
     assert model.logger.name_to_value["demonstrations/last_loss"] == callback.fit["last_loss"]
 
 
@@ -96,10 +108,21 @@ def test_kept_demonstrations_join_every_e_step_and_every_regression(demos, monke
     dataset, contexts, latents = demos
     regressed = []
     regress = hindsight.regress_mean
-    monkeypatch.setattr(hindsight, "regress_mean", lambda policy, optimizer, x, y, **kw: regressed.append(
-        (x.clone(), y.clone())) or regress(policy, optimizer, x, y, **kw))
-    model = _BatchRecorder(HindsightReachEnv(), EncodingLinearGenerator(), seed=1, n_steps=16, batch_size=16,
-                           hindsight_kwargs={"history": 1, "regression_steps": 2})
+    monkeypatch.setattr(
+        hindsight,
+        "regress_mean",
+        lambda policy, optimizer, x, y, **kw: (
+            regressed.append((x.clone(), y.clone())) or regress(policy, optimizer, x, y, **kw)
+        ),
+    )
+    model = _BatchRecorder(
+        HindsightReachEnv(),
+        EncodingLinearGenerator(),
+        seed=1,
+        n_steps=16,
+        batch_size=16,
+        hindsight_kwargs={"history": 1, "regression_steps": 2},
+    )
     model.learn(48, callback=DemonstrationCallback(dataset, fit_steps=0))
     assert len(model.batches) == len(regressed) == 3
     clipped = np.clip(latents, -3, 3).astype(np.float32)  # the latents as the dataset's actions encode them
@@ -112,21 +135,34 @@ def test_kept_demonstrations_join_every_e_step_and_every_regression(demos, monke
         np.testing.assert_allclose(y[-N:].numpy(), clipped, atol=1e-5)
 
 
-def test_a_resumed_run_keeps_the_demonstrations_and_is_not_fitted_again(hindsight_task, demos, tmp_path,  # noqa: F811
-                                                                         monkeypatch):
+def test_a_resumed_run_keeps_the_demonstrations_and_is_not_fitted_again(
+    hindsight_task,  # noqa: F811
+    demos,
+    tmp_path,
+    monkeypatch,
+):
     dataset, _, _ = demos
     fits = []
     fit = demonstrations_module.fit_mean_to_demonstrations
-    monkeypatch.setattr(demonstrations_module, "fit_mean_to_demonstrations",
-                        lambda *args, **kwargs: fits.append(1) or fit(*args, **kwargs))
-    settings = {"episodes": 128, "seed": 3, "batch_episodes": 32, "policy_averaging": 0.9, "checkpoint_every": 64,
-                "hindsight_kwargs": {"history": 2, "regression_steps": 4}, "demonstrations": dataset,
-                "callback": [{DEMONSTRATION_CALLBACK: {"fit_steps": 20}}]}
+    monkeypatch.setattr(
+        demonstrations_module, "fit_mean_to_demonstrations", lambda *args, **kwargs: fits.append(1) or fit(*args, **kwargs)
+    )
+    settings = {
+        "episodes": 128,
+        "seed": 3,
+        "batch_episodes": 32,
+        "policy_averaging": 0.9,
+        "checkpoint_every": 64,
+        "hindsight_kwargs": {"history": 2, "regression_steps": 4},
+        "demonstrations": dataset,
+        "callback": [{DEMONSTRATION_CALLBACK: {"fit_steps": 20}}],
+    }
     whole = train_policy("fast-reach", EncodingLinearGenerator(), out_dir=tmp_path / "whole", **settings)
     assert len(fits) == 1
     learn = GenRL.train
-    monkeypatch.setattr(GenRL, "train", lambda model: learn(model) if model._n_updates < 3 else (_ for _ in ()).throw(
-        _Killed()))  # killed in the fourth update: the checkpoint is at 64 episodes
+    monkeypatch.setattr(
+        GenRL, "train", lambda model: learn(model) if model._n_updates < 3 else (_ for _ in ()).throw(_Killed())
+    )  # killed in the fourth update: the checkpoint is at 64 episodes
     with pytest.raises(_Killed):
         train_policy("fast-reach", EncodingLinearGenerator(), out_dir=tmp_path / "stopped", **settings)
     (memories,) = (th.load(path, weights_only=True) for path in (tmp_path / "stopped" / "checkpoint").glob("memories*"))
@@ -147,26 +183,51 @@ def test_a_resumed_run_keeps_the_demonstrations_and_is_not_fitted_again(hindsigh
 def test_missing_or_unfitting_demonstrations_are_refused_before_any_work(fast_reach_task, demos, tmp_path):  # noqa: F811
     dataset, contexts, latents = demos
     callback = [{DEMONSTRATION_CALLBACK: {"fit_steps": 10}}]
-    with pytest.raises(ValueError, match=r"learn from demonstrations .* need their dataset: give it .*--data DIR.*"
-                                         r"`genrl demos --task fast-reach --episodes 4000 --out DIR`"):
-        train_policy("fast-reach", EncodingLinearGenerator(), episodes=32, batch_episodes=16, out_dir=tmp_path / "run",
-                     hindsight_kwargs={}, callback=callback)
+    with pytest.raises(
+        ValueError,
+        match=r"learn from demonstrations .* need their dataset: give it .*--data DIR.*"
+        r"`genrl demos --task fast-reach --episodes 4000 --out DIR`",
+    ):
+        train_policy(
+            "fast-reach",
+            EncodingLinearGenerator(),
+            episodes=32,
+            batch_episodes=16,
+            out_dir=tmp_path / "run",
+            hindsight_kwargs={},
+            callback=callback,
+        )
     assert not (tmp_path / "run").exists()
     with pytest.raises(ValueError, match="do not learn from demonstrations"):
         build_callbacks(None, demonstrations=dataset)
     with pytest.raises(ValueError, match="no demonstration dataset at"):
         DemonstrationCallback(tmp_path / "none")
     with pytest.raises(ValueError, match="needs GenRL's hindsight_kwargs"):
-        train_policy("fast-reach", EncodingLinearGenerator(), episodes=32, batch_episodes=16, out_dir=tmp_path / "run",
-                     callback=callback, demonstrations=dataset)
+        train_policy(
+            "fast-reach",
+            EncodingLinearGenerator(),
+            episodes=32,
+            batch_episodes=16,
+            out_dir=tmp_path / "run",
+            callback=callback,
+            demonstrations=dataset,
+        )
     with pytest.raises(ValueError, match=r"trajectories of shape \(5, 2\).*the generator makes \(4, 2\)"):
         DemonstrationCallback(dataset).pulls(EncodingLinearGenerator(4), spaces.Box(-1, 1, (2,)), 3.0)
     with pytest.raises(ValueError, match="needs a generator with an encoder"):
         DemonstrationCallback(dataset).pulls(LinearGenerator(), spaces.Box(-1, 1, (2,)), 3.0)
     wide = _dataset(tmp_path / "wide", np.hstack([contexts, contexts[:, :1]]), latents.astype(np.float32))
     with pytest.raises(ValueError, match=r"context is its first observation, of shape \(3,\), but the env's context"):
-        train_policy("fast-reach", EncodingLinearGenerator(), episodes=32, batch_episodes=16, out_dir=tmp_path / "run",
-                     hindsight_kwargs={}, callback=callback, demonstrations=wide)
+        train_policy(
+            "fast-reach",
+            EncodingLinearGenerator(),
+            episodes=32,
+            batch_episodes=16,
+            out_dir=tmp_path / "run",
+            hindsight_kwargs={},
+            callback=callback,
+            demonstrations=wide,
+        )
     assert not (tmp_path / "run").exists()
     with pytest.raises(ValueError, match="'fit_step' not among DemonstrationCallback's arguments"):
         build_callbacks([{DEMONSTRATION_CALLBACK: {"fit_step": 10}}], demonstrations=dataset)

@@ -26,8 +26,16 @@ def test_trpo_e_step_rejects_non_positive_curvature():
     q = copy.deepcopy(model.policy)
     before = th.nn.utils.parameters_to_vector(q.parameters()).detach().clone()
     # A damping of -1000 makes F + damping I negative definite: the quadratic KL model has no positive curvature.
-    stats = trpo_e_step(q, model.policy, batch, target_kl=0.01, cg_max_steps=15, cg_damping=-1000.0,
-                        line_search_shrinking_factor=0.8, line_search_max_iter=10)
+    stats = trpo_e_step(
+        q,
+        model.policy,
+        batch,
+        target_kl=0.01,
+        cg_max_steps=15,
+        cg_damping=-1000.0,
+        line_search_shrinking_factor=0.8,
+        line_search_max_iter=10,
+    )
     assert stats["line_search_success"] == 0.0 and stats["step_size"] == 0.0 and np.isfinite(stats["policy_objective"])
     th.testing.assert_close(th.nn.utils.parameters_to_vector(q.parameters()).detach(), before, rtol=0, atol=0)
 
@@ -46,8 +54,16 @@ def test_trpo_e_step_rejects_candidates_whose_distribution_is_invalid():
     # Actions near the mean are good, far ones bad: the natural step narrows the policy, and with a KL bound of
     # 1e6 every candidate's standard deviation underflows to 0, which torch.distributions refuses.
     q = copy.deepcopy(model.policy)
-    stats = trpo_e_step(q, model.policy, batch, target_kl=1e6, cg_max_steps=15, cg_damping=0.1,
-                        line_search_shrinking_factor=0.8, line_search_max_iter=10)
+    stats = trpo_e_step(
+        q,
+        model.policy,
+        batch,
+        target_kl=1e6,
+        cg_max_steps=15,
+        cg_damping=0.1,
+        line_search_shrinking_factor=0.8,
+        line_search_max_iter=10,
+    )
     assert stats["line_search_success"] == 0.0 and stats["accepted_fraction"] == 0.0
     for parameter, original in zip(q.parameters(), model.policy.parameters(), strict=True):
         th.testing.assert_close(parameter, original, rtol=0, atol=0)
@@ -55,8 +71,13 @@ def test_trpo_e_step_rejects_candidates_whose_distribution_is_invalid():
 
 def _moved_policy(policy_name, activation=th.nn.Tanh):
     """A policy whose actor is moved off its initial weights (a state-dependent mean, a spread away from its start)."""
-    policy = GenRL(policy_name, FastReachEnv(), LinearGenerator(), seed=0, policy_kwargs={
-        "net_arch": {"pi": [16, 16], "vf": [8]}, "activation_fn": activation}).policy
+    policy = GenRL(
+        policy_name,
+        FastReachEnv(),
+        LinearGenerator(),
+        seed=0,
+        policy_kwargs={"net_arch": {"pi": [16, 16], "vf": [8]}, "activation_fn": activation},
+    ).policy
     generator = th.Generator().manual_seed(3)
     with th.no_grad():
         for parameter in actor_parameters(policy):
@@ -64,8 +85,9 @@ def _moved_policy(policy_name, activation=th.nn.Tanh):
     return policy
 
 
-@pytest.mark.parametrize(("policy_name", "activation"), [
-    ("MlpPolicy", th.nn.Tanh), ("ContextStdPolicy", th.nn.Tanh), ("MlpPolicy", th.nn.ReLU)])
+@pytest.mark.parametrize(
+    ("policy_name", "activation"), [("MlpPolicy", th.nn.Tanh), ("ContextStdPolicy", th.nn.Tanh), ("MlpPolicy", th.nn.ReLU)]
+)
 def test_analytic_fisher_vector_product_is_the_kl_hessians(policy_name, activation):
     """H v against autograd's double backward pass of the KL, in float64 (the Hessian computed independently)."""
     from sb3_contrib.common.utils import flat_grad
@@ -108,8 +130,16 @@ def test_trpo_e_step_with_the_analytic_product_takes_the_double_backward_step(mo
             monkeypatch.setattr(e_step, "gaussian_fisher", lambda *args: None)
         q = copy.deepcopy(model.policy)
         th.manual_seed(0)
-        stats = e_step.trpo_e_step(q, model.policy, batch, target_kl=0.01, cg_max_steps=15, cg_damping=0.1,
-                                   line_search_shrinking_factor=0.8, line_search_max_iter=10)
+        stats = e_step.trpo_e_step(
+            q,
+            model.policy,
+            batch,
+            target_kl=0.01,
+            cg_max_steps=15,
+            cg_damping=0.1,
+            line_search_shrinking_factor=0.8,
+            line_search_max_iter=10,
+        )
         results.append((stats, th.nn.utils.parameters_to_vector(actor_parameters(q)).detach()))
     (stats, phi), (expected_stats, expected_phi) = results
     assert stats["line_search_success"] == expected_stats["line_search_success"] == 1.0

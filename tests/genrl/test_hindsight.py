@@ -36,8 +36,9 @@ def test_hindsight_relabels_each_pull_with_the_point_its_own_action_reached():
     relabelled_actions = np.clip(actions[relabelled].numpy(), -3, 3)
     expected_contexts = np.clip(LinearGenerator().decode(relabelled_actions), -1, 1).sum(axis=1)
     np.testing.assert_allclose(observations[relabelled].numpy(), expected_contexts, atol=1e-5)
-    np.testing.assert_allclose(np.sort(actions[relabelled].numpy(), axis=0),
-                               np.sort(actions[:n_played].numpy()[inside], axis=0))
+    np.testing.assert_allclose(
+        np.sort(actions[relabelled].numpy(), axis=0), np.sort(actions[:n_played].numpy()[inside], axis=0)
+    )
     np.testing.assert_allclose(log_prob_pi[relabelled].numpy(), log_prob[relabelled].numpy(), rtol=1e-5)
     raw = th.as_tensor(buffer_advantages.flatten())
     expected = (0.0 - values[relabelled] - raw.mean()) / (raw.std() + 1e-8)
@@ -60,14 +61,15 @@ class _EveryBatchRecorder(GenRL):
 
 
 def test_hindsight_history_keeps_the_relabelled_pulls_of_the_last_batches():
-    model = _EveryBatchRecorder(LatentActionWrapper(HindsightReachEnv(), LinearGenerator()), seed=1, n_steps=16,
-                                hindsight_kwargs={"history": 2})
+    model = _EveryBatchRecorder(
+        LatentActionWrapper(HindsightReachEnv(), LinearGenerator()), seed=1, n_steps=16, hindsight_kwargs={"history": 2}
+    )
     model.learn(64)  # four iterations
     inside_actions = []
     for iteration, ((observations, actions, log_prob_pi, _), log_prob, played) in enumerate(model.recorded):
         reached = np.clip(LinearGenerator().decode(np.clip(played, -3, 3)), -1, 1).sum(axis=1)
         inside_actions.append(played[np.all(np.abs(reached) <= 0.8, axis=1)])
-        kept = np.concatenate(inside_actions[max(0, iteration - 1):])  # this batch's and the one before
+        kept = np.concatenate(inside_actions[max(0, iteration - 1) :])  # this batch's and the one before
         relabelled = slice(len(played), None)
         assert len(observations) == len(played) + len(kept)
         np.testing.assert_allclose(np.sort(actions[relabelled].numpy(), axis=0), np.sort(kept, axis=0))
@@ -84,8 +86,9 @@ class _NothingReachedEnv(FastReachEnv):
 
 
 def test_hindsight_with_no_pull_to_relabel_leaves_the_batch_as_played():
-    model = EStepBatchRecorder("MlpPolicy", LatentActionWrapper(_NothingReachedEnv(), LinearGenerator()), seed=0,
-                               n_steps=16, hindsight_kwargs={})
+    model = EStepBatchRecorder(
+        "MlpPolicy", LatentActionWrapper(_NothingReachedEnv(), LinearGenerator()), seed=0, n_steps=16, hindsight_kwargs={}
+    )
     model.learn(16)
     observations = model.recorded[0][0]
     assert len(observations) == 16 and model.logger.name_to_value["train/hindsight_pulls"] == 0
@@ -94,8 +97,7 @@ def test_hindsight_with_no_pull_to_relabel_leaves_the_batch_as_played():
 def test_hindsight_reaches_new_goals_sooner_on_the_toy():
     distances = {}
     for hindsight_kwargs in (None, {}):
-        model = GenRL(LatentActionWrapper(HindsightReachEnv(), LinearGenerator()), seed=0,
-                      hindsight_kwargs=hindsight_kwargs)
+        model = GenRL(LatentActionWrapper(HindsightReachEnv(), LinearGenerator()), seed=0, hindsight_kwargs=hindsight_kwargs)
         model.learn(640)
         after = np.array([model.predict(goal, deterministic=True)[0] for goal in GOALS])
         distances[hindsight_kwargs is not None] = np.abs(after - np.array([optimal_latent(goal) for goal in GOALS])).max()
@@ -105,8 +107,12 @@ def test_hindsight_reaches_new_goals_sooner_on_the_toy():
 def test_hindsight_regression_reaches_new_goals_sooner_on_the_toy():
     distances = {}
     for steps in (0, 256):
-        model = GenRL(LatentActionWrapper(HindsightReachEnv(), LinearGenerator()), seed=0, n_steps=16,
-                      hindsight_kwargs={"history": 8, "regression_steps": steps})
+        model = GenRL(
+            LatentActionWrapper(HindsightReachEnv(), LinearGenerator()),
+            seed=0,
+            n_steps=16,
+            hindsight_kwargs={"history": 8, "regression_steps": steps},
+        )
         model.learn(320)
         after = np.array([model.predict(goal, deterministic=True)[0] for goal in GOALS])
         distances[steps] = np.abs(after - np.array([optimal_latent(goal) for goal in GOALS])).max()
@@ -115,8 +121,12 @@ def test_hindsight_regression_reaches_new_goals_sooner_on_the_toy():
 
 
 def test_hindsight_regression_keeps_its_optimizer_across_save_and_load(tmp_path):
-    model = GenRL(LatentActionWrapper(HindsightReachEnv(), LinearGenerator()), seed=0, n_steps=16,
-                  hindsight_kwargs={"regression_steps": 4, "regression_lr": 3e-4, "regression_batch_size": 32})
+    model = GenRL(
+        LatentActionWrapper(HindsightReachEnv(), LinearGenerator()),
+        seed=0,
+        n_steps=16,
+        hindsight_kwargs={"regression_steps": 4, "regression_lr": 3e-4, "regression_batch_size": 32},
+    )
     model.learn(32)
     assert "hindsight.optimizer" in model._get_torch_save_params()[0]
     state = model.hindsight.optimizer.state_dict()
@@ -125,8 +135,7 @@ def test_hindsight_regression_keeps_its_optimizer_across_save_and_load(tmp_path)
     loaded = GenRL.load(tmp_path / "model.zip", env=HindsightReachEnv(), generator=LinearGenerator())
     assert (loaded.hindsight.regression_steps, loaded.hindsight.regression_batch_size) == (4, 32)
     assert loaded.hindsight_kwargs == {"regression_steps": 4, "regression_lr": 3e-4, "regression_batch_size": 32}
-    for before, after in zip(state["state"].values(), loaded.hindsight.optimizer.state_dict()["state"].values(),
-                             strict=True):
+    for before, after in zip(state["state"].values(), loaded.hindsight.optimizer.state_dict()["state"].values(), strict=True):
         th.testing.assert_close(after["exp_avg"], before["exp_avg"])
     assert len(loaded.hindsight.memory) == 0  # the kept pulls are not saved: a loaded model keeps them anew
     assert GenRL(FastReachEnv(), LinearGenerator(), hindsight_kwargs={}).hindsight.optimizer is None  # no regression
@@ -135,8 +144,9 @@ def test_hindsight_regression_keeps_its_optimizer_across_save_and_load(tmp_path)
 
 def test_hindsight_switched_on_at_load_relabels_from_then_on(tmp_path):
     GenRL(LatentActionWrapper(HindsightReachEnv(), LinearGenerator()), seed=0, n_steps=16).learn(16).save(tmp_path / "m")
-    loaded = GenRL.load(tmp_path / "m.zip", env=HindsightReachEnv(), generator=LinearGenerator(),
-                        hindsight_kwargs={"regression_steps": 2})
+    loaded = GenRL.load(
+        tmp_path / "m.zip", env=HindsightReachEnv(), generator=LinearGenerator(), hindsight_kwargs={"regression_steps": 2}
+    )
     loaded.learn(16)
     assert loaded.logger.name_to_value["train/hindsight_pulls"] > 0 and len(loaded.hindsight.memory) == 1
     assert all(value["step"] == 2 for value in loaded.hindsight.optimizer.state_dict()["state"].values())
@@ -150,8 +160,10 @@ def trained():
 
 def _relabel_infos(contexts, rewards):
     """One step's infos (one env) per context: ``None`` for a pull that reached nothing."""
-    return [[{"hindsight": None if context is None else (np.asarray(context, np.float32), reward)}]
-            for context, reward in zip(contexts, rewards, strict=True)]
+    return [
+        [{"hindsight": None if context is None else (np.asarray(context, np.float32), reward)}]
+        for context, reward in zip(contexts, rewards, strict=True)
+    ]
 
 
 # contexts of 8 pulls: inside the box, None (nothing reached), outside the box, not finite
@@ -243,8 +255,9 @@ def test_refit_fits_the_mean_from_its_initial_weights_to_the_solving_pulls_alone
     import copy
 
     policy, buffer = trained.policy, trained.rollout_buffer
-    hindsight = HindsightRelabelling(policy, refit_every=16, refit_start=8, refit_steps=50, regression_lr=1e-2,
-                                     regression_batch_size=4)
+    hindsight = HindsightRelabelling(
+        policy, refit_every=16, refit_start=8, refit_steps=50, regression_lr=1e-2, regression_batch_size=4
+    )
     initial = [parameter.detach().clone() for parameter in mean_parameters(policy)]
     rows = [i for i, flag in enumerate(SOLVED) if flag]
     contexts = th.as_tensor(buffer.observations[rows]).float()
@@ -262,9 +275,14 @@ def test_refit_fits_the_mean_from_its_initial_weights_to_the_solving_pulls_alone
                 for parameter, value in zip(mean_parameters(expected), initial, strict=True):
                     parameter.copy_(value)
             th.manual_seed(episodes)
-            losses = regress_mean(expected, th.optim.Adam(mean_parameters(expected), lr=1e-2),
-                                  th.cat([contexts] * (episodes // 8)), th.cat([actions] * (episodes // 8)), steps=50,
-                                  batch_size=4)
+            losses = regress_mean(
+                expected,
+                th.optim.Adam(mean_parameters(expected), lr=1e-2),
+                th.cat([contexts] * (episodes // 8)),
+                th.cat([actions] * (episodes // 8)),
+                steps=50,
+                batch_size=4,
+            )
             th.manual_seed(episodes)
         stats = hindsight.refit(buffer, episodes)
         assert len(hindsight.solved) == episodes // 8
@@ -284,8 +302,13 @@ def test_refit_fits_the_mean_from_its_initial_weights_to_the_solving_pulls_alone
 
 
 def test_refit_inside_genrl_logs_its_pairs_and_brings_the_mean_to_the_solving_pulls():
-    model = GenRL(LatentActionWrapper(SuccessReachEnv(), LinearGenerator()), seed=0, n_steps=32, device="cpu",
-                  hindsight_kwargs={"refit_every": 64, "refit_steps": 300, "regression_lr": 1e-2})
+    model = GenRL(
+        LatentActionWrapper(SuccessReachEnv(), LinearGenerator()),
+        seed=0,
+        n_steps=32,
+        device="cpu",
+        hindsight_kwargs={"refit_every": 64, "refit_steps": 300, "regression_lr": 1e-2},
+    )
     model.learn(64)
     pairs = model.logger.name_to_value["train/refit_pairs"]
     contexts, actions = (th.cat(part) for part in zip(*model.hindsight.solved, strict=True))

@@ -50,16 +50,20 @@ def test_spread_moves_at_most_max_log_std_change_per_iteration(e_step):
     changes = {}
     for bound in (None, 0.01, 0.0):
         recorder = _LogStdRecorder()
-        GenRL(FastReachEnv(), LinearGenerator(), e_step=e_step, seed=0, n_steps=32,
-              max_log_std_change=bound).learn(8 * 32, callback=recorder)
+        GenRL(FastReachEnv(), LinearGenerator(), e_step=e_step, seed=0, n_steps=32, max_log_std_change=bound).learn(
+            8 * 32, callback=recorder
+        )
         changes[bound] = np.abs(np.diff(np.array(recorder.values), axis=0))
         assert len(changes[bound]) == 8
     assert changes[None].max() > 0.02  # unbounded, the spread moves faster than the bound allows
     assert changes[0.01].max() <= 0.01 + 1e-6
     assert changes[0.01].min() >= 0.01 - 1e-6  # and here the spread shrinks as fast as the bound lets it
     assert changes[0.0].max() == 0.0  # 0: the spread stays at log_std_init
-    with pytest.raises(ValueError, match=r"max_log_std_change must be >= 0 \(0: the spread stays as it starts\) or "
-                                         r"None, got -0.1"):
+    with pytest.raises(
+        ValueError,
+        match=r"max_log_std_change must be >= 0 \(0: the spread stays as it starts\) or "
+        r"None, got -0.1",
+    ):
         GenRL(FastReachEnv(), LinearGenerator(), max_log_std_change=-0.1)
 
 
@@ -67,8 +71,9 @@ def test_limit_log_std_change_is_the_largest_change_over_the_box_by_brute_force(
     from sb3_genrl.genrl.policies import ContextStdPolicy, limit_log_std_change, log_std_parameters
 
     space = gym.spaces.Box(-2.0, 3.0, (3,), np.float32)
-    policy = ContextStdPolicy(space, gym.spaces.Box(-3, 3, (4,), np.float32), lambda _: 1e-3,
-                              features_extractor_class=BoxScaler)
+    policy = ContextStdPolicy(
+        space, gym.spaces.Box(-3, 3, (4,), np.float32), lambda _: 1e-3, features_extractor_class=BoxScaler
+    )
     before = log_std_parameters(policy)
     th.testing.assert_close(before["weight"], th.zeros(4, 3))  # it starts independent of the context
     generator = th.Generator().manual_seed(0)
@@ -116,8 +121,9 @@ def test_context_std_policy_spread_depends_on_the_context_within_its_trust_regio
     changes = {}
     for bound in (None, 0.01):
         recorder = _ContextStdRecorder(low, high)
-        model = GenRL("ContextStdPolicy", FastReachEnv(), LinearGenerator(), e_step=e_step, seed=0, n_steps=32,
-                      max_log_std_change=bound)
+        model = GenRL(
+            "ContextStdPolicy", FastReachEnv(), LinearGenerator(), e_step=e_step, seed=0, n_steps=32, max_log_std_change=bound
+        )
         model.learn(8 * 32, callback=recorder)
         values = np.array(recorder.values)
         np.testing.assert_allclose(values[0], 0.0, atol=1e-7)  # the prior's std at first, for every context
@@ -135,11 +141,14 @@ def test_context_std_policy_spread_depends_on_the_context_within_its_trust_regio
     th.testing.assert_close(distribution.log_prob(actions), log_prob)
     th.testing.assert_close(distribution.entropy(), entropy)
     model.save(tmp_path / "model.zip")
-    for loaded in (GenRL.load(tmp_path / "model.zip", generator=LinearGenerator()),
-                   load_policy(tmp_path / "model.zip", FastReachEnv(), generator=LinearGenerator(), device=model.device)):
+    for loaded in (
+        GenRL.load(tmp_path / "model.zip", generator=LinearGenerator()),
+        load_policy(tmp_path / "model.zip", FastReachEnv(), generator=LinearGenerator(), device=model.device),
+    ):
         assert isinstance(loaded.policy, ContextStdPolicy)
-        th.testing.assert_close(loaded.policy.get_distribution(observations).distribution.stddev,
-                                distribution.distribution.stddev)
+        th.testing.assert_close(
+            loaded.policy.get_distribution(observations).distribution.stddev, distribution.distribution.stddev
+        )
         np.testing.assert_allclose(loaded.predict(GOALS, deterministic=True)[0], model.predict(GOALS, deterministic=True)[0])
 
 
@@ -175,6 +184,5 @@ def test_an_image_context_keeps_sb3s_extractors_and_is_scaled_once():
     assert isinstance(mlp.policy.pi_features_extractor, FlattenExtractor)
     for value, expected in ((0, 0.0), (255, 1.0)):  # SB3 divides by 255, and nothing rescales it again
         image = th.full((1, 36, 36, 3), value, dtype=th.uint8)
-        features = mlp.policy.extract_features(mlp.policy.obs_to_tensor(image.numpy())[0],
-                                               mlp.policy.pi_features_extractor)
+        features = mlp.policy.extract_features(mlp.policy.obs_to_tensor(image.numpy())[0], mlp.policy.pi_features_extractor)
         assert th.all(features == expected)

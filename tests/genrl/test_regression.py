@@ -34,8 +34,9 @@ def test_mean_parameters_are_the_actors_without_its_spread(policy_name):
 def test_policy_mean_is_the_distributions_mean(policy_name):
     from sb3_genrl.genrl.regression import policy_mean
 
-    policy = GenRL(policy_name, FastReachEnv(), LinearGenerator(), seed=0,
-                   policy_kwargs={"net_arch": {"pi": [16, 16, 16], "vf": [8]}}).policy
+    policy = GenRL(
+        policy_name, FastReachEnv(), LinearGenerator(), seed=0, policy_kwargs={"net_arch": {"pi": [16, 16, 16], "vf": [8]}}
+    ).policy
     with th.no_grad():  # move the mean off its near-zero start, so that a wrong path would show
         for parameter in policy.action_net.parameters():
             parameter.add_(th.randn(parameter.shape, generator=th.Generator().manual_seed(1)))
@@ -53,8 +54,11 @@ def test_regress_mean_fits_a_known_linear_map_and_leaves_the_rest():
     contexts = th.rand(512, 2, generator=generator) * 1.6 - 0.8
     weights, bias = th.tensor([[1.5, -0.5], [0.3, 2.0]]), th.tensor([0.2, -0.4])
     targets = contexts @ weights.T + bias  # the answer, computed here
-    untouched = {name: value.clone() for name, value in policy.state_dict().items()
-                 if name.startswith(("log_std", "value_net", "mlp_extractor.value_net"))}
+    untouched = {
+        name: value.clone()
+        for name, value in policy.state_dict().items()
+        if name.startswith(("log_std", "value_net", "mlp_extractor.value_net"))
+    }
     optimizer = th.optim.Adam(mean_parameters(policy), lr=1e-3)
     losses = regress_mean(policy, optimizer, contexts, targets, steps=1500, batch_size=64)
     assert len(losses) == 1500 and np.mean(losses[-50:]) < 0.01 * np.mean(losses[:50])
@@ -124,15 +128,22 @@ def assert_same_fit(first, second, first_optimizer, second_optimizer):
             th.testing.assert_close(value, other_states[key][field], rtol=0, atol=0)
 
 
-@pytest.mark.parametrize(("policy_name", "activation", "foreach"), [
-    ("MlpPolicy", th.nn.Tanh, True), ("ContextStdPolicy", th.nn.Tanh, True), ("MlpPolicy", th.nn.ReLU, False)])
+@pytest.mark.parametrize(
+    ("policy_name", "activation", "foreach"),
+    [("MlpPolicy", th.nn.Tanh, True), ("ContextStdPolicy", th.nn.Tanh, True), ("MlpPolicy", th.nn.ReLU, False)],
+)
 def test_fused_regression_is_autograd_and_adam_bit_for_bit(policy_name, activation, foreach):
     import copy
 
     from sb3_genrl.genrl.regression import fused_mean, mean_parameters, regress_mean
 
-    policy = GenRL(policy_name, FastReachEnv(), LinearGenerator(), seed=0, policy_kwargs={
-        "net_arch": {"pi": [32, 32, 32], "vf": [8]}, "activation_fn": activation}).policy
+    policy = GenRL(
+        policy_name,
+        FastReachEnv(),
+        LinearGenerator(),
+        seed=0,
+        policy_kwargs={"net_arch": {"pi": [32, 32, 32], "vf": [8]}, "activation_fn": activation},
+    ).policy
     generator = th.Generator().manual_seed(0)
     contexts = th.rand(300, 2, generator=generator) * 1.6 - 0.8
     actions = th.randn(300, 2, generator=generator)

@@ -68,24 +68,46 @@ def test_a_rerun_into_a_run_folder_never_mixes_two_runs(fast_reach_task, tmp_pat
 
 def test_a_second_run_into_a_locked_folder_stops_at_once_with_exit_2(hockey_generator, tmp_path, cli):
     folder = tmp_path / "run"
-    holder = subprocess.Popen([sys.executable, "-c", textwrap.dedent("""
+    holder = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            textwrap.dedent("""
         import sys, time
         from sb3_genrl.study.state import folder_lock
         with folder_lock(sys.argv[1]):
             print("locked", flush=True)
             time.sleep(120)
-    """), str(folder)], stdout=subprocess.PIPE, text=True)
+    """),
+            str(folder),
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert holder.stdout.readline().strip() == "locked"
-        code, _, err = cli("train-policy", "--task", "hockey", "--generator", hockey_generator, "--episodes", 4,
-                           "--batch-episodes", 2, "--out", folder)
+        code, _, err = cli(
+            "train-policy",
+            "--task",
+            "hockey",
+            "--generator",
+            hockey_generator,
+            "--episodes",
+            4,
+            "--batch-episodes",
+            2,
+            "--out",
+            folder,
+        )
         assert code == 2 and f"{folder} is in use by another process (PID {holder.pid}" in err
-        code, _, err = cli("baseline", "latent-trpo", "--task", "hockey", "--generator", hockey_generator,
-                           "--episodes", 4, "--out", folder)
+        code, _, err = cli(
+            "baseline", "latent-trpo", "--task", "hockey", "--generator", hockey_generator, "--episodes", 4, "--out", folder
+        )
         assert code == 2 and f"{folder} is in use by another process (PID {holder.pid}" in err
         assert sorted(path.name for path in folder.iterdir()) == [".lock"]  # nothing written
     finally:
         holder.kill()
         holder.wait()
-    assert np.isfinite(train_policy("hockey", hockey_generator, episodes=4, batch_episodes=2, out_dir=folder)[
-        "final_mean_reward"])
+    assert np.isfinite(
+        train_policy("hockey", hockey_generator, episodes=4, batch_episodes=2, out_dir=folder)["final_mean_reward"]
+    )

@@ -121,6 +121,7 @@ def test_interrupted_save_keeps_the_previous_policy_file(tmp_path, monkeypatch):
 def test_load_switches_the_optional_states_on_and_off(tmp_path):
     """policy_averaging and the hindsight regression changed at load: the saved state of a setting now off is dropped,
     one now on starts afresh from the loaded policy, and the regression's learning rate is the one given."""
+
     def trained(**kwargs):
         model = GenRL(LatentActionWrapper(HindsightReachEnv(), LinearGenerator()), seed=0, n_steps=16, **kwargs)
         model.learn(32)
@@ -134,10 +135,15 @@ def test_load_switches_the_optional_states_on_and_off(tmp_path):
 
     contexts = np.array([[0.3, -0.2], [-0.5, 0.4]], dtype=np.float32)
     with_both = trained(policy_averaging=0.9, hindsight_kwargs={"regression_steps": 4})
-    plain = GenRL.load(tmp_path / "model.zip", env=HindsightReachEnv(), generator=LinearGenerator(),
-                       policy_averaging=None)  # the policy, not its saved average, acts
-    np.testing.assert_allclose(plain.predict(contexts, deterministic=True)[0],
-                               with_both.policy.predict(contexts, deterministic=True)[0], rtol=0, atol=0)
+    plain = GenRL.load(
+        tmp_path / "model.zip", env=HindsightReachEnv(), generator=LinearGenerator(), policy_averaging=None
+    )  # the policy, not its saved average, acts
+    np.testing.assert_allclose(
+        plain.predict(contexts, deterministic=True)[0],
+        with_both.policy.predict(contexts, deterministic=True)[0],
+        rtol=0,
+        atol=0,
+    )
     switched_off = load(policy_averaging=None, hindsight_kwargs={"regression_steps": 0})
     assert switched_off.policy_average is None and switched_off.hindsight.optimizer is None
     assert "hindsight.optimizer" not in switched_off._get_torch_save_params()[0]
@@ -148,11 +154,17 @@ def test_load_switches_the_optional_states_on_and_off(tmp_path):
     assert all(value["step"] == 8 + 4 for value in faster.hindsight.optimizer.state_dict()["state"].values())
 
     without = trained(hindsight_kwargs={})
-    switched_on = GenRL.load(tmp_path / "model.zip", env=HindsightReachEnv(), generator=LinearGenerator(),
-                             policy_averaging=0.9, hindsight_kwargs={"regression_steps": 4})
+    switched_on = GenRL.load(
+        tmp_path / "model.zip",
+        env=HindsightReachEnv(),
+        generator=LinearGenerator(),
+        policy_averaging=0.9,
+        hindsight_kwargs={"regression_steps": 4},
+    )
     # the new average starts as the loaded policy, not as the policy the model was built with
-    np.testing.assert_allclose(switched_on.predict(contexts, deterministic=True)[0],
-                               without.predict(contexts, deterministic=True)[0], rtol=0, atol=0)
+    np.testing.assert_allclose(
+        switched_on.predict(contexts, deterministic=True)[0], without.predict(contexts, deterministic=True)[0], rtol=0, atol=0
+    )
     assert switched_on.hindsight.optimizer.state_dict()["state"] == {}
     switched_on.learn(16)
     assert all(value["step"] == 4 for value in switched_on.hindsight.optimizer.state_dict()["state"].values())
@@ -172,12 +184,13 @@ def test_a_policy_refuses_a_generator_other_than_the_one_it_was_trained_with(tmp
     trained_with, other = _vae(0), _vae(1)
     trained_with.save(str(tmp_path / "vae.pt"))
     GenRL("GenRL/Hockey-v0", str(tmp_path / "vae.pt"), n_steps=8, device="cpu").save(tmp_path / "policy.zip")
-    assert GenRL.load(tmp_path / "policy.zip", device="cpu").generator_sha256 == generator_files.generator_digest(
-        trained_with)
+    assert GenRL.load(tmp_path / "policy.zip", device="cpu").generator_sha256 == generator_files.generator_digest(trained_with)
     GenRL.load(tmp_path / "policy.zip", device="cpu", generator=trained_with)  # in memory, the same content: accepted
     other.save(str(tmp_path / "vae.pt"))  # a new generator written to the same path
-    refused = (r"the generator BetaVAE from '.*vae.pt' \(\(latent_dim, T, M\) = \(2, 69, 7\), SHA-256 [0-9a-f]{16}\.\.\.\) "
-               r"is not the one .*policy.zip was trained")
+    refused = (
+        r"the generator BetaVAE from '.*vae.pt' \(\(latent_dim, T, M\) = \(2, 69, 7\), SHA-256 [0-9a-f]{16}\.\.\.\) "
+        r"is not the one .*policy.zip was trained"
+    )
     with pytest.raises(ValueError, match=refused):
         GenRL.load(tmp_path / "policy.zip", device="cpu")
     with pytest.raises(ValueError, match=refused):
@@ -198,8 +211,11 @@ def test_a_generator_given_beside_an_env_that_wraps_another_is_refused(tmp_path)
     wrapping, other = _vae(0), _vae(1)
     wrapping.save(str(tmp_path / "vae.pt"))
     env = LatentActionWrapper(gym.make("GenRL/Hockey-v0"), wrapping)
-    with pytest.raises(ValueError, match=r"the generator given, BetaVAE \(\(latent_dim, T, M\) = \(2, 69, 7\), SHA-256 "
-                                         r"[0-9a-f]{16}\.\.\.\), is not the one wrapping the env, BetaVAE "):
+    with pytest.raises(
+        ValueError,
+        match=r"the generator given, BetaVAE \(\(latent_dim, T, M\) = \(2, 69, 7\), SHA-256 "
+        r"[0-9a-f]{16}\.\.\.\), is not the one wrapping the env, BetaVAE ",
+    ):
         GenRL(env, other, n_steps=8)
     # The env's own generator, or one of the same content (its file), is accepted.
     assert GenRL(env, wrapping, n_steps=8).generator is wrapping
@@ -211,12 +227,12 @@ def test_a_generator_given_beside_an_env_that_wraps_another_is_refused(tmp_path)
 
 def test_load_accepts_the_constructors_own_policy_kwargs(tmp_path):
     GenRL(FastReachEnv(), LinearGenerator(), n_steps=8, policy_kwargs={"net_arch": [32]}).save(tmp_path / "policy.zip")
-    loaded = GenRL.load(tmp_path / "policy.zip", env=FastReachEnv(), generator=LinearGenerator(),
-                        policy_kwargs={"net_arch": [32]})
+    loaded = GenRL.load(
+        tmp_path / "policy.zip", env=FastReachEnv(), generator=LinearGenerator(), policy_kwargs={"net_arch": [32]}
+    )
     assert loaded.policy_kwargs["net_arch"] == [32]
     with pytest.raises(ValueError, match="policy kwargs do not equal"):  # other ones are still refused, as by SB3
-        GenRL.load(tmp_path / "policy.zip", env=FastReachEnv(), generator=LinearGenerator(),
-                   policy_kwargs={"net_arch": [64]})
+        GenRL.load(tmp_path / "policy.zip", env=FastReachEnv(), generator=LinearGenerator(), policy_kwargs={"net_arch": [64]})
 
 
 def test_load_refuses_a_generator_file_and_another_algorithms_zip_naming_them(tmp_path):

@@ -13,8 +13,12 @@ from sb3_genrl.genrl import check_genrl_settings
 
 
 def test_check_genrl_settings_refuses_unknown_names_and_policies():
-    settings = {"policy": "ContextStdPolicy", "target_kl": 0.03, "policy_kwargs": {"net_arch": [8]},
-                "hindsight_kwargs": {"history": 2}}
+    settings = {
+        "policy": "ContextStdPolicy",
+        "target_kl": 0.03,
+        "policy_kwargs": {"net_arch": [8]},
+        "hindsight_kwargs": {"history": 2},
+    }
     checked = check_genrl_settings(settings)
     assert checked == settings and checked is not settings and type(checked) is dict  # a plain copy
     assert checked["hindsight_kwargs"] is not settings["hindsight_kwargs"]
@@ -32,8 +36,10 @@ def test_check_genrl_settings_refuses_unknown_names_and_policies():
     with pytest.raises(ValueError, match="hindsight_kwargs needs e_step='trpo'"):
         check_genrl_settings({"hindsight_kwargs": {}, "e_step": "kl_penalty"})
     assert check_genrl_settings({"hindsight_kwargs": {"history": 2}}) == {"hindsight_kwargs": {"history": 2}}
-    assert check_genrl_settings({"hindsight_kwargs": None, "e_step": "kl_penalty"}) == {"hindsight_kwargs": None,
-                                                                                          "e_step": "kl_penalty"}
+    assert check_genrl_settings({"hindsight_kwargs": None, "e_step": "kl_penalty"}) == {
+        "hindsight_kwargs": None,
+        "e_step": "kl_penalty",
+    }
 
 
 def test_genrl_kwargs_argument_parses_and_checks_json():
@@ -55,29 +61,58 @@ def test_genrl_kwargs_argument_parses_and_checks_json():
             genrl_kwargs_argument(text)
 
 
-@pytest.mark.parametrize(("hindsight_kwargs", "message"), [
-    ({"regression_steps": -1}, r"hindsight_kwargs\['regression_steps'\] must be an integer >= 0, got -1"),
-    ({"regression_steps": 1.5}, r"hindsight_kwargs\['regression_steps'\] must be an integer >= 0"),
-    ({"regression_steps": True}, r"hindsight_kwargs\['regression_steps'\] must be an integer >= 0"),
-    ({"regression_lr": 0.0}, r"hindsight_kwargs\['regression_lr'\] must be positive"),
-    ({"regression_batch_size": 0}, r"hindsight_kwargs\['regression_batch_size'\] must be an integer >= 1"),
-    ({"regression_batch_size": True}, r"hindsight_kwargs\['regression_batch_size'\] must be an integer >= 1"),
-    ({"regression_steps": 4, "regression_weighted": 1}, r"hindsight_kwargs\['regression_weighted'\] must be True or False"),
-    ({"regression_weighted": True}, r"hindsight_kwargs\['regression_weighted'\] weights the regression's pulls, which "
-                                    "needs regression_steps > 0"),
-    ({"refit_every": -64}, r"hindsight_kwargs\['refit_every'\] must be an integer >= 0, got -64"),
-    ({"refit_every": 64, "refit_steps": 0}, r"hindsight_kwargs\['refit_steps'\] must be an integer >= 1, got 0"),
-    ({"refit_every": 64, "refit_start": 0}, r"hindsight_kwargs\['refit_start'\] must be an integer >= 1 or None"),
-    ({"refit_start": 512}, r"hindsight_kwargs\['refit_start'\] is the episode of the first refit, which needs "
-                           "refit_every > 0"),
-    ({"history": 0}, r"hindsight_kwargs\['history'\] must be an integer >= 1, got 0"),
-    ({"history": 1.5}, r"hindsight_kwargs\['history'\] must be an integer >= 1"),
-    ({"histroy": 2}, r"hindsight_kwargs: 'histroy' not among its settings \(history, regression_steps"),
-    ("yes", "hindsight_kwargs must be a dict or None, got 'yes'"),
-    (True, "hindsight_kwargs must be a dict or None, got True"),
-], ids=["steps-negative", "steps-fraction", "steps-bool", "lr-zero", "batch-zero", "batch-bool", "weighted-int",
-        "weighted-without-steps", "refit-negative", "refit-steps-zero", "refit-start-zero",
-        "refit-start-without-every", "history-zero", "history-fraction", "unknown-key", "string", "bool"])
+@pytest.mark.parametrize(
+    ("hindsight_kwargs", "message"),
+    [
+        ({"regression_steps": -1}, r"hindsight_kwargs\['regression_steps'\] must be an integer >= 0, got -1"),
+        ({"regression_steps": 1.5}, r"hindsight_kwargs\['regression_steps'\] must be an integer >= 0"),
+        ({"regression_steps": True}, r"hindsight_kwargs\['regression_steps'\] must be an integer >= 0"),
+        ({"regression_lr": 0.0}, r"hindsight_kwargs\['regression_lr'\] must be positive"),
+        ({"regression_batch_size": 0}, r"hindsight_kwargs\['regression_batch_size'\] must be an integer >= 1"),
+        ({"regression_batch_size": True}, r"hindsight_kwargs\['regression_batch_size'\] must be an integer >= 1"),
+        (
+            {"regression_steps": 4, "regression_weighted": 1},
+            r"hindsight_kwargs\['regression_weighted'\] must be True or False",
+        ),
+        (
+            {"regression_weighted": True},
+            r"hindsight_kwargs\['regression_weighted'\] weights the regression's pulls, which "
+            "needs regression_steps > 0",
+        ),
+        ({"refit_every": -64}, r"hindsight_kwargs\['refit_every'\] must be an integer >= 0, got -64"),
+        ({"refit_every": 64, "refit_steps": 0}, r"hindsight_kwargs\['refit_steps'\] must be an integer >= 1, got 0"),
+        ({"refit_every": 64, "refit_start": 0}, r"hindsight_kwargs\['refit_start'\] must be an integer >= 1 or None"),
+        (
+            {"refit_start": 512},
+            r"hindsight_kwargs\['refit_start'\] is the episode of the first refit, which needs "
+            "refit_every > 0",
+        ),
+        ({"history": 0}, r"hindsight_kwargs\['history'\] must be an integer >= 1, got 0"),
+        ({"history": 1.5}, r"hindsight_kwargs\['history'\] must be an integer >= 1"),
+        ({"histroy": 2}, r"hindsight_kwargs: 'histroy' not among its settings \(history, regression_steps"),
+        ("yes", "hindsight_kwargs must be a dict or None, got 'yes'"),
+        (True, "hindsight_kwargs must be a dict or None, got True"),
+    ],
+    ids=[
+        "steps-negative",
+        "steps-fraction",
+        "steps-bool",
+        "lr-zero",
+        "batch-zero",
+        "batch-bool",
+        "weighted-int",
+        "weighted-without-steps",
+        "refit-negative",
+        "refit-steps-zero",
+        "refit-start-zero",
+        "refit-start-without-every",
+        "history-zero",
+        "history-fraction",
+        "unknown-key",
+        "string",
+        "bool",
+    ],
+)
 def test_hindsight_kwargs_are_checked(hindsight_kwargs, message):
     with pytest.raises(ValueError, match=message):
         GenRL(FastReachEnv(), LinearGenerator(), hindsight_kwargs=hindsight_kwargs)
@@ -92,8 +127,12 @@ def test_hindsight_is_checked():
     with pytest.raises(ValueError, match=r"info\['hindsight'\]"):
         model.learn(64)
     assert model.num_timesteps == 1  # refused at the first pull, not after the rollout
-    dict_env = LatentActionWrapper(ReachEnv(), LinearGenerator(), context=lambda obs: {"goal": obs[:2]},
-                                   context_space=gym.spaces.Dict({"goal": gym.spaces.Box(-1, 1, (2,))}))
+    dict_env = LatentActionWrapper(
+        ReachEnv(),
+        LinearGenerator(),
+        context=lambda obs: {"goal": obs[:2]},
+        context_space=gym.spaces.Dict({"goal": gym.spaces.Box(-1, 1, (2,))}),
+    )
     with pytest.raises(ValueError, match="hindsight_kwargs relabels Box contexts"):
         GenRL("MultiInputPolicy", dict_env, hindsight_kwargs={})
 

@@ -27,10 +27,19 @@ def fast_reach_task():
     """FastReachEnv as a registered task (the registry is how train_policy resolves tasks)."""
     from sb3_genrl.envs import TASKS, TaskSpec, register_task
 
-    spec = TaskSpec(name="fast-reach", env_id=TOY_TASK_ID, env_class=FastReachEnv, horizon=5, goal_low=np.full(2, -0.8),
-                    goal_high=np.full(2, 0.8), in_goal_region=lambda points: np.ones(len(points), dtype=bool),
-                    cell_size=0.1, sample_expert=lambda rng: np.zeros((5, 7)), perturbation_scales=np.zeros(7),
-                    is_valid=lambda info: True)
+    spec = TaskSpec(
+        name="fast-reach",
+        env_id=TOY_TASK_ID,
+        env_class=FastReachEnv,
+        horizon=5,
+        goal_low=np.full(2, -0.8),
+        goal_high=np.full(2, 0.8),
+        in_goal_region=lambda points: np.ones(len(points), dtype=bool),
+        cell_size=0.1,
+        sample_expert=lambda rng: np.zeros((5, 7)),
+        perturbation_scales=np.zeros(7),
+        is_valid=lambda info: True,
+    )
     register_task(spec)
     yield spec
     TASKS.pop(spec.name)
@@ -57,8 +66,9 @@ def test_train_policy_writes_curve_model_and_logs(fast_reach_task, tmp_path, cap
         progress = [row for row in csv.DictReader(file) if row.get("train/kl")]
     assert len(progress) == 3 and all(float(row["train/kl"]) >= 0 for row in progress)
     # GenRL's own mean reward of each iteration (from its rollout buffer) is the Monitor's, up to its 6 decimals.
-    np.testing.assert_allclose([float(row["train/mean_reward"]) for row in progress],
-                               [float(row["mean_reward"]) for row in rows], atol=1e-6)
+    np.testing.assert_allclose(
+        [float(row["train/mean_reward"]) for row in progress], [float(row["mean_reward"]) for row in rows], atol=1e-6
+    )
     assert any((tmp_path / "logs").glob("events.out.tfevents.*"))
     assert (tmp_path / "learning_curve.png").stat().st_size > 0
     assert GenRL.load(result["model_path"], generator=LinearGenerator()).predict(GOALS[0])[0].shape == (2,)
@@ -73,8 +83,17 @@ def test_train_policy_writes_curve_model_and_logs(fast_reach_task, tmp_path, cap
     with pytest.raises(SystemExit) as exit_info:  # --task takes its choices from the registry
         cli_main(argv)
     assert exit_info.value.code == 2 and "invalid choice: 'curling'" in capsys.readouterr().err
-    argv = ["train-policy", "--task", "fast-reach", "--generator", str(tmp_path / "missing.pt"), "--episodes", "8",
-            "--out", str(tmp_path)]
+    argv = [
+        "train-policy",
+        "--task",
+        "fast-reach",
+        "--generator",
+        str(tmp_path / "missing.pt"),
+        "--episodes",
+        "8",
+        "--out",
+        str(tmp_path),
+    ]
     with pytest.raises(SystemExit):
         cli_main(argv)
     assert "missing.pt' does not exist" in capsys.readouterr().err
@@ -85,8 +104,12 @@ def test_train_policy_plays_several_envs_together(fast_reach_task, tmp_path):
     reproducible from its seed."""
     from sb3_genrl.curves import read_monitor
 
-    runs = [train_policy("fast-reach", LinearGenerator(), episodes=64, seed=3, out_dir=tmp_path / name,
-                         batch_episodes=32, n_envs=2) for name in ("a", "b")]
+    runs = [
+        train_policy(
+            "fast-reach", LinearGenerator(), episodes=64, seed=3, out_dir=tmp_path / name, batch_episodes=32, n_envs=2
+        )
+        for name in ("a", "b")
+    ]
     assert runs[0]["episodes"] == 64 and runs[0]["iterations"] == 2 and runs[0]["n_envs"] == 2
     episodes = [read_monitor(run["episodes_csv_path"]) for run in runs]
     assert len(episodes[0]["return"]) == 64 and np.all(episodes[0]["length"] == 1)
@@ -106,12 +129,14 @@ def test_several_envs_without_a_main_guard_fail_with_a_clear_error(tmp_path):
     import sys
 
     script = tmp_path / "no_guard.py"
-    script.write_text(f"import sys\nsys.path.insert(0, {str(pathlib.Path(__file__).parents[1])!r})\n"
-                      "import gymnasium as gym\nfrom conftest import LinearGenerator, ReachEnv\n"
-                      "from sb3_genrl.genrl import train_policy\n"
-                      "gym.register('GenRLTest/StepReach-v0', entry_point=ReachEnv)\n"
-                      "train_policy('GenRLTest/StepReach-v0', LinearGenerator(), episodes=4, batch_episodes=2, n_envs=2, "
-                      f"out_dir={str(tmp_path / 'run')!r})\n")
+    script.write_text(
+        f"import sys\nsys.path.insert(0, {str(pathlib.Path(__file__).parents[1])!r})\n"
+        "import gymnasium as gym\nfrom conftest import LinearGenerator, ReachEnv\n"
+        "from sb3_genrl.genrl import train_policy\n"
+        "gym.register('GenRLTest/StepReach-v0', entry_point=ReachEnv)\n"
+        "train_policy('GenRLTest/StepReach-v0', LinearGenerator(), episodes=4, batch_episodes=2, n_envs=2, "
+        f"out_dir={str(tmp_path / 'run')!r})\n"
+    )
     run = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300, cwd=tmp_path)
     assert run.returncode != 0
     assert "RuntimeError: the 2 env processes did not start" in run.stderr
@@ -146,8 +171,16 @@ def test_quickstart_records_the_settings_train_policy_runs_with(fast_reach_task,
     from sb3_genrl.study.quickstart import QUICKSTART_ENVS, _stage_settings
 
     settings = {"batch_size": 64, "target_kl": 0.02}
-    run = train_policy("fast-reach", LinearGenerator(), episodes=16, seed=0, out_dir=tmp_path, batch_episodes=16,
-                       n_envs=QUICKSTART_ENVS, **settings)
+    run = train_policy(
+        "fast-reach",
+        LinearGenerator(),
+        episodes=16,
+        seed=0,
+        out_dir=tmp_path,
+        batch_episodes=16,
+        n_envs=QUICKSTART_ENVS,
+        **settings,
+    )
     recorded = _stage_settings("fast-reach", 10, 2, 16, 16, settings, 10, 10, 0, False)["policy"]["genrl"]
     assert recorded == run["genrl_settings"]
     assert (recorded["n_steps"], recorded["batch_size"], recorded["target_kl"]) == (16 // QUICKSTART_ENVS, 16, 0.02)
@@ -156,11 +189,20 @@ def test_quickstart_records_the_settings_train_policy_runs_with(fast_reach_task,
 def test_genrl_settings_record_the_policy_arguments_as_json():
     from sb3_genrl.genrl.train import genrl_settings
 
-    settings = genrl_settings({"policy_kwargs": {"net_arch": {"pi": [64, 64, 64], "vf": (64, 64)},
-                                                 "activation_fn": th.nn.Tanh},
-                               "learning_rate": lambda progress: 1e-3 * progress})
-    assert settings["policy_kwargs"] == {"net_arch": {"pi": [64, 64, 64], "vf": [64, 64]},
-                                         "activation_fn": "torch.nn.modules.activation.Tanh"}
+    settings = genrl_settings(
+        {
+            "policy_kwargs": {"net_arch": {"pi": [64, 64, 64], "vf": (64, 64)}, "activation_fn": th.nn.Tanh},
+            "learning_rate": lambda progress: 1e-3 * progress,
+        }
+    )
+    assert settings["policy_kwargs"] == {
+        "net_arch": {"pi": [64, 64, 64], "vf": [64, 64]},
+        "activation_fn": "torch.nn.modules.activation.Tanh",
+    }
     assert "learning_rate" not in settings  # a schedule is no JSON value
-    assert genrl_settings({"policy_kwargs": {"net_arch": [8], "optimizer_kwargs": {"eps": object()}}}).get(
-        "policy_kwargs", "left out") == "left out"
+    assert (
+        genrl_settings({"policy_kwargs": {"net_arch": [8], "optimizer_kwargs": {"eps": object()}}}).get(
+            "policy_kwargs", "left out"
+        )
+        == "left out"
+    )

@@ -25,8 +25,9 @@ class _BatchRecorder(BaseCallback):
 
     def _on_rollout_end(self) -> None:
         buffer = self.model.rollout_buffer
-        self.batches.append((buffer.observations.reshape(-1, buffer.observations.shape[-1]).copy(),
-                             buffer.returns.flatten().copy()))
+        self.batches.append(
+            (buffer.observations.reshape(-1, buffer.observations.shape[-1]).copy(), buffer.returns.flatten().copy())
+        )
 
     def _on_step(self) -> bool:
         return True
@@ -38,7 +39,8 @@ def test_value_memory_holds_the_last_value_history_batches():
     model.learn(5 * 16, callback=recorder)
     assert len(recorder.batches) == 5 and len(model._value_memory) == 3
     for (observations, returns), (expected_observations, expected_returns) in zip(
-            model._value_memory, recorder.batches[-3:], strict=True):  # the same rows, in another order
+        model._value_memory, recorder.batches[-3:], strict=True
+    ):  # the same rows, in another order
         observations, returns = observations.cpu().numpy(), returns.cpu().numpy()
         order, expected_order = np.argsort(returns), np.argsort(expected_returns)
         np.testing.assert_allclose(observations[order], expected_observations[expected_order])
@@ -49,8 +51,7 @@ def test_value_memory_holds_the_last_value_history_batches():
 def test_value_function_is_the_least_squares_fit_over_the_remembered_batches(value_history, expected):
     # The same contexts with returns 0 in the remembered batch and 1 in the current one: the least-squares value is
     # 1 when only the current batch counts, and the mean 0.5 over both batches.
-    model = GenRL(FastReachEnv(), LinearGenerator(), seed=0, n_steps=16, value_history=value_history,
-                  n_critic_updates=2000)
+    model = GenRL(FastReachEnv(), LinearGenerator(), seed=0, n_steps=16, value_history=value_history, n_critic_updates=2000)
     model.learn(16)
     observations = next(model.rollout_buffer.get(batch_size=None)).observations
     model._value_memory.clear()
@@ -118,8 +119,9 @@ def test_fused_value_fit_is_autograd_and_adam_bit_for_bit(policy_name):
 
     from sb3_genrl.genrl.value import fit_value_function, fused_value
 
-    policy = GenRL(policy_name, FastReachEnv(), LinearGenerator(), seed=0,
-                   policy_kwargs={"net_arch": {"pi": [8], "vf": [32, 32]}}).policy
+    policy = GenRL(
+        policy_name, FastReachEnv(), LinearGenerator(), seed=0, policy_kwargs={"net_arch": {"pi": [8], "vf": [32, 32]}}
+    ).policy
     generator = th.Generator().manual_seed(0)
     observations = th.rand(90, 2, generator=generator) * 1.6 - 0.8
     returns = th.randn(90, generator=generator)
