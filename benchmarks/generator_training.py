@@ -20,7 +20,7 @@ from sb3_genrl.envs import TASKS
 from sb3_genrl import __version__
 from sb3_genrl.checks import COUNT, JSON_OUT, SEED, check_device, option
 from sb3_genrl.generative import make_generator
-from sb3_genrl.generative.presets import BATCH_SIZE, N_DEMONSTRATIONS, N_JOINTS
+from sb3_genrl.generative.defaults import BATCH_SIZE, N_DEMONSTRATIONS, N_JOINTS
 from sb3_genrl.generative.synthetic import sine_ramp_trajectories
 from sb3_genrl.utils import atomic_write_json
 

@@ -1,17 +1,13 @@
 """sb3-genrl: policies trained in the latent space of generative models of motor trajectories (GenRL)."""
 
-from importlib.metadata import PackageNotFoundError, entry_points, version
+from importlib.metadata import entry_points
 
 from sb3_genrl.genrl import GenRL
 from sb3_genrl.vec_env import BatchedLatentVecEnv
+from sb3_genrl.version import __version__
 from sb3_genrl.wrappers import LatentActionWrapper
 
 __all__ = ["BatchedLatentVecEnv", "GenRL", "LatentActionWrapper", "__version__"]
-
-try:
-    __version__ = version("sb3-genrl")
-except PackageNotFoundError:  # running from a source tree that is not installed
-    __version__ = "0.0.0+unknown"
 
 
 def _register_gymnasium_plugins() -> None:

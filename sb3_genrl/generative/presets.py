@@ -1,31 +1,16 @@
-"""The paper's generative-model constants and its model grid (VAE1-9, GAN1-9), by name."""
+"""The paper's model grid (VAE1-9, GAN1-9, paper table 1) and the task recipes, by name, and the generators they build."""
 
 from __future__ import annotations
 
 from itertools import product
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import torch
 
-if TYPE_CHECKING:  # the models import their defaults from here
-    from sb3_genrl.generative.torch_generator import TorchTrajectoryGenerator
-
-# Section 6.1.2: latent dimensions N_alpha and the regularisation weights of the grid (paper table 1).
-LATENT_DIMS = (2, 3, 6)
-BETAS = (0.01, 0.005, 0.001)
-INFO_WEIGHTS = (0.1, 1.5, 3.5)
-# Section 6.1.2: trajectories of 7 joints (their horizon is the task's, read from the data or the task's spec).
-N_JOINTS = 7
-# Appendix B: "trained for 5000 epochs with learning rate fixed to 2e-4 using batch size 256"; model selection by the
-# squared error between "100 randomly generated trajectories" and held-out test trajectories.
-EPOCHS = 5000
-LEARNING_RATE = 2e-4
-BATCH_SIZE = 256
-SELECTION_SAMPLES = 100
-# Section 6.1.2: about 40K demonstrations per task (used for benchmark sizes).
-N_DEMONSTRATIONS = 40_000
-
-MODEL_KINDS = ("vae", "gan")
+from sb3_genrl.generative.defaults import BETAS, INFO_WEIGHTS, LATENT_DIMS, MODEL_KINDS
+from sb3_genrl.generative.infogan import InfoGAN
+from sb3_genrl.generative.torch_generator import TorchTrajectoryGenerator
+from sb3_genrl.generative.vae import BetaVAE
 
 
 def _grid() -> dict[str, dict[str, Any]]:
@@ -102,9 +87,6 @@ def make_generator(
     :param std_floor: floor of each normalisation std as a fraction of the largest (``None``: the model's default)
     :param device: torch device or ``"auto"``
     """
-    from sb3_genrl.generative.infogan import InfoGAN
-    from sb3_genrl.generative.vae import BetaVAE
-
     spec = resolve_generator_spec(preset_or_kind, latent_dim=latent_dim, beta=beta, info_weight=info_weight)
     extra = {} if std_floor is None else {"std_floor": std_floor}
     if spec["model"] == "vae":

@@ -26,7 +26,8 @@ from sb3_genrl.generative.common import (
     selection_mse,
     split_train_validation,
 )
-from sb3_genrl.generative.presets import BATCH_SIZE, EPOCHS, LEARNING_RATE, SELECTION_SAMPLES
+from sb3_genrl.generative.defaults import BATCH_SIZE, EPOCHS, LEARNING_RATE, SELECTION_SAMPLES
+from sb3_genrl.generative.file_format import save_generator
 
 SelfTorchTrajectoryGenerator = TypeVar("SelfTorchTrajectoryGenerator", bound="TorchTrajectoryGenerator")
 
@@ -330,6 +331,4 @@ class TorchTrajectoryGenerator(TrajectoryGenerator, abc.ABC):
 
     def save(self, path: str) -> None:
         """Write weights, configuration, normalisation statistics, history and package version to one file."""
-        from sb3_genrl.generative.serialization import save_generator
-
         save_generator(self, path)

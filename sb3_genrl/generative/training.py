@@ -11,14 +11,8 @@ import torch
 
 from sb3_genrl.checks import check_device, check_output_file, check_positive_float, check_positive_int, check_seed
 from sb3_genrl.data import load_trajectories
-from sb3_genrl.generative.presets import (
-    BATCH_SIZE,
-    EPOCHS,
-    LEARNING_RATE,
-    PRESETS,
-    SELECTION_SAMPLES,
-    make_generator,
-)
+from sb3_genrl.generative.defaults import BATCH_SIZE, EPOCHS, LEARNING_RATE, SELECTION_SAMPLES
+from sb3_genrl.generative.presets import PRESETS, make_generator
 from sb3_genrl.generative.torch_generator import TorchTrajectoryGenerator
 
 

@@ -60,7 +60,7 @@ def _is_generator_file(path: Any) -> bool:
     if not isinstance(path, str | os.PathLike):
         return False
     try:
-        from sb3_genrl.generative.serialization import FORMAT_MARKER
+        from sb3_genrl.generative.file_format import FORMAT_MARKER
 
         return th.load(path, map_location="cpu", weights_only=True).get("format") == FORMAT_MARKER
     except Exception:  # noqa: BLE001 (any file that torch cannot read as ours is not a generator file)
@@ -96,7 +96,7 @@ def generator_digest(generator: TrajectoryGenerator | None) -> str | None:
     (its content is unknown), or none."""
     if generator is None or not (hasattr(generator, "state_tensors") and hasattr(generator, "config")):
         return None
-    from sb3_genrl.generative.serialization import payload_digest
+    from sb3_genrl.generative.file_format import payload_digest
 
     return payload_digest(
         {
