@@ -9,6 +9,7 @@ checking whether its output exists therefore never mistakes a partial file for a
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import os
 import secrets
@@ -49,7 +50,9 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
             torch.save(payload, tmp)
 
     The parent folder is created. If the block raises, the temporary file is removed and ``path`` is left as it
-    was. A block that writes nothing to the temporary path raises ``FileNotFoundError``.
+    was. A block that writes nothing to the temporary path raises ``FileNotFoundError``. A failed write that names no
+    file (a full disk: ``OSError`` without a file name, or torch's ``RuntimeError`` from its zip writer) is raised as
+    an ``OSError`` naming ``path``.
 
     :param path: the final path
     """
@@ -64,10 +67,24 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
             raise FileNotFoundError(f"nothing was written for {str(final)!r}")
         _fsync(tmp)
         os.replace(tmp, final)
-    except BaseException:
+    except BaseException as error:
         with contextlib.suppress(FileNotFoundError):
             tmp.unlink()
-        raise
+        named = _naming_the_file(error, final)
+        if named is None:
+            raise
+        raise named from error
+
+
+def _naming_the_file(error: BaseException, final: Path) -> OSError | None:
+    """The failed write ``error`` as an ``OSError`` naming ``final`` (``None``: it names a file already, or is no
+    failed write)."""
+    if isinstance(error, OSError) and error.filename is None and error.errno is not None:
+        return OSError(error.errno, error.strerror or str(error), str(final))
+    if isinstance(error, RuntimeError) and ("PytorchStreamWriter" in str(error) or "unexpected pos" in str(error)):
+        first_line = str(error).strip().splitlines()[0]
+        return OSError(errno.EIO, f"torch could not write the file, is the disk full? ({first_line})", str(final))
+    return None
 
 
 def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> Path:
@@ -180,8 +197,9 @@ def write_checkpoint(
     """Write a checkpoint of several files as one unit into ``folder``.
 
     Each file is written (atomically) under a name of its own, ``<stem>-<random><suffix>``; then ``state.json``,
-    holding ``state`` and ``"files"`` (each entry's file name), replaces the previous one atomically; then the files
-    of the previous checkpoint are removed. A run killed at any moment (or a full disk) leaves ``state.json``
+    holding ``state``, ``"files"`` (each entry's file name) and ``"sizes"`` (each file's size in bytes, checked by
+    :func:`read_checkpoint`), replaces the previous one atomically; then the files of the previous checkpoint are
+    removed. A run killed at any moment (or a full disk) leaves ``state.json``
     naming a whole checkpoint, the new one or the one before, never a mix of them.
 
     :param folder: the checkpoint folder (created)
@@ -193,11 +211,12 @@ def write_checkpoint(
     folder.mkdir(parents=True, exist_ok=True)
     token = secrets.token_hex(4)
     names = {entry: f"{Path(name).stem}-{token}{Path(name).suffix}" for entry, (name, _) in files.items()}
-    record = {**state, "files": names}
+    record = {**state, "files": names, "sizes": {}}
     try:
         for entry, (_, write) in files.items():
             with atomic_path(folder / names[entry]) as tmp:
                 write(tmp)
+            record["sizes"][entry] = (folder / names[entry]).stat().st_size
         atomic_write_json(folder / CHECKPOINT_STATE, record)
     except BaseException:  # the previous checkpoint stays; this one's files go
         for name in names.values():
@@ -211,7 +230,8 @@ def write_checkpoint(
 
 def read_checkpoint(folder: str | os.PathLike[str]) -> dict[str, Any] | None:
     """What ``folder/state.json`` holds (see :func:`write_checkpoint`), with ``"paths"``: each entry's file; ``None``
-    when there is no checkpoint.
+    when there is no checkpoint. A file that is missing, or not of the size it was written with (truncated), is
+    refused with a ``ValueError`` naming it.
 
     :param folder: the checkpoint folder
     """
@@ -222,9 +242,16 @@ def read_checkpoint(folder: str | os.PathLike[str]) -> dict[str, Any] | None:
     try:
         state = json.loads(path.read_text())
         paths = {entry: folder / name for entry, name in state["files"].items()}
-    except (json.JSONDecodeError, KeyError, TypeError, AttributeError) as error:
+        sizes = {entry: int(size) for entry, size in state.get("sizes", {}).items()}  # none: an earlier version's
+    except (json.JSONDecodeError, KeyError, TypeError, AttributeError, ValueError) as error:
         raise ValueError(f"{path} is not a checkpoint state ({error}); delete {folder} to start afresh") from None
     missing = [str(p) for p in paths.values() if not p.is_file()]
     if missing:
         raise ValueError(f"{path} names files that do not exist: {missing}; delete {folder} to start afresh")
+    for entry, size in sizes.items():
+        if entry in paths and paths[entry].stat().st_size != size:
+            raise ValueError(
+                f"the checkpoint file {paths[entry]} is truncated or corrupt ({paths[entry].stat().st_size} bytes, "
+                f"{size} when it was written); delete {folder} to start afresh"
+            )
     return state | {"paths": paths}

@@ -23,9 +23,11 @@ the earlier one kept as ``progress.until_episode_K.csv``).
 from __future__ import annotations
 
 import pathlib
+import pickle
 import random
 import time
 import warnings
+import zipfile
 from typing import Any
 
 import gymnasium as gym
@@ -125,7 +127,7 @@ def resume_genrl(state: dict[str, Any], env: Any, generator: TrajectoryGenerator
     """The model as the checkpoint ``state`` left it, on ``env`` (a new monitored env of the run, its envs wrapped in
     :class:`RandomStateRecorder`), which is reset to draw the checkpoint's contexts again, with ``logger`` holding the
     values the stopped run had not written yet."""
-    memories = th.load(state["paths"]["memories"], weights_only=True, map_location="cpu")
+    memories = _load_memories(state["paths"]["memories"])
     model = GenRL.load(state["paths"]["model"], env=env, device=device, force_reset=False, generator=generator)
     model._value_memory.extend(_to_device(memories["value_memory"], model.device))
     if model.hindsight is not None:
@@ -152,6 +154,18 @@ def resume_genrl(state: dict[str, Any], env: Any, generator: TrajectoryGenerator
     _restore_pending_logs(memories["logger"], logger)
     _continue_clocks(venv, state)
     return model
+
+
+def _load_memories(path: pathlib.Path) -> dict[str, Any]:
+    """The checkpoint's memories file, or a ``ValueError`` naming it when it cannot be read (truncated or corrupt)."""
+    try:
+        return th.load(path, weights_only=True, map_location="cpu")
+    except (OSError, EOFError, RuntimeError, pickle.UnpicklingError, zipfile.BadZipFile) as error:
+        reason = str(error).strip().split(". ")[0].split("\n")[0] or "it ends early"  # torch's first sentence
+        raise ValueError(
+            f"the checkpoint file {path} is truncated or corrupt ({type(error).__name__}: {reason}); "
+            f"delete {path.parent} to start afresh"
+        ) from error
 
 
 def random_states(env: gym.Env) -> dict[str, Any]:

@@ -99,3 +99,27 @@ def _progress(path) -> dict[str, list[str]]:
     with open(path) as file:
         rows = [row for row in csv.DictReader(file) if row.get("train/kl")]
     return {key: [row[key] for row in rows] for key in ("train/mean_reward", "train/kl")}
+
+
+def test_a_truncated_memories_file_is_refused_naming_it_and_the_checkpoint_is_kept(fast_reach_task, tmp_path, monkeypatch):  # noqa: F811
+    settings = {"episodes": 128, "seed": 3, "batch_episodes": 32, "checkpoint_every": 32}
+    learn = GenRL.train
+    monkeypatch.setattr(
+        GenRL, "train", lambda model: learn(model) if model._n_updates < 2 else (_ for _ in ()).throw(_Killed())
+    )
+    with pytest.raises(_Killed):
+        train_policy("fast-reach", LinearGenerator(), out_dir=tmp_path, **settings)
+    monkeypatch.undo()
+    folder = tmp_path / "checkpoint"
+    state = json.loads((folder / "state.json").read_text())
+    memories = folder / state["files"]["memories"]
+    memories.write_bytes(memories.read_bytes()[:-10])  # cut short, as by a copy that stopped
+    with pytest.raises(ValueError, match="is truncated or corrupt") as error:
+        train_policy("fast-reach", LinearGenerator(), out_dir=tmp_path, **settings)
+    assert str(memories) in str(error.value) and f"delete {folder}" in str(error.value)
+    # A checkpoint of an earlier version (no recorded sizes) is refused with the same words when torch cannot read it.
+    (folder / "state.json").write_text(json.dumps({key: value for key, value in state.items() if key != "sizes"}))
+    with pytest.raises(ValueError, match="is truncated or corrupt") as error:
+        train_policy("fast-reach", LinearGenerator(), out_dir=tmp_path, **settings)
+    assert str(memories) in str(error.value) and f"delete {folder}" in str(error.value)
+    assert sorted(path.name for path in folder.iterdir()) == sorted(["state.json", *state["files"].values()])  # kept
