@@ -20,6 +20,7 @@ __all__ = [
     "PRIOR_ROLLOUT_SEED",
     "TUNING_GOAL_SEED",
     "changed_settings",
+    "check_genrl_entry",
     "hyperparams_file",
     "known_algos",
     "known_env_ids",
@@ -105,11 +106,27 @@ def load_genrl_settings(env_id: str) -> tuple[int, int, dict[str, Any]]:
     :return: ``(episodes, batch_episodes, genrl_kwargs)``; ``genrl_kwargs`` may name the ``policy`` and the
         ``callback``
     """
+    return check_genrl_entry(load_hyperparams("genrl", env_id), f"{hyperparams_file('genrl')} {env_id}")
+
+
+def check_genrl_entry(entry: dict[str, Any], name: str) -> tuple[int, int, dict[str, Any]]:
+    """A task's entry of GenRL settings in rl-zoo3's format, checked before any work (:func:`load_genrl_settings`
+    reads one from ``genrl.yml``; rl-zoo3's entry point checks the entry it runs with, ``-conf`` and ``-params``
+    included).
+
+    :param entry: the entry (not changed): ``n_timesteps``, ``n_steps``, optionally ``n_envs``, ``env_wrapper`` and
+        ``callback``, and GenRL arguments (``policy_kwargs`` may be rl-zoo3's ``"dict(...)"`` string)
+    :param name: where the entry comes from, to start the error messages with
+    :return: ``(episodes, batch_episodes, genrl_kwargs)`` as :func:`load_genrl_settings`'s
+    :raises ValueError: naming the setting and what was expected
+    """
     from sb3_genrl.genrl import check_genrl_settings
     from sb3_genrl.genrl.demonstrations import callback_entries
 
-    entry = load_hyperparams("genrl", env_id)
-    name = f"{hyperparams_file('genrl')} {env_id}"
+    entry = copy.deepcopy(entry)
+    for key in _KWARGS:
+        if key in entry:
+            entry[key] = parse_kwargs(entry[key], f"{name}: {key}")
     for key in ("n_timesteps", "n_steps"):
         if key not in entry:
             raise ValueError(f"{name}: needs {key}")

@@ -273,8 +273,8 @@ def test_a_missing_generator_names_the_command_that_makes_it(monkeypatch, tmp_pa
     monkeypatch.setenv("SB3_GENRL_CACHE", str(tmp_path))
     with pytest.raises(
         FileNotFoundError,
-        match=r"generators/hockey/vae\.pt is not made yet: `python -m sb3_genrl\.zoo "
-        r"train --algo genrl --env GenRL/Hockey-v0` makes it",
+        match=r"generators/hockey/vae\.pt is not made yet: `python -m sb3_genrl\.zoo build-generator --env "
+        r"GenRL/Hockey-v0` makes it \(as `python -m sb3_genrl\.zoo train --algo genrl --env GenRL/Hockey-v0` does",
     ):
         latent_action(gym.make(ENV_ID))
     with pytest.raises(FileNotFoundError, match="no generator file"):
@@ -314,12 +314,14 @@ def test_a_demonstration_callback_gets_the_cached_generators_demonstrations(monk
     from sb3_genrl.data import write_dataset
     from sb3_genrl.genrl.demonstrations import DEMONSTRATION_CALLBACK, DemonstrationCallback
     from sb3_genrl.study.state import dataset_fingerprint
+    from sb3_genrl.utils import atomic_write_json
     from sb3_genrl.zoo.experiment import WRAPPER, resolved_callback, resolved_wrapper
-    from sb3_genrl.zoo.generators import default_demonstrations, default_generator
+    from sb3_genrl.zoo.generators import default_demonstrations, default_generator, generator_settings
 
     monkeypatch.setenv("SB3_GENRL_CACHE", str(tmp_path))
     default_generator(ENV_ID).parent.mkdir(parents=True)
     shutil.copy(hockey_generator, default_generator(ENV_ID))  # the cached generator, made before
+    atomic_write_json(default_generator(ENV_ID).parent / "stage.json", generator_settings(ENV_ID))
     wrapper = resolved_wrapper(WRAPPER, ENV_ID, "cpu")
     callback = [{DEMONSTRATION_CALLBACK: {"fit_steps": 10}}]
     with pytest.raises(
@@ -377,5 +379,5 @@ def test_every_task_entry_lies_in_the_search_space():
 
 
 def test_the_entry_point_names_its_scripts(capsys):
-    assert main(["--help"]) == 0 and "{train,enjoy,record_video}" in capsys.readouterr().out
+    assert main(["--help"]) == 0 and "{train,enjoy,record_video,build-generator}" in capsys.readouterr().out
     assert main(["plot_train"]) == 2 and "unknown script 'plot_train'" in capsys.readouterr().err

@@ -1,12 +1,16 @@
 """rl-zoo3's ``ExperimentManager`` for GenRL: the generator named in the saved run, and evaluation on tuning goals.
 
-Three things differ from rl-zoo3's own manager, for ``--algo genrl`` only:
+Four things differ from rl-zoo3's own manager, for ``--algo genrl`` only:
 
+- the entry (``-conf``'s file or ``hyperparams/genrl.yml``, with ``-params`` laid over it) is checked before any
+  work: every GenRL setting (:func:`sb3_genrl.hyperparams.check_genrl_entry`) and the env wrapper's arguments, so
+  that a mistake is reported before a generator is made;
 - the env wrapper's generator is resolved before any env is made (the task's quickstart generator is made into the
   cache when missing, :mod:`sb3_genrl.zoo.generators`), and the run's ``config.yml`` records its file and content
   digest, so that ``enjoy`` and ``record_video`` play the policy with the generator it was trained with; a
   :class:`~sb3_genrl.genrl.demonstrations.DemonstrationCallback` without a dataset (the Fetch tasks' entries) gets the
-  demonstrations that generator was trained on, recorded in ``config.yml`` with their fingerprint;
+  demonstrations that generator was trained on, recorded in ``config.yml`` with their fingerprint; a model
+  continued with ``-i`` must have been trained with that generator;
 - every evaluation env (``EvalCallback`` while training, the trials' evaluations with ``-optimize``) draws its goals
   from :data:`~sb3_genrl.hyperparams.TUNING_GOAL_SEED` afresh at each evaluation, the same goals each time and never
   the held-out ones (:data:`~sb3_genrl.hyperparams.EVAL_GOAL_SEED`);
@@ -17,16 +21,24 @@ Three things differ from rl-zoo3's own manager, for ``--algo genrl`` only:
 from __future__ import annotations
 
 import contextlib
+import inspect
 from collections.abc import Iterator
 from typing import Any
 
 import optuna
 from rl_zoo3.exp_manager import ExperimentManager
+from stable_baselines3.common.save_util import load_from_zip_file
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 
-from sb3_genrl.hyperparams import TUNING_GOAL_SEED
+from sb3_genrl.checks import check_positive_float
+from sb3_genrl.genrl.generator_files import check_model_data, generator_digest, generator_file
+from sb3_genrl.hyperparams import TUNING_GOAL_SEED, ZOO_KEYS, check_genrl_entry
+from sb3_genrl.zoo.generators import build_default_generator, default_demonstrations, default_generator
+from sb3_genrl.zoo.wrapper import latent_action, load_generator, resolve_generator
 
 WRAPPER = "sb3_genrl.zoo.latent_action"
+# rl-zoo3's keys of an entry that are not GenRL's (check_genrl_entry reads n_timesteps, n_envs, env_wrapper, callback)
+RL_ZOO_KEYS = (ZOO_KEYS | {"monitor_kwargs"}) - {"n_timesteps", "n_envs", "env_wrapper", "callback"}
 
 
 class TuningGoals(VecEnvWrapper):
@@ -54,7 +66,13 @@ class GenRLExperimentManager(ExperimentManager):
     def read_hyperparameters(self) -> tuple[dict[str, Any], dict[str, Any]]:
         hyperparams, saved = super().read_hyperparameters()
         if self.algo == "genrl":
-            wrapper = resolved_wrapper(hyperparams.get("env_wrapper"), self.env_name.gym_id, self.device)
+            env_id = self.env_name.gym_id
+            check_entry(
+                hyperparams, f"{env_id} (the settings of {self.config}{' with -params' if self.custom_hyperparams else ''})"
+            )
+            wrapper = resolved_wrapper(hyperparams.get("env_wrapper"), env_id, self.device)
+            if self.continue_training:
+                check_trained_agent(self.trained_agent, wrapper)
             hyperparams["env_wrapper"] = saved["env_wrapper"] = wrapper
             if hyperparams.get("callback") is not None:
                 callback = resolved_callback(hyperparams["callback"], wrapper, self.env_name.gym_id)
@@ -96,16 +114,77 @@ class GenRLExperimentManager(ExperimentManager):
             optuna.create_study = create_study
 
 
+def check_entry(hyperparams: dict[str, Any], name: str) -> None:
+    """Refuse an rl-zoo3 entry of GenRL settings that GenRL or its env wrapper would refuse, before any work: the
+    GenRL settings (:func:`~sb3_genrl.hyperparams.check_genrl_entry`, rl-zoo3's own keys set aside) and the
+    arguments of the latent-action wrapper.
+
+    :param hyperparams: the entry as rl-zoo3 read it (``-params`` laid over it)
+    :param name: what the entry is, to start the error messages with
+    :raises ValueError: naming the setting and what was expected
+    """
+    entry = {key: value for key, value in hyperparams.items() if key not in RL_ZOO_KEYS}
+    if isinstance(entry.get("policy"), str) and "." in entry["policy"]:  # a policy class by its path, for rl-zoo3
+        del entry["policy"]
+    if isinstance(entry.get("learning_rate"), str):  # rl-zoo3's schedule, "lin_0.001": its value at the start
+        entry["learning_rate"] = _schedule_start(entry["learning_rate"], name)
+    check_genrl_entry(entry, name)
+    check_env_wrapper(hyperparams.get("env_wrapper"), name)
+
+
+def _schedule_start(schedule: str, name: str) -> float:
+    """The start of rl-zoo3's linear schedule ``"lin_0.001"`` (rl-zoo3 reads ``<any name>_<number>``)."""
+    try:
+        _, value = schedule.split("_")
+        return float(value)
+    except ValueError:
+        raise ValueError(f"{name}: learning_rate must be a number or rl-zoo3's 'lin_<number>', got {schedule!r}") from None
+
+
+def check_env_wrapper(env_wrapper: Any, name: str) -> None:
+    """Refuse an rl-zoo3 ``env_wrapper`` without the latent-action wrapper, or with arguments it would refuse.
+
+    :param env_wrapper: a wrapper's class path, ``{path: {arguments}}``, or a list of them
+    :param name: what the settings are, to start the error messages with
+    :raises ValueError: naming the entry and what was expected
+    """
+    ours = []
+    for item in env_wrapper if isinstance(env_wrapper, list) else [env_wrapper]:
+        if isinstance(item, dict) and len(item) == 1 and isinstance(next(iter(item)), str):
+            path, kwargs = next(iter(item.items()))
+            if kwargs is not None and not isinstance(kwargs, dict):
+                raise ValueError(f"{name}: env_wrapper: the arguments of {path} must be a mapping, got {kwargs!r}")
+        elif isinstance(item, str) or item is None:
+            path, kwargs = item, None
+        else:
+            raise ValueError(f"{name}: env_wrapper: expected a wrapper's class path or {{path: {{arguments}}}}, got {item!r}")
+        if path == WRAPPER:
+            ours.append(kwargs or {})
+    if not ours:
+        raise ValueError(f"{name}: --algo genrl needs the env wrapper {WRAPPER} (env_wrapper)")
+    known = [key for key in inspect.signature(latent_action).parameters if key != "env"]
+    for kwargs in ours:
+        unknown = sorted(set(kwargs) - set(known))
+        if unknown:
+            raise ValueError(
+                f"{name}: env_wrapper {WRAPPER}: {', '.join(map(repr, unknown))} "
+                f"{'is not among its arguments' if len(unknown) == 1 else 'are not among its arguments'} "
+                f"({', '.join(known)})"
+            )
+        for key in ("generator", "generator_sha256"):
+            if kwargs.get(key) is not None and not isinstance(kwargs[key], str):
+                raise ValueError(f"{name}: env_wrapper {WRAPPER}: {key} must be a file name, got {kwargs[key]!r}")
+        if "latent_clip" in kwargs:
+            check_positive_float(kwargs["latent_clip"], f"{name}: env_wrapper {WRAPPER}: latent_clip")
+
+
 def resolved_wrapper(env_wrapper: Any, env_id: str, device: Any = "auto") -> Any:
     """The entry's ``env_wrapper`` with the latent-action wrapper's generator file and digest filled in (the task's
-    quickstart generator made into the cache when the entry names none and it is missing)."""
-    from sb3_genrl.genrl.generator_files import generator_digest
-    from sb3_genrl.zoo.generators import build_default_generator, default_generator
-    from sb3_genrl.zoo.wrapper import load_generator, resolve_generator
-
-    wrappers = env_wrapper if isinstance(env_wrapper, list) else [env_wrapper]
+    quickstart generator made into the cache when the entry names none and it is missing). The wrapper's arguments
+    are checked (:func:`check_env_wrapper`) before any generator is loaded or made."""
+    check_env_wrapper(env_wrapper, f"{env_id}: the settings")
     resolved = []
-    for wrapper in wrappers:
+    for wrapper in env_wrapper if isinstance(env_wrapper, list) else [env_wrapper]:
         name, kwargs = next(iter(wrapper.items())) if isinstance(wrapper, dict) else (wrapper, {})
         if name != WRAPPER:
             resolved.append(wrapper)
@@ -116,9 +195,30 @@ def resolved_wrapper(env_wrapper: Any, env_id: str, device: Any = "auto") -> Any
         path = resolve_generator(kwargs.get("generator"), env_id)
         kwargs.update(generator=str(path.resolve()), generator_sha256=generator_digest(load_generator(path)))
         resolved.append({name: kwargs})
-    if WRAPPER not in [next(iter(w)) if isinstance(w, dict) else w for w in resolved]:
-        raise ValueError(f"--algo genrl needs the env wrapper {WRAPPER} in the settings of {env_id} (env_wrapper)")
     return resolved
+
+
+def check_trained_agent(path: str, wrapper: list[Any]) -> None:
+    """Refuse to continue training (rl-zoo3's ``-i``) a model zip that was trained with another generator than the
+    latent-action wrapper's (the zip records its generator's ``generator_sha256``), or a zip that is not a GenRL model.
+
+    :param path: the model zip
+    :param wrapper: the resolved ``env_wrapper`` (:func:`resolved_wrapper`)
+    :raises ValueError: naming both generators
+    """
+    data, _, _ = load_from_zip_file(path, device="cpu", load_data=True)
+    check_model_data(path, data)
+    recorded = data.get("generator_sha256")
+    kwargs = next(item[WRAPPER] for item in wrapper if isinstance(item, dict) and WRAPPER in item)
+    given = kwargs["generator_sha256"]
+    if recorded is not None and recorded != given:
+        trained_with = data.get("generator_path") or generator_file(path)
+        raise ValueError(
+            f"-i {path} was trained with another generator (SHA-256 {recorded[:12]}..., {trained_with}) than the "
+            f"env wrapper's {kwargs['generator']} (SHA-256 {given[:12] + '...' if given else 'unknown'}): continue it with "
+            f"the generator it was trained with, -params \"env_wrapper:[{{'{WRAPPER}': {{'generator': "
+            f"'{trained_with}'}}}}]\", or train a new model without -i"
+        )
 
 
 def resolved_callback(callback: Any, wrapper: list[Any], env_id: str) -> list[dict[str, Any]]:
@@ -127,7 +227,6 @@ def resolved_callback(callback: Any, wrapper: list[Any], env_id: str) -> list[di
     trained on, with their fingerprint; another generator needs the callback's dataset given."""
     from sb3_genrl.genrl.demonstrations import DEMONSTRATION_CALLBACK, callback_entries, with_dataset
     from sb3_genrl.study.state import dataset_fingerprint
-    from sb3_genrl.zoo.generators import default_demonstrations, default_generator
 
     entries = callback_entries(callback, f"{env_id}: callback")
     if not any(path == DEMONSTRATION_CALLBACK and kwargs.get("dataset") is None for path, kwargs in entries):

@@ -18,6 +18,7 @@ from stable_baselines3.common.monitor import Monitor
 
 from sb3_genrl.generative.base import TrajectoryGenerator
 from sb3_genrl.wrappers import LatentActionWrapper
+from sb3_genrl.zoo.generators import build_command, check_cache, default_generator
 
 
 class ZooLatentActionWrapper(LatentActionWrapper):
@@ -51,7 +52,8 @@ def latent_action(
 
     :param env: the task as rl-zoo3 makes it (in SB3's ``Monitor``, which is moved above the wrapper)
     :param generator: the generator's file; ``None``: the task's quickstart generator in the cache
-        (:func:`sb3_genrl.zoo.generators.default_generator`, made by ``python -m sb3_genrl.zoo train``)
+        (:func:`sb3_genrl.zoo.generators.default_generator`, made by ``python -m sb3_genrl.zoo build-generator``, or
+        by ``train`` on first use)
     :param generator_sha256: the generator's content digest, when known (a saved run records it): a generator file
         whose content differs is refused
     :param latent_clip: as :class:`~sb3_genrl.LatentActionWrapper`'s
@@ -76,19 +78,19 @@ def latent_action(
 
 
 def resolve_generator(generator: str | os.PathLike | None, env_id: str | None) -> pathlib.Path:
-    """The generator file: ``generator`` (``~`` expanded), or the cached quickstart generator of ``env_id``'s task;
-    a ``FileNotFoundError`` saying how to make a missing one."""
-    from sb3_genrl.zoo.generators import default_generator
-
+    """The generator file: ``generator`` (``~`` expanded), or the cached quickstart generator of ``env_id``'s task
+    (refused when made with other settings, :func:`~sb3_genrl.zoo.generators.check_cache`); a ``FileNotFoundError``
+    saying how to make a missing one."""
     if generator is None:
         if env_id is None:
             raise ValueError("sb3_genrl.zoo.latent_action: an env without a Gymnasium id needs its generator file")
         path = default_generator(env_id)
+        check_cache(env_id)
         if not path.is_file():
             raise FileNotFoundError(
-                f"{env_id}'s generator {path} is not made yet: `python -m sb3_genrl.zoo train "
-                f"--algo genrl --env {env_id}` makes it first (the quickstart's stages), or give "
-                "a generator file as the wrapper's `generator`"
+                f"{env_id}'s generator {path} is not made yet: `{build_command(env_id)}` makes it (as "
+                f"`python -m sb3_genrl.zoo train --algo genrl --env {env_id}` does on first use), or give a "
+                "generator file as the wrapper's `generator`"
             )
         return path
     path = pathlib.Path(generator).expanduser()
