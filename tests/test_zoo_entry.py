@@ -114,6 +114,9 @@ def test_user_mistakes_are_one_line_before_any_generator_is_made(zoo, no_cache, 
     for arguments, message in mistakes.items():
         line = one_line_error(*zoo("train", "--algo", "genrl", *arguments, "-f", logs)[::2])
         assert line.startswith("python -m sb3_genrl.zoo train: error: ") and message in line, (arguments, line)
+    for script in ("enjoy", "record_video"):  # rl-zoo3's own checks, asserts
+        line = one_line_error(*zoo(script, "--algo", "genrl", "--env", ENV_ID, "-f", logs)[::2])
+        assert line == f"python -m sb3_genrl.zoo {script}: error: The {logs / 'genrl'} folder was not found"
     monkeypatch.delitem(gym.registry, "FetchPush-v4", raising=False)  # as without Gymnasium-Robotics
     line = one_line_error(*zoo("train", "--algo", "genrl", "--env", "FetchPush-v4", "-f", logs)[::2])
     assert 'FetchPush-v4 is not available: the Fetch tasks need Gymnasium-Robotics: pip install "sb3-genrl[robotics]"' in line
