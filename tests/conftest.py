@@ -16,6 +16,10 @@ from gymnasium import spaces  # noqa: E402
 
 from sb3_genrl.generative import TrajectoryGenerator  # noqa: E402
 
+# Seconds a test waits on another process before it gives up: a bound against a hang only, far beyond any run on a
+# loaded machine. No test passes or fails by how long something took; each waits for a signal (an exit, a line, a file).
+HANG_S = 1800
+
 
 @pytest.fixture(autouse=True)
 def one_torch_thread():

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from conftest import HANG_S
 
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 
@@ -58,7 +59,7 @@ def test_benchmarks_refuse_bad_arguments_before_any_work(tmp_path, script, argv,
     (tmp_path / "FILE").write_text("")
     (tmp_path / "FOLDER").mkdir()
     done = subprocess.run(
-        [sys.executable, str(BENCHMARKS / script), *argv], cwd=tmp_path, capture_output=True, text=True, timeout=120
+        [sys.executable, str(BENCHMARKS / script), *argv], cwd=tmp_path, capture_output=True, text=True, timeout=HANG_S
     )
     assert done.returncode == 2 and message in done.stderr, done.stderr
     assert done.stderr.splitlines()[-1].startswith(f"{script}: error: ")
@@ -72,7 +73,7 @@ def test_the_benchmarks_are_a_package_without_path_edits():
         [sys.executable, "-m", "sb3_genrl.benchmarks.genrl", "--task", "hockey", "--episodes", "0"],
         capture_output=True,
         text=True,
-        timeout=120,
+        timeout=HANG_S,
     )
     assert done.returncode == 2 and "argument --episodes: must be an integer >= 1, got 0" in done.stderr
 
@@ -160,7 +161,7 @@ def test_baselines_merge_refuses_a_result_of_other_settings_before_any_work(tmp_
         cwd=tmp_path,
         capture_output=True,
         text=True,
-        timeout=120,
+        timeout=HANG_S,
     )
     assert done.returncode != 0 and "--merge: cannot merge into" in done.stderr, done.stderr
     assert "episodes: 3000 there, 40 now" in done.stderr

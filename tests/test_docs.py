@@ -6,6 +6,8 @@ import re
 import subprocess
 import sys
 
+from conftest import HANG_S
+
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"
 COMPANION_SUFFIXES = (".md", ".png", "_episodes.png", "_env_steps.png", "_contacts.png")
@@ -26,7 +28,7 @@ def test_docs_build_without_warnings(tmp_path):
         str(ROOT / "docs"),
         str(tmp_path / "html"),
     ]
-    done = subprocess.run(command, capture_output=True, text=True, timeout=300)
+    done = subprocess.run(command, capture_output=True, text=True, timeout=HANG_S)
     assert done.returncode == 0, done.stdout + done.stderr
     assert (tmp_path / "html" / "modules" / "genrl.html").exists()
 

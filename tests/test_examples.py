@@ -11,7 +11,7 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import policy_distances
+from conftest import HANG_S, policy_distances
 
 EXAMPLES = pathlib.Path(__file__).resolve().parents[1] / "examples"
 
@@ -19,7 +19,7 @@ EXAMPLES = pathlib.Path(__file__).resolve().parents[1] / "examples"
 def run_example(name: str, *args: str, cwd: pathlib.Path) -> str:
     env = dict(os.environ, MUJOCO_GL=os.environ.get("MUJOCO_GL", "egl"), OMP_NUM_THREADS="1")
     completed = subprocess.run(
-        [sys.executable, str(EXAMPLES / name), *args], cwd=cwd, env=env, capture_output=True, text=True, timeout=600
+        [sys.executable, str(EXAMPLES / name), *args], cwd=cwd, env=env, capture_output=True, text=True, timeout=HANG_S
     )
     assert completed.returncode == 0, completed.stderr[-3000:]
     return completed.stdout

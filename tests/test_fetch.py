@@ -9,6 +9,7 @@ import gymnasium as gym
 import mujoco
 import numpy as np
 import pytest
+from conftest import HANG_S
 
 pytest.importorskip("gymnasium_robotics")
 
@@ -77,7 +78,7 @@ def test_fetch_ids_reset_whichever_of_the_two_packages_is_imported_first(order):
         f"import {order}\nimport gymnasium as gym\nenv = gym.make('FetchPush-v4')\nenv.reset(seed=0)\n"
         "print(type(env.unwrapped).__module__)"
     )
-    result = subprocess.run([sys.executable, "-W", "always", "-c", code], capture_output=True, text=True, timeout=120)
+    result = subprocess.run([sys.executable, "-W", "always", "-c", code], capture_output=True, text=True, timeout=HANG_S)
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip().splitlines()[-1] == "gymnasium_robotics.envs.fetch.push"
     assert "Overriding environment" not in result.stderr

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import policy_distances
+from conftest import HANG_S, policy_distances
 from sb3_genrl.envs import get_task
 
 from sb3_genrl.genrl.train import genrl_settings
@@ -159,13 +159,15 @@ def _free_ports(n: int) -> list[int]:
     return ports
 
 
-def _wait_for_port(port: int, seconds: float) -> None:
-    deadline = time.monotonic() + seconds
+def _wait_for_port(port: int, head: subprocess.Popen) -> None:
+    """Wait until ``head`` opens ``port`` (a refused connection is answered at once); fail if it exits first."""
+    deadline = time.monotonic() + HANG_S  # only against a hang
     while time.monotonic() < deadline:
-        with contextlib.suppress(OSError), socket.create_connection(("127.0.0.1", port), timeout=1):
+        with contextlib.suppress(OSError), socket.create_connection(("127.0.0.1", port), timeout=HANG_S):
             return
+        assert head.poll() is None, f"the Ray head exited with status {head.returncode} before it opened port {port}"
         time.sleep(0.5)
-    raise TimeoutError(f"the Ray head did not open port {port} within {seconds} s")
+    raise AssertionError(f"the Ray head did not open port {port}")
 
 
 RAY_STUDY = """
@@ -209,13 +211,13 @@ def test_study_on_a_ray_cluster_started_with_ray_start(tmp_path):
         stderr=subprocess.DEVNULL,
     )
     try:
-        _wait_for_port(gcs, 120)
+        _wait_for_port(gcs, head)
         address = f"127.0.0.1:{gcs}"
-        # Without the token the study stops within its time limit, naming the address and what to set (run beside
-        # the study with the token, which works).
+        # Without the token the study stops at its time limit, naming the address and what to set (run beside the
+        # study with the token, which works, given a limit no loaded machine reaches).
         no_token = {key: value for key, value in os.environ.items() if not key.startswith("RAY_AUTH")}
         runs = {}
-        for name, env, limit in (("refused", no_token, "5"), ("study", token_env, "30")):
+        for name, env, limit in (("refused", no_token, "5"), ("study", token_env, str(HANG_S))):
             with open(tmp_path / f"{name}.err", "w") as stderr:
                 runs[name] = subprocess.Popen(
                     [sys.executable, "-c", RAY_STUDY, str(tmp_path / name), address, limit],
@@ -224,7 +226,7 @@ def test_study_on_a_ray_cluster_started_with_ray_start(tmp_path):
                     stderr=stderr,
                 )
         for run in runs.values():
-            run.wait(500)
+            run.wait(HANG_S)
         errors = {name: (tmp_path / f"{name}.err").read_text() for name in runs}
         assert runs["refused"].returncode != 0
         assert f"RayConnectionError: no connection to the Ray cluster at {address} within 5 s" in errors["refused"]

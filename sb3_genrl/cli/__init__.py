@@ -9,6 +9,7 @@ demonstration dataset and ``--episodes`` / ``--demo-episodes`` are counts; ``--o
 from __future__ import annotations
 
 import argparse
+import errno
 import os
 import sys
 import time
@@ -85,6 +86,8 @@ def main(argv: list[str] | None = None) -> int:
         return _fail(args.command, f"error: {error}", 2)
     except OSError as error:  # a full disk, a folder gone: the cause and the file
         where = " ".join(repr(os.fspath(name)) for name in (error.filename, error.filename2) if name is not None)
+        if not where and error.errno in (errno.ENOSPC, errno.EDQUOT) and getattr(args, "out", None) is not None:
+            where = f"writing {os.fspath(args.out)!r}"  # a file written as it grows (the Monitor's, the logger's)
         return _fail(args.command, f"error: {error.strerror or error}{': ' + where if where else ''}", 1)
     except RuntimeError as error:
         if "PytorchStreamWriter" not in str(error) and "unexpected pos" not in str(error):

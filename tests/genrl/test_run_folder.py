@@ -73,14 +73,15 @@ def test_a_second_run_into_a_locked_folder_stops_at_once_with_exit_2(hockey_gene
             sys.executable,
             "-c",
             textwrap.dedent("""
-        import sys, time
+        import sys
         from sb3_genrl.study.state import folder_lock
         with folder_lock(sys.argv[1]):
             print("locked", flush=True)
-            time.sleep(120)
+            sys.stdin.read()  # holds the lock until the test kills it
     """),
             str(folder),
         ],
+        stdin=subprocess.PIPE,
         stdout=subprocess.PIPE,
         text=True,
     )

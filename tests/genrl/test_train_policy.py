@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import torch as th
 from conftest import (
+    HANG_S,
     FastReachEnv,
     LinearGenerator,
 )
@@ -137,7 +138,7 @@ def test_several_envs_without_a_main_guard_fail_with_a_clear_error(tmp_path):
         "train_policy('GenRLTest/StepReach-v0', LinearGenerator(), episodes=4, batch_episodes=2, n_envs=2, "
         f"out_dir={str(tmp_path / 'run')!r})\n"
     )
-    run = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    run = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=HANG_S, cwd=tmp_path)
     assert run.returncode != 0
     assert "RuntimeError: the 2 env processes did not start" in run.stderr
     assert 'under `if __name__ == "__main__":`' in run.stderr
