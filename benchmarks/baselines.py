@@ -51,7 +51,7 @@ from sb3_genrl.benchmarks.baselines_results import METHODS, WINDOW, core_hours, 
 from sb3_genrl.envs import arm_tasks
 
 from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, OUT_DIR, SEED, json_object_argument
-from sb3_genrl.provenance import package_versions
+from sb3_genrl.provenance import provenance
 from sb3_genrl.run_folder import differing
 from sb3_genrl.utils import atomic_write_json
 
@@ -384,7 +384,7 @@ def main(argv: list[str] | None = None) -> None:
         for seed in args.seeds
     ]
     run_jobs(jobs, args.jobs)
-    result = benchmark | package_versions() | {"machine": platform.machine(), "cpus": os.cpu_count(), "jobs": args.jobs}
+    result = benchmark | provenance() | {"machine": platform.machine(), "cpus": os.cpu_count(), "jobs": args.jobs}
     result = collect(result, args, work, generator, {job[0]: job[1] for job in jobs})
     if check_merge.previous is not None:
         result = merge_results(check_merge.previous, result)

@@ -78,6 +78,7 @@ def main(argv: list[str] | None = None) -> int:
     from sb3_genrl.checks import EXISTING, JSON_OUT, SEED
     from sb3_genrl.data import load_transitions
     from sb3_genrl.hyperparams import EVAL_GOAL_SEED
+    from sb3_genrl.provenance import provenance
     from sb3_genrl.utils import atomic_write_json
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -108,7 +109,7 @@ def main(argv: list[str] | None = None) -> int:
     for seed, run in zip(args.seeds, runs, strict=True):
         result["seeds"].append(seed_result(run, spec.name, transitions, seed))
         print(json.dumps(result["seeds"][-1]), flush=True)
-    atomic_write_json(out, result)
+    atomic_write_json(out, provenance() | result)
     print(f"arm holding still: {result['arm_holding_still']:.3f} m -> {out}")
     return 0
 

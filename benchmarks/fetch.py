@@ -57,7 +57,7 @@ from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, SEED
 from sb3_genrl.generative import load, train_generator
 from sb3_genrl.generative.presets import resolve_generator_spec
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED, TUNING_GOAL_SEED
-from sb3_genrl.provenance import package_versions
+from sb3_genrl.provenance import provenance
 from sb3_genrl.study.quickstart import quickstart_preset, task_settings
 
 RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
@@ -286,7 +286,7 @@ def main(argv: list[str] | None = None) -> None:
     args = arguments(argv)
     torch.set_num_threads(1)
     result = start(args)
-    result.update(**package_versions(), machine=platform.machine(), cpus=os.cpu_count())
+    result.update(**provenance(), machine=platform.machine(), cpus=os.cpu_count())
 
     def write() -> None:
         write_result(args.out, result)

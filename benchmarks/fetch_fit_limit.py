@@ -49,7 +49,7 @@ from sb3_genrl.genrl.demonstrations import fit_mean_to_demonstrations
 from sb3_genrl.genrl.regression import policy_mean
 from sb3_genrl.hyperparams import TUNING_GOAL_SEED
 from sb3_genrl.markdown import markdown_table
-from sb3_genrl.provenance import package_versions
+from sb3_genrl.provenance import provenance
 from sb3_genrl.study.state import file_fingerprint
 from sb3_genrl.utils import atomic_path, atomic_write_json, atomic_write_text
 from sb3_genrl.wrappers import LatentActionWrapper
@@ -167,7 +167,7 @@ def main(argv: list[str] | None = None) -> dict:
     result = {
         "benchmark": f"fetch_fit_limit_{args.task}",
         "command": "python " + " ".join(["benchmarks/fetch_fit_limit.py", *(argv if argv is not None else sys.argv[1:])]),
-        **package_versions(),
+        **provenance(),
         "task": args.task,
         "generator": os.path.abspath(args.generator),
         "data": os.path.abspath(args.data),

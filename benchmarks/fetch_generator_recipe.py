@@ -25,6 +25,7 @@ from sb3_genrl.data import load_actions
 from sb3_genrl.generative.presets import resolve_generator_spec
 from sb3_genrl.generative.vae import BetaVAE
 from sb3_genrl.hyperparams import TUNING_GOAL_SEED
+from sb3_genrl.provenance import provenance
 from sb3_genrl.utils import atomic_write_json
 
 RECONSTRUCTION_SEED = 1  # as benchmarks/fetch.py: demonstrations the generator was not trained on
@@ -70,7 +71,7 @@ def main(argv: list[str] | None = None) -> None:
                 "seconds": time.perf_counter() - start,
             }
             result["rows"].append(row)
-            atomic_write_json(args.out, result)
+            atomic_write_json(args.out, provenance() | result)
             print(json.dumps(row), flush=True)
 
 

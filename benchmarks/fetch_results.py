@@ -21,6 +21,7 @@ import os
 import numpy as np
 
 from sb3_genrl.markdown import markdown_table
+from sb3_genrl.provenance import provenance
 from sb3_genrl.utils import atomic_path, atomic_write_json, atomic_write_text
 
 RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
@@ -268,7 +269,7 @@ def kept_tqc_progress(logs: str | None, results: str) -> list[list]:
             furthest[row[0]] = row
     progress = [furthest[name] for name in sorted(furthest)]
     if progress != kept:
-        atomic_write_json(kept_path, {"columns": TQC_COLUMNS, "rows": progress})
+        atomic_write_json(kept_path, provenance() | {"columns": TQC_COLUMNS, "rows": progress})
     return progress
 
 

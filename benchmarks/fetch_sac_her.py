@@ -44,7 +44,7 @@ from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, SEED
 from sb3_genrl.curves import episode_info
 from sb3_genrl.data import load_arrays
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED, parse_kwargs
-from sb3_genrl.provenance import package_versions
+from sb3_genrl.provenance import provenance
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 SETTINGS = os.path.join(HERE, "sac_her_fetch.yml")
@@ -193,7 +193,7 @@ def main(argv: list[str] | None = None) -> None:
     torch.set_num_threads(1)
     episodes_data = fetch_goal_episodes(args.task, load_arrays(data))
     result = {
-        **package_versions(),
+        **provenance(),
         "benchmark": f"fetch_sac_her_{args.task}_{args.variant}",
         "task": args.task,
         "variant": args.variant,

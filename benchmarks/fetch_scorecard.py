@@ -47,7 +47,7 @@ from sb3_genrl.hyperparams import EVAL_GOAL_SEED, TUNING_GOAL_SEED
 from sb3_genrl.markdown import markdown_table
 from sb3_genrl.metrics import correlation_table, evaluate_generator, real_subset
 from sb3_genrl.metrics.prior_rollout import PRIOR_ROLLOUT_SEED
-from sb3_genrl.provenance import package_versions
+from sb3_genrl.provenance import provenance
 from sb3_genrl.study.quickstart import task_settings
 from sb3_genrl.utils import atomic_write_json, atomic_write_text
 
@@ -229,7 +229,7 @@ def main(argv: list[str] | None = None) -> None:
         "settings": settings,
         "rows": [],
         "command": "python benchmarks/fetch_scorecard.py " + " ".join(argv if argv is not None else sys.argv[1:]),
-        **package_versions(),
+        **provenance(),
     }
     if os.path.exists(args.out):
         with open(args.out) as file:

@@ -22,6 +22,7 @@ from sb3_genrl.checks import COUNT, JSON_OUT, SEED, check_device, option
 from sb3_genrl.generative import make_generator
 from sb3_genrl.generative.defaults import BATCH_SIZE, N_DEMONSTRATIONS, N_JOINTS
 from sb3_genrl.generative.synthetic import sine_ramp_trajectories
+from sb3_genrl.provenance import provenance
 from sb3_genrl.utils import atomic_write_json
 
 DEFAULT_OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "generator_training.json")
@@ -87,7 +88,7 @@ def main(argv: list[str] | None = None) -> None:
         "processor": platform.processor() or platform.machine(),
         "cpu_count": os.cpu_count(),
     }
-    atomic_write_json(args.out, {"environment": environment, "results": rows})
+    atomic_write_json(args.out, provenance() | {"environment": environment, "results": rows})
     print(f"wrote {args.out}")
 
 

@@ -40,7 +40,7 @@ from sb3_genrl.generative.presets import PRESETS
 from sb3_genrl.genrl import check_genrl_settings, evaluate_on_goals
 from sb3_genrl.genrl.train import genrl_settings, make_genrl
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED, lay_over
-from sb3_genrl.provenance import package_versions
+from sb3_genrl.provenance import provenance
 from sb3_genrl.study.quickstart import task_settings
 from sb3_genrl.utils import atomic_path, atomic_write_json
 
@@ -299,7 +299,7 @@ def main(argv: list[str] | None = None) -> None:
     os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
     result: dict[str, object] = {
         "benchmark": f"genrl_{setting.task}",
-        **package_versions(),
+        **provenance(),
         "machine": platform.machine(),
         "processor": platform.processor(),
         "cpus": os.cpu_count(),

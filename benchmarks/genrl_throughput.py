@@ -35,6 +35,7 @@ from sb3_genrl.benchmarks.sim_throughput import open_loop_rate, scripted_episode
 
 from sb3_genrl.checks import COUNT, JSON_OUT, check_input_path
 from sb3_genrl.markdown import markdown_table
+from sb3_genrl.provenance import provenance
 from sb3_genrl.utils import atomic_write_json
 from sb3_genrl.vec_env import default_threads
 
@@ -244,7 +245,8 @@ def main() -> None:
     )
     atomic_write_json(
         args.out,
-        {
+        provenance()
+        | {
             "command": command,
             "machine": platform.processor() or platform.machine(),
             "cores": default_threads(),

@@ -202,6 +202,7 @@ def main() -> None:
 
     from sb3_genrl.generative import load
     from sb3_genrl.hyperparams import EVAL_GOAL_SEED
+    from sb3_genrl.provenance import provenance
     from sb3_genrl.utils import atomic_write_json
 
     parser = argparse.ArgumentParser(description=main.__doc__)
@@ -236,7 +237,7 @@ def main() -> None:
     if args.grid:
         limit = generator_limit(generator, args.task, goals, grid=args.grid, prior_samples=0)
         result["grid"] = {"n": args.grid, **limit["summary"], "coarser_grid_means": limit["coarser_grid_means"]}
-    atomic_write_json(out, result)
+    atomic_write_json(out, provenance() | result)
     print(json.dumps(result, indent=1))
 
 

@@ -16,6 +16,7 @@ from sb3_genrl.envs.hockey import HockeyEnv, scripted_hit
 
 from sb3_genrl.checks import COUNT, JSON_OUT
 from sb3_genrl.markdown import markdown_table
+from sb3_genrl.provenance import provenance
 from sb3_genrl.utils import atomic_write_json
 
 
@@ -111,7 +112,7 @@ def main() -> None:
             ],
         )
     )
-    atomic_write_json(args.out, rows)
+    atomic_write_json(args.out, provenance() | {"rows": rows})
     print(f"wrote {args.out}")
 
 

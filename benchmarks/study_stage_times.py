@@ -17,6 +17,7 @@ import time
 
 import torch
 
+from sb3_genrl.provenance import provenance
 from sb3_genrl.utils import atomic_write_json
 
 
@@ -33,7 +34,7 @@ def main() -> None:
         w, c = time.perf_counter(), time.process_time()
         extra = fn()
         res[key] = {"wall_s": time.perf_counter() - w, "cpu_s": time.process_time() - c, **(extra or {})}
-        atomic_write_json(res_path, res)
+        atomic_write_json(res_path, res | provenance())
         print(key, res[key], flush=True)
 
     from sb3_genrl.envs.demonstrations import make_demonstrations

@@ -1,6 +1,7 @@
 """The documentation: the Sphinx site builds offline with warnings as errors, and benchmarks/results holds exactly
 the results that the README and the docs cite."""
 
+import json
 import pathlib
 import re
 import subprocess
@@ -65,3 +66,17 @@ def test_results_page_holds_the_fetch_tables_as_written():
     page = (ROOT / "docs" / "results.md").read_text(encoding="utf-8").splitlines()
     rows = [line for line in (RESULTS / "fetch.md").read_text(encoding="utf-8").splitlines() if line.startswith("|")]
     assert rows and [row for row in rows if row not in page] == []
+
+
+def test_every_result_records_the_package_version_and_the_commit():
+    """Each result JSON names the sb3-genrl version and the git commit of the code that made it."""
+    unrecorded = []
+    for path in sorted(RESULTS.glob("*.json")):
+        result = json.loads(path.read_text(encoding="utf-8"))
+        if not (
+            isinstance(result, dict)
+            and result.get("sb3_genrl")
+            and re.fullmatch(r"[0-9a-f]{40}(\+dirty)?", str(result.get("git_commit")))
+        ):
+            unrecorded.append(path.name)
+    assert unrecorded == []
