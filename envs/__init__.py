@@ -18,6 +18,8 @@ from gymnasium.envs.registration import register, registry
 from sb3_genrl.envs import basketball, fetch, hockey
 from sb3_genrl.envs.spec import TaskSpec
 
+from sb3_genrl.task_ids import register_task_id
+
 __all__ = ["DEFAULT_TASK", "TASKS", "TaskSpec", "arm_tasks", "get_task", "make_task", "register_envs", "register_task"]
 
 TASKS: dict[str, TaskSpec] = {}
@@ -45,6 +47,7 @@ def register_task(spec: TaskSpec) -> TaskSpec:
             # A module-level class is registered by its import path, as Gymnasium's own envs are.
             entry_point = cls if "<locals>" in cls.__qualname__ else f"{cls.__module__}:{cls.__qualname__}"
             register(id=env_id, entry_point=entry_point, max_episode_steps=spec.horizon)
+    register_task_id(spec.name, spec.env_id)
     TASKS[spec.name] = spec
     return spec
 

@@ -34,6 +34,7 @@ from sb3_genrl.metrics.prior_rollout import (
     PriorRollout,
     prior_rollout,
 )
+from sb3_genrl.task_ids import task_env_id
 from sb3_genrl.utils import atomic_write_json, atomic_write_text
 
 # Paper section 6.1.2: 15000 generated against 15000 fixed, randomly chosen training trajectories, k = 3.
@@ -387,12 +388,10 @@ def _check_rank_by(rank_by: str | None, task: str | None) -> None:
 
 def _check_prior_task(task: str, contexts: int, draws: int, prior_seed: int) -> None:
     """Refuse an unknown task, or bad prior-rollout sizes, before any work."""
-    from sb3_genrl.envs import get_task
-
     check_positive_int(contexts, "contexts")
     check_positive_int(draws, "draws")
     check_seed(prior_seed)
-    get_task(task)  # raises, naming the registered tasks
+    task_env_id(task)  # raises, naming the registered tasks
 
 
 def _check_sample_sizes(real: np.ndarray, n: int, dwpr_n: int, interventions: int) -> None:

@@ -31,6 +31,8 @@ import numpy as np
 
 from sb3_genrl.generative.base import TrajectoryGenerator
 from sb3_genrl.hyperparams import PRIOR_ROLLOUT_SEED
+from sb3_genrl.task_ids import task_env_id
+from sb3_genrl.wrappers import LatentActionWrapper
 
 DEFAULT_CONTEXTS = 64
 DEFAULT_DRAWS = 16
@@ -78,14 +80,10 @@ class PriorRollout:
 
 
 def _latent_env(task: str | gym.Env, generator: TrajectoryGenerator) -> Any:
-    from sb3_genrl.wrappers import LatentActionWrapper
-
     if isinstance(task, gym.Env):
         env = task
     else:
-        from sb3_genrl.envs import get_task
-
-        env = gym.make(get_task(task).env_id)
+        env = gym.make(task_env_id(task))
     return LatentActionWrapper(env, generator)
 
 
