@@ -5,12 +5,13 @@ Task-level workflow code: it reads the task registry (:data:`sb3_genrl.envs.TASK
 
 from __future__ import annotations
 
+import errno
 from pathlib import Path
 
 import numpy as np
 
 from sb3_genrl.checks import check_output_dir, check_positive_int, check_seed
-from sb3_genrl.utils import atomic_path, atomic_write_text
+from sb3_genrl.utils import atomic_path, atomic_write_bytes, atomic_write_text
 
 
 def frame_strip(frames: list[np.ndarray], n: int = 6) -> np.ndarray:
@@ -20,25 +21,40 @@ def frame_strip(frames: list[np.ndarray], n: int = 6) -> np.ndarray:
 
 
 def save_animation(frames: list[np.ndarray], path: str | Path, fps: int = 25) -> Path:
-    """Write frames as a GIF or MP4 (by the file's suffix)."""
+    """Write frames as a GIF or MP4 (by the file's suffix), atomically. An MP4 is read back before it takes its name:
+    one that does not hold every frame (ffmpeg prints its failures, a full disk among them, and exits without an
+    error reaching Python) raises ``OSError`` naming ``path``, and nothing is left there."""
     import imageio.v3 as iio
 
     path = Path(path)
+    if path.suffix.lower() == ".gif":  # made in memory: a failed write is the file's own, naming it
+        atomic_write_bytes(path, iio.imwrite("<bytes>", np.stack(frames), extension=".gif", duration=1000 / fps, loop=0))
+        return path
     with atomic_path(path) as tmp:  # the temporary name keeps the suffix, which picks the format
-        if path.suffix.lower() == ".gif":
-            iio.imwrite(tmp, np.stack(frames), duration=1000 / fps, loop=0)
-        else:
-            iio.imwrite(tmp, np.stack(frames), fps=fps)
+        iio.imwrite(tmp, np.stack(frames), fps=fps)
+        _check_video_frames(tmp, len(frames), path)
     return path
+
+
+def _check_video_frames(video: Path, expected: int, final: Path) -> None:
+    """Refuse the MP4 ``video`` (to be renamed ``final``) unless it holds ``expected`` frames."""
+    import imageio_ffmpeg  # imageio's FFmpeg plugin, needed for MP4 only (sb3_genrl.video.check_mp4_writer)
+
+    try:
+        written = imageio_ffmpeg.count_frames_and_secs(str(video))[0]
+    except RuntimeError:  # ffmpeg cannot read it: the file ends early
+        written = 0
+    if written != expected:
+        raise OSError(
+            errno.EIO, f"ffmpeg wrote {written} of {expected} frames (see its messages above; is the disk full?)", str(final)
+        )
 
 
 def save_image(image: np.ndarray, path: str | Path) -> Path:
     """Write one image (format by the file's suffix) atomically."""
     import imageio.v3 as iio
 
-    with atomic_path(path) as tmp:
-        iio.imwrite(tmp, image)
-    return Path(path)
+    return atomic_write_bytes(path, iio.imwrite("<bytes>", image, extension=Path(path).suffix))
 
 
 def play_scripted(
