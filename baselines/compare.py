@@ -38,9 +38,9 @@ def compare_runs(run_dirs: list[str | os.PathLike], out_dir: str | os.PathLike, 
     """Write ``comparison.md`` / ``comparison.csv``, ``reward_vs_episodes.png`` (mean +- std over seeds of each
     method) and ``table_contacts.png`` (average table contacts per episode of each method) to ``out_dir``.
 
-    :param run_dirs: run folders (several seeds per method)
+    :param run_dirs: run folders (several seeds per method), all of one task
     :param out_dir: output folder (created)
-    :param task: only runs of this task (default: all given, which must then share one task)
+    :param task: the task the runs must be of (default: the one they share); a run of another task is refused, naming it
     :return: the Markdown table's path
     """
     out = check_output_dir(out_dir)
@@ -107,27 +107,33 @@ def compare_runs(run_dirs: list[str | os.PathLike], out_dir: str | os.PathLike, 
 
 
 def _read_runs(run_dirs: list[str | os.PathLike], task: str | None) -> tuple[dict[str, list[dict]], str]:
-    """The runs of ``task`` grouped by method (each with its curve and mean table contacts per episode) and the task."""
-    runs: dict[str, list[dict]] = defaultdict(list)
-    tasks = set()
+    """The runs grouped by method (each with its curve and mean table contacts per episode) and their task; runs of
+    several tasks, or of another task than ``task``, are refused, naming each run's task."""
+    summaries = []
     for run_dir in map(pathlib.Path, run_dirs):
         summary_path = run_dir / "summary.json"
         if not summary_path.exists():
             raise ValueError(f"{run_dir} is not a run folder (no summary.json)")
-        summary = json.loads(summary_path.read_text())
-        if task is not None and summary.get("task") != task:
-            continue
-        tasks.add(summary.get("task"))
+        summaries.append((run_dir, json.loads(summary_path.read_text())))
+    if not summaries:
+        raise ValueError("no run folders given")
+    by_task: dict[str, list[str]] = defaultdict(list)
+    for run_dir, summary in summaries:
+        by_task[str(summary.get("task"))].append(str(run_dir))
+    if task is not None and set(by_task) != {task}:
+        others = ", ".join(f"{run} ({name})" for name, dirs in by_task.items() if name != task for run in dirs)
+        raise ValueError(f"runs of another task than {task!r}: {others}; leave them out (compare each task's runs apart)")
+    if len(by_task) > 1:
+        tasks = "; ".join(f"{name}: {', '.join(dirs)}" for name, dirs in by_task.items())
+        raise ValueError(f"the runs are of several tasks ({tasks}); compare one task's runs at a time")
+    runs: dict[str, list[dict]] = defaultdict(list)
+    for run_dir, summary in summaries:
         episodes = read_monitor(run_dir / MONITOR_FILE) if (run_dir / MONITOR_FILE).exists() else {}
         contacts = episodes.get("table_contacts", np.array([np.nan]))
         runs[summary["algorithm"]].append(
             {"curve": read_curve(run_dir / "learning_curve.csv"), "summary": summary, "contacts": _nanmean(contacts)}
         )
-    if not runs:
-        raise ValueError(f"no runs of task {task!r} among {len(run_dirs)} folders")
-    if len(tasks) > 1:
-        raise ValueError(f"runs of several tasks {sorted(tasks)}; pass task=...")
-    return runs, task or tasks.pop()
+    return runs, next(iter(by_task))
 
 
 def _method_row(label: str, curves: list[dict[str, np.ndarray]], contacts: list[float], budget: int) -> dict:

@@ -9,6 +9,7 @@ import pytest
 import torch as th
 from sb3_genrl.baselines import FEEDBACK_BASELINES
 from sb3_genrl.baselines.bc import STD_RANGE, actor_mean, fit_actor, split_episodes
+from sb3_genrl.baselines.compare import compare_runs
 from sb3_genrl.baselines.evaluation import evaluate_trained, load_trained
 from sb3_genrl.baselines.feedback import (
     add_time_feature,
@@ -647,3 +648,26 @@ def test_training_health_reads_every_progress_file_and_flags_divergence(tmp_path
     health = training_health(tmp_path)
     assert health["approx_kl_median"] == 3 and health["approx_kl_max"] == 5 and health["clip_fraction_median"] == 0.9
     assert "far beyond its trust region" in health["warnings"][0]
+
+
+def test_compare_refuses_a_named_run_of_another_task_naming_it(tmp_path):
+    def run(name: str, task: str, algorithm: str):
+        folder = tmp_path / name
+        folder.mkdir()
+        (folder / "summary.json").write_text(json.dumps({"task": task, "algorithm": algorithm}))
+        (folder / "learning_curve.csv").write_text("episodes,mean_reward\n16,-0.5\n32,-0.4\n")
+        return folder
+
+    hockey, basketball = run("genrl", "hockey", "genrl"), run("ppo", "basketball", "ppo")
+    out = tmp_path / "out"
+    for task, message in (
+        ("hockey", f"runs of another task than 'hockey': {basketball} (basketball); leave them out"),
+        (None, f"the runs are of several tasks (hockey: {hockey}; basketball: {basketball}); compare one task's runs"),
+    ):
+        with pytest.raises(ValueError) as error:
+            compare_runs([hockey, basketball], out, task=task)
+        assert message in str(error.value) and not out.exists()
+        task_option = [] if task is None else ["--task", task]
+        assert main(["compare", *task_option, "--runs", str(hockey), str(basketball), "--out", str(out)]) == 2
+        assert not out.exists()
+    assert compare_runs([hockey], out, task="hockey").read_text().count("| GenRL | 1 |") == 1
