@@ -16,6 +16,7 @@ import numpy as np
 from gymnasium import spaces
 from stable_baselines3.common.vec_env import VecEnv
 
+from sb3_genrl.checks import check_positive_float
 from sb3_genrl.generative.base import TrajectoryGenerator
 
 RewardMode = Literal["last", "sum"]
@@ -98,8 +99,7 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
             raise TypeError(f"generator must be a TrajectoryGenerator, got {type(generator).__name__}")
         if reward not in ("last", "sum"):
             raise ValueError(f"reward must be 'last' or 'sum', got {reward!r}")
-        if not latent_clip > 0:
-            raise ValueError(f"latent_clip must be positive, got {latent_clip!r}")
+        check_positive_float(latent_clip, "latent_clip")
         if int(max_hold_steps) != max_hold_steps or max_hold_steps < 0:
             raise ValueError(f"max_hold_steps must be a non-negative integer, got {max_hold_steps!r}")
         gym.utils.RecordConstructorArgs.__init__(
@@ -316,20 +316,37 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         if not goal_steps:
             return None
         new_goal = goal_steps[-1][0]
-        compute_reward = self.env.unwrapped.compute_reward
         # a trajectory that leaves the achieved goal where it started (a push that misses the object) solves its
         # relabelled goal whatever it does: such a pull teaches nothing about reaching goals
         last_info = goal_steps[-1][1]
-        if float(np.asarray(compute_reward(self._start_achieved, new_goal, last_info)).item()) >= float(
-            np.asarray(compute_reward(new_goal, new_goal, last_info)).item()
-        ):
+        if self._goal_reward(self._start_achieved, new_goal, last_info) >= self._goal_reward(new_goal, new_goal, last_info):
             return None
         rewards = [
-            float(np.asarray(compute_reward(achieved, new_goal, info)).item())
+            self._goal_reward(achieved, new_goal, info)
             for achieved, info in (goal_steps[-1:] if self.reward_mode == "last" else goal_steps)
         ]
         desired = np.ravel(new_goal).astype(np.float32)
         return np.concatenate([desired, np.asarray(self._context, np.float32)[desired.size :]]), float(np.sum(rewards))
+
+    def _goal_reward(self, achieved_goal: Any, desired_goal: Any, info: dict[str, Any]) -> float:
+        """A goal env's ``compute_reward`` for one achieved goal and one desired goal, refused unless it is one finite
+        number (a NaN would reach the E-step through the relabelled pulls)."""
+        task = self.env.unwrapped
+        reward = np.asarray(task.compute_reward(achieved_goal, desired_goal, info))
+        if reward.size != 1:
+            raise ValueError(
+                f"{type(task).__name__}.compute_reward(achieved_goal, desired_goal, info) returned shape {reward.shape} "
+                f"for one achieved goal of shape {np.shape(achieved_goal)} and one desired goal: expected one reward "
+                "(shape () or (1,))"
+            )
+        if not np.isfinite(reward.item()):
+            raise ValueError(
+                f"{type(task).__name__}.compute_reward(achieved_goal, desired_goal, info) returned the non-finite "
+                f"reward {reward.item()!r} for the achieved goal {np.ravel(achieved_goal).tolist()} and the desired "
+                f"goal {np.ravel(desired_goal).tolist()} (a relabelled pull of hindsight); a reward must be a finite "
+                "number"
+            )
+        return float(reward.item())
 
     def play_batch(self, alphas: np.ndarray, goals: np.ndarray, *, n_threads: int = 1) -> tuple[np.ndarray, list[dict]]:
         """Play many latent actions ``(B, latent_dim)`` for goals ``(B, goal_dim)`` through the task's fast path.
@@ -387,14 +404,19 @@ def find_latent_wrapper(env: gym.Env) -> LatentActionWrapper | None:
 
 
 def latent_action_env(
-    env: gym.Env | VecEnv | str | None, generator: TrajectoryGenerator | None, *, latent_clip: float = 3.0
+    env: gym.Env | VecEnv | str | None,
+    generator: TrajectoryGenerator | None,
+    *,
+    latent_clip: float = 3.0,
+    check_latent_clip: bool = True,
 ) -> tuple[gym.Env | VecEnv | None, TrajectoryGenerator | None]:
     """Return ``(env, generator)`` with ``env`` a latent-action env (used by GenRL for what users pass it).
 
     A raw env (or Gymnasium id) is wrapped in :class:`LatentActionWrapper`; an env that already is one (possibly
     inside further wrappers), or a VecEnv of such envs, is returned as is, with its generator when none is given.
-    ``None`` stays ``None``. Raises ``ValueError`` for a raw env without generator, a VecEnv of raw envs, or a
-    generator whose shapes differ from the wrapped env's.
+    ``None`` stays ``None``. Raises ``ValueError`` for a raw env without generator, a VecEnv of raw envs, a
+    generator whose shapes differ from the wrapped env's, or (a normal prior, with ``check_latent_clip``) an env
+    wrapped with another ``latent_clip``: GenRL's setting is the wrapped env's, not only a record.
     """
     if generator is not None and not isinstance(generator, TrajectoryGenerator):
         raise TypeError(f"generator must be a TrajectoryGenerator or a file path, got {type(generator).__name__}")
@@ -407,8 +429,10 @@ def latent_action_env(
             env_generator = env.get_attr("generator", indices=[0])[0]
         except AttributeError as error:
             raise ValueError("a VecEnv must hold LatentActionWrapper envs; wrap each env before vectorising") from error
+        env_clip = _vec_env_attribute(env, "latent_clip")
     elif find_latent_wrapper(env) is not None:
         env_generator = find_latent_wrapper(env).generator  # type: ignore[union-attr]
+        env_clip = find_latent_wrapper(env).latent_clip  # type: ignore[union-attr]
     else:
         if generator is None:
             raise ValueError(f"a generator is needed to wrap {env} (or pass an env already wrapped in LatentActionWrapper)")
@@ -419,4 +443,17 @@ def latent_action_env(
         shapes = [(g.latent_dim, g.horizon, g.action_dim) for g in (generator, env_generator)]
         if shapes[0] != shapes[1]:
             raise ValueError(f"generator (latent_dim, T, M) = {shapes[0]} differs from the wrapped env's {shapes[1]}")
+    if check_latent_clip and env_generator.prior != "uniform" and env_clip is not None and env_clip != latent_clip:
+        raise ValueError(
+            f"the env is wrapped with latent_clip={env_clip!r}, not {latent_clip!r}: the latent_clip of GenRL (or of "
+            "the model) is the half-width of the wrapped env's action box; give both the same"
+        )
     return env, generator if generator is not None else env_generator
+
+
+def _vec_env_attribute(env: VecEnv, name: str) -> Any:
+    """The attribute ``name`` of a VecEnv's first env, None when it has none."""
+    try:
+        return env.get_attr(name, indices=[0])[0]
+    except AttributeError:
+        return None

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from conftest import HANG_S
 
-from sb3_genrl import __version__
+from sb3_genrl import GenRL, __version__
 from sb3_genrl.checks import check_device, check_int, check_output_dir, check_output_file, check_seed
 from sb3_genrl.cli import WORKFLOW
 from sb3_genrl.curves import MONITOR_FILE, read_monitor
@@ -697,3 +697,41 @@ def test_ctrl_c_of_a_run_with_env_processes_exits_130_in_one_line(tmp_path, hock
             process.kill()
     assert process.returncode == 130 and "Traceback" not in err
     assert err.strip().splitlines()[-1] == "genrl train-policy: interrupted; rerun the same command to resume"
+
+
+def test_wrong_types_in_genrl_kwargs_are_refused_before_the_run_folder_is_claimed(tmp_path, cli, hockey_generator):
+    """A string for a number, a float for an integer, ``net_arch: "big"``, a KL bound of 0: one line, exit status 2,
+    and the run folder not claimed, so the corrected command runs without --overwrite (the wrong types used to fail
+    with a traceback after run_record.json was written)."""
+    run = tmp_path / "run"
+    argv = (
+        "train-policy",
+        "--task",
+        "hockey",
+        "--generator",
+        hockey_generator,
+        "--episodes",
+        8,
+        "--batch-episodes",
+        8,
+        "--library-defaults",
+        "--device",
+        "cpu",
+        "--no-progress-bar",
+        "--out",
+        run,
+    )
+    for genrl_kwargs, message in (
+        ('{"target_kl": "0.01"}', "target_kl must be a finite number > 0 (the E-step's KL bound), got '0.01' (str)"),
+        ('{"n_critic_updates": 2.5}', "n_critic_updates must be a positive integer, got 2.5"),
+        ('{"policy_kwargs": {"net_arch": "big"}}', "policy_kwargs['net_arch'] must be a list of positive layer sizes"),
+        ('{"target_kl": 0}', "target_kl must be a finite number > 0 (the E-step's KL bound), got 0"),
+        ('{"latent_clip": -1.0}', "latent_clip must be a finite number > 0, got -1.0"),
+    ):
+        code, printed, err = cli(*argv, "--genrl-kwargs", genrl_kwargs)
+        assert code == 2 and printed == "" and message in err and err.count("\n") == 1, err
+        assert err.startswith("genrl train-policy: error: argument --e-step/--genrl-kwargs: GenRL's defaults")
+        assert not (run / "run_record.json").exists()
+    code, printed, err = cli(*argv, "--genrl-kwargs", '{"target_kl": 0.02, "latent_clip": 1.0}')
+    assert code == 0 and "GenRL on hockey: 8 episodes" in printed
+    assert GenRL.load(run / "genrl_policy.zip", device="cpu").action_space.high.tolist() == [1.0, 1.0]

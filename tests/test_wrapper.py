@@ -312,3 +312,33 @@ def test_non_finite_reward_refused_at_the_pull_that_returns_it():
     # GenRL stops at that pull instead of training on it (it used to learn nothing and return normally)
     with pytest.raises(ValueError, match="non-finite reward nan"):
         GenRL(NanRewardEnv(), LinearGenerator(), n_steps=8, seed=0).learn(64)
+
+
+@pytest.mark.parametrize("bad", [0.0, -1.0, float("nan"), float("inf"), "3"])
+def test_latent_clip_must_be_a_finite_positive_number(bad):
+    with pytest.raises(ValueError, match=f"latent_clip must be a finite number > 0, got {re.escape(repr(bad))}"):
+        LatentActionWrapper(FastReachEnv(), LinearGenerator(), latent_clip=bad)
+
+
+def test_a_goal_env_compute_reward_of_the_wrong_shape_is_named_with_the_shape_expected():
+    """A compute_reward that returns one reward per coordinate (a missing sum) is named, with the shape it returned and
+    the one expected (it used to fail with "can only convert an array of size 1 to a Python scalar")."""
+    from test_fetch_goal_api import PointGoalEnv
+
+    class PerCoordinateReward(PointGoalEnv):
+        def compute_reward(self, achieved_goal, desired_goal, info):
+            return -np.abs(np.asarray(achieved_goal) - desired_goal)
+
+        def step(self, action):  # the step's own reward, summed: only the relabelled pulls see the wrong shape
+            self.position, self.t = self.position + np.asarray(action, dtype=np.float64), self.t + 1
+            reward = float(self.compute_reward(self.position, self.goal, None).sum())
+            return self._obs(), reward, False, self.t >= self.episode_length, {}
+
+    env = LatentActionWrapper(PerCoordinateReward(), LinearGenerator())
+    env.reset(seed=0)
+    with pytest.raises(
+        ValueError,
+        match=r"PerCoordinateReward.compute_reward\(achieved_goal, desired_goal, info\) returned shape \(2,\) for one "
+        r"achieved goal of shape \(2,\) and one desired goal: expected one reward \(shape \(\) or \(1,\)\)",
+    ):
+        env.step(np.ones(2, dtype=np.float32))

@@ -7,6 +7,7 @@ import io
 import json
 import os
 import pathlib
+import warnings
 from typing import Any
 
 import torch as th
@@ -73,20 +74,45 @@ def saved_generator(
     generator: TrajectoryGenerator | str | None,
     device: th.device | str,
 ) -> tuple[TrajectoryGenerator | None, str | None]:
-    """The generator of a model loaded from ``path`` whose saved ``data`` is given, and its file: ``generator`` when
-    given (a file is loaded onto ``device``), else the file ``data`` names, else :func:`generator_file` of ``path``;
-    ``(None, None)`` when there is none. One that is not the generator the model recorded is refused
-    (:func:`check_recorded_generator`)."""
+    """The generator of a model loaded from ``path`` whose saved ``data`` is given, and its file (an absolute path):
+    ``generator`` when given (a file is loaded onto ``device``), else the first of :func:`generator_candidates` that
+    exists; ``(None, None)`` when there is none. One that is not the generator the model recorded is refused
+    (:func:`check_recorded_generator`); a model saved without a record of its generator (an older version) is warned
+    about."""
     check_model_data(path, data)
+    if "generator_sha256" not in data:
+        warnings.warn(
+            f"{path} was saved without its generator's SHA-256 (by an older sb3-genrl): its generator cannot be "
+            "checked against the one the policy was trained with; save it again to record it",
+            stacklevel=3,
+        )
     generator_path = os.path.abspath(generator) if isinstance(generator, str | os.PathLike) else None
     if generator is None:
-        candidates = [data.get("generator_path")]
-        candidates += [generator_file(path)] if isinstance(path, str | pathlib.Path) else []
-        generator_path = next((str(p) for p in candidates if p is not None and os.path.isfile(p)), None)
+        generator_path = next((p for p in generator_candidates(path, data) if os.path.isfile(p)), None)
     if generator_path is not None:
         generator = load_generator(generator_path, device)
     check_recorded_generator(generator, data.get("generator_sha256"), generator_path, path)  # type: ignore[arg-type]
     return generator, generator_path  # type: ignore[return-value]
+
+
+def generator_candidates(path: str | pathlib.Path | io.BufferedIOBase, data: dict[str, Any]) -> list[str]:
+    """Where the generator of a model saved at ``path`` (``data``: its saved data) may be, as absolute paths: the file
+    it was built from, then :func:`generator_file` of ``path``."""
+    candidates = [data.get("generator_path")] + ([generator_file(path)] if isinstance(path, str | os.PathLike) else [])
+    return [os.path.abspath(candidate) for candidate in candidates if candidate is not None]
+
+
+def warn_without_generator(path: Any, data: dict[str, Any]) -> None:
+    """Warn that the model loaded from ``path`` has no generator: none was given and none of
+    :func:`generator_candidates` exists (it still predicts latent actions; ``predict_trajectory`` raises)."""
+    tried = generator_candidates(path, data)
+    warnings.warn(
+        f"no generator found for {path}"
+        + (f" (none of {', '.join(map(repr, tried))} exists)" if tried else "")
+        + ": the model predicts latent actions, but cannot decode them; pass generator= (the generator it was "
+        "trained with) to decode or train",
+        stacklevel=3,
+    )
 
 
 def generator_digest(generator: TrajectoryGenerator | None) -> str | None:
@@ -141,10 +167,17 @@ def check_recorded_generator(
         )
 
 
-def check_same_generator(given: TrajectoryGenerator | None, env: Any, given_path: str | None) -> None:
+def check_same_generator(given: TrajectoryGenerator | None, env: Any, given_path: str | None, model: Any = None) -> None:
     """Refuse a generator given beside an env that already wraps another one (GenRL would train on the env's and save
     the given one). Generators of the same content (:func:`generator_digest`) pass; of unknown content, only the same
-    object, or one of the same class when the env's is a copy from an env process."""
+    object, or one of the same class when the env's is a copy from an env process.
+
+    :param given: the generator given to the constructor, or a model's own
+    :param env: the env given
+    :param given_path: the file ``given`` came from (named in the error), if any
+    :param model: None: ``given`` was given to the constructor; else the model whose own generator ``given`` is
+        (``"this model"``, a zip's path: ``set_env`` and ``load`` with an env), named in the error
+    """
     wrapped, copied = wrapped_generator(env)
     if given is None or wrapped is None or given is wrapped:
         return
@@ -153,12 +186,20 @@ def check_same_generator(given: TrajectoryGenerator | None, env: Any, given_path
         same = copied and type(given) is type(wrapped)
     else:
         same = digests[0] == digests[1]
-    if not same:
+    if same:
+        return
+    if model is None:
         raise ValueError(
             f"the generator given, {describe_generator(given, given_path)}, is not the one wrapping the "
             f"env, {describe_generator(wrapped)}: GenRL plays the env's; pass that one, or no generator "
             "(the env's is used)"
         )
+    raise ValueError(
+        f"the env is wrapped with the generator {describe_generator(wrapped)}, not with {model}'s own, "
+        f"{describe_generator(given, given_path)}: the policy would train on the env's and be saved and "
+        "evaluated with its own; wrap the env with the model's generator, or pass the env unwrapped (it is "
+        "wrapped with the model's)"
+    )
 
 
 def wrapped_generator(env: Any) -> tuple[TrajectoryGenerator | None, bool]:

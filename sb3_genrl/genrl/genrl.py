@@ -21,19 +21,18 @@ from sb3_genrl.checks import SettingError
 from sb3_genrl.generative.base import TrajectoryGenerator
 from sb3_genrl.genrl import generator_files
 from sb3_genrl.genrl.averaging import averaged_copy, update_average
+from sb3_genrl.genrl.buffers import FiniteRewardDictRolloutBuffer, FiniteRewardRolloutBuffer
 from sb3_genrl.genrl.e_step import kl_penalty_e_step, trpo_e_step, variational_copy
 from sb3_genrl.genrl.hindsight import HindsightRelabelling
 from sb3_genrl.genrl.policies import (
     BoxScaler,
     ContextStdPolicy,
-    MlpPolicy,
-    MultiInputPolicy,
     completed_like,
     completed_policy_kwargs,
     limit_log_std_change,
     log_std_parameters,
 )
-from sb3_genrl.genrl.settings import check_genrl_settings
+from sb3_genrl.genrl.settings import POLICY_ALIASES, SETTINGS, check_genrl_settings
 from sb3_genrl.genrl.value import fit_value_function
 from sb3_genrl.utils import atomic_path
 from sb3_genrl.wrappers import latent_action_env
@@ -99,11 +98,7 @@ class GenRL(OnPolicyAlgorithm):
     :param _init_setup_model: build the networks now (``load()`` passes False)
     """
 
-    policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = {
-        "MlpPolicy": MlpPolicy,
-        "MultiInputPolicy": MultiInputPolicy,
-        "ContextStdPolicy": ContextStdPolicy,
-    }
+    policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = POLICY_ALIASES
     policy: ActorCriticPolicy
     # States saved only when their setting is on (see _get_torch_save_params and set_parameters)
     OPTIONAL_STATES: ClassVar[tuple[str, ...]] = ("policy_average", "hindsight.optimizer")
@@ -146,18 +141,11 @@ class GenRL(OnPolicyAlgorithm):
             if generator is not None:
                 raise TypeError("GenRL(env, generator, generator=...) got the generator twice")
             policy, env, generator = "MlpPolicy", policy, env  # type: ignore[assignment]
-        self.hindsight_kwargs = check_genrl_settings(
-            dict(  # the values SB3 does not check itself
-                e_step=e_step,
-                n_em_iterations=n_em_iterations,
-                value_history=value_history,
-                batch_size=batch_size,
-                policy_averaging=policy_averaging,
-                max_log_std_change=max_log_std_change,
-                hindsight_kwargs=hindsight_kwargs,
-            )
-        )["hindsight_kwargs"]
-        env, policy_kwargs = self._latent_env(env, generator, latent_clip, policy_kwargs, device)
+        arguments = locals()
+        # every setting, checked before any work (sb3_genrl.genrl.settings; SB3 checks few of them, some only partway)
+        self.hindsight_kwargs = check_genrl_settings({name: arguments[name] for name in SETTINGS})["hindsight_kwargs"]
+        # load() builds the model with the defaults, then sets the saved settings (it checks the env's latent_clip itself)
+        env, policy_kwargs = self._latent_env(env, generator, latent_clip, policy_kwargs, device, _init_setup_model)
         super().__init__(
             self._fitting_policy(policy, env),
             env,
@@ -191,6 +179,9 @@ class GenRL(OnPolicyAlgorithm):
             self._setup_model()
 
     def _setup_model(self) -> None:
+        # SB3's rollout buffer, refusing a non-finite reward where it enters GenRL (after every wrapper of the env)
+        dict_context = isinstance(self.observation_space, spaces.Dict)
+        self.rollout_buffer_class = FiniteRewardDictRolloutBuffer if dict_context else FiniteRewardRolloutBuffer
         super()._setup_model()
         extractor = self.policy.pi_features_extractor
         if (
@@ -348,9 +339,13 @@ class GenRL(OnPolicyAlgorithm):
         return super().learn(total_timesteps, callback, log_interval, tb_log_name, reset_num_timesteps, progress_bar)
 
     def set_env(self, env: GymEnv, force_reset: bool = True) -> None:
-        """Like SB3's ``set_env``; a raw env is wrapped with this model's generator first."""
-        env, _ = latent_action_env(env, self.generator, latent_clip=self.latent_clip)
+        """Like SB3's ``set_env``; a raw env is wrapped with this model's generator first. A wrapped env must hold this
+        model's generator and ``latent_clip`` (another generator is refused: the policy would train on it and be saved
+        with its own); a model without a generator takes the env's, when it is the one the model recorded."""
+        env, generator = self._generator_env(env, self.generator, self.generator_path, self.latent_clip, "this model")
+        generator_files.check_recorded_generator(generator, self.generator_sha256, None, "this model")
         super().set_env(env, force_reset=force_reset)  # type: ignore[arg-type]
+        self.generator = generator
 
     def _optional_state(self, name: str) -> Any:
         """The object of an entry of ``OPTIONAL_STATES`` (``"hindsight.optimizer"``: an attribute's), None when off."""
@@ -392,14 +387,15 @@ class GenRL(OnPolicyAlgorithm):
             self.hindsight.set_learning_rate()
 
     def save(self, path: str | pathlib.Path | io.BufferedIOBase, exclude: Any = None, include: Any = None) -> None:
-        """Save like SB3, atomically for a file path (a ``.zip`` suffix is added when there is none, as SB3 does); an
-        in-memory generator (no known path) is also saved as ``<name>.generator.pt`` beside it."""
+        """Save like SB3, atomically for a file path (a ``.zip`` suffix is added when there is none, as SB3 does). The
+        model records its generator's file (an absolute path); a generator without one (built in memory, or loaded from
+        beside another zip), or whose file is gone, is also saved as ``<name>.generator.pt`` beside it."""
         if not isinstance(path, str | pathlib.Path):
             super().save(path, exclude=exclude, include=include)
             return
         final = pathlib.Path(path)
         final = final if final.suffix else final.with_name(final.name + ".zip")
-        if self.generator_path is None and self.generator is not None:
+        if self.generator is not None and (self.generator_path is None or not os.path.isfile(self.generator_path)):
             generator_files.save_generator_beside(self.generator, final)
         with atomic_path(final) as tmp:
             super().save(tmp, exclude=exclude, include=include)
@@ -418,23 +414,36 @@ class GenRL(OnPolicyAlgorithm):
         **kwargs: Any,
     ) -> SelfGenRL:
         """Load like SB3. The generator is ``generator`` when given, else the saved path or ``<name>.generator.pt``
-        (refused when its SHA-256 is not the model's ``generator_sha256``); without any, the model still predicts
-        latent actions and ``predict_trajectory`` raises. A file that is not a GenRL model zip is refused."""
+        (refused when its SHA-256 is not the model's ``generator_sha256``); without any, the env's (checked the same
+        way), else none: the model still predicts latent actions, ``predict_trajectory`` raises, and a warning says so.
+        A file that is not a GenRL model zip is refused; so is an env wrapped with another generator than the model's,
+        and a setting in ``kwargs`` that the constructor would refuse (checked with the saved ones)."""
         from stable_baselines3.common.save_util import load_from_zip_file
 
         data, _, _ = load_from_zip_file(path, device=device, custom_objects=custom_objects, load_data=True)
+        data = data or {}
         if isinstance(path, io.BufferedIOBase):
             path.seek(0)
-        generator, generator_path = generator_files.saved_generator(path, data or {}, generator, device)  # model's device
-        if isinstance(kwargs.get("policy_kwargs"), dict) and data:  # the constructor's: stored with the defaults added
+        generator, generator_path = generator_files.saved_generator(path, data, generator, device)  # model's device
+        settings = {key: value for key, value in kwargs.items() if key in SETTINGS}
+        if settings:  # SB3 sets them without the constructor: checked here, with the saved ones they go together with
+            saved = {key: data[key] for key in SETTINGS if key in data and key != "policy_kwargs"}
+            check_genrl_settings(saved | settings, f"GenRL.load({path})")
+        if isinstance(kwargs.get("policy_kwargs"), dict):  # the constructor's: stored with the defaults added
             kwargs["policy_kwargs"] = completed_like(kwargs["policy_kwargs"], data.get("policy_kwargs", {}))
-        if env is not None:  # a raw env is wrapped as at training time
-            latent_clip = kwargs.get("latent_clip", (data or {}).get("latent_clip", 3.0))
-            env, generator = latent_action_env(env, generator, latent_clip=latent_clip)  # type: ignore[arg-type]
+        if env is not None:  # a raw env is wrapped as at training time; a wrapped one must hold the model's generator
+            latent_clip = kwargs.get("latent_clip", data.get("latent_clip", SETTINGS["latent_clip"].default))
+            env, generator = cls._generator_env(env, generator, generator_path, latent_clip, path)
+            generator_files.check_recorded_generator(generator, data.get("generator_sha256"), None, path)  # the env's
+        if generator is None:
+            generator_files.warn_without_generator(path, data)
         model = super().load(path, env, device, custom_objects, print_system_info, force_reset, **kwargs)
         model.generator = generator  # type: ignore[assignment]
-        if isinstance(generator, TrajectoryGenerator) and generator_path is not None and model.generator_path is None:
-            model.generator_path = generator_path
+        # the generator's own file, recorded in the next save; one found beside this zip is saved beside the next
+        beside = isinstance(path, str | os.PathLike) and generator_path == os.path.abspath(
+            generator_files.generator_file(path)
+        )
+        model.generator_path = None if beside else generator_path
         return model
 
     def _latent_env(
@@ -444,19 +453,47 @@ class GenRL(OnPolicyAlgorithm):
         latent_clip: float,
         policy_kwargs: dict[str, Any] | None,
         device: th.device | str,
+        check_latent_clip: bool = True,
     ) -> tuple[Any, dict[str, Any]]:
         """Set ``generator``, ``generator_path`` and ``generator_sha256``; the env in its latent-action wrapper, and the
         policy arguments completed (:func:`~sb3_genrl.genrl.policies.completed_policy_kwargs`). A generator given as a
-        file is loaded onto ``device``; one given beside an env that wraps another is refused."""
+        file is loaded onto ``device``; one given beside an env that wraps another is refused, and so is an env wrapped
+        with another ``latent_clip`` (unless not ``check_latent_clip``)."""
         self.generator_path: str | None = None
         if isinstance(generator, str | os.PathLike):
             self.generator_path = os.path.abspath(generator)
             generator = generator_files.load_generator(self.generator_path, device)
-        generator_files.check_same_generator(generator, env, self.generator_path)  # type: ignore[arg-type]
-        env, self.generator = latent_action_env(env, generator, latent_clip=latent_clip)  # type: ignore[arg-type]
+        env, self.generator = self._generator_env(
+            env,
+            generator,  # type: ignore[arg-type]
+            self.generator_path,
+            latent_clip,
+            check_latent_clip=check_latent_clip,
+        )
         self.generator_sha256 = generator_files.generator_digest(self.generator)  # saved, and checked by load()
         prior = None if self.generator is None else self.generator.prior
         return env, completed_policy_kwargs(policy_kwargs, prior, getattr(env, "observation_space", None))
+
+    @staticmethod
+    def _generator_env(
+        env: Any,
+        generator: TrajectoryGenerator | None,
+        generator_path: str | None,
+        latent_clip: float,
+        model: Any = None,
+        check_latent_clip: bool = True,
+    ) -> tuple[Any, TrajectoryGenerator | None]:
+        """The way every env reaches a GenRL model (the constructor, ``set_env``, ``load``): a raw env wrapped with
+        ``generator``, or an env already wrapped, refused when its generator is not ``generator`` or its ``latent_clip``
+        is not ``latent_clip`` (:func:`~sb3_genrl.genrl.generator_files.check_same_generator`,
+        :func:`~sb3_genrl.wrappers.latent_action_env`); with the generator it plays.
+
+        :param model: None for the constructor's own arguments, else the model whose generator ``generator`` is
+        :param check_latent_clip: refuse a wrapped env of another ``latent_clip`` (False while ``load()`` builds the model
+            with the default settings, before it sets the saved ones)
+        """
+        generator_files.check_same_generator(generator, env, generator_path, model)
+        return latent_action_env(env, generator, latent_clip=latent_clip, check_latent_clip=check_latent_clip)
 
     @staticmethod
     def _fitting_policy(policy: Any, env: Any) -> Any:

@@ -94,6 +94,19 @@ def check_hindsight_kwargs(hindsight_kwargs: Mapping[str, Any]) -> dict[str, Any
     return dict(hindsight_kwargs)
 
 
+def check_relabelled_reward(hindsight: Any) -> None:
+    """Refuse an ``info["hindsight"]`` that is not ``(context, reward)`` with one finite reward."""
+    if not isinstance(hindsight, tuple | list) or len(hindsight) != 2:
+        raise ValueError(f"info['hindsight'] must be (context, reward) or None, got {hindsight!r}")
+    reward = np.asarray(hindsight[1])
+    if reward.size != 1 or not np.issubdtype(reward.dtype, np.number) or not np.isfinite(reward.item()):
+        raise ValueError(
+            f"info['hindsight'] holds the relabelled reward {hindsight[1]!r}, not one finite number (from the task's "
+            "hindsight(info), or a goal-conditioned env's compute_reward): a relabelled pull's reward must be one "
+            "finite number"
+        )
+
+
 class HindsightRelabelling:
     """The relabelled pulls of GenRL's last batches, and the fit of the policy's mean to them (see the module doc).
 
@@ -158,11 +171,15 @@ class HindsightRelabelling:
         self.pull_infos = []
 
     def add_infos(self, infos: list[dict[str, Any]]) -> None:
-        """Keep one step's infos of the rollout (one per env); refused at once when they cannot be relabelled."""
+        """Keep one step's infos of the rollout (one per env); refused at once when they cannot be relabelled, or when
+        a relabelled pull's reward is not one finite number (where the relabelled rewards enter GenRL)."""
         if not all("hindsight" in info for info in infos):
             raise ValueError(NO_HINDSIGHT_INFO)
         if self.refit_every and not all("is_success" in info for info in infos):
             raise ValueError(NO_SUCCESS_INFO)
+        for info in infos:
+            if info["hindsight"] is not None:
+                check_relabelled_reward(info["hindsight"])
         self.pull_infos.append(infos)
 
     def extend_batch(

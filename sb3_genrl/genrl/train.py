@@ -40,7 +40,7 @@ from sb3_genrl.genrl.demonstrations import DemonstrationCallback, build_callback
 from sb3_genrl.genrl.generator_files import generator_digest
 from sb3_genrl.genrl.genrl import EStep, GenRL
 from sb3_genrl.genrl.policies import MlpPolicy
-from sb3_genrl.genrl.settings import NOT_SETTINGS, check_genrl_settings
+from sb3_genrl.genrl.settings import NOT_SETTINGS, SETTINGS, check_genrl_settings
 from sb3_genrl.run_folder import CHECKPOINT_DIR, SUMMARY, keep_episodes, open_run, remove_checkpoint
 from sb3_genrl.utils import atomic_write_json, folder_lock
 from sb3_genrl.wrappers import LatentActionWrapper
@@ -148,8 +148,10 @@ def train_policy(
     )
     out = check_output_dir(out_dir)
     callbacks = build_callbacks(callback, demonstrations=demonstrations, what=f"the settings of {task_name}", task=task)
-    # Built first: a generator that does not fit the task is refused before anything is written.
-    env = LatentActionWrapper(gym.make(env_id), _as_generator(generator))
+    # Built first: a generator that does not fit the task is refused before anything is written. The settings'
+    # latent_clip is the wrapper's (GenRL refuses a wrapped env with another).
+    latent_clip = genrl_kwargs.get("latent_clip", SETTINGS["latent_clip"].default)
+    env = LatentActionWrapper(gym.make(env_id), _as_generator(generator), latent_clip=latent_clip)
     arguments = {
         "e_step": e_step,
         "seed": seed,
@@ -402,13 +404,15 @@ def _training_env(
     from sb3_genrl.vec_env import BatchedLatentVecEnv
 
     spec, generator = env.env.spec, env.generator  # the spec, not the id: the processes need not know the id
-    batched = env.use_fast_path
+    batched, latent_clip = env.use_fast_path, env.latent_clip
     env.close()
     if batched:
-        venv = BatchedLatentVecEnv([partial(_episode_env, spec, generator, False) for _ in range(n_envs)], n_threads)
+        venv = BatchedLatentVecEnv(
+            [partial(_episode_env, spec, generator, latent_clip, False) for _ in range(n_envs)], n_threads
+        )
     else:
         try:
-            venv = SubprocVecEnv([partial(_episode_env, spec, generator) for _ in range(n_envs)])
+            venv = SubprocVecEnv([partial(_episode_env, spec, generator, latent_clip) for _ in range(n_envs)])
         except (BrokenPipeError, EOFError, ConnectionResetError) as error:  # a process died while starting
             raise RuntimeError(f"the {n_envs} env processes did not start. {MAIN_GUARD}") from error
     keys = (*EPISODE_INFO, "cpu_seconds")
@@ -423,15 +427,16 @@ def _training_env(
 def _episode_env(
     spec: gym.envs.registration.EnvSpec,
     generator: TrajectoryGenerator,
+    latent_clip: float,
     own_process: bool = True,
 ) -> gym.Env:
-    """One env of the training VecEnv (in its own process for a ``SubprocVecEnv``): the latent-action task with the
-    Monitor's info keys."""
+    """One env of the training VecEnv (in its own process for a ``SubprocVecEnv``): the latent-action task, its action
+    box ``latent_clip`` wide, with the Monitor's info keys."""
     if own_process:
         import torch
 
         torch.set_num_threads(1)  # one core per env process
-    return episode_info(RandomStateRecorder(LatentActionWrapper(gym.make(spec), generator)))
+    return episode_info(RandomStateRecorder(LatentActionWrapper(gym.make(spec), generator, latent_clip=latent_clip)))
 
 
 def _json_settings(genrl_kwargs: dict[str, Any]) -> dict[str, Any]:
@@ -474,13 +479,7 @@ def genrl_settings(genrl_kwargs: dict[str, Any] | None = None) -> dict[str, Any]
     a stage is resumed, not silently mixed with results made under the old one. The policy is named only when it is
     not the default ``"MlpPolicy"`` (the records of runs with the default policy do not name it). A task entry's
     ``callback`` is not a GenRL setting and is left out."""
-    import inspect
-
-    defaults = {
-        name: parameter.default
-        for name, parameter in inspect.signature(GenRL.__init__).parameters.items()
-        if parameter.default is not inspect.Parameter.empty and name != "policy"
-    }
+    defaults = {name: setting.default for name, setting in SETTINGS.items() if name != "policy"}
     settings = defaults | dict(genrl_kwargs or {})
     policy = settings.pop("policy", "MlpPolicy")
     if policy not in ("MlpPolicy", MlpPolicy):

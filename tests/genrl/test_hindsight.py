@@ -316,3 +316,43 @@ def test_refit_inside_genrl_logs_its_pairs_and_brings_the_mean_to_the_solving_pu
     with th.no_grad():
         error = (model.policy.get_distribution(contexts).distribution.mean - actions).pow(2).mean().item()
     assert error < 0.5 * actions.var(0).mean().item()  # closer to the pairs than their own spread
+
+
+class _NanHindsightEnv(HindsightReachEnv):
+    """HindsightReachEnv whose relabelled pulls have the reward NaN (the played pulls' rewards are finite)."""
+
+    def hindsight(self, info):
+        return np.asarray(info["reached"], dtype=np.float32), float("nan")
+
+
+def test_a_non_finite_relabelled_reward_is_refused_where_it_enters_genrl(trained):
+    """A relabelled pull's reward enters GenRL through the pulls' infos: a NaN there is refused at the first pull (it
+    used to be taken in, and the E-step's step and KL stayed 0 at every iteration, without a word)."""
+    model = GenRL(_NanHindsightEnv(), LinearGenerator(), seed=0, n_steps=16, hindsight_kwargs={})
+    with pytest.raises(ValueError, match=r"info\['hindsight'\] holds the relabelled reward nan, not one finite number"):
+        model.learn(32)
+    assert model.num_timesteps == 1
+    hindsight = HindsightRelabelling(trained.policy)
+    for bad in ((np.zeros(2), np.array([0.0, 1.0])), (np.zeros(2), "0"), (np.zeros(2), float("inf"))):
+        with pytest.raises(ValueError, match=r"info\['hindsight'\] holds the relabelled reward"):
+            hindsight.add_infos([{"hindsight": bad}])
+    with pytest.raises(ValueError, match=r"info\['hindsight'\] must be \(context, reward\) or None"):
+        hindsight.add_infos([{"hindsight": np.zeros(2)}])
+
+
+def test_a_goal_env_whose_compute_reward_gives_nan_for_a_relabelled_goal_is_refused_naming_compute_reward():
+    from test_fetch_goal_api import PointGoalEnv
+
+    class NanForOtherGoals(PointGoalEnv):  # finite for the episode's own goal, NaN for a relabelled one
+        def compute_reward(self, achieved_goal, desired_goal, info):
+            reward = super().compute_reward(achieved_goal, desired_goal, info)
+            return reward if np.array_equal(desired_goal, self.goal) else np.full_like(reward, np.nan)
+
+    model = GenRL(LatentActionWrapper(NanForOtherGoals(), LinearGenerator()), n_steps=8, seed=0, hindsight_kwargs={})
+    with pytest.raises(
+        ValueError,
+        match=r"NanForOtherGoals.compute_reward\(achieved_goal, desired_goal, info\) returned the non-finite reward nan "
+        r"for the achieved goal .* \(a relabelled pull of hindsight\)",
+    ):
+        model.learn(16)
+    assert model.num_timesteps == 0

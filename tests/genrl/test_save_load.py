@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -41,7 +43,8 @@ def test_save_load_predict_round_trip(tmp_path, monkeypatch):
 def test_load_without_generator_still_predicts(tmp_path):
     model = GenRL(FastReachEnv(), _UnsavableGenerator(), seed=0)
     model.save(tmp_path / "policy")
-    loaded = GenRL.load(tmp_path / "policy")
+    with pytest.warns(UserWarning, match="no generator found for .*policy"):
+        loaded = GenRL.load(tmp_path / "policy")
     assert loaded.predict(GOALS[0], deterministic=True)[0].shape == (2,)
     with pytest.raises(ValueError, match="generator"):
         loaded.predict_trajectory(GOALS[0])
@@ -244,3 +247,90 @@ def test_load_refuses_a_generator_file_and_another_algorithms_zip_naming_them(tm
     PPO("MlpPolicy", "Pendulum-v1", n_steps=8, batch_size=8).save(tmp_path / "ppo.zip")
     with pytest.raises(ValueError, match="ppo.zip is not a GenRL model: it holds a ActorCriticPolicy policy"):
         GenRL.load(tmp_path / "ppo.zip")
+
+
+def test_set_env_with_an_env_wrapped_with_another_generator_is_refused(tmp_path):
+    """set_env with a LatentActionWrapper of another generator: the model would train on it while it keeps, saves and
+    evaluates with its own; refused. The same content, or a raw env (wrapped with the model's), is accepted."""
+    own, other = _vae(0), _vae(1)
+    model = GenRL("GenRL/Hockey-v0", own, n_steps=8, device="cpu")
+    with pytest.raises(
+        ValueError,
+        match=r"the env is wrapped with the generator BetaVAE \(\(latent_dim, T, M\) = \(2, 69, 7\), SHA-256 [0-9a-f]{16}"
+        r"\.\.\.\), not with this model's own, BetaVAE .*: the policy would train on the env's",
+    ):
+        model.set_env(LatentActionWrapper(gym.make("GenRL/Hockey-v0"), other))
+    own.save(str(tmp_path / "own.pt"))
+    from sb3_genrl.generative import load
+
+    model.set_env(LatentActionWrapper(gym.make("GenRL/Hockey-v0"), load(str(tmp_path / "own.pt"), device="cpu")))
+    model.set_env(gym.make("GenRL/Hockey-v0"))
+    assert model.generator is own and model.env.get_attr("generator")[0] is own
+
+
+def test_load_with_an_env_wrapped_with_another_generator_is_refused(tmp_path):
+    """GenRL.load(path, env=wrapped with B) of a model trained with A: refused (it used to train on B and save A); a
+    model loaded without its generator takes the env's only when it is the one the model recorded."""
+    own, other = _vae(0), _vae(1)
+    GenRL("GenRL/Hockey-v0", own, n_steps=8, device="cpu").save(tmp_path / "model.zip")
+    with pytest.raises(ValueError, match=r"the env is wrapped with the generator BetaVAE .*, not with .*model.zip's own"):
+        GenRL.load(tmp_path / "model.zip", env=LatentActionWrapper(gym.make("GenRL/Hockey-v0"), other), device="cpu")
+    loaded = GenRL.load(tmp_path / "model.zip", env=LatentActionWrapper(gym.make("GenRL/Hockey-v0"), own), device="cpu")
+    assert generator_files.generator_digest(loaded.generator) == generator_files.generator_digest(own)
+    (tmp_path / "model.generator.pt").unlink()  # no generator of its own: the env's is checked against the record
+    with pytest.raises(ValueError, match=r"the generator BetaVAE .* is not the one .*model.zip was trained with"):
+        GenRL.load(tmp_path / "model.zip", env=LatentActionWrapper(gym.make("GenRL/Hockey-v0"), other), device="cpu")
+    adopted = GenRL.load(tmp_path / "model.zip", env=LatentActionWrapper(gym.make("GenRL/Hockey-v0"), own), device="cpu")
+    assert adopted.generator is own
+
+
+def test_a_model_loaded_by_a_relative_path_keeps_its_generator_when_saved_elsewhere(tmp_path, monkeypatch):
+    """Loaded as d1/model.zip from its parent folder and saved to d2/: the new zip finds its generator from any
+    folder (it used to record the relative path d1/model.generator.pt and load elsewhere with none, silently)."""
+    generator = _vae(0)
+    (tmp_path / "work").mkdir()
+    monkeypatch.chdir(tmp_path / "work")
+    GenRL("GenRL/Hockey-v0", generator, n_steps=8, device="cpu").save("d1/model.zip")
+    GenRL.load("d1/model.zip", device="cpu").save("d2/model.zip")
+    GenRL("GenRL/Hockey-v0", "d1/model.generator.pt", n_steps=8, device="cpu").save("d3/model.zip")  # a file, relative
+    GenRL.load("d3/model.zip", device="cpu").save("d4/model.zip")
+    monkeypatch.chdir(tmp_path)
+    for name in ("d2", "d4"):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # no warning: the generator is found
+            loaded = GenRL.load(tmp_path / "work" / name / "model.zip", device="cpu")
+        assert generator_files.generator_digest(loaded.generator) == generator_files.generator_digest(generator)
+    assert (tmp_path / "work" / "d2" / "model.generator.pt").is_file()  # an in-memory generator travels beside its zip
+
+
+def test_a_model_whose_generator_file_is_gone_saves_it_beside_and_one_without_any_warns(tmp_path):
+    generator = _vae(0)
+    generator.save(str(tmp_path / "vae.pt"))
+    model = GenRL("GenRL/Hockey-v0", str(tmp_path / "vae.pt"), n_steps=8, device="cpu")
+    model.save(tmp_path / "kept.zip")
+    (tmp_path / "vae.pt").unlink()
+    model.save(tmp_path / "moved.zip")  # the file it was built from is gone: saved beside
+    assert not (tmp_path / "kept.generator.pt").exists() and (tmp_path / "moved.generator.pt").is_file()
+    assert GenRL.load(tmp_path / "moved.zip", device="cpu").generator is not None
+    with pytest.warns(UserWarning, match=r"no generator found for .*kept.zip \(none of '.*vae.pt', '.*kept.generator.pt'"):
+        loaded = GenRL.load(tmp_path / "kept.zip", device="cpu")
+    assert loaded.generator is None
+
+
+def test_a_model_zip_without_a_generator_hash_is_flagged(tmp_path):
+    """A zip of an older version (no generator_sha256): its generator cannot be checked, and a warning says so."""
+    import json
+    import zipfile
+
+    GenRL("GenRL/Hockey-v0", _vae(0), n_steps=8, device="cpu").save(tmp_path / "model.zip")
+    with zipfile.ZipFile(tmp_path / "model.zip") as archive:
+        entries = {name: archive.read(name) for name in archive.namelist()}
+    data = json.loads(entries["data"])
+    del data["generator_sha256"]
+    entries["data"] = json.dumps(data).encode()
+    with zipfile.ZipFile(tmp_path / "older.zip", "w") as archive:
+        for name, content in entries.items():
+            archive.writestr(name, content)
+    (tmp_path / "model.generator.pt").rename(tmp_path / "older.generator.pt")
+    with pytest.warns(UserWarning, match=r"older.zip was saved without its generator's SHA-256 \(by an older sb3-genrl\)"):
+        assert GenRL.load(tmp_path / "older.zip", device="cpu").generator is not None

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import re
 
 import gymnasium as gym
 import pytest
@@ -150,3 +151,128 @@ def test_a_batch_size_of_zero_is_refused_naming_it():
         GenRL(FastReachEnv(), LinearGenerator(), batch_size=0)
     with pytest.raises(ValueError, match="batch_size must be a positive integer, got 0"):
         check_genrl_settings({"batch_size": 0})
+
+
+def test_the_settings_table_agrees_with_genrl_s_signature():
+    """settings.py holds its own table of the settings (no import of GenRL); GenRL's signature has the same names and
+    defaults, and its policy aliases are the table's."""
+    import inspect
+
+    from sb3_genrl.genrl.settings import NOT_SETTINGS, POLICY_ALIASES, SETTINGS
+
+    parameters = inspect.signature(GenRL.__init__).parameters
+    assert list(SETTINGS) == [name for name in parameters if name not in NOT_SETTINGS]
+    assert {name: setting.default for name, setting in SETTINGS.items()} == {
+        name: parameters[name].default for name in SETTINGS
+    }
+    assert GenRL.policy_aliases == POLICY_ALIASES
+    assert all(setting.accepts(setting.default) for setting in SETTINGS.values())  # every default passes its own check
+
+
+def _setting_id(item):
+    return "-".join(f"{key}={value}" for key, value in item.items()) if isinstance(item, dict) else None
+
+
+STOPS_LEARNING = [
+    ({"target_kl": -0.01}, "target_kl must be a finite number > 0 (the E-step's KL bound), got -0.01"),
+    ({"target_kl": 0}, "target_kl must be a finite number > 0 (the E-step's KL bound), got 0"),
+    ({"target_kl": float("nan")}, "target_kl must be a finite number > 0 (the E-step's KL bound), got nan"),
+    ({"target_kl": float("inf")}, "target_kl must be a finite number > 0 (the E-step's KL bound), got inf"),
+    ({"line_search_max_iter": 0}, "line_search_max_iter must be a positive integer, got 0"),
+    ({"cg_max_steps": 0}, "cg_max_steps must be a positive integer, got 0"),
+    ({"cg_damping": -0.1}, "cg_damping must be a finite number >= 0, got -0.1"),
+    ({"line_search_shrinking_factor": 1.0}, "line_search_shrinking_factor must be a number between 0 and 1 (exclusive)"),
+    ({"line_search_shrinking_factor": 0}, "line_search_shrinking_factor must be a number between 0 and 1 (exclusive)"),
+    ({"kl_coef": 0.0, "e_step": "kl_penalty"}, "kl_coef must be a finite number > 0, got 0.0"),
+    (
+        {"learning_rate": 0.0},
+        "learning_rate must be a finite number > 0 or a schedule (a callable of the remaining progress), got 0.0",
+    ),
+    ({"e_step_learning_rate": -1e-3}, "e_step_learning_rate must be a finite number > 0, got -0.001"),
+    ({"n_critic_updates": 0}, "n_critic_updates must be a positive integer, got 0"),
+    ({"n_e_step_epochs": 0}, "n_e_step_epochs must be a positive integer, got 0"),
+    ({"n_steps": 0}, "n_steps must be a positive integer, got 0"),
+    ({"latent_clip": -1.0}, "latent_clip must be a finite number > 0, got -1.0"),
+    ({"latent_clip": 0}, "latent_clip must be a finite number > 0, got 0"),
+    ({"latent_clip": float("inf")}, "latent_clip must be a finite number > 0, got inf"),
+]
+
+
+@pytest.mark.parametrize(("settings", "message"), STOPS_LEARNING, ids=_setting_id)
+def test_settings_that_stop_learning_are_refused_wherever_settings_are_taken(settings, message, tmp_path):
+    """The constructor, the check of --genrl-kwargs and the settings files, and GenRL.load with settings: each refuses
+    the value before any work (they used to run to the end with train/kl at 0 and a flat curve)."""
+    message = re.escape(message)
+    with pytest.raises(ValueError, match=message):
+        GenRL(FastReachEnv(), LinearGenerator(), **settings)
+    with pytest.raises(ValueError, match=f"--genrl-kwargs: {message}"):
+        check_genrl_settings(settings, "--genrl-kwargs")
+    GenRL(FastReachEnv(), LinearGenerator(), n_steps=8, e_step=settings.get("e_step", "trpo")).save(tmp_path / "model.zip")
+    with pytest.raises(ValueError, match=rf"GenRL\.load\(.*model\.zip\): {message}"):
+        GenRL.load(tmp_path / "model.zip", env=FastReachEnv(), generator=LinearGenerator(), **settings)
+
+
+@pytest.mark.parametrize(
+    ("settings", "message"),
+    [
+        ({"target_kl": "0.01"}, r"target_kl must be a finite number > 0 \(the E-step's KL bound\), got '0.01' \(str\)"),
+        ({"n_critic_updates": 2.5}, "n_critic_updates must be a positive integer, got 2.5"),
+        ({"n_em_iterations": True}, "n_em_iterations must be a positive integer, got True"),
+        ({"normalize_advantage": "yes"}, r"normalize_advantage must be True or False, got 'yes' \(str\)"),
+        ({"e_step": 1}, "e_step must be 'trpo' or 'kl_penalty', got 1"),
+        ({"policy_kwargs": "big"}, r"policy_kwargs must be a dict or None, got 'big' \(str\)"),
+        (
+            {"policy_kwargs": {"net_arch": "big"}},
+            r"policy_kwargs\['net_arch'\] must be a list of positive layer sizes or a dict of them for 'pi' and 'vf', "
+            r"got 'big' \(str\)",
+        ),
+        ({"policy_kwargs": {"net_arch": {"pi": [64, -1]}}}, r"policy_kwargs\['net_arch'\] must be a list of positive"),
+        ({"policy_kwargs": {"net_arch": {"actor": [64]}}}, r"policy_kwargs\['net_arch'\] must be a list of positive"),
+        ({"policy_kwargs": {"activation_fn": "relu"}}, r"policy_kwargs\['activation_fn'\] must be a torch.nn.Module class"),
+        ({"policy_kwargs": {"log_std_init": "0"}}, r"policy_kwargs\['log_std_init'\] must be a finite number, got '0'"),
+        ({"policy_kwargs": {"net_arhc": [8]}}, r"policy_kwargs: 'net_arhc' is not an argument of ActorCriticPolicy"),
+        ({"policy_kwargs": {"use_sde": True}}, r"policy_kwargs: 'use_sde' is not an argument of ActorCriticPolicy"),
+    ],
+    ids=_setting_id,
+)
+def test_a_value_of_the_wrong_type_is_refused_in_one_line_before_any_work(settings, message):
+    """A string for a number, a float for an integer, ``net_arch: "big"``: refused by the check every path takes, not
+    a TypeError or an AssertionError from SB3 partway through."""
+    with pytest.raises(ValueError, match=f"--genrl-kwargs: {message}"):
+        check_genrl_settings(settings, "--genrl-kwargs")
+    with pytest.raises(ValueError, match=message):
+        GenRL(FastReachEnv(), LinearGenerator(), **settings)
+
+
+def test_settings_given_to_load_are_checked_with_the_saved_ones(tmp_path):
+    GenRL(FastReachEnv(), LinearGenerator(), n_steps=8, e_step="kl_penalty").save(tmp_path / "model.zip")
+    with pytest.raises(ValueError, match=r"GenRL.load\(.*model.zip\): hindsight_kwargs needs e_step='trpo'"):
+        GenRL.load(tmp_path / "model.zip", env=FastReachEnv(), generator=LinearGenerator(), hindsight_kwargs={})
+    loaded = GenRL.load(tmp_path / "model.zip", env=FastReachEnv(), generator=LinearGenerator(), kl_coef=0.5)
+    assert loaded.kl_coef == 0.5 and loaded.e_step == "kl_penalty"
+
+
+def test_latent_clip_of_an_env_already_wrapped_must_be_the_wrappers(tmp_path):
+    """GenRL's latent_clip is the half-width of the wrapped env's action box, not only a record: an env wrapped with
+    another is refused (it used to be recorded in the model while the box stayed as wrapped)."""
+    generator = LinearGenerator()
+    wrapped = LatentActionWrapper(FastReachEnv(), generator, latent_clip=2.0)
+    with pytest.raises(ValueError, match=r"the env is wrapped with latent_clip=2.0, not 1.0: .* give both the same"):
+        GenRL(wrapped, latent_clip=1.0)
+    with pytest.raises(ValueError, match="the env is wrapped with latent_clip=2.0, not 3.0"):
+        GenRL(wrapped)  # GenRL's default
+    model = GenRL(wrapped, latent_clip=2.0, n_steps=8)
+    assert model.latent_clip == 2.0 and model.action_space.high.tolist() == [2.0, 2.0]
+    model.save(tmp_path / "model.zip")  # loaded onto an env: the raw one wrapped with the saved latent_clip
+    for env in (FastReachEnv(), LatentActionWrapper(FastReachEnv(), generator, latent_clip=2.0)):
+        loaded = GenRL.load(tmp_path / "model.zip", env=env, generator=generator)
+        assert loaded.latent_clip == 2.0 and loaded.env.get_attr("latent_clip") == [2.0]
+    with pytest.raises(ValueError, match="the env is wrapped with latent_clip=3.0, not 2.0"):
+        GenRL.load(tmp_path / "model.zip", env=LatentActionWrapper(FastReachEnv(), generator), generator=generator)
+    raw = GenRL(FastReachEnv(), generator, latent_clip=1.5, n_steps=8)  # a raw env is wrapped with it
+    assert raw.action_space.high.tolist() == [1.5, 1.5]
+    with pytest.raises(ValueError, match="the env is wrapped with latent_clip=2.0, not 1.5"):
+        raw.set_env(wrapped)
+    # a uniform prior's box is its support, [-1, 1], whatever latent_clip is
+    uniform = LatentActionWrapper(FastReachEnv(), LinearGenerator(prior="uniform"), latent_clip=2.0)
+    assert GenRL(uniform, n_steps=8).action_space.high.tolist() == [1.0, 1.0]

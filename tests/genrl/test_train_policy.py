@@ -207,3 +207,25 @@ def test_genrl_settings_record_the_policy_arguments_as_json():
         )
         == "left out"
     )
+
+
+def test_latent_clip_in_the_settings_is_the_action_box_of_the_run(fast_reach_task, tmp_path):
+    """latent_clip among train_policy's settings (``genrl train-policy --genrl-kwargs``) is the action box of every
+    env of the run, one or several (it used to be recorded in the summary and the model while the box stayed +-3)."""
+    from sb3_genrl.curves import read_monitor
+
+    for n_envs in (1, 2):
+        result = train_policy(
+            "fast-reach",
+            LinearGenerator(),
+            episodes=32,
+            seed=0,
+            out_dir=tmp_path / str(n_envs),
+            batch_episodes=16,
+            n_envs=n_envs,
+            latent_clip=0.5,
+        )
+        model = GenRL.load(result["model_path"], generator=LinearGenerator())
+        assert result["genrl_settings"]["latent_clip"] == model.latent_clip == 0.5
+        assert model.action_space.high.tolist() == [0.5, 0.5]
+        assert len(read_monitor(result["episodes_csv_path"])["return"]) == 32
