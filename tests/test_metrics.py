@@ -402,6 +402,21 @@ def test_evaluate_generators_checks_its_arguments_first(tmp_path) -> None:
     assert calls == [] and not (tmp_path / "out").exists()
 
 
+def test_an_empty_dataset_is_refused_naming_it(tmp_path, cli, hockey_generator) -> None:
+    generator = two_factor_generator()
+    empty = tmp_path / "empty.npy"
+    np.save(empty, np.zeros((0, generator.horizon, generator.action_dim), np.float32))
+    with pytest.raises(ValueError, match=r"^'.*empty.npy' holds no trajectories \(shape \(0, ") as error:
+        evaluate_generators([generator], empty, n=40, dwpr_n=10, out_dir=tmp_path / "out")
+    assert str(empty) in str(error.value) and "pass n" not in str(error.value)
+    with pytest.raises(ValueError, match="the trajectories array holds no trajectories"):
+        evaluate_generators([generator], np.zeros((0, 4, 2)), n=40, dwpr_n=10, out_dir=tmp_path / "out")
+    np.save(empty, np.zeros((0, 69, 7), np.float32))  # the command, with a generator file of its shape
+    code, _, err = cli("evaluate", hockey_generator, "--data", empty, "--out", tmp_path / "out", "--device", "cpu")
+    assert code == 2 and err.startswith(f"genrl evaluate: error: '{empty}' holds no trajectories") and err.count("\n") == 1
+    assert not (tmp_path / "out").exists()
+
+
 def test_evaluate_generator_is_the_one_evaluation_and_independent_of_list_order(tmp_path) -> None:
     from sb3_genrl.metrics import evaluate_generator, real_subset
 

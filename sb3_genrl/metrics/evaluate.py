@@ -349,7 +349,7 @@ def evaluate_generators(
     )
     out = check_output_dir(out_dir)
     real = load_trajectories(data)
-    _check_sample_sizes(real, n, dwpr_n, interventions)
+    _check_sample_sizes(real, n, dwpr_n, interventions, data)
     real = real_subset(real, n, seed)
     out.mkdir(parents=True, exist_ok=True)
     evaluations: list[GeneratorEvaluation] = []
@@ -394,8 +394,12 @@ def _check_prior_task(task: str, contexts: int, draws: int, prior_seed: int) -> 
     task_env_id(task)  # raises, naming the registered tasks
 
 
-def _check_sample_sizes(real: np.ndarray, n: int, dwpr_n: int, interventions: int) -> None:
-    """Refuse more samples than the real data holds, or DwPR sets that cannot fit in this machine's memory."""
+def _check_sample_sizes(real: np.ndarray, n: int, dwpr_n: int, interventions: int, data: Any) -> None:
+    """Refuse an empty real set, more samples than the real data holds, or DwPR sets that cannot fit in this machine's
+    memory."""
+    if len(real) == 0:
+        name = repr(str(data)) if isinstance(data, str | os.PathLike) else "the trajectories array"
+        raise ValueError(f"{name} holds no trajectories (shape {real.shape}); the evaluation needs at least n = {n}")
     if n > len(real):
         raise ValueError(f"n = {n} is more than the {len(real)} real trajectories; pass n <= {len(real)}")
     # DwPR holds a reference set and one latent dimension's set of n * D decoded float32 trajectories at a time.
