@@ -87,8 +87,8 @@ class GenRL(OnPolicyAlgorithm):
         paper): the arguments of :class:`~sb3_genrl.genrl.hindsight.HindsightRelabelling` (``{}``: its defaults),
         among them ``history``, ``regression_steps`` and ``refit_every``. Needs ``e_step="trpo"``, a Box context and
         ``info["hindsight"]`` (the refits also ``info["is_success"]``)
-    :param latent_clip: half-width of the latent action box, in prior standard deviations, when a raw env is
-        wrapped with a normal-prior generator (default 3)
+    :param latent_clip: half-width of the latent action box, in prior standard deviations, for a normal-prior
+        generator (default 3): a raw env is wrapped with it, an env already wrapped must have it
     :param stats_window_size: episodes averaged in the ``rollout/`` logs (default 100)
     :param tensorboard_log: TensorBoard log folder (default None: no TensorBoard)
     :param policy_kwargs: extra policy arguments (``net_arch``, ``log_std_init``, ...)
