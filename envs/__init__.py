@@ -7,6 +7,8 @@ package's own tasks, one more entry in :data:`_BUILT_IN`). A task may also decla
 hindsight experience replay (``GenRL/HockeyGoal-v0``, ``GenRL/BasketballGoal-v0``: ``get_task(name).goal_env_id``).
 With the optional extra ``robotics``, Gymnasium-Robotics' Fetch tasks join them (:mod:`sb3_genrl.envs.fetch`:
 ``fetch-reach``, ``fetch-push``, ``fetch-slide``, ``fetch-pick-and-place``, under Gymnasium-Robotics' own ids).
+Meta-World's 50 tasks, when ``metaworld`` is installed, are Gymnasium ids only (``GenRL/metaworld-push-v3``, ...;
+:mod:`sb3_genrl.envs.metaworld`), not entries of :data:`TASKS`.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ import importlib.util
 from typing import Any
 
 from gymnasium.envs.registration import register, registry
-from sb3_genrl.envs import basketball, fetch, hockey
+from sb3_genrl.envs import basketball, fetch, hockey, metaworld
 from sb3_genrl.envs.spec import TaskSpec
 
 from sb3_genrl.task_ids import register_task_id
@@ -97,6 +99,7 @@ def register_envs() -> None:
         from sb3_genrl.envs.fetch_mujoco import fix_on_import
 
         fix_on_import(fetch.FETCH_IDS)
+    metaworld.register_metaworld_envs()  # GenRL/metaworld-<name>, when Meta-World is installed (not imported here)
 
 
 register_envs()
