@@ -1,4 +1,4 @@
-"""Short task names (``"hockey"``) and the Gymnasium ids they stand for (``"GenRL/Hockey-v0"``).
+"""Short task names and the Gymnasium ids they stand for (the hockey task's name and ``GenRL/Hockey-v0``).
 
 The tasks register their names here (:func:`sb3_genrl.envs.register_task` does), so that the library can take a task
 by its short name without importing the tasks: a name resolves to an id, and the id to an env through Gymnasium's
