@@ -24,6 +24,7 @@ from sb3_genrl.genrl.averaging import averaged_copy, update_average
 from sb3_genrl.genrl.buffers import FiniteRewardDictRolloutBuffer, FiniteRewardRolloutBuffer
 from sb3_genrl.genrl.e_step import kl_penalty_e_step, trpo_e_step, variational_copy
 from sb3_genrl.genrl.hindsight import HindsightRelabelling
+from sb3_genrl.genrl.latent_critic import LatentCritic, check_latent_critic_kwargs
 from sb3_genrl.genrl.policies import (
     BoxScaler,
     ContextStdPolicy,
@@ -87,6 +88,9 @@ class GenRL(OnPolicyAlgorithm):
         paper): the arguments of :class:`~sb3_genrl.genrl.hindsight.HindsightRelabelling` (``{}``: its defaults),
         among them ``history``, ``regression_steps`` and ``refit_every``. Needs ``e_step="trpo"``, a Box context and
         ``info["hindsight"]`` (the refits also ``info["is_success"]``)
+    :param latent_critic_kwargs: take the E-step's baseline from a critic over latent actions fitted to the pulls of
+        the last batches, ``A = r - E_{alpha ~ pi}[Q(s0, alpha)]``, instead of ``A = r - V(s0)`` (default None: the
+        paper's ``V``): the arguments of :class:`~sb3_genrl.genrl.latent_critic.LatentCritic` (``{}``: its defaults)
     :param latent_clip: half-width of the latent action box, in prior standard deviations, for a normal-prior
         generator (default 3): a raw env is wrapped with it, an env already wrapped must have it
     :param stats_window_size: episodes averaged in the ``rollout/`` logs (default 100)
@@ -128,6 +132,7 @@ class GenRL(OnPolicyAlgorithm):
         value_history: int = 1,
         policy_averaging: float | None = None,
         hindsight_kwargs: dict[str, Any] | None = None,
+        latent_critic_kwargs: dict[str, Any] | None = None,
         latent_clip: float = 3.0,
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,
@@ -175,6 +180,7 @@ class GenRL(OnPolicyAlgorithm):
         self.kl_coef, self.n_e_step_epochs, self.e_step_learning_rate = kl_coef, n_e_step_epochs, e_step_learning_rate
         self.batch_size, self.n_critic_updates, self.value_history = batch_size, n_critic_updates, int(value_history)
         self.max_log_std_change, self.latent_clip, self.policy_averaging = max_log_std_change, latent_clip, policy_averaging
+        self.latent_critic_kwargs = None if latent_critic_kwargs is None else dict(latent_critic_kwargs)
         if _init_setup_model:
             self._setup_model()
 
@@ -198,6 +204,10 @@ class GenRL(OnPolicyAlgorithm):
         self._value_memory: collections.deque[tuple[Any, th.Tensor]] = collections.deque(maxlen=self.value_history)
         self.policy_average = None if self.policy_averaging is None else averaged_copy(self.policy)
         self.hindsight = None if self.hindsight_kwargs is None else HindsightRelabelling(self.policy, **self.hindsight_kwargs)
+        critic_kwargs = getattr(self, "latent_critic_kwargs", None)  # (absent from a model saved before it existed)
+        self.latent_critic = (
+            None if critic_kwargs is None else LatentCritic(self.policy, **check_latent_critic_kwargs(critic_kwargs))
+        )
 
     def train(self) -> None:
         """One EM iteration (Algorithm 1) on the N episodes in the rollout buffer."""
@@ -211,10 +221,11 @@ class GenRL(OnPolicyAlgorithm):
         # alpha_i ~ pi_theta(.|s_i). Each episode ends after one step, so returns = r_i and A_i = r_i - V(s_i).
         data = next(self.rollout_buffer.get(batch_size=None))
         observations, actions, log_prob_pi = data.observations, data.actions, data.old_log_prob
-        advantages = data.advantages
+        advantages, stats = data.advantages, {}
+        if self.latent_critic is not None:  # the baseline E_{alpha ~ pi}[Q(s0, alpha)] of a critic over latent actions
+            advantages, stats = self.latent_critic.advantages(self.policy, observations, actions, data.returns)
         advantage_mean, advantage_std = (advantages.mean(), advantages.std() + 1e-8) if self.normalize_advantage else (0, 1)
         batch = (observations, actions, log_prob_pi, (advantages - advantage_mean) / advantage_std)
-        stats: dict[str, float] = {}
         if self.hindsight is not None:  # the relabelled pulls join the E-step's batch
             batch, stats["hindsight_pulls"] = self.hindsight.extend_batch(
                 batch, self.rollout_buffer, advantage_mean, advantage_std
@@ -358,7 +369,15 @@ class GenRL(OnPolicyAlgorithm):
         return state_dicts + [name for name in self.OPTIONAL_STATES if self._optional_state(name) is not None], variables
 
     def _excluded_save_params(self) -> list[str]:
-        return [*super()._excluded_save_params(), "generator", "_value_memory", "policy_average", "hindsight", "_q"]
+        return [
+            *super()._excluded_save_params(),
+            "generator",
+            "_value_memory",
+            "policy_average",
+            "hindsight",
+            "_q",
+            "latent_critic",
+        ]
 
     def set_parameters(
         self, load_path_or_dict: str | dict[str, Any], exact_match: bool = True, device: th.device | str = "auto"

@@ -21,6 +21,7 @@ from stable_baselines3.common.policies import ActorCriticPolicy, BasePolicy
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 
 from sb3_genrl.genrl.hindsight import check_hindsight_kwargs
+from sb3_genrl.genrl.latent_critic import check_latent_critic_kwargs
 from sb3_genrl.genrl.policies import ContextStdPolicy, MlpPolicy, MultiInputPolicy
 
 # GenRL's policy aliases, as SB3 algorithms name theirs (GenRL.policy_aliases)
@@ -110,6 +111,7 @@ SETTINGS: dict[str, Setting] = {
     "value_history": Setting(1, "a positive integer", _integer(1)),
     "policy_averaging": Setting(None, "between 0 and 1 (exclusive) or None", _or_none(_FRACTION)),
     "hindsight_kwargs": Setting(None, "a dict or None", lambda value: value is None or isinstance(value, Mapping)),
+    "latent_critic_kwargs": Setting(None, "a dict or None", lambda value: value is None or isinstance(value, Mapping)),
     "latent_clip": Setting(3.0, "a finite number > 0", _POSITIVE),
     "policy_kwargs": Setting(None, "a dict or None", lambda value: value is None or isinstance(value, Mapping)),
 }
@@ -158,6 +160,8 @@ def _check_values(values: dict[str, Any]) -> dict[str, Any] | None:
             raise ValueError(f"{key} must be {SETTINGS[key].allowed}, got {value!r}{kind}")
     policy = values["policy"]
     _check_policy_kwargs(values["policy_kwargs"], POLICY_ALIASES.get(policy, policy))
+    if values["latent_critic_kwargs"] is not None:
+        check_latent_critic_kwargs(values["latent_critic_kwargs"])
     hindsight_kwargs = values["hindsight_kwargs"]
     if hindsight_kwargs is None:
         return None
