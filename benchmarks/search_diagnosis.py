@@ -26,8 +26,9 @@ For ``GenRL(env, generator)`` with no settings, the benchmark records per iterat
   run on that reward.
 
 Diagnosis goals are drawn with :data:`~sb3_genrl.hyperparams.TUNING_GOAL_SEED`. The comparison of GenRL's default with
-the option it motivates (``mean_fit="best_pulls"``, :mod:`sb3_genrl.genrl.best_pulls`), 3 seeds each with no other
-setting, is measured on held-out goals (:data:`~sb3_genrl.hyperparams.EVAL_GOAL_SEED`) that chose nothing.
+the option it motivates (``latent_critic_kwargs={}``, :mod:`sb3_genrl.genrl.latent_critic`) and with a longer value
+fit (``n_critic_updates=200``), 3 seeds each with no other setting, is measured on held-out goals
+(:data:`~sb3_genrl.hyperparams.EVAL_GOAL_SEED`) that chose nothing.
 
     python benchmarks/search_diagnosis.py
 """
