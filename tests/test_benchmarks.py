@@ -51,6 +51,7 @@ BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
             "argument --device: must be 'auto' or a torch device",
         ),
         ("precision_recall.py", ["--out", "FOLDER"], "argument --out: 'FOLDER' is a folder; expected a file name"),
+        ("precision_recall.py", ["--repeats", "0"], "argument --repeats: must be an integer >= 1, got 0"),
         ("sim_throughput.py", ["--repeats", "0"], "argument --repeats: must be an integer >= 1, got 0"),
         ("reachable.py", ["--task", "hockey", "--generator", "missing.pt", "--out", "out.json"], "missing.pt is not a file"),
     ],

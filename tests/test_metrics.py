@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import importlib
 import math
 
 import gymnasium as gym
@@ -19,6 +20,9 @@ from sb3_genrl.metrics import (
     evaluate_generators,
     precision_recall,
 )
+
+# The module, which the package's function of the same name hides.
+precision_recall_module = importlib.import_module("sb3_genrl.metrics.precision_recall")
 
 
 def brute_force(real: np.ndarray, generated: np.ndarray, k: int) -> tuple[float, float, np.ndarray, np.ndarray]:
@@ -489,6 +493,41 @@ def test_precision_recall_equals_brute_force_for_very_large_and_very_small_value
         assert (result.precision, result.recall) == expected[:2], (batch_size, result)
         np.testing.assert_allclose(result.real_radii, expected[2], rtol=1e-12, atol=0)
         np.testing.assert_allclose(result.generated_radii, expected[3], rtol=1e-12, atol=0)
+
+
+def test_precision_recall_matches_brute_force_on_blocks_ranked_by_groups_of_columns() -> None:
+    # Blocks wide enough for the grouped ranking of rows and columns, square and not (the last block of each set is
+    # narrower), on grids full of duplicates and exactly tied distances.
+    rng = np.random.default_rng(3)
+    real, generated = grid_points(rng, 700, 3), grid_points(rng, 650, 3)
+    for k in (1, 3):
+        expected = brute_force(real, generated, k)
+        for batch_size in (None, 256, 211):
+            result = precision_recall(real, generated, k, batch_size=batch_size, device="cpu", return_radii=True)
+            assert (result.precision, result.recall) == expected[:2], (k, batch_size, result)
+            np.testing.assert_allclose(result.real_radii, expected[2], rtol=1e-12, atol=0)
+            np.testing.assert_allclose(result.generated_radii, expected[3], rtol=1e-12, atol=0)
+
+
+def test_radii_with_tied_next_neighbours_are_settled_without_a_second_pass(monkeypatch) -> None:
+    # On a square grid an inner point's 4 nearest neighbours all lie at distance 1 and the next at sqrt(2): with
+    # k = 3 its k-th and (k+1)-th neighbours tie, which the kept candidates settle without recomputing its row.
+    grid = np.stack(np.meshgrid(np.arange(12.0), np.arange(12.0)), axis=-1).reshape(-1, 2)
+    generated = grid + np.random.default_rng(0).normal(0, 0.3, size=grid.shape)
+    recomputed = []
+    original = precision_recall_module._exact_sq_radii_rows
+
+    def counting(points, factors, rows, *args):
+        recomputed.append(len(rows))
+        return original(points, factors, rows, *args)
+
+    monkeypatch.setattr(precision_recall_module, "_exact_sq_radii_rows", counting)
+    for batch_size in (None, 50):
+        result = precision_recall(grid, generated, 3, batch_size=batch_size, device="cpu", return_radii=True)
+        expected = brute_force(grid, generated, 3)
+        assert (result.precision, result.recall) == expected[:2]
+        np.testing.assert_allclose(result.real_radii, expected[2], rtol=1e-12, atol=0)
+    assert recomputed == []
 
 
 def test_precision_recall_refuses_values_whose_squared_distances_overflow_float64() -> None:

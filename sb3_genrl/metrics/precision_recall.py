@@ -27,6 +27,11 @@ _SUBNORMAL32 = 2.0**-149
 DEFAULT_MEMORY_BUDGET_MB = 256.0
 # Bytes of temporaries per element of a distance block (the block, a margin buffer, reductions).
 _BYTES_PER_BLOCK_ELEMENT = 12
+# Positions per group of :func:`_merge_nearest`'s reduction pass.
+_GROUP_SIZE = 16
+# Float32 nearest neighbours kept per point beyond its k nearest: a radius is settled from the kept ones unless that
+# many more lie within the rounding bound of the k-th (then the point's row is recomputed).
+_EXTRA_CANDIDATES = 2
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -104,9 +109,10 @@ def power_of_two_scale(point_sets: Sequence[tuple[str, np.ndarray]], shift: np.n
     """
     largest = 0.0
     for _, points in point_sets:
-        step = _rows_per_chunk(points.shape[1])
-        for start in range(0, len(points), step):
-            largest = max(largest, float(np.abs(points[start : start + step] - shift).max()))
+        # Rounding is monotone, so the largest |x - shift| of a column is that of its largest or smallest value.
+        above = points.max(0).astype(np.float64) - shift
+        below = shift - points.min(0).astype(np.float64)
+        largest = max(largest, float(np.maximum(above, below).max()))
     dim = point_sets[0][1].shape[1]
     limit = float(np.sqrt(np.finfo(np.float64).max / (16 * dim)))
     if largest > limit:
@@ -126,9 +132,12 @@ def prepare(points: np.ndarray, shift: np.ndarray, scale: float, device: torch.d
     centred = torch.empty(original.shape, dtype=torch.float32, device=device)
     sq_norms = torch.empty(len(original), dtype=torch.float32, device=device)
     step = _rows_per_chunk(original.shape[1])
+    buffer = torch.empty(min(step, len(original)), original.shape[1], dtype=torch.float64, device=device)
     for start in range(0, len(original), step):
-        centred[start : start + step] = (original[start : start + step].double() - shift_t) * scale
-        sq_norms[start : start + step] = (centred[start : start + step].double() ** 2).sum(1)
+        chunk = original[start : start + step]
+        work = torch.sub(chunk, shift_t, out=buffer[: len(chunk)]).mul_(scale)
+        centred[start : start + step] = work
+        sq_norms[start : start + step] = work.copy_(centred[start : start + step]).square_().sum(1)
     return _PreparedSet(original, centred, sq_norms, scale * scale)
 
 
@@ -160,13 +169,14 @@ def _direct_sq_pairs(a: torch.Tensor, b: torch.Tensor, a_rows: torch.Tensor, b_r
     """Float64 squared distances ``|a[a_rows[p]] - b[b_rows[p]]|^2`` as the direct sum of squared differences."""
     out = torch.empty(len(a_rows), dtype=torch.float64, device=a.device)
     for p0 in range(0, len(a_rows), chunk):
-        diff = a[a_rows[p0 : p0 + chunk]].double() - b[b_rows[p0 : p0 + chunk]].double()
-        out[p0 : p0 + chunk] = (diff * diff).sum(1)
+        diff = a[a_rows[p0 : p0 + chunk]].double()  # a copy (indexing copies), so the in-place steps are safe
+        out[p0 : p0 + chunk] = diff.sub_(b[b_rows[p0 : p0 + chunk]]).square_().sum(1)
     return out
 
 
-def _kth_per_row(rows: torch.Tensor, values: torch.Tensor, num_rows: int, k: int) -> torch.Tensor:
-    """The k-th smallest of ``values`` per row index in ``rows`` (every row index in range occurs at least k times)."""
+def _kth_per_row(rows: torch.Tensor, values: torch.Tensor, num_rows: int, k: int | torch.Tensor) -> torch.Tensor:
+    """The k-th smallest of ``values`` per row index in ``rows`` (every row index in range occurs at least k times);
+    ``k`` is one rank for all rows or a ``(num_rows,)`` tensor of ranks."""
     order = torch.argsort(values, stable=True)
     order = order[torch.argsort(rows[order], stable=True)]
     counts = torch.bincount(rows, minlength=num_rows)
@@ -179,11 +189,55 @@ def _row_chunk(block: int, num_others: int) -> int:
     return max(1, block * block // num_others)
 
 
-def _merge_topk(
-    values: torch.Tensor, indices: torch.Tensor, new_values: torch.Tensor, new_indices: torch.Tensor, keep: int
-) -> tuple[torch.Tensor, torch.Tensor]:
-    best = torch.topk(torch.cat([values, new_values], dim=1), keep, dim=1, largest=False)
-    return best.values, torch.gather(torch.cat([indices, new_indices], dim=1), 1, best.indices)
+def _merge_nearest(
+    block: torch.Tensor, row_start: int, col_start: int, values: torch.Tensor, indices: torch.Tensor, dims: tuple[int, ...]
+) -> None:
+    """Merge a contiguous block's smallest values per row (``1`` in ``dims``) and per column (``0``; both need a
+    square block) into the running smallest ``values`` and their point ``indices``, ``(num_points, keep)`` each,
+    sorted; the block's rows are the points from ``row_start``, its columns those from ``col_start``.
+
+    A line's positions are split into ``length // _GROUP_SIZE`` interleaved groups (position ``p`` in group
+    ``p % groups``, the last ``length % _GROUP_SIZE`` positions on their own): one reduction pass over the block,
+    along its contiguous dimension, gives each group's minimum, a line's ``keep`` smallest values lie in its
+    ``keep`` groups of smallest minimum and its own positions, and only those are ranked, together with the line's
+    running values. Rows and columns are ranked together, so that a block costs a few passes whatever its shape.
+    """
+    keep = values.shape[1]
+    rows, cols = block.shape
+    length = cols if dims == (1,) else rows
+    device = block.device
+    starts = {1: row_start, 0: col_start}
+    counts = {1: rows, 0: cols}
+    groups = length // _GROUP_SIZE
+    if groups > 2 * keep:
+        main = groups * _GROUP_SIZE
+        group_min = [
+            block[:, :main].unflatten(1, (_GROUP_SIZE, groups)).amin(1)
+            if dim == 1
+            else block[:main].unflatten(0, (_GROUP_SIZE, groups)).amin(0).T
+            for dim in dims
+        ]
+        chosen = torch.topk(torch.cat(group_min) if len(dims) > 1 else group_min[0], keep, dim=1, largest=False).indices
+        positions = (chosen[:, :, None] + torch.arange(0, main, groups, device=device)).flatten(1)
+        if main < length:
+            positions = torch.cat([positions, torch.arange(main, length, device=device).expand(len(positions), -1)], dim=1)
+    else:
+        positions = torch.arange(length, device=device).expand(sum(counts[dim] for dim in dims), -1)
+    # Line l's position p is the block's flat element base[l] + p * stride[l]; its point is offset[l] + p.
+    base = torch.cat([torch.arange(counts[dim], device=device) * (cols if dim == 1 else 1) for dim in dims])
+    stride = torch.cat([torch.full((counts[dim],), 1 if dim == 1 else cols, device=device) for dim in dims])
+    offset = torch.cat([torch.full((counts[dim],), starts[1 - dim], device=device) for dim in dims])
+    candidates = torch.take(block, base[:, None] + positions * stride[:, None])
+    lines = [slice(starts[dim], starts[dim] + counts[dim]) for dim in dims]
+    running_values = torch.cat([values[line] for line in lines])
+    running_indices = torch.cat([indices[line] for line in lines])
+    best = torch.topk(torch.cat([candidates, running_values], dim=1), keep, dim=1, largest=False)
+    best_indices = torch.cat([positions + offset[:, None], running_indices], dim=1).gather(1, best.indices)
+    first = 0
+    for line in lines:
+        values[line] = best.values[first : first + line.stop - line.start]
+        indices[line] = best_indices[first : first + line.stop - line.start]
+        first += line.stop - line.start
 
 
 def _exact_sq_radii_rows(
@@ -208,38 +262,43 @@ def _exact_sq_radii_rows(
 def squared_radii(points: _PreparedSet, k: int, block: int) -> torch.Tensor:
     """Exact squared distance of every point to its k-th nearest neighbour in its own set (own index excluded).
 
-    One pass over the upper block triangle of the set's float32 distance matrix keeps a running top-(k+1) per
-    row: each off-diagonal block serves its rows and, transposed, its columns. When the (k+1)-th float32 value is
-    clear of the k-th by twice the error bound, the kept candidates hold every possible k-th neighbour and their
-    direct distances give the exact radius; other rows are recomputed (:func:`_exact_sq_radii_rows`).
+    One pass over the upper block triangle of the set's float32 distance matrix keeps the ``k + 2`` smallest
+    values of each point (:func:`_merge_nearest`): each off-diagonal block serves its rows and its columns. When
+    the last kept value is clear of the k-th by twice the error bound, the kept candidates hold every possible k-th
+    neighbour and the direct distances of those near the k-th give the exact radius; other rows (rare: two more
+    neighbours within the bound of the k-th) are recomputed (:func:`_exact_sq_radii_rows`).
     """
     n, dim = points.centred.shape
-    keep = min(k + 1, n - 1)
+    keep = min(k + _EXTRA_CANDIDATES, n - 1)
     device = points.centred.device
     left, right = _pair_factors(points, points.sq_norms, points, points.sq_norms)
     values = torch.full((n, keep), torch.inf, device=device)
     indices = torch.full((n, keep), -1, dtype=torch.long, device=device)
+    buffer = torch.empty(min(block, n) ** 2, device=device)  # one block's products, reused: no page faults per block
     for i0 in range(0, n, block):
         i1 = min(i0 + block, n)
         for j0 in range(i0, n, block):
             j1 = min(j0 + block, n)
-            sq = torch.mm(left[i0:i1], right[j0:j1].T)
+            sq = torch.mm(left[i0:i1], right[j0:j1].T, out=buffer[: (i1 - i0) * (j1 - j0)].view(i1 - i0, j1 - j0))
             if j0 == i0:
                 sq.fill_diagonal_(torch.inf)
-            best = torch.topk(sq, min(keep, j1 - j0), dim=1, largest=False)
-            values[i0:i1], indices[i0:i1] = _merge_topk(values[i0:i1], indices[i0:i1], best.values, best.indices + j0, keep)
-            if j0 != i0:
-                best = torch.topk(sq.T.contiguous(), min(keep, i1 - i0), dim=1, largest=False)
-                values[j0:j1], indices[j0:j1] = _merge_topk(
-                    values[j0:j1], indices[j0:j1], best.values, best.indices + i0, keep
-                )
+                _merge_nearest(sq, i0, j0, values, indices, (1,))
+            elif i1 - i0 == j1 - j0:
+                _merge_nearest(sq, i0, j0, values, indices, (1, 0))
+            else:
+                _merge_nearest(sq, i0, j0, values, indices, (1,))
+                _merge_nearest(sq, i0, j0, values, indices, (0,))
     tol = _float32_tolerance(dim) * (points.sq_norms + points.sq_norms.max()) + _float32_floor(dim)
-    certain = (values[:, k] - values[:, k - 1]) > 2 * tol if keep > k else torch.ones(n, dtype=torch.bool, device=device)
-    # Among the first k candidates of a certain row, only those within twice the bound of the k-th can be the
-    # farthest; the exact radius is the largest of their direct distances.
-    r_idx, c_idx = ((values[:, :k] >= (values[:, k - 1] - 2 * tol)[:, None]) & certain[:, None]).nonzero(as_tuple=True)
+    # Exact distances lie within tol of the float32 ones, so with V the k-th float32 value, the k-th exact one lies
+    # in [V - tol, V + tol]: candidates below V - 2 tol are among the k nearest, those above V + 2 tol are not, and
+    # the radius is the (k - below)-th smallest direct distance of the candidates in between. A row is certain when
+    # its last candidate lies above V + 2 tol (or when it kept every other point).
+    low = (values[:, k - 1] - 2 * tol)[:, None]
+    high = (values[:, k - 1] + 2 * tol)[:, None]
+    certain = values[:, -1] > high[:, 0] if keep < n - 1 else torch.ones(n, dtype=torch.bool, device=device)
+    r_idx, c_idx = ((values >= low) & (values <= high)).nonzero(as_tuple=True)
     direct = _direct_sq_pairs(points.original, points.original, r_idx, indices[r_idx, c_idx], block)
-    exact = torch.zeros(n, dtype=torch.float64, device=device).scatter_reduce_(0, r_idx, direct, "amax")
+    exact = _kth_per_row(r_idx, direct, n, k - (values < low).sum(1))
     rows = (~certain).nonzero(as_tuple=True)[0]
     if len(rows):
         exact[rows] = _exact_sq_radii_rows(points, (left, right), rows, k, tol, block)
@@ -247,16 +306,27 @@ def squared_radii(points: _PreparedSet, k: int, block: int) -> torch.Tensor:
 
 
 def _exact_inside(
-    points: _PreparedSet, rows: torch.Tensor, others: _PreparedSet, other_sq_radii: torch.Tensor, tol: torch.Tensor, block: int
+    points: _PreparedSet,
+    rows: torch.Tensor,
+    factors: tuple[torch.Tensor, torch.Tensor],
+    own_radii: torch.Tensor,
+    others: _PreparedSet,
+    other_sq_radii: torch.Tensor,
+    tol: torch.Tensor,
+    block: int,
 ) -> torch.Tensor:
     """Exact test of ``rows`` of ``points`` against the balls of ``others``: margins clear of 0 by the float32 bound
-    ``tol`` decide, the others are settled by direct distances."""
-    left, right = _pair_factors(points, points.sq_norms, others, others.sq_norms - (other_sq_radii * others.sq_scale).float())
+    ``tol`` decide, the others are settled by direct distances.
+
+    ``factors`` are :func:`membership`'s (``points``' first): their products plus ``own_radii`` (float32 units) are
+    the margins ``|x - y|^2 - radius(y)^2``, computed as :func:`membership`'s pass computes them.
+    """
+    own, other = factors
     inside = torch.zeros(len(rows), dtype=torch.bool, device=rows.device)
-    step = _row_chunk(block, len(right))
+    step = _row_chunk(block, len(other))
     for r0 in range(0, len(rows), step):
         r = rows[r0 : r0 + step]
-        margin = torch.mm(left[r], right.T)
+        margin = torch.mm(own[r], other.T).add_(own_radii[r, None])
         inside[r0 : r0 + step] = (margin < -tol[r, None]).any(1)
         r_idx, c_idx = (margin.abs() <= tol[r, None]).nonzero(as_tuple=True)
         direct = _direct_sq_pairs(points.original, others.original, r[r_idx], c_idx, step)
@@ -286,19 +356,20 @@ def membership(
     left, right = _pair_factors(real, real.sq_norms - r_real, generated, generated.sq_norms - r_gen)
     gen_margin = torch.full((n_gen,), torch.inf, device=device)
     real_margin = torch.full((n_real,), torch.inf, device=device)
+    buffer = torch.empty(min(block, n_real) * min(block, n_gen), device=device)
     for i0 in range(0, n_real, block):
         i1 = min(i0 + block, n_real)
         for j0 in range(0, n_gen, block):
             j1 = min(j0 + block, n_gen)
-            q = torch.mm(left[i0:i1], right[j0:j1].T)
+            q = torch.mm(left[i0:i1], right[j0:j1].T, out=buffer[: (i1 - i0) * (j1 - j0)].view(i1 - i0, j1 - j0))
             torch.minimum(gen_margin[j0:j1], q.amin(0), out=gen_margin[j0:j1])
             torch.minimum(real_margin[i0:i1], q.amin(1), out=real_margin[i0:i1])
     gen_margin += r_gen
     real_margin += r_real
     results = []
-    for points, margin, own_radii, others, other_radii in (
-        (generated, gen_margin, r_gen, real, real_sq_radii),
-        (real, real_margin, r_real, generated, generated_sq_radii),
+    for points, margin, factors, own_radii, others, other_radii in (
+        (generated, gen_margin, (right, left), r_gen, real, real_sq_radii),
+        (real, real_margin, (left, right), r_real, generated, generated_sq_radii),
     ):
         dim = points.centred.shape[1]
         tol = _float32_tolerance(dim) * (
@@ -307,7 +378,7 @@ def membership(
         inside = margin < -tol
         rows = (margin.abs() <= tol).nonzero(as_tuple=True)[0]
         if len(rows):
-            inside[rows] = _exact_inside(points, rows, others, other_radii, tol, block)
+            inside[rows] = _exact_inside(points, rows, factors, own_radii, others, other_radii, tol, block)
         results.append(inside)
     return results[0], results[1]
 
