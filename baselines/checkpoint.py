@@ -25,7 +25,7 @@ from typing import Any
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.monitor import Monitor
 
-from sb3_genrl.run_folder import CHECKPOINT_DIR, differing, keep_episodes, remove_checkpoint  # noqa: F401 (re-exported)
+from sb3_genrl.run.folder import CHECKPOINT_DIR, differing, keep_episodes, remove_checkpoint  # noqa: F401 (re-exported)
 from sb3_genrl.utils import read_checkpoint, write_checkpoint
 
 MODEL, BUFFER = "model.zip", "replay_buffer.pkl"
@@ -102,7 +102,7 @@ def resume_state(out: pathlib.Path, identity: dict[str, Any]) -> dict[str, Any] 
 def prepare_resume(out: pathlib.Path, state: dict[str, Any]) -> None:
     """Keep the Monitor file's rows up to the checkpoint and set the earlier training log aside (once per checkpoint: a
     second resume from the same checkpoint keeps the log set aside by the first; see
-    :func:`sb3_genrl.run_folder.keep_episodes`)."""
+    :func:`sb3_genrl.run.folder.keep_episodes`)."""
     keep_episodes(out, int(state["episodes"]))
 
 

@@ -44,7 +44,7 @@ def add_time_feature(transitions: dict[str, np.ndarray], horizon: int) -> dict[s
 
 def held_out_goals(task: str, goals: int, seed: int) -> np.ndarray:
     """``goals`` goals drawn from the task's goal distribution with ``np.random.default_rng(seed)``, as
-    :func:`sb3_genrl.genrl.evaluate_on_goals` draws them (the same seed gives the same goals)."""
+    :func:`sb3_genrl.run.evaluate_on_goals` draws them (the same seed gives the same goals)."""
     env = gym.make(get_task(task).env_id).unwrapped
     rng = np.random.default_rng(seed)
     return np.array([env.sample_goal(rng) for _ in range(goals)], dtype=np.float32)

@@ -80,7 +80,7 @@ from sb3_genrl.checks import (
 from sb3_genrl.curves import LOG_DIR, MONITOR_FILE, monitor_episodes, read_monitor, training_logger, write_learning_curve
 from sb3_genrl.genrl.generator_files import generator_digest
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED
-from sb3_genrl.run_folder import open_run
+from sb3_genrl.run.folder import open_run
 from sb3_genrl.utils import atomic_path, atomic_write_json, folder_lock
 
 CHECKPOINT_EVERY = 250  # episodes between checkpoints of an off-policy baseline (about 5 minutes of one core)
@@ -128,7 +128,7 @@ def train_baseline(
     :param window: episodes per point of the learning curve
     :param overwrite: replace a run already in ``out_dir`` (its files only) instead of refusing or resuming it; without
         it, a rerun of the same run returns the finished run's summary or resumes the unfinished one, and another
-        run's folder is refused (see :mod:`sb3_genrl.run_folder`); ``out_dir`` is locked while the run works in it
+        run's folder is refused (see :mod:`sb3_genrl.run.folder`); ``out_dir`` is locked while the run works in it
     """
     _check_arguments(algorithm, episodes, seed, demos, demo_episodes, generator, eval_goals, checkpoint_every, device)
     changes, spec, out = check_algorithm_kwargs(algorithm, algorithm_kwargs), get_task(task), check_output_dir(out_dir)

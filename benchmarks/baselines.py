@@ -52,7 +52,7 @@ from sb3_genrl.envs import arm_tasks
 
 from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, OUT_DIR, SEED, json_object_argument
 from sb3_genrl.provenance import provenance
-from sb3_genrl.run_folder import differing
+from sb3_genrl.run.folder import differing
 from sb3_genrl.utils import atomic_write_json
 
 HERE = pathlib.Path(__file__).resolve().parent
@@ -115,7 +115,7 @@ def run_settings(method: str, args: argparse.Namespace, seed: int, demos: str, g
             "batch_episodes": args.genrl_kwargs.get("n_steps", WINDOW) if method == "genrl" else WINDOW,
         }
         if method == "genrl":  # the chosen GenRL arguments, and every setting in effect
-            from sb3_genrl.genrl.train import genrl_settings
+            from sb3_genrl.run.train import genrl_settings
 
             settings["genrl_kwargs"] = args.genrl_kwargs
             settings["genrl"] = genrl_settings(settings["genrl_kwargs"])
@@ -140,7 +140,7 @@ def run_one(method: str, settings: dict[str, Any], demos: str, generator: str, r
     run.mkdir(parents=True, exist_ok=True)
     began = time.perf_counter()
     if method == "genrl":
-        from sb3_genrl.genrl import train_policy
+        from sb3_genrl.run import train_policy
 
         genrl_kwargs = {key: value for key, value in settings["genrl_kwargs"].items() if key != "n_steps"}
         summary = train_policy(

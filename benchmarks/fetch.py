@@ -21,7 +21,7 @@ after a stop resumes where it stopped (a run's settings are recorded and checked
    start of an iteration, after its update) and at the end, the deterministic policy plays ``--eval-states``
    held-out initial states (reset seeds from :data:`~sb3_genrl.hyperparams.EVAL_GOAL_SEED`, never used in tuning);
    the curve is against episodes and environment steps (50 per episode). Each seed checkpoints at every evaluation
-   (:mod:`sb3_genrl.genrl.checkpoint`) and resumes from it.
+   (:mod:`sb3_genrl.run.checkpoint`) and resumes from it.
 5. the generator's limit near the first seed's final policy: on the same ``--limit-states`` held-out states, the share
    its deterministic action solves and the share that one of ``--near-draws`` draws from the policy's own spread
    solves (``fetch_demonstrations.policy_neighbourhood_success``): a gap says the search, not the generator, limits.

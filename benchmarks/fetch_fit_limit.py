@@ -44,13 +44,13 @@ from sb3_genrl.envs import get_task
 from sb3_genrl.envs.fetch_demonstrations import evaluate_success, replay_success
 
 from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, SEED
+from sb3_genrl.data.fingerprints import file_fingerprint
 from sb3_genrl.genrl import GenRL
 from sb3_genrl.genrl.demonstrations import fit_mean_to_demonstrations
 from sb3_genrl.genrl.regression import policy_mean
 from sb3_genrl.hyperparams import TUNING_GOAL_SEED
 from sb3_genrl.markdown import markdown_table
 from sb3_genrl.provenance import provenance
-from sb3_genrl.study.state import file_fingerprint
 from sb3_genrl.utils import atomic_path, atomic_write_json, atomic_write_text
 from sb3_genrl.wrappers import LatentActionWrapper
 

@@ -42,12 +42,13 @@ from sb3_genrl.data import load_actions
 from sb3_genrl.generative import load
 from sb3_genrl.generative.presets import resolve_generator_spec
 from sb3_genrl.generative.vae import BetaVAE
-from sb3_genrl.genrl import GenRL, train_policy
+from sb3_genrl.genrl import GenRL
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED, TUNING_GOAL_SEED
 from sb3_genrl.markdown import markdown_table
 from sb3_genrl.metrics import correlation_table, evaluate_generator, real_subset
 from sb3_genrl.metrics.prior_rollout import PRIOR_ROLLOUT_SEED
 from sb3_genrl.provenance import provenance
+from sb3_genrl.run import train_policy
 from sb3_genrl.study.quickstart import task_settings
 from sb3_genrl.utils import atomic_write_json, atomic_write_text
 

@@ -2,7 +2,7 @@
 at every evaluation and resumed from its checkpoint.
 
 The run's folder (``WORK/seed_S``) holds SB3's Monitor file and logger, the checkpoint (as ``genrl train-policy``
-writes it, :mod:`sb3_genrl.genrl.checkpoint`) and, at the end, the model. The curve's points past the checkpoint a
+writes it, :mod:`sb3_genrl.run.checkpoint`) and, at the end, the model. The curve's points past the checkpoint a
 resumed run starts from are dropped from the row and measured again.
 """
 
@@ -24,15 +24,15 @@ from sb3_genrl.envs.fetch_demonstrations import evaluate_success
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
 from sb3_genrl.curves import monitor_episodes, training_logger
+from sb3_genrl.data.fingerprints import dataset_fingerprint
 from sb3_genrl.generative import load
 from sb3_genrl.genrl import GenRL
-from sb3_genrl.genrl.checkpoint import GenRLCheckpoint, RandomStateRecorder, resume_genrl, resume_state
 from sb3_genrl.genrl.demonstrations import DemonstrationCallback, build_callbacks, fit_mean_to_demonstrations
 from sb3_genrl.genrl.generator_files import generator_digest
-from sb3_genrl.genrl.train import genrl_settings, make_genrl, run_settings
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED
+from sb3_genrl.run.checkpoint import GenRLCheckpoint, RandomStateRecorder, resume_genrl, resume_state
+from sb3_genrl.run.train import genrl_settings, make_genrl, run_settings
 from sb3_genrl.study.quickstart import task_settings
-from sb3_genrl.study.state import dataset_fingerprint
 from sb3_genrl.wrappers import LatentActionWrapper
 
 CURVE = ("curve_episodes", "curve_env_steps", "curve_success")

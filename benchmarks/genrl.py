@@ -37,10 +37,11 @@ from sb3_genrl import LatentActionWrapper
 from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, SEED, check_int, json_object_argument, option
 from sb3_genrl.generative import load, train_generator
 from sb3_genrl.generative.presets import PRESETS
-from sb3_genrl.genrl import check_genrl_settings, evaluate_on_goals
-from sb3_genrl.genrl.train import genrl_settings, make_genrl
+from sb3_genrl.genrl import check_genrl_settings
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED, lay_over
 from sb3_genrl.provenance import provenance
+from sb3_genrl.run import evaluate_on_goals
+from sb3_genrl.run.train import genrl_settings, make_genrl
 from sb3_genrl.study.quickstart import task_settings
 from sb3_genrl.utils import atomic_path, atomic_write_json
 

@@ -3,7 +3,7 @@ cores, and the shares of the run's time in simulation, in decoding and in update
 
 Shares are of GenRL's loop (``learn``: collection and updates, without the run's set-up and outputs). For each task,
 trains GenRL with its settings (``hyperparams/genrl.yml``) for ``--episodes`` episodes through
-:func:`sb3_genrl.genrl.train_policy`, once per ``--n-envs`` (``2``: the quickstart's; ``N``: all of an iteration's
+:func:`sb3_genrl.run.train_policy`, once per ``--n-envs`` (``2``: the quickstart's; ``N``: all of an iteration's
 episodes in one fast-path call), timing the fast path's ``play_trajectories`` calls (simulation), the generator's
 ``decode`` calls (decoding) and GenRL's ``train`` (updates), and within the updates each of :data:`UPDATE_PARTS`
 (their shares of the updates: ``update_parts_share``). In the same run it measures the open-loop bound on all
@@ -72,8 +72,9 @@ def run_genrl(task: str, generator_path: str, episodes: int, n_envs: int, thread
     from sb3_genrl.envs import get_task
 
     from sb3_genrl.generative import load
-    from sb3_genrl.genrl import GenRL, train_policy
+    from sb3_genrl.genrl import GenRL
     from sb3_genrl.genrl.hindsight import HindsightRelabelling
+    from sb3_genrl.run import train_policy
     from sb3_genrl.study.quickstart import task_settings
 
     _, batch_episodes, genrl_kwargs = task_settings(task)

@@ -41,8 +41,8 @@ def main() -> None:
 
     from sb3_genrl.data import load_actions
     from sb3_genrl.generative import load, train_generator
-    from sb3_genrl.genrl import train_policy
     from sb3_genrl.metrics import evaluate_generator, real_subset
+    from sb3_genrl.run import train_policy
     from sb3_genrl.study.quickstart import task_settings
 
     demos = out / "demonstrations"

@@ -14,80 +14,19 @@ Meta-World's 50 tasks, when ``metaworld`` is installed, are Gymnasium ids only (
 from __future__ import annotations
 
 import importlib.util
-from typing import Any
 
-from gymnasium.envs.registration import register, registry
-from sb3_genrl.envs import basketball, fetch, hockey, metaworld
+from sb3_genrl.envs import basketball, fetch, fetch_tasks, hockey, metaworld
+from sb3_genrl.envs.fetch_mujoco import fix_on_import
+from sb3_genrl.envs.registry import TASKS, arm_tasks, get_task, make_task, register_task
 from sb3_genrl.envs.spec import TaskSpec
-
-from sb3_genrl.task_ids import register_task_id
 
 __all__ = ["DEFAULT_TASK", "TASKS", "TaskSpec", "arm_tasks", "get_task", "make_task", "register_envs", "register_task"]
 
-TASKS: dict[str, TaskSpec] = {}
 # Gymnasium-Robotics' Fetch tasks, when its optional extra is installed (``pip install "sb3-genrl[robotics]"``; looked up
 # without importing it)
 ROBOTICS = importlib.util.find_spec("gymnasium_robotics") is not None
-_BUILT_IN = (hockey.TASK, basketball.TASK, *(fetch.TASKS if ROBOTICS else ()))
+_BUILT_IN = (hockey.TASK, basketball.TASK, *(fetch_tasks.TASKS if ROBOTICS else ()))
 DEFAULT_TASK = hockey.TASK.name  # the quickstart's task
-
-
-def register_task(spec: TaskSpec) -> TaskSpec:
-    """Add a task to :data:`TASKS` and register its Gymnasium id (idempotent for the same spec).
-
-    :param spec: the task's description
-    :return: ``spec``
-    """
-    known = TASKS.get(spec.name)
-    if known is not None and known is not spec:
-        raise ValueError(f"a different task is already registered as {spec.name!r}")
-    clash = [name for name, other in TASKS.items() if other.env_id == spec.env_id and name != spec.name]
-    if clash:
-        raise ValueError(f"Gymnasium id {spec.env_id!r} already belongs to task {clash[0]!r}")
-    for env_id, cls in ((spec.env_id, spec.env_class), (spec.goal_env_id, spec.goal_env_class)):
-        if env_id is not None and env_id not in registry:
-            # A module-level class is registered by its import path, as Gymnasium's own envs are.
-            entry_point = cls if "<locals>" in cls.__qualname__ else f"{cls.__module__}:{cls.__qualname__}"
-            register(id=env_id, entry_point=entry_point, max_episode_steps=spec.horizon)
-    register_task_id(spec.name, spec.env_id)
-    TASKS[spec.name] = spec
-    return spec
-
-
-def get_task(task: str | TaskSpec) -> TaskSpec:
-    """The registered task of a short name or a Gymnasium id (a :class:`TaskSpec` is returned as it is).
-
-    :param task: a name in :data:`TASKS` or the Gymnasium id of one
-    :return: the task's description
-    """
-    if isinstance(task, TaskSpec):
-        return task
-    if task in TASKS:
-        return TASKS[task]
-    for spec in TASKS.values():
-        if spec.env_id == task:
-            return spec
-    raise ValueError(
-        f"unknown task {task!r}; expected one of {sorted(TASKS)} or their Gymnasium ids "
-        f"{sorted(spec.env_id for spec in TASKS.values())}"
-    )
-
-
-def arm_tasks() -> tuple[str, ...]:
-    """The registered tasks on the package's arm (:class:`~sb3_genrl.envs.base.ArmTaskEnv`): those that the scripted
-    motions' showcase, the feedback baselines, the video and the study run on (not, for now, the Fetch tasks)."""
-    from sb3_genrl.envs.base import ArmTaskEnv
-
-    return tuple(
-        name for name, spec in TASKS.items() if isinstance(spec.env_class, type) and issubclass(spec.env_class, ArmTaskEnv)
-    )
-
-
-def make_task(name: str, **kwargs: Any):
-    """``gymnasium.make`` of a registered task by its short name or Gymnasium id, with ``kwargs``."""
-    import gymnasium
-
-    return gymnasium.make(get_task(name).env_id, **kwargs)
 
 
 def register_envs() -> None:
@@ -96,8 +35,6 @@ def register_envs() -> None:
     for spec in _BUILT_IN:
         register_task(spec)
     if ROBOTICS:  # Gymnasium-Robotics' joint helpers fixed now if it is imported, else as soon as it is
-        from sb3_genrl.envs.fetch_mujoco import fix_on_import
-
         fix_on_import(fetch.FETCH_IDS)
     metaworld.register_metaworld_envs()  # GenRL/metaworld-<name>, when Meta-World is installed (not imported here)
 

@@ -12,7 +12,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from sb3_genrl.envs import TaskSpec, get_task
+from sb3_genrl.envs.registry import get_task
+from sb3_genrl.envs.spec import TaskSpec
 from scipy.spatial import cKDTree
 
 from sb3_genrl.utils import atomic_path, atomic_write_json

@@ -22,11 +22,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from sb3_genrl.envs import TaskSpec, get_task
 from sb3_genrl.envs.arm import JOINT_RANGE
 from sb3_genrl.envs.base import ArmTaskEnv
 from sb3_genrl.envs.control import default_threads
 from sb3_genrl.envs.motions import bump
+from sb3_genrl.envs.registry import get_task
+from sb3_genrl.envs.spec import TaskSpec
 from tqdm.auto import tqdm
 
 from sb3_genrl.provenance import package_versions
@@ -132,7 +133,7 @@ def make_demonstrations(
     atomically (see :func:`sb3_genrl.data.write_dataset`) together with its coverage report (``coverage.json`` and
     ``coverage.png`` beside its ``data`` folder), so a dataset is never visible without its report. While it runs,
     the sibling lock file ``.NAME.lock`` keeps a second writer of the same directory out
-    (:func:`sb3_genrl.study.state.folder_lock`); temporary directories left by a killed writer are removed.
+    (:func:`sb3_genrl.utils.folder_lock`); temporary directories left by a killed writer are removed.
 
     :param task: a task name from :data:`sb3_genrl.envs.TASKS` (or its spec)
     :param episodes: number of demonstrations (paper: 40000)
@@ -144,7 +145,7 @@ def make_demonstrations(
     :return: the dataset directory
     """
     from sb3_genrl.checks import check_output_dir, check_positive_int, check_seed
-    from sb3_genrl.study.state import folder_lock
+    from sb3_genrl.utils import folder_lock
 
     spec = get_task(task)
     check_positive_int(episodes, "episodes")

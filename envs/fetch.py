@@ -28,7 +28,6 @@ from typing import Any
 
 import numpy as np
 from sb3_genrl.envs.fetch_mujoco import robotics_env_class
-from sb3_genrl.envs.spec import TaskSpec
 
 FETCH_HORIZON = 50  # Gymnasium-Robotics' max_episode_steps of every Fetch task
 FETCH_ACTION_DIM = 4  # dx, dy, dz, gripper
@@ -197,53 +196,3 @@ def is_valid(info: dict[str, Any]) -> bool:
     """A played trajectory may be a demonstration when what it moves ended within 5 cm of its aim and the object (if
     any) is still on the table (``info`` from :func:`sb3_genrl.envs.fetch_demonstrations.play_expert`)."""
     return bool(info["aim_distance"] < SUCCESS_DISTANCE and info.get("on_table", True))
-
-
-def make_arrays(*args: Any, **kwargs: Any) -> Any:
-    """The demonstrations' arrays (:func:`sb3_genrl.envs.fetch_demonstrations.make_arrays`)."""
-    from sb3_genrl.envs.fetch_demonstrations import make_arrays as make
-
-    return make(*args, **kwargs)
-
-
-def evaluate_success(*args: Any, **kwargs: Any) -> Any:
-    """A policy's success rate (:func:`sb3_genrl.envs.fetch_demonstrations.evaluate_success`)."""
-    from sb3_genrl.envs.fetch_demonstrations import evaluate_success as evaluate
-
-    return evaluate(*args, **kwargs)
-
-
-def _task(name: str, short: str, maker: Callable[..., Any]) -> TaskSpec:
-    low, high = (np.asarray(corner, dtype=np.float64) for corner in GOAL_BOXES[name])
-
-    def in_goal_region(points: np.ndarray) -> np.ndarray:
-        points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-        return np.all((points >= low) & (points <= high), axis=1)
-
-    family = FAMILIES[name]
-    return TaskSpec(
-        name=short,
-        env_id=family.env_id,
-        env_class=maker,
-        horizon=FETCH_HORIZON,
-        goal_low=low,
-        goal_high=high,
-        in_goal_region=in_goal_region,
-        cell_size=0.03 if name == "Slide" else 0.02,
-        sample_expert=family.expert,
-        perturbation_scales=PERTURBATION,
-        is_valid=is_valid,
-        action_dim=FETCH_ACTION_DIM,
-        demonstrations=make_arrays,
-        evaluate=evaluate_success,
-        generator_preset="VAE-FETCH",
-        video=False,
-    )
-
-
-TASKS = (
-    _task("Reach", "fetch-reach", make_fetch_reach),
-    _task("Push", "fetch-push", make_fetch_push),
-    _task("Slide", "fetch-slide", make_fetch_slide),
-    _task("PickAndPlace", "fetch-pick-and-place", make_fetch_pick_and_place),
-)

@@ -16,10 +16,10 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-from sb3_genrl.envs import get_task
 from sb3_genrl.envs.demonstrations import perturbation
 from sb3_genrl.envs.fetch import FAMILIES, FETCH_HORIZON, GRIPPER_GAIN, PERTURBATION, STEP_METRES, is_valid
 from sb3_genrl.envs.fetch_mujoco import fix_joint_helpers
+from sb3_genrl.envs.registry import get_task
 from sb3_genrl.envs.spec import TaskSpec
 from tqdm.auto import tqdm
 

@@ -21,8 +21,8 @@ from sb3_genrl.envs.demonstrations import make_demonstrations
 
 from sb3_genrl import GenRL  # importing sb3_genrl registers GenRL/Hockey-v0 with Gymnasium
 from sb3_genrl.generative import train_generator
-from sb3_genrl.genrl import train_policy
 from sb3_genrl.hyperparams import load_genrl_settings
+from sb3_genrl.run import train_policy
 
 
 def main() -> None:

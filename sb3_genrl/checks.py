@@ -8,6 +8,7 @@ types (:func:`option`), so its messages name the option (``genrl demos: error: a
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import numbers
 import os
@@ -15,6 +16,9 @@ import tempfile
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
+
+import numpy as np
+import torch
 
 T = TypeVar("T")
 
@@ -70,8 +74,6 @@ def sub_seed(seed: int, key: int) -> int:
     :param seed: the run's seed (0 to ``2**32 - 1``)
     :param key: which sub-stream (a non-negative integer: an offset, a count of episodes)
     """
-    import numpy as np
-
     check_seed(seed)
     check_int(key, "key", minimum=0)
     if seed + key <= MAX_SEED:
@@ -110,7 +112,6 @@ def check_device(device: Any, name: str = "device") -> Any:
     """
     if isinstance(device, str) and device == "auto":
         return device
-    import torch
 
     try:
         parsed = torch.device(device)
@@ -236,8 +237,6 @@ JSON_OUT = option(check_output_file, suffixes=(".json",))
 
 def json_argument(text: str) -> Any:
     """An argparse ``type``: the value a JSON text holds (callers check its shape, e.g. ``--genrl-kwargs``)."""
-    import json
-
     try:
         return json.loads(text)
     except json.JSONDecodeError as error:

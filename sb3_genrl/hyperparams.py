@@ -11,9 +11,17 @@ from __future__ import annotations
 import ast
 import copy
 import functools
+import inspect
 import pathlib
 from importlib import resources
 from typing import Any
+
+import yaml
+from torch import nn
+
+from sb3_genrl.genrl import GenRL, check_genrl_settings
+from sb3_genrl.genrl.demonstrations import callback_class, callback_entries
+from sb3_genrl.genrl.hindsight import DEFAULTS as HINDSIGHT_DEFAULTS
 
 __all__ = [
     "EVAL_GOAL_SEED",
@@ -62,8 +70,6 @@ def hyperparams_file(algo: str) -> pathlib.Path:
 
 @functools.cache
 def _entries(algo: str) -> dict[str, Any]:
-    import yaml
-
     path = hyperparams_file(algo)
     entries = yaml.safe_load(path.read_text())
     if not isinstance(entries, dict) or not all(isinstance(entry, dict) for entry in entries.values()):
@@ -99,7 +105,7 @@ def load_genrl_settings(env_id: str) -> tuple[int, int, dict[str, Any]]:
     ``n_steps`` the episodes of an iteration, ``N``; a run in another number of env processes keeps ``N``. The
     entry's ``env_wrapper`` is rl-zoo3's (:mod:`sb3_genrl.zoo`), not a GenRL setting. Its ``callback`` (rl-zoo3's
     key, e.g. the Fetch tasks' :class:`~sb3_genrl.genrl.demonstrations.DemonstrationCallback`) is kept among the
-    settings as ``callback``, a list of ``{class path: {arguments}}``, which :func:`sb3_genrl.genrl.train_policy` builds
+    settings as ``callback``, a list of ``{class path: {arguments}}``, which :func:`sb3_genrl.run.train_policy` builds
     (and refuses without the demonstrations it needs).
 
     :param env_id: the task's Gymnasium id, e.g. ``GenRL/Hockey-v0``
@@ -120,9 +126,6 @@ def check_genrl_entry(entry: dict[str, Any], name: str) -> tuple[int, int, dict[
     :return: ``(episodes, batch_episodes, genrl_kwargs)`` as :func:`load_genrl_settings`'s
     :raises ValueError: naming the setting and what was expected
     """
-    from sb3_genrl.genrl import check_genrl_settings
-    from sb3_genrl.genrl.demonstrations import callback_entries
-
     entry = copy.deepcopy(entry)
     for key in _KWARGS:
         if key in entry:
@@ -154,11 +157,6 @@ def changed_settings(env_id: str) -> list[str]:
     each callback (``callback: DemonstrationCallback``) with each argument that differs from its defaults. Not
     counted: the budget (``n_timesteps``) and rl-zoo3's ``env_wrapper``.
     """
-    import inspect
-
-    from sb3_genrl.genrl import GenRL
-    from sb3_genrl.genrl.demonstrations import callback_class, callback_entries
-    from sb3_genrl.genrl.hindsight import DEFAULTS as HINDSIGHT_DEFAULTS
 
     _, batch_episodes, settings = load_genrl_settings(env_id)
     defaults = {name: parameter.default for name, parameter in inspect.signature(GenRL.__init__).parameters.items()}
@@ -235,8 +233,6 @@ def _literal(node: ast.AST) -> Any:
 
 def _torch_nn_class(node: ast.Attribute) -> type:
     """``nn.ReLU``, ``th.nn.ReLU`` or ``torch.nn.ReLU``: the class of ``torch.nn``."""
-    from torch import nn
-
     path = ast.unparse(node)
     module, _, name = path.rpartition(".")
     cls = getattr(nn, name, None) if module in ("nn", "th.nn", "torch.nn") else None

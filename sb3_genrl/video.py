@@ -58,7 +58,7 @@ def record_video(
 
     :param task: a task name from :data:`sb3_genrl.envs.TASKS`
     :param goals: episodes (goals) to show, drawn with ``seed`` (which also draws the random latent actions)
-    :param trust_policy: load the policy zip with SB3's unpickling (see :func:`sb3_genrl.genrl.loading.load_policy`);
+    :param trust_policy: load the policy zip with SB3's unpickling (see :func:`sb3_genrl.run.loading.load_policy`);
         by default nothing in it is unpickled
     :return: ``video``, ``strip`` paths and per-episode ``rewards``
     """
@@ -77,7 +77,7 @@ def record_video(
     rng = np.random.default_rng(seed)
     goal_list = np.array([env.sample_goal(rng) for _ in range(goals)])
     if policy is not None:
-        from sb3_genrl.genrl.loading import load_policy
+        from sb3_genrl.run.loading import load_policy
 
         path = pathlib.Path(policy)
         model = load_policy(path / "genrl_policy.zip" if path.is_dir() else path, env, trust=trust_policy)

@@ -296,7 +296,7 @@ def test_library_functions_check_before_any_work(tmp_path):
         quickstart(tmp_path / "quick", task="hockey", policy_episodes=-1)
     with pytest.raises(ValueError, match="device"):
         quickstart(tmp_path / "quick", task="hockey", device="bogus")
-    from sb3_genrl.genrl import train_policy
+    from sb3_genrl.run import train_policy
 
     with pytest.raises(ValueError, match="hindsight_kwargs needs e_step='trpo'"):  # GenRL's settings, before its Monitor
         train_policy("hockey", "missing.pt", episodes=8, out_dir=tmp_path / "policy", e_step="kl_penalty", hindsight_kwargs={})
@@ -311,8 +311,8 @@ def test_every_library_entry_point_checks_its_output_path_and_seed_first(tmp_pat
     from sb3_genrl.envs.demonstrations import make_demonstrations
 
     from sb3_genrl.generative import train_generator
-    from sb3_genrl.genrl import train_policy
     from sb3_genrl.metrics import evaluate_generators
+    from sb3_genrl.run import train_policy
     from sb3_genrl.showcase import play_scripted
     from sb3_genrl.study import run_study
     from sb3_genrl.study.quickstart import quickstart
@@ -432,8 +432,8 @@ def test_baseline_and_compare(runs, tmp_path, cli, hockey_generator):
 
     from sb3_genrl import LatentActionWrapper
     from sb3_genrl.generative import load
-    from sb3_genrl.genrl import evaluate_on_goals
     from sb3_genrl.hyperparams import EVAL_GOAL_SEED
+    from sb3_genrl.run import evaluate_on_goals
 
     generator = load(hockey_generator)
     latent_ppo = load_trained("latent-ppo", runs / "ppo" / "latent-ppo_policy.zip", "hockey")
@@ -539,7 +539,7 @@ def _with_payload(policy_zip: Path, out: Path, key: str, marker: Path) -> Path:
 
 def test_policy_zips_are_loaded_without_unpickling(runs, tmp_path, cli):
     from sb3_genrl import GenRL
-    from sb3_genrl.genrl.loading import load_policy
+    from sb3_genrl.run.loading import load_policy
 
     policy = runs / "genrl" / "genrl_policy.zip"
     marker = tmp_path / "marker"

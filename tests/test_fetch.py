@@ -148,7 +148,7 @@ def test_demonstrations_generator_and_genrl_on_fetch_push(tmp_path, cli):
     }
     code, _, err = cli(*policy, "--data", dataset, "--genrl-kwargs", json.dumps(small))
     assert code == 0, err
-    from sb3_genrl.study.state import dataset_fingerprint
+    from sb3_genrl.data.fingerprints import dataset_fingerprint
 
     record = json.loads((tmp_path / "policy" / "run_record.json").read_text())
     assert dataset_fingerprint(dataset) in json.dumps(record)  # the demonstrations are part of the run's identity
@@ -360,7 +360,7 @@ def test_the_benchmark_keeps_the_generator_whose_fitted_mean_solves_the_most_tun
 def test_the_results_table_says_which_runs_used_former_settings():
     from sb3_genrl.benchmarks.fetch_results import status
 
-    from sb3_genrl.genrl.train import genrl_settings
+    from sb3_genrl.run.train import genrl_settings
     from sb3_genrl.study.quickstart import task_settings
 
     _, batch_episodes, genrl_kwargs = task_settings("fetch-push")

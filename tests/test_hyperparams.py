@@ -143,7 +143,7 @@ def test_lay_over_merges_mappings_and_replaces_the_rest():
 
 
 def test_the_genrl_that_train_policy_builds_is_the_entrys(hockey_generator, tmp_path, cli):
-    from sb3_genrl.genrl.train import genrl_settings
+    from sb3_genrl.run.train import genrl_settings
 
     code, _, err = cli(
         "train-policy",

@@ -181,7 +181,8 @@ def test_toy_task_through_the_cli(reach_task, tmp_path, capsys):
     )
     summary = json.loads((run / "summary.json").read_text())
     assert (summary["task"], summary["episodes"], summary["iterations"]) == ("reach", 16, 2)
-    from sb3_genrl.genrl import GenRL, evaluate_on_goals
+    from sb3_genrl.genrl import GenRL
+    from sb3_genrl.run import evaluate_on_goals
 
     model = GenRL.load(run / "genrl_policy.zip", device="cpu")
     goals, rewards, infos = evaluate_on_goals(model, "reach", goals=4, seed=1)

@@ -20,14 +20,9 @@ from gymnasium import spaces
 from sb3_genrl.cli import main
 from sb3_genrl.data import write_dataset
 from sb3_genrl.data.minari_io import remove_stale_partials
+from sb3_genrl.run.stages import SettingsConflictError, check_and_record, settings_conflicts
 from sb3_genrl.study import run_study
-from sb3_genrl.study.state import (
-    FolderInUseError,
-    SettingsConflictError,
-    check_and_record,
-    folder_lock,
-    settings_conflicts,
-)
+from sb3_genrl.utils import FolderInUseError, folder_lock
 
 
 def _alive(pid: int) -> bool:
@@ -73,7 +68,7 @@ def test_lock_refuses_a_second_holder_and_is_released_when_it_dies(tmp_path: Pat
     holder = _python(
         """
         import sys
-        from sb3_genrl.study.state import folder_lock
+        from sb3_genrl.utils import folder_lock
         with folder_lock(sys.argv[1]):
             print("locked", flush=True)
             sys.stdin.read()  # holds the lock until the test kills it

@@ -20,11 +20,11 @@ import pytest
 from conftest import HANG_S, policy_distances
 from sb3_genrl.envs import get_task
 
-from sb3_genrl.genrl.train import genrl_settings
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED, load_genrl_settings
+from sb3_genrl.run.stages import SettingsConflictError
+from sb3_genrl.run.train import genrl_settings
 from sb3_genrl.study import run_study
 from sb3_genrl.study.scales import SCALES, task_scale
-from sb3_genrl.study.state import SettingsConflictError
 
 SMOKE_MODELS = ("VAE1", "GAN1")  # one of each kind: every table and plot of the study has something to show
 

@@ -204,7 +204,7 @@ def test_fast_path_reward_equals_the_step_path_reward_exactly_through_the_wrappe
 def test_generator_of_another_horizon_is_refused_when_the_wrapper_is_built(tmp_path):
     from sb3_genrl import GenRL
     from sb3_genrl.generative import make_generator
-    from sb3_genrl.genrl import train_policy
+    from sb3_genrl.run import train_policy
 
     generator = make_generator("VAE1", horizon=68, action_dim=7, device="cpu")
     for use_fast_path in (None, False):

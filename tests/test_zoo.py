@@ -128,7 +128,7 @@ def test_record_video_writes_one_frame_per_episode(trained, tmp_path):
 
 
 def test_the_zoo_and_train_policy_build_the_same_genrl_from_the_file(trained, hockey_generator, tmp_path, cli):
-    from sb3_genrl.genrl.train import genrl_settings
+    from sb3_genrl.run.train import genrl_settings
 
     code, _, err = cli(
         "train-policy",
@@ -312,8 +312,8 @@ def test_a_demonstration_callback_gets_the_cached_generators_demonstrations(monk
     from gymnasium import spaces
 
     from sb3_genrl.data import write_dataset
+    from sb3_genrl.data.fingerprints import dataset_fingerprint
     from sb3_genrl.genrl.demonstrations import DEMONSTRATION_CALLBACK, DemonstrationCallback
-    from sb3_genrl.study.state import dataset_fingerprint
     from sb3_genrl.utils import atomic_write_json
     from sb3_genrl.zoo.experiment import WRAPPER, resolved_callback, resolved_wrapper
     from sb3_genrl.zoo.generators import default_demonstrations, default_generator, generator_settings

@@ -101,7 +101,7 @@ def evaluate_command(args: argparse.Namespace) -> int:
 
 
 def train_policy_command(args: argparse.Namespace) -> int:
-    from sb3_genrl.genrl import train_policy
+    from sb3_genrl.run import train_policy
 
     result = train_policy(
         args.task,

@@ -182,7 +182,7 @@ def add_evaluate(sub: argparse._SubParsersAction) -> None:
 
 
 def add_train_policy(sub: argparse._SubParsersAction) -> None:
-    from sb3_genrl.genrl.checkpoint import CHECKPOINT_EVERY
+    from sb3_genrl.run.checkpoint import CHECKPOINT_EVERY
 
     policy = sub.add_parser("train-policy", help="train a GenRL policy over a generator's latent space (Algorithm 1)")
     _task_option(policy)

@@ -33,7 +33,13 @@ from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
+import h5py
+import minari
 import numpy as np
+from minari.data_collector.episode_buffer import EpisodeBuffer
+from minari.dataset.minari_dataset import parse_dataset_id
+from minari.dataset.minari_storage import MinariStorage
+from minari.serialization import serialize_space
 
 ARRAYS_FILE = "genrl_episodes.npz"
 METADATA_FILE = "metadata.json"
@@ -143,7 +149,6 @@ def _check_hdf5_opens(hdf5_file: Path) -> None:
     """Refuse a Minari HDF5 storage that no longer opens (e.g. truncated), though the loaders read the npz."""
     if importlib.util.find_spec("h5py") is None:
         return
-    import h5py
 
     try:
         with h5py.File(hdf5_file, "r") as storage:
@@ -156,8 +161,6 @@ def _check_hdf5_opens(hdf5_file: Path) -> None:
 
 def _load_with_minari(data_dir: Path) -> dict[str, np.ndarray]:
     """Read the episodes through Minari's storage API (slower: one call per episode)."""
-    from minari.dataset.minari_storage import MinariStorage
-
     try:
         storage = MinariStorage.read(data_dir)
         episodes = list(storage.get_episodes(range(storage.total_episodes)))
@@ -241,9 +244,6 @@ def write_dataset(
         a coverage report) that a complete dataset must never be without
     :return: the dataset directory
     """
-    from minari.dataset.minari_dataset import parse_dataset_id
-    from minari.serialization import serialize_space
-
     parse_dataset_id(dataset_id)  # raises on a malformed id
     missing = [key for key in _ARRAY_KEYS if key not in arrays]
     if missing:
@@ -273,7 +273,6 @@ def write_dataset(
                 "action_space": serialize_space(action_space),
             }
         )
-        import minari
 
         metadata.update(
             dataset_id=dataset_id,
@@ -333,9 +332,6 @@ def _write_minari_hdf5(
     data_dir: Path, arrays: dict[str, np.ndarray], observation_space: gym.spaces.Box, action_space: gym.spaces.Box
 ) -> None:
     """Minari's own HDF5 episode storage, through its storage API."""
-    from minari.data_collector.episode_buffer import EpisodeBuffer
-    from minari.dataset.minari_storage import MinariStorage
-
     storage = MinariStorage.new(
         data_dir, observation_space=observation_space, action_space=action_space, data_format="hdf5", jpeg_encoding=False
     )

@@ -4,7 +4,6 @@ from sb3_genrl.genrl.genrl import GenRL
 from sb3_genrl.genrl.hindsight import HindsightRelabelling
 from sb3_genrl.genrl.policies import MlpPolicy, MultiInputPolicy
 from sb3_genrl.genrl.settings import check_genrl_settings
-from sb3_genrl.genrl.train import evaluate_on_goals, train_policy
 
 __all__ = [
     "GenRL",
@@ -12,6 +11,4 @@ __all__ = [
     "MlpPolicy",
     "MultiInputPolicy",
     "check_genrl_settings",
-    "evaluate_on_goals",
-    "train_policy",
 ]

@@ -37,6 +37,8 @@ from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.policies import ActorCriticPolicy
 
+from sb3_genrl.data import load_arrays
+from sb3_genrl.data.fingerprints import dataset_fingerprint as fingerprint
 from sb3_genrl.genrl.regression import fit_mean
 
 DEMONSTRATION_CALLBACK = "sb3_genrl.genrl.demonstrations.DemonstrationCallback"
@@ -58,7 +60,7 @@ class DemonstrationCallback(BaseCallback):
         needs GenRL's ``hindsight_kwargs``)
     :param learning_rate: Adam learning rate of the fit (default 1e-3)
     :param batch_size: demonstrations per step of the fit, drawn with replacement (default 256)
-    :param dataset_fingerprint: the dataset's :func:`~sb3_genrl.study.state.dataset_fingerprint`, when known (a saved
+    :param dataset_fingerprint: the dataset's :func:`~sb3_genrl.data.fingerprints.dataset_fingerprint`, when known (a saved
         run records it): a dataset whose content differs is refused
     :param verbose: 1: print the fit's losses
     """
@@ -81,14 +83,11 @@ class DemonstrationCallback(BaseCallback):
                 "DemonstrationCallback(dataset=None): settings that "
                 + NO_DATASET.format(name=DEMONSTRATION_CALLBACK, task="TASK")
             )
-        from sb3_genrl.data import load_arrays
 
         self.dataset, self.fit_steps, self.keep = os.fspath(dataset), int(fit_steps), bool(keep)
         self.learning_rate, self.batch_size = float(learning_rate), int(batch_size)
         arrays = load_arrays(self.dataset, keys=("observations", "actions"))  # raises naming a missing dataset
         if dataset_fingerprint is not None:
-            from sb3_genrl.study.state import dataset_fingerprint as fingerprint
-
             if fingerprint(self.dataset) != dataset_fingerprint:
                 raise ValueError(
                     f"the demonstrations {self.dataset} are not the ones this run was trained with "

@@ -11,8 +11,12 @@ import warnings
 from typing import Any
 
 import torch as th
+from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
 
+from sb3_genrl.generative import load
 from sb3_genrl.generative.base import TrajectoryGenerator
+from sb3_genrl.generative.file_format import FORMAT_MARKER, payload_digest
+from sb3_genrl.wrappers import find_latent_wrapper
 
 
 def generator_file(path: str | pathlib.Path) -> pathlib.Path:
@@ -25,8 +29,6 @@ def generator_file(path: str | pathlib.Path) -> pathlib.Path:
 
 def load_generator(path: str, device: th.device | str) -> TrajectoryGenerator:
     """The generator saved at ``path``, onto ``device`` (:func:`sb3_genrl.generative.load`)."""
-    from sb3_genrl.generative import load  # imported lazily: the model classes are only needed here
-
     return load(path, device=device)
 
 
@@ -61,8 +63,6 @@ def _is_generator_file(path: Any) -> bool:
     if not isinstance(path, str | os.PathLike):
         return False
     try:
-        from sb3_genrl.generative.file_format import FORMAT_MARKER
-
         return th.load(path, map_location="cpu", weights_only=True).get("format") == FORMAT_MARKER
     except Exception:  # noqa: BLE001 (any file that torch cannot read as ours is not a generator file)
         return False
@@ -122,7 +122,6 @@ def generator_digest(generator: TrajectoryGenerator | None) -> str | None:
     (its content is unknown), or none."""
     if generator is None or not (hasattr(generator, "state_tensors") and hasattr(generator, "config")):
         return None
-    from sb3_genrl.generative.file_format import payload_digest
 
     return payload_digest(
         {
@@ -205,9 +204,6 @@ def check_same_generator(given: TrajectoryGenerator | None, env: Any, given_path
 def wrapped_generator(env: Any) -> tuple[TrajectoryGenerator | None, bool]:
     """The generator of the :class:`~sb3_genrl.LatentActionWrapper` that ``env`` (or a VecEnv's first env) already is
     or holds (``None`` for a raw env, a Gymnasium id or none), and whether it is a copy (from an env process)."""
-    from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
-
-    from sb3_genrl.wrappers import find_latent_wrapper
 
     if isinstance(env, VecEnv):
         try:

@@ -14,6 +14,7 @@ from gymnasium import spaces
 from stable_baselines3.common.distributions import Distribution, kl_divergence
 from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
 from stable_baselines3.common.policies import ActorCriticPolicy, BasePolicy
+from stable_baselines3.common.save_util import load_from_zip_file
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 from stable_baselines3.common.utils import explained_variance
 
@@ -385,8 +386,6 @@ class GenRL(OnPolicyAlgorithm):
         """Like SB3's, for a model whose ``policy_averaging`` or hindsight regression was switched on or off at load:
         the saved state of a setting now off is dropped, one now on but not saved starts afresh (the average from the
         loaded policy, the regression's Adam without moments). The regression's learning rate is this model's."""
-        from stable_baselines3.common.save_util import load_from_zip_file
-
         params = dict(
             load_path_or_dict
             if isinstance(load_path_or_dict, dict)
@@ -437,8 +436,6 @@ class GenRL(OnPolicyAlgorithm):
         way), else none: the model still predicts latent actions, ``predict_trajectory`` raises, and a warning says so.
         A file that is not a GenRL model zip is refused; so is an env wrapped with another generator than the model's,
         and a setting in ``kwargs`` that the constructor would refuse (checked with the saved ones)."""
-        from stable_baselines3.common.save_util import load_from_zip_file
-
         data, _, _ = load_from_zip_file(path, device=device, custom_objects=custom_objects, load_data=True)
         data = data or {}
         if isinstance(path, io.BufferedIOBase):

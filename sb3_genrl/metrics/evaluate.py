@@ -20,6 +20,7 @@ import torch
 
 from sb3_genrl.checks import check_device, check_fraction, check_input_path, check_output_dir, check_positive_int, check_seed
 from sb3_genrl.data import load_trajectories
+from sb3_genrl.generative import load
 from sb3_genrl.generative.base import TrajectoryGenerator
 from sb3_genrl.markdown import markdown_table
 from sb3_genrl.metrics.correlation import MEASURES
@@ -34,6 +35,7 @@ from sb3_genrl.metrics.prior_rollout import (
     PriorRollout,
     prior_rollout,
 )
+from sb3_genrl.metrics.scorecard import NOT_CONVERGED_PRECISION, RANK_MEASURES, scorecard_markdown
 from sb3_genrl.task_ids import task_env_id
 from sb3_genrl.utils import atomic_write_json, atomic_write_text
 
@@ -122,7 +124,6 @@ def _named_generators(
 def _as_generator(model: str | os.PathLike | TrajectoryGenerator, device: torch.device | str) -> TrajectoryGenerator:
     if isinstance(model, TrajectoryGenerator):
         return model
-    from sb3_genrl.generative import load
 
     return load(model, device=device)
 
@@ -136,8 +137,6 @@ def write_results(
     """Write ``results.csv``, ``results.md``, ``scorecard.md`` (ranked by ``rank_by``,
     :func:`~sb3_genrl.metrics.scorecard.rank_key`, with models below ``min_precision`` last; None: the default
     threshold), the two scatter plots and, last, ``results.json`` into ``out_dir`` (each file atomically)."""
-    from sb3_genrl.metrics.scorecard import NOT_CONVERGED_PRECISION, scorecard_markdown
-
     if min_precision is None:
         min_precision = NOT_CONVERGED_PRECISION
 
@@ -378,8 +377,6 @@ def evaluate_generators(
 
 def _check_rank_by(rank_by: str | None, task: str | None) -> None:
     """Refuse a measure the scorecard cannot rank by, before any work."""
-    from sb3_genrl.metrics.scorecard import RANK_MEASURES
-
     if rank_by is not None and rank_by not in RANK_MEASURES:
         raise ValueError(f"rank_by must be one of {', '.join(RANK_MEASURES)}, got {rank_by!r}")
     if rank_by == "prior_median" and task is None:

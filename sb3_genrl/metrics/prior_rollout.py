@@ -7,7 +7,7 @@ which some draw lands near every goal gives GenRL's search somewhere to start. I
 episodes and the seconds they took, is reported with it.
 
 The goals are drawn with ``np.random.default_rng(seed)`` from the task's goal distribution, as
-:func:`sb3_genrl.genrl.evaluate_on_goals` draws them; the default seed :data:`PRIOR_ROLLOUT_SEED` is neither the
+:func:`sb3_genrl.run.evaluate_on_goals` draws them; the default seed :data:`PRIOR_ROLLOUT_SEED` is neither the
 final evaluations' :data:`~sb3_genrl.hyperparams.EVAL_GOAL_SEED` nor the tuning's
 :data:`~sb3_genrl.hyperparams.TUNING_GOAL_SEED`, so the measure never sees the goals a policy is judged on. The latent
 actions are drawn from a seed of their own spawned from ``seed``; they are clipped to GenRL's action box and played
@@ -29,6 +29,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from sb3_genrl.checks import check_positive_int, check_seed
 from sb3_genrl.generative.base import TrajectoryGenerator
 from sb3_genrl.hyperparams import PRIOR_ROLLOUT_SEED
 from sb3_genrl.task_ids import task_env_id
@@ -108,8 +109,6 @@ def prior_rollout(
     :param n_threads: simulation threads of the fast path (the step path plays in this process)
     :return: a :class:`PriorRollout`
     """
-    from sb3_genrl.checks import check_positive_int, check_seed
-
     check_positive_int(draws, "draws")
     check_seed(seed)
     env = _latent_env(task, generator)
@@ -136,8 +135,6 @@ def prior_rollout(
 
 def _step_path_rollout(env: Any, generator: TrajectoryGenerator, contexts: Any, draws: int, seed: int) -> PriorRollout:
     """:func:`prior_rollout` through ``env``'s step path: goal ``g`` is the reset state of seed ``seed + g``."""
-    from sb3_genrl.checks import check_positive_int
-
     if np.ndim(contexts) != 0:
         raise ValueError(
             f"{type(env.unwrapped).__name__} has no fast path: its contexts are reset states, so contexts "

@@ -2,7 +2,7 @@
 
 Every stage writes its result file when it completes and is skipped when that file exists, so an interrupted study
 resumes where it stopped. The study's runner checks and records each stage's settings before any job starts
-(:mod:`sb3_genrl.study.state`); a job also ties its evaluation and policies to the generator file they used (its
+(:mod:`sb3_genrl.run.stages`); a job also ties its evaluation and policies to the generator file they used (its
 fingerprint) and refuses to reuse them for another. The job is a plain function of plain arguments, so a process
 pool or Ray can run it.
 """
@@ -17,15 +17,9 @@ from typing import Any
 
 import numpy as np
 
+from sb3_genrl.data.fingerprints import file_fingerprint
 from sb3_genrl.metrics.prior_rollout import PRIOR_ROLLOUT_SEED  # the prior rollout's goals (not the evaluations')
-from sb3_genrl.study.state import (
-    STAGE_FILE,
-    check_and_record,
-    file_fingerprint,
-    read_settings,
-    refuse_conflicts,
-    settings_conflicts,
-)
+from sb3_genrl.run.stages import STAGE_FILE, check_and_record, read_settings, refuse_conflicts, settings_conflicts
 from sb3_genrl.utils import atomic_write_json
 
 # Fixed settings of the study's stages (recorded with each stage, see sb3_genrl.study.runner).
@@ -182,7 +176,7 @@ def _policy_rewards(
     """One GenRL run's best iteration mean reward, the best within the first half of its budget (from its learning
     curve), its final iteration's and its CPU seconds (its Monitor file's, the process that played and learned)."""
     from sb3_genrl.curves import MONITOR_FILE, read_curve, read_monitor
-    from sb3_genrl.genrl import train_policy
+    from sb3_genrl.run import train_policy
 
     if not (run_dir / "summary.json").exists():
         train_policy(

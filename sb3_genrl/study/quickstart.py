@@ -11,17 +11,10 @@ from collections.abc import Callable
 from typing import Any
 
 from sb3_genrl.checks import sub_seed
+from sb3_genrl.data.fingerprints import dataset_fingerprint, file_fingerprint
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED
-from sb3_genrl.study.state import (
-    check_and_record,
-    dataset_fingerprint,
-    file_fingerprint,
-    folder_lock,
-    read_settings,
-    refuse_conflicts,
-    settings_conflicts,
-)
-from sb3_genrl.utils import atomic_write_json, atomic_write_text
+from sb3_genrl.run.stages import check_and_record, read_settings, refuse_conflicts, settings_conflicts
+from sb3_genrl.utils import atomic_write_json, atomic_write_text, folder_lock
 
 # Paper table 1's VAE1 (N_alpha = 2, beta = 0.01). Of the 2-D VAEs, its stronger prior term lays the hockey
 # demonstrations out as one unfolded sheet (shot distance along one latent axis, direction along the other); with
@@ -60,8 +53,8 @@ def quickstart(
     Each stage is skipped when its output exists, so a rerun resumes. Each stage also records the settings that
     made it (``vae.stage.json``, ``evaluation/stage.json``, ``policy/stage.json``, ``video.stage.json``; the
     dataset's own metadata) and the fingerprint of its input, and a rerun with other settings raises
-    :class:`~sb3_genrl.study.state.SettingsConflictError` before any work; one process at a time may work in
-    ``out_dir`` (:class:`~sb3_genrl.study.state.FolderInUseError`). The README gives the stages' times of the committed
+    :class:`~sb3_genrl.run.stages.SettingsConflictError` before any work; one process at a time may work in
+    ``out_dir`` (:class:`~sb3_genrl.utils.FolderInUseError`). The README gives the stages' times of the committed
     reports.
 
     :param out_dir: output folder (a rerun resumes it)
@@ -148,7 +141,7 @@ def _stage_settings(
 ) -> dict[str, dict[str, Any]]:
     """What each stage is made with: recorded beside its output, and compared with the record on a rerun."""
     import sb3_genrl
-    from sb3_genrl.genrl.train import genrl_settings, run_settings
+    from sb3_genrl.run.train import genrl_settings, run_settings
 
     return {
         "demonstrations": {"task": task, "episodes": demo_episodes, "seed": seed, "version": sb3_genrl.__version__},
@@ -215,9 +208,9 @@ def _run_stages(
 ) -> dict[str, float]:
     from sb3_genrl.envs.demonstrations import make_demonstrations
     from sb3_genrl.generative import train_generator
-    from sb3_genrl.genrl import train_policy
     from sb3_genrl.genrl.demonstrations import uses_demonstrations
     from sb3_genrl.metrics import evaluate_generators
+    from sb3_genrl.run import train_policy
 
     dataset, model_path, policy = out / "demonstrations", out / "vae.pt", out / "policy"
     demos, generator, evaluation, policy_stage = (
@@ -364,7 +357,8 @@ def _policy_score(out: pathlib.Path, task: str, seed: int) -> tuple[str, str]:
     """The trained policy played deterministically from 100 held-out goals (or initial states): the report's words
     and the log's line (the success rate for a task scored by success, else the mean distance to the goal)."""
     from sb3_genrl.envs import get_task
-    from sb3_genrl.genrl import GenRL, evaluate_on_goals
+    from sb3_genrl.genrl import GenRL
+    from sb3_genrl.run import evaluate_on_goals
 
     model = GenRL.load(out / "policy" / "genrl_policy.zip", device="cpu")
     spec = get_task(task)
@@ -399,7 +393,7 @@ def task_settings(task: str) -> tuple[int, int, dict[str, Any]]:
     :param task: a task name from :data:`sb3_genrl.envs.TASKS` or its Gymnasium id
     :return: ``(episodes, batch_episodes, genrl_kwargs)``: the budget of episodes, the episodes per EM iteration and
         the further GenRL arguments (``policy`` among them, and the entry's ``callback`` where it has one, which
-        :func:`~sb3_genrl.genrl.train_policy` takes: the Fetch tasks' learning from demonstrations)
+        :func:`~sb3_genrl.run.train_policy` takes: the Fetch tasks' learning from demonstrations)
     """
     from sb3_genrl.envs import get_task
     from sb3_genrl.hyperparams import known_env_ids, load_genrl_settings

@@ -1,6 +1,6 @@
 """``genrl study``: demonstrations -> 18 generators -> evaluation -> GenRL over seeds -> baselines -> report.
 
-A study folder is resumable and guarded (:mod:`sb3_genrl.study.state`): one process at a time holds it (a lock),
+A study folder is resumable and guarded (:mod:`sb3_genrl.run.stages`): one process at a time holds it (a lock),
 each stage records the settings that made it, and a rerun whose settings differ from a stage's record is refused
 before any work, with the stage folders and settings named. The reports read their numbers from these records.
 """
@@ -16,7 +16,16 @@ from typing import Any
 
 from sb3_genrl.baselines import BASELINES
 from sb3_genrl.checks import check_device, check_output_dir, check_positive_int
+from sb3_genrl.data.fingerprints import dataset_fingerprint, file_fingerprint
 from sb3_genrl.provenance import package_versions
+from sb3_genrl.run.stages import (
+    STAGE_FILE,
+    check_and_record,
+    exit_with_parent,
+    read_settings,
+    refuse_conflicts,
+    settings_conflicts,
+)
 from sb3_genrl.study.cluster import DEFAULT_CONNECT_TIMEOUT
 from sb3_genrl.study.jobs import (
     EVALUATION_SEED,
@@ -30,18 +39,7 @@ from sb3_genrl.study.jobs import (
 )
 from sb3_genrl.study.report import write_all_tasks_report, write_task_report
 from sb3_genrl.study.scales import SCALES, StudyScale, task_scale
-from sb3_genrl.study.state import (
-    STAGE_FILE,
-    check_and_record,
-    dataset_fingerprint,
-    exit_with_parent,
-    file_fingerprint,
-    folder_lock,
-    read_settings,
-    refuse_conflicts,
-    settings_conflicts,
-)
-from sb3_genrl.utils import atomic_write_json, atomic_write_text
+from sb3_genrl.utils import atomic_write_json, atomic_write_text, folder_lock
 
 MODELS = tuple(f"VAE{i}" for i in range(1, 10)) + tuple(f"GAN{i}" for i in range(1, 10))
 DEMONSTRATION_SEED = 0
@@ -64,8 +62,8 @@ def run_study(
 
     Results are written as they complete and finished work is skipped on a rerun, so an interrupted study resumes.
     A rerun with settings that differ from those recorded in the folder raises
-    :class:`~sb3_genrl.study.state.SettingsConflictError` before any work; a folder that another process is
-    working in raises :class:`~sb3_genrl.study.state.FolderInUseError`.
+    :class:`~sb3_genrl.run.stages.SettingsConflictError` before any work; a folder that another process is
+    working in raises :class:`~sb3_genrl.utils.FolderInUseError`.
 
     :param task: a task name from :func:`sb3_genrl.envs.arm_tasks`, or ``all`` for all of them
     :param scale: ``smoke``, ``small`` or ``paper`` (see :data:`~sb3_genrl.study.scales.SCALES`), or a
@@ -141,7 +139,7 @@ def _stages(
 ) -> list[tuple[pathlib.Path, dict, bool]]:
     """Each stage's record, this run's settings for it and whether it has output. ``dataset`` is the fingerprint
     of the demonstrations (None: not known yet, left out of the settings)."""
-    from sb3_genrl.genrl.train import genrl_settings
+    from sb3_genrl.run.train import genrl_settings
 
     made_from = {} if dataset is None else {"dataset": dataset}
     generators, evaluation, policies, comparison = (

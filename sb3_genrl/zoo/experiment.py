@@ -44,7 +44,7 @@ RL_ZOO_KEYS = (ZOO_KEYS | {"monitor_kwargs"}) - {"n_timesteps", "n_envs", "env_w
 class TuningGoals(VecEnvWrapper):
     """Each ``reset()`` reseeds the envs, env ``i`` with ``seed + i``: every evaluation plays the same goals. With one
     env the goals of an evaluation of ``n`` episodes are those of
-    :func:`sb3_genrl.genrl.train.evaluate_on_goals` with ``goals=n`` and the same seed. With ``seed=None`` (the
+    :func:`sb3_genrl.run.train.evaluate_on_goals` with ``goals=n`` and the same seed. With ``seed=None`` (the
     training envs, wrapped alike so that SB3's ``EvalCallback`` sees envs of one type) nothing is reseeded."""
 
     def __init__(self, venv: VecEnv, seed: int | None = TUNING_GOAL_SEED) -> None:
@@ -225,8 +225,8 @@ def resolved_callback(callback: Any, wrapper: list[Any], env_id: str) -> list[di
     """The entry's ``callback`` with the dataset of a :class:`~sb3_genrl.genrl.demonstrations.DemonstrationCallback`
     that names none filled in: the cached quickstart demonstrations that the wrapper's generator (the cached one) was
     trained on, with their fingerprint; another generator needs the callback's dataset given."""
+    from sb3_genrl.data.fingerprints import dataset_fingerprint
     from sb3_genrl.genrl.demonstrations import DEMONSTRATION_CALLBACK, callback_entries, with_dataset
-    from sb3_genrl.study.state import dataset_fingerprint
 
     entries = callback_entries(callback, f"{env_id}: callback")
     if not any(path == DEMONSTRATION_CALLBACK and kwargs.get("dataset") is None for path, kwargs in entries):

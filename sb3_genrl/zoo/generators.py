@@ -17,8 +17,9 @@ import pathlib
 from collections.abc import Callable
 
 from sb3_genrl.checks import check_output_dir
+from sb3_genrl.run.stages import STAGE_FILE, check_and_record, read_settings, settings_conflicts
 from sb3_genrl.study.quickstart import DEMO_EPISODES, GENERATOR_EPOCHS, GENERATOR_EVAL_EVERY, quickstart_preset
-from sb3_genrl.study.state import STAGE_FILE, check_and_record, folder_lock, read_settings, settings_conflicts
+from sb3_genrl.utils import folder_lock
 
 CACHE_VARIABLE = "SB3_GENRL_CACHE"
 SEED = 0  # the quickstart's default seed

@@ -5,7 +5,7 @@ rl-zoo3's study (``python -m sb3_genrl.zoo train --algo genrl -optimize --storag
 ``hyperparams/genrl.yml`` (:mod:`sb3_genrl.zoo.experiment`). This plays the policy that each of the two saved
 (``TRIALS/trial_N/best_model.zip``, the best of its evaluations on the tuning goals) on the held-out goals
 (:data:`~sb3_genrl.hyperparams.EVAL_GOAL_SEED`) with the package's evaluation,
-:func:`sb3_genrl.genrl.train.evaluate_on_goals`, and with rl-zoo3's ``enjoy --no-render`` on the same goals, and
+:func:`sb3_genrl.run.train.evaluate_on_goals`, and with rl-zoo3's ``enjoy --no-render`` on the same goals, and
 writes both, and which is better there, to a JSON file::
 
     python -m sb3_genrl.zoo.held_out --env GenRL/Hockey-v0 --storage sqlite:///hockey.db --study-name genrl-hockey \\
@@ -74,7 +74,7 @@ def compare(env_id: str, storage: str, study_name: str, trials_folder: str, goal
 def held_out_distances(model_path: str, env_id: str, goals: int) -> np.ndarray:
     """The final distances of a saved policy's deterministic trajectories to the held-out goals."""
     from sb3_genrl import GenRL
-    from sb3_genrl.genrl.train import evaluate_on_goals
+    from sb3_genrl.run.train import evaluate_on_goals
 
     model = GenRL.load(model_path, device="cpu")
     _, rewards, _ = evaluate_on_goals(model, env_id, goals=goals, seed=EVAL_GOAL_SEED)

@@ -26,7 +26,7 @@ class _WeightRecorder(Recorder):
 
 
 def test_policy_averaging_is_the_start_corrected_moving_average_and_acts(tmp_path):
-    from sb3_genrl.genrl.loading import load_policy
+    from sb3_genrl.run.loading import load_policy
 
     recorder, decay = _WeightRecorder(), 0.7
     model = GenRL(FastReachEnv(), LinearGenerator(), seed=0, n_steps=16, policy_averaging=decay)

@@ -13,7 +13,7 @@ from test_train_policy import fast_reach_task  # noqa: F401 (the fixture)
 
 from sb3_genrl import GenRL
 from sb3_genrl.curves import MONITOR_FILE, read_monitor
-from sb3_genrl.genrl import train_policy
+from sb3_genrl.run import train_policy
 
 
 class _Killed(Exception):

@@ -18,8 +18,8 @@ from test_train_policy import fast_reach_task  # noqa: F401 (the fixture)
 from sb3_genrl import GenRL
 from sb3_genrl.data import write_dataset
 from sb3_genrl.genrl import demonstrations as demonstrations_module
-from sb3_genrl.genrl import train_policy
 from sb3_genrl.genrl.demonstrations import DEMONSTRATION_CALLBACK, DemonstrationCallback, build_callbacks
+from sb3_genrl.run import train_policy
 
 N, HORIZON = 48, 5
 
@@ -175,7 +175,7 @@ def test_a_resumed_run_keeps_the_demonstrations_and_is_not_fitted_again(
         np.testing.assert_array_equal(got[key], expected[key], err_msg=key)
     assert resumed["final_mean_reward"] == whole["final_mean_reward"]
     record = json.loads((tmp_path / "whole" / "run_record.json").read_text())
-    from sb3_genrl.study.state import dataset_fingerprint
+    from sb3_genrl.data.fingerprints import dataset_fingerprint
 
     assert dataset_fingerprint(dataset) in json.dumps(record)  # the demonstrations are part of the run's identity
 

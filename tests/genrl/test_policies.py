@@ -114,8 +114,8 @@ class _ContextStdRecorder(Recorder):
 
 @pytest.mark.parametrize("e_step", ["trpo", "kl_penalty"])
 def test_context_std_policy_spread_depends_on_the_context_within_its_trust_region(e_step, tmp_path):
-    from sb3_genrl.genrl.loading import load_policy
     from sb3_genrl.genrl.policies import ContextStdPolicy
+    from sb3_genrl.run.loading import load_policy
 
     low, high = FastReachEnv.context_space.low[0], FastReachEnv.context_space.high[0]
     changes = {}

@@ -15,8 +15,8 @@ from test_train_policy import fast_reach_task  # noqa: F401 (the fixture)
 
 from sb3_genrl import GenRL
 from sb3_genrl.curves import MONITOR_FILE, read_monitor
-from sb3_genrl.genrl import train_policy
-from sb3_genrl.run_folder import RunFolderError
+from sb3_genrl.run import train_policy
+from sb3_genrl.run.folder import RunFolderError
 
 
 class _Killed(Exception):
@@ -74,7 +74,7 @@ def test_a_second_run_into_a_locked_folder_stops_at_once_with_exit_2(hockey_gene
             "-c",
             textwrap.dedent("""
         import sys
-        from sb3_genrl.study.state import folder_lock
+        from sb3_genrl.utils import folder_lock
         with folder_lock(sys.argv[1]):
             print("locked", flush=True)
             sys.stdin.read()  # holds the lock until the test kills it

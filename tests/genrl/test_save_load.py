@@ -87,7 +87,7 @@ def test_a_generator_file_is_loaded_onto_the_models_device(tmp_path, monkeypatch
     they load from a file on D."""
     import sb3_genrl.generative as generative
     from sb3_genrl.generative import make_generator
-    from sb3_genrl.genrl.loading import load_policy
+    from sb3_genrl.run.loading import load_policy
 
     make_generator("VAE1", horizon=69, action_dim=7, device="cpu").save(str(tmp_path / "vae.pt"))
     devices, real_load = [], generative.load
@@ -182,7 +182,7 @@ def _vae(seed: int):
 
 
 def test_a_policy_refuses_a_generator_other_than_the_one_it_was_trained_with(tmp_path, cli):
-    from sb3_genrl.genrl.loading import load_policy
+    from sb3_genrl.run.loading import load_policy
 
     trained_with, other = _vae(0), _vae(1)
     trained_with.save(str(tmp_path / "vae.pt"))

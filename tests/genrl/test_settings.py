@@ -44,7 +44,7 @@ def test_check_genrl_settings_refuses_unknown_names_and_policies():
 
 
 def test_genrl_kwargs_argument_parses_and_checks_json():
-    from sb3_genrl.genrl.train import genrl_kwargs_argument, genrl_kwargs_override_argument
+    from sb3_genrl.run.train import genrl_kwargs_argument, genrl_kwargs_override_argument
 
     # settings laid over a task's are checked as any others: one hindsight_kwargs dict holds the settings that
     # depend on each other

@@ -18,7 +18,7 @@ from genrl_test_helpers import GOALS, TOY_ID
 
 from sb3_genrl import GenRL
 from sb3_genrl.cli import main as cli_main
-from sb3_genrl.genrl import train_policy
+from sb3_genrl.run import train_policy
 
 TOY_TASK_ID = "GenRLTest/FastReachTask-v0"
 
@@ -133,7 +133,7 @@ def test_several_envs_without_a_main_guard_fail_with_a_clear_error(tmp_path):
     script.write_text(
         f"import sys\nsys.path.insert(0, {str(pathlib.Path(__file__).parents[1])!r})\n"
         "import gymnasium as gym\nfrom conftest import LinearGenerator, ReachEnv\n"
-        "from sb3_genrl.genrl import train_policy\n"
+        "from sb3_genrl.run import train_policy\n"
         "gym.register('GenRLTest/StepReach-v0', entry_point=ReachEnv)\n"
         "train_policy('GenRLTest/StepReach-v0', LinearGenerator(), episodes=4, batch_episodes=2, n_envs=2, "
         f"out_dir={str(tmp_path / 'run')!r})\n"
@@ -147,7 +147,7 @@ def test_several_envs_without_a_main_guard_fail_with_a_clear_error(tmp_path):
 
 def test_evaluate_on_goals_plays_the_deterministic_policy(tmp_path):
     from sb3_genrl.generative import make_generator
-    from sb3_genrl.genrl import evaluate_on_goals
+    from sb3_genrl.run import evaluate_on_goals
 
     generator = make_generator("VAE1", horizon=69, action_dim=7, device="cpu")
     model = GenRL("GenRL/Hockey-v0", generator, n_steps=8, seed=0)
@@ -188,7 +188,7 @@ def test_quickstart_records_the_settings_train_policy_runs_with(fast_reach_task,
 
 
 def test_genrl_settings_record_the_policy_arguments_as_json():
-    from sb3_genrl.genrl.train import genrl_settings
+    from sb3_genrl.run.train import genrl_settings
 
     settings = genrl_settings(
         {

@@ -1,11 +1,13 @@
-"""What makes a study or quickstart folder safe to resume: recorded settings, fingerprints, a lock, worker exit.
+"""What makes a stage's folder (a study's, a quickstart's, a cached generator's) safe to resume: recorded settings,
+fingerprints, a lock, worker exit.
 
 - **Recorded settings.** Each resumable stage writes the settings that produce it (``stage.json`` next to its
   output) before it starts, and a rerun compares them with its own before it does any work
   (:func:`settings_conflicts`, :func:`refuse_conflicts`). A stage whose output exists without a record (an older
   version wrote it) counts as a conflict too, so no result of unknown settings is reused or reported.
-- **Fingerprints** (:func:`dataset_fingerprint`, :func:`file_fingerprint`) tie a stage to the exact inputs it
-  used: a generator to its demonstrations, a policy to its generator.
+- **Fingerprints** (:func:`~sb3_genrl.data.fingerprints.dataset_fingerprint`,
+  :func:`~sb3_genrl.data.fingerprints.file_fingerprint`) tie a stage to the exact inputs it used: a generator to its
+  demonstrations, a policy to its generator.
 - **A lock** (:func:`~sb3_genrl.utils.folder_lock`, shared with ``genrl train-policy`` and ``genrl baseline``)
   keeps a second process out of a folder while one works in it; the operating system releases it when the holder
   exits, however it exits.
@@ -16,7 +18,6 @@
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import json
 import os
 import signal
@@ -27,9 +28,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from sb3_genrl.utils import LOCK_FILE, FolderInUseError, atomic_write_json, folder_lock  # noqa: F401 (the lock's home was here)
+from sb3_genrl.utils import atomic_write_json
 
 STAGE_FILE = "stage.json"
 
@@ -124,31 +123,6 @@ def check_and_record(
     )
     if recorded is None:
         atomic_write_json(record, dict(wanted))
-
-
-def dataset_fingerprint(dataset: str | os.PathLike) -> str:
-    """A short hash of a demonstration dataset's action trajectories (the generators' training data).
-
-    :param dataset: the dataset directory
-    """
-    from sb3_genrl.data import load_actions
-
-    actions = load_actions(dataset)
-    digest = hashlib.sha256(f"{actions.shape}{actions.dtype}".encode())
-    digest.update(np.ascontiguousarray(actions).tobytes())
-    return digest.hexdigest()[:16]
-
-
-def file_fingerprint(path: str | os.PathLike) -> str:
-    """A short hash of a file's bytes (a generator, a policy).
-
-    :param path: the file
-    """
-    digest = hashlib.sha256()
-    with open(path, "rb") as file:
-        for block in iter(lambda: file.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()[:16]
 
 
 def exit_with_parent(parent_pid: int, poll_s: float = 1.0) -> None:

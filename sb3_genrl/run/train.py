@@ -35,13 +35,13 @@ from sb3_genrl.curves import (
     write_learning_curve,
 )
 from sb3_genrl.generative.base import TrajectoryGenerator
-from sb3_genrl.genrl.checkpoint import CHECKPOINT_EVERY, GenRLCheckpoint, RandomStateRecorder, resume_genrl, resume_state
 from sb3_genrl.genrl.demonstrations import DemonstrationCallback, build_callbacks, callback_entries
 from sb3_genrl.genrl.generator_files import generator_digest
 from sb3_genrl.genrl.genrl import EStep, GenRL
 from sb3_genrl.genrl.policies import MlpPolicy
 from sb3_genrl.genrl.settings import NOT_SETTINGS, SETTINGS, check_genrl_settings
-from sb3_genrl.run_folder import CHECKPOINT_DIR, SUMMARY, keep_episodes, open_run, remove_checkpoint
+from sb3_genrl.run.checkpoint import CHECKPOINT_EVERY, GenRLCheckpoint, RandomStateRecorder, resume_genrl, resume_state
+from sb3_genrl.run.folder import CHECKPOINT_DIR, SUMMARY, keep_episodes, open_run, remove_checkpoint
 from sb3_genrl.utils import atomic_write_json, folder_lock
 from sb3_genrl.wrappers import LatentActionWrapper
 
@@ -116,7 +116,7 @@ def train_policy(
     :param seed: random seed
     :param out_dir: output folder (created), locked while the run works in it; a rerun of the same run into it
         returns the finished run's summary, or resumes the unfinished one; another run's folder is refused (see
-        :mod:`sb3_genrl.run_folder`)
+        :mod:`sb3_genrl.run.folder`)
     :param e_step: ``"trpo"`` or ``"kl_penalty"`` (see :class:`~sb3_genrl.GenRL`)
     :param batch_episodes: episodes per EM iteration, ``N``
     :param n_envs: envs played at a time; a divisor of ``batch_episodes``. Above 1, the arm tasks play each step's
@@ -129,7 +129,7 @@ def train_policy(
     :param verbose: GenRL verbosity
     :param checkpoint_every: episodes between checkpoints (``None``: none), at the start of an iteration; the same
         run into the same ``out_dir`` resumes from the last one and ends as the run would have ended without the stop,
-        bit for bit (:mod:`sb3_genrl.genrl.checkpoint`)
+        bit for bit (:mod:`sb3_genrl.run.checkpoint`)
     :param overwrite: replace a run already in ``out_dir`` (its files only) instead of refusing or resuming it
     :param n_threads: simulation threads of the batched fast path (default: all cores)
     :param demonstrations: the dataset of the settings' :class:`~sb3_genrl.genrl.demonstrations.DemonstrationCallback`
@@ -209,7 +209,7 @@ def _callback_identity(
     when they are refused)."""
     if callback is None:
         return {}
-    from sb3_genrl.study.state import dataset_fingerprint
+    from sb3_genrl.data.fingerprints import dataset_fingerprint
 
     settings = genrl_settings(arguments)
     datasets = []
@@ -283,7 +283,7 @@ def _run(
     return result
 
 
-# What a run writes in its folder (besides summary.json, checkpoint/ and run_record.json; see sb3_genrl.run_folder)
+# What a run writes in its folder (besides summary.json, checkpoint/ and run_record.json; see sb3_genrl.run.folder)
 OUTPUTS = ("genrl_policy.zip", "genrl_policy.generator.pt", "learning_curve.csv", "learning_curve.png", MONITOR_FILE, LOG_DIR)
 
 
@@ -394,7 +394,7 @@ def _training_env(
 ) -> Any:
     """The monitored training env: ``env`` itself, or ``n_envs`` copies of it played together
     (:class:`~sb3_genrl.vec_env.BatchedLatentVecEnv` on ``n_threads``, for a task with a fast path) or in their own
-    processes, each under a :class:`~sb3_genrl.genrl.checkpoint.RandomStateRecorder` (``append``: a resumed run adds
+    processes, each under a :class:`~sb3_genrl.run.checkpoint.RandomStateRecorder` (``append``: a resumed run adds
     to the Monitor file)."""
     if n_envs == 1:
         return monitor_episodes(RandomStateRecorder(env), out, append=append)
