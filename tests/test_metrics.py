@@ -724,3 +724,13 @@ def test_genrl_evaluate_with_a_task_prints_the_ranked_scorecard_with_the_prior_r
     assert result["prior_best"] == rollout.best.tolist() and result["prior_episodes"] == 6
     assert result["prior_success"] == rollout.summary()["prior_success"] == np.mean(rollout.best == 0.0)
     assert "Ranked by recall" in out and "prior success" in out
+
+
+def test_prior_rollout_uses_all_cores_by_default_and_its_result_does_not_depend_on_them(hockey_generator) -> None:
+    from sb3_genrl.generative import load
+    from sb3_genrl.metrics.prior_rollout import prior_rollout
+
+    generator = load(hockey_generator, device="cpu")
+    results = [prior_rollout(generator, "hockey", contexts=4, draws=3, seed=2, n_threads=n) for n in (1, 2, None)]
+    for result in results[1:]:
+        np.testing.assert_array_equal(result.best, results[0].best)

@@ -208,9 +208,10 @@ def add_train_policy(sub: argparse._SubParsersAction) -> None:
     policy.add_argument(
         "--n-envs",
         type=COUNT,
-        default=1,
-        help="envs played at a time, a divisor of --batch-episodes (default 1): on the arm tasks "
-        "in one threaded simulation call per step on all cores, on others one process each",
+        default=None,
+        help="envs played at a time, a divisor of --batch-episodes (default: all of an iteration's episodes together "
+        "on a task with a fast path, in one threaded simulation call on all cores; 1 on others); above 1 on a task "
+        "without a fast path, one process each. The result depends on it, never on the number of cores",
     )
     policy.add_argument(
         "--library-defaults",

@@ -33,6 +33,7 @@ from sb3_genrl.checks import check_positive_int, check_seed
 from sb3_genrl.generative.base import TrajectoryGenerator
 from sb3_genrl.hyperparams import PRIOR_ROLLOUT_SEED
 from sb3_genrl.task_ids import task_env_id
+from sb3_genrl.vec_env import default_threads
 from sb3_genrl.wrappers import LatentActionWrapper
 
 DEFAULT_CONTEXTS = 64
@@ -95,7 +96,7 @@ def prior_rollout(
     contexts: int | np.ndarray = DEFAULT_CONTEXTS,
     draws: int = DEFAULT_DRAWS,
     seed: int = PRIOR_ROLLOUT_SEED,
-    n_threads: int = 1,
+    n_threads: int | None = None,
 ) -> PriorRollout:
     """The best reward that ``draws`` prior draws reach for each goal (see the module's description).
 
@@ -106,7 +107,8 @@ def prior_rollout(
         themselves ``(G, goal_dim)`` (the fast path only)
     :param draws: prior draws per goal
     :param seed: seed of the goals; the draws come from a seed spawned from it
-    :param n_threads: simulation threads of the fast path (the step path plays in this process)
+    :param n_threads: simulation threads of the fast path (default: all cores; the result does not depend on it; the
+        step path plays in this process)
     :return: a :class:`PriorRollout`
     """
     check_positive_int(draws, "draws")
@@ -126,7 +128,8 @@ def prior_rollout(
         wall, cpu = time.perf_counter(), time.process_time()
         latent_rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0])
         alphas = generator.sample_prior(len(goals) * draws, latent_rng)  # goal g plays draws g*draws .. (g+1)*draws-1
-        rewards, _ = env.play_batch(alphas, np.repeat(goals, draws, axis=0), n_threads=n_threads)
+        threads = default_threads() if n_threads is None else n_threads
+        rewards, _ = env.play_batch(alphas, np.repeat(goals, draws, axis=0), n_threads=threads)
         best = rewards.reshape(len(goals), draws).max(axis=1)
         return PriorRollout(best, draws, seed, len(goals) * draws, time.perf_counter() - wall, time.process_time() - cpu)
     finally:

@@ -92,7 +92,7 @@ def train_policy(
     out_dir: str | os.PathLike,
     e_step: EStep = "trpo",
     batch_episodes: int = 64,
-    n_envs: int = 1,
+    n_envs: int | None = None,
     device: str = "auto",
     progress_bar: bool = False,
     verbose: int = 0,
@@ -119,11 +119,13 @@ def train_policy(
         :mod:`sb3_genrl.run.folder`)
     :param e_step: ``"trpo"`` or ``"kl_penalty"`` (see :class:`~sb3_genrl.GenRL`)
     :param batch_episodes: episodes per EM iteration, ``N``
-    :param n_envs: envs played at a time; a divisor of ``batch_episodes``. Above 1, the arm tasks play each step's
-        trajectories in one threaded call in this process (:class:`~sb3_genrl.vec_env.BatchedLatentVecEnv`), any
-        other task each env in its own process (SB3's ``SubprocVecEnv``: a script must then run its work under
-        ``if __name__ == "__main__":``; the Monitor's ``cpu_seconds`` is then the env process's). The result depends
-        on it (the envs draw their goals from seeds ``seed``, ``seed + 1``, ...), not on the machine nor ``n_threads``.
+    :param n_envs: envs played at a time; a divisor of ``batch_episodes``. Above 1, a task with a fast path (the arm
+        tasks) plays each step's trajectories in one threaded call in this process on ``n_threads`` cores
+        (:class:`~sb3_genrl.vec_env.BatchedLatentVecEnv`), any other task each env in its own process (SB3's
+        ``SubprocVecEnv``: a script must then run its work under ``if __name__ == "__main__":``; the Monitor's
+        ``cpu_seconds`` is then the env process's). Default ``None``: ``batch_episodes`` for a task with a fast path
+        (an iteration's episodes played together on all cores), else 1. The result depends on it (the envs draw their
+        goals from seeds ``seed``, ``seed + 1``, ...), never on the machine nor ``n_threads``.
     :param device: torch device
     :param progress_bar: show a progress bar
     :param verbose: GenRL verbosity
@@ -152,6 +154,8 @@ def train_policy(
     # latent_clip is the wrapper's (GenRL refuses a wrapped env with another).
     latent_clip = genrl_kwargs.get("latent_clip", SETTINGS["latent_clip"].default)
     env = LatentActionWrapper(gym.make(env_id), _as_generator(generator), latent_clip=latent_clip)
+    if n_envs is None:  # a fixed choice of the task, never of the machine: the result depends on n_envs
+        n_envs = default_n_envs(env, batch_episodes)
     arguments = {
         "e_step": e_step,
         "seed": seed,
@@ -374,11 +378,17 @@ def _check_arguments(
     if n_threads is not None:
         check_positive_int(n_threads, "n_threads")
     check_int(batch_episodes, "batch_episodes", minimum=2)
+    if n_envs is None:
+        return _check_settings(seed, device, genrl_kwargs)
     check_positive_int(n_envs, "n_envs")
     if n_envs > 1 and getattr(multiprocessing.current_process(), "_inheriting", False):  # Python's own test
         raise RuntimeError(MAIN_GUARD)  # in an env process that re-imports the script: its stderr shows why
     if batch_episodes % n_envs:
         raise ValueError(f"batch_episodes ({batch_episodes}) must be a multiple of n_envs ({n_envs})")
+    _check_settings(seed, device, genrl_kwargs)
+
+
+def _check_settings(seed: int, device: str, genrl_kwargs: dict[str, Any]) -> None:
     check_seed(seed)
     check_device(device)
     if "n_steps" in genrl_kwargs:  # the learning curve's window and the summary's iterations follow batch_episodes
@@ -387,6 +397,13 @@ def _check_arguments(
             "(n_steps is batch_episodes / n_envs)"
         )
     check_genrl_settings(genrl_kwargs)
+
+
+def default_n_envs(env: LatentActionWrapper, batch_episodes: int) -> int:
+    """The envs a run plays at a time when none is asked for: an iteration's ``batch_episodes`` together where the task
+    has a fast path (one threaded simulation call per iteration, on all cores), else 1 (another count plays env
+    processes, which a script must start under ``if __name__ == "__main__":``)."""
+    return batch_episodes if env.use_fast_path else 1
 
 
 def _training_env(

@@ -8,6 +8,7 @@ import csv
 import gymnasium as gym
 import numpy as np
 import pytest
+import torch
 import torch as th
 from conftest import (
     HANG_S,
@@ -120,6 +121,30 @@ def test_train_policy_plays_several_envs_together(fast_reach_task, tmp_path):
     with pytest.raises(ValueError, match=r"batch_episodes \(32\) must be a multiple of n_envs \(3\)"):
         train_policy("fast-reach", LinearGenerator(), episodes=64, out_dir=tmp_path / "c", batch_episodes=32, n_envs=3)
     assert not (tmp_path / "c").exists()
+
+
+def test_by_default_an_iterations_episodes_play_together_and_the_result_does_not_depend_on_the_cores(
+    fast_reach_task, tmp_path
+):
+    """With no n_envs, a task with a fast path plays each iteration's episodes in one threaded call; the saved policy
+    is the same, bit for bit, on 1 simulation thread and on 2."""
+    runs = [
+        train_policy(
+            "fast-reach",
+            LinearGenerator(),
+            episodes=64,
+            seed=5,
+            out_dir=tmp_path / str(threads),
+            batch_episodes=16,
+            n_threads=threads,
+        )
+        for threads in (1, 2)
+    ]
+    assert runs[0]["n_envs"] == runs[1]["n_envs"] == 16
+    policies = [GenRL.load(run["model_path"], generator=LinearGenerator()).policy.state_dict() for run in runs]
+    assert policies[0].keys() == policies[1].keys()
+    for name, tensor in policies[0].items():
+        assert torch.equal(tensor, policies[1][name]), name
 
 
 def test_several_envs_without_a_main_guard_fail_with_a_clear_error(tmp_path):
