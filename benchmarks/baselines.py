@@ -150,6 +150,7 @@ def run_one(method: str, settings: dict[str, Any], demos: str, generator: str, r
             seed=settings["seed"],
             out_dir=run,
             batch_episodes=settings["batch_episodes"],
+            n_envs=1,  # as the committed results were made; the methods' runs go side by side (--jobs)
             device="cpu",
             **genrl_kwargs,
         )

@@ -72,6 +72,7 @@ def main() -> None:
             seed=0,
             out_dir=out / "policy",
             batch_episodes=batch,
+            n_envs=1,  # as the study's jobs play
             device="cpu",
             **kwargs,
         )

@@ -186,6 +186,7 @@ def _policy_rewards(
             seed=seed,
             out_dir=run_dir,
             batch_episodes=scale["batch_episodes"],
+            n_envs=1,  # one env per job: the study runs its jobs side by side on the cores
             device=device,
             **task_genrl_kwargs(task),
         )
