@@ -14,8 +14,8 @@ from typing import Any
 import numpy as np
 from sb3_genrl.envs.registry import get_task
 from sb3_genrl.envs.spec import TaskSpec
-from scipy.spatial import cKDTree
 
+from sb3_genrl.data import dataset_info, load_reached
 from sb3_genrl.utils import atomic_path, atomic_write_json
 
 
@@ -41,6 +41,8 @@ def region_cells(task: str | TaskSpec) -> np.ndarray:
 
 def covered_cells(reached: np.ndarray, task: str | TaskSpec) -> np.ndarray:
     """Per cell of :func:`region_cells`: whether some reached point lies within one cell size of its centre."""
+    from scipy.spatial import cKDTree  # scipy.spatial costs about 0.5 s; `import sb3_genrl` reaches this module
+
     spec = get_task(task)
     centres = region_cells(spec)
     reached = np.asarray(reached, dtype=np.float64).reshape(-1, 2)
@@ -74,8 +76,6 @@ def coverage_report(
         ``in_region`` (share of reached points inside the region) and the two file paths
     """
     if isinstance(source, str | os.PathLike):
-        from sb3_genrl.data import dataset_info, load_reached
-
         info = dataset_info(source)
         if task is not None and get_task(task).name != info["task"]:
             raise ValueError(f"dataset {str(source)!r} holds task {info['task']!r}, not {get_task(task).name!r}")

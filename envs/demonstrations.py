@@ -25,12 +25,17 @@ import numpy as np
 from sb3_genrl.envs.arm import JOINT_RANGE
 from sb3_genrl.envs.base import ArmTaskEnv
 from sb3_genrl.envs.control import default_threads
+from sb3_genrl.envs.coverage import coverage_report
 from sb3_genrl.envs.motions import bump
 from sb3_genrl.envs.registry import get_task
 from sb3_genrl.envs.spec import TaskSpec
 from tqdm.auto import tqdm
 
+import sb3_genrl
+from sb3_genrl.checks import check_output_dir, check_positive_int, check_seed
+from sb3_genrl.data import dataset_info, write_dataset
 from sb3_genrl.provenance import package_versions
+from sb3_genrl.utils import folder_lock
 
 ACTION_MARGIN = 0.95  # trajectories use at most this share of the action box
 JOINT_MARGIN = 0.05  # rad kept from each joint limit
@@ -144,9 +149,6 @@ def make_demonstrations(
     :param chunk: trajectories drawn and simulated per round
     :return: the dataset directory
     """
-    from sb3_genrl.checks import check_output_dir, check_positive_int, check_seed
-    from sb3_genrl.utils import folder_lock
-
     spec = get_task(task)
     check_positive_int(episodes, "episodes")
     check_seed(seed)
@@ -165,8 +167,6 @@ def refuse_existing_output(out_dir: Path) -> None:
 
     :param out_dir: the dataset directory to create
     """
-    from sb3_genrl.data import dataset_info
-
     if not out_dir.exists() or (out_dir.is_dir() and not any(out_dir.iterdir())):
         return
     try:
@@ -192,11 +192,6 @@ def refuse_existing_output(out_dir: Path) -> None:
 def _make_demonstrations(
     spec: TaskSpec, episodes: int, out_dir: Path, seed: int, n_threads: int | None, progress_bar: bool, chunk: int
 ) -> Path:
-    from sb3_genrl.envs.coverage import coverage_report
-
-    import sb3_genrl
-    from sb3_genrl.data import write_dataset
-
     task = spec.name
     began = time.perf_counter()
     n_threads = default_threads() if n_threads is None else int(n_threads)

@@ -11,10 +11,12 @@ from __future__ import annotations
 import concurrent.futures
 import contextlib
 import multiprocessing
+from math import comb
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
+import torch as th
 from gymnasium import spaces
 from sb3_genrl.envs.demonstrations import perturbation
 from sb3_genrl.envs.fetch import FAMILIES, FETCH_HORIZON, GRIPPER_GAIN, PERTURBATION, STEP_METRES, is_valid
@@ -22,6 +24,8 @@ from sb3_genrl.envs.fetch_mujoco import fix_joint_helpers
 from sb3_genrl.envs.registry import get_task
 from sb3_genrl.envs.spec import TaskSpec
 from tqdm.auto import tqdm
+
+from sb3_genrl.wrappers import LatentActionWrapper
 
 _ENVS: dict[str, gym.Env] = {}  # one env per task in each worker process
 
@@ -182,8 +186,6 @@ def evaluate_success(model: Any, task: str | TaskSpec, episodes: int = 100, seed
     :param episodes: reset states
     :param seed: the first reset's seed
     """
-    from sb3_genrl.wrappers import LatentActionWrapper
-
     if model.generator is None:
         raise ValueError("this GenRL model has no generator: pass generator= to GenRL.load()")
     fix_joint_helpers()
@@ -274,8 +276,6 @@ def prior_best_success(
     ``draws`` latent actions from its prior, decoded and played open-loop; per state the number of draws that solve
     the env's goal (``info["is_success"]``). Returns the share of states solved by at least one draw (best of
     ``draws``), the best of 1, 10 and 100 draws (estimated from the same counts, without replacement) and the counts."""
-    from math import comb
-
     spec = get_task(task)
     rng = np.random.default_rng([seed, states, draws])
     actions = np.clip(generator.decode(generator.sample_prior(states * draws, rng)), -1.0, 1.0).astype(np.float32)
@@ -304,10 +304,6 @@ def policy_neighbourhood_success(
     states the deterministic action solves, the share that at least one draw solves (best of ``draws``), the mean
     success of one draw (the stochastic policy's), and the counts per state. A gap between the first two says that
     solving latent actions lie within the policy's spread, so that the search, not the generator, limits it."""
-    import torch as th
-
-    from sb3_genrl.wrappers import LatentActionWrapper
-
     spec = get_task(task)
     fix_joint_helpers()
     env = LatentActionWrapper(gym.make(spec.env_id), model.generator)

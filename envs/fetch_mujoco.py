@@ -26,6 +26,7 @@ from typing import Any
 
 import mujoco
 import numpy as np
+from gymnasium.envs.registration import load_env_creator, registry
 
 ROBOTICS_HINT = (
     'the Fetch tasks need Gymnasium-Robotics: pip install "sb3-genrl[robotics]" '
@@ -90,8 +91,6 @@ def fix_joint_helpers() -> bool:
 
 def _set_aside(own_ids: tuple[str, ...]) -> dict[str, Any]:
     """Remove from Gymnasium's registry those of ``own_ids`` that this package registered; return them."""
-    from gymnasium.envs.registration import registry
-
     return {
         env_id: registry.pop(env_id)
         for env_id in own_ids
@@ -122,8 +121,6 @@ class _FixOnImport(importlib.abc.MetaPathFinder):
         run, own_ids = spec.loader.exec_module, self.own_ids
 
         def exec_module(module: Any) -> None:
-            from gymnasium.envs.registration import registry
-
             own = _set_aside(own_ids)
             try:
                 run(module)
@@ -153,8 +150,6 @@ def import_robotics(own_ids: tuple[str, ...] = ()) -> Any:
         after this fix); they are set aside while Gymnasium-Robotics registers its own, without Gymnasium's warning
         about overriding them, and then put back
     """
-    from gymnasium.envs.registration import registry
-
     own = _set_aside(own_ids) if "gymnasium_robotics" not in sys.modules else {}
     try:
         module = importlib.import_module("gymnasium_robotics")
@@ -168,8 +163,6 @@ def import_robotics(own_ids: tuple[str, ...] = ()) -> Any:
 
 def robotics_env_class(env_id: str, own_ids: tuple[str, ...] = ()) -> type:
     """Gymnasium-Robotics' env class of ``env_id`` (e.g. ``FetchPush-v4``), its joint helpers fixed."""
-    from gymnasium.envs.registration import load_env_creator
-
     import_robotics(own_ids)
     return load_env_creator(entry_point_of(env_id))
 
