@@ -288,6 +288,7 @@ def squared_radii(points: _PreparedSet, k: int, block: int) -> torch.Tensor:
             else:
                 _merge_nearest(sq, i0, j0, values, indices, (1,))
                 _merge_nearest(sq, i0, j0, values, indices, (0,))
+    del sq, buffer  # the memory budget goes to the recomputed rows
     tol = _float32_tolerance(dim) * (points.sq_norms + points.sq_norms.max()) + _float32_floor(dim)
     # Exact distances lie within tol of the float32 ones, so with V the k-th float32 value, the k-th exact one lies
     # in [V - tol, V + tol]: candidates below V - 2 tol are among the k nearest, those above V + 2 tol are not, and
@@ -364,6 +365,7 @@ def membership(
             q = torch.mm(left[i0:i1], right[j0:j1].T, out=buffer[: (i1 - i0) * (j1 - j0)].view(i1 - i0, j1 - j0))
             torch.minimum(gen_margin[j0:j1], q.amin(0), out=gen_margin[j0:j1])
             torch.minimum(real_margin[i0:i1], q.amin(1), out=real_margin[i0:i1])
+    del q, buffer  # the memory budget goes to the borderline rows
     gen_margin += r_gen
     real_margin += r_real
     results = []
