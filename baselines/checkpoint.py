@@ -25,6 +25,7 @@ from typing import Any
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.monitor import Monitor
 
+from sb3_genrl.curves import _EpisodeInfo
 from sb3_genrl.run.folder import CHECKPOINT_DIR, differing, keep_episodes, remove_checkpoint  # noqa: F401 (re-exported)
 from sb3_genrl.utils import read_checkpoint, write_checkpoint
 
@@ -120,8 +121,6 @@ def _monitor(model: Any) -> Monitor:
 
 
 def _episode_info(monitor: Monitor) -> Any:
-    from sb3_genrl.curves import _EpisodeInfo
-
     if not isinstance(monitor.env, _EpisodeInfo):
         raise TypeError("the checkpointed run's Monitor must wrap sb3_genrl.curves.episode_info's wrapper")
     return monitor.env

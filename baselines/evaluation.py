@@ -3,8 +3,10 @@ stability: the final evaluation and the health check of :func:`sb3_genrl.baselin
 
 from __future__ import annotations
 
+import csv
 import os
 import pathlib
+import re
 from typing import Any
 
 import gymnasium as gym
@@ -16,6 +18,7 @@ from sb3_genrl.envs import get_task
 from stable_baselines3 import SAC
 
 from sb3_genrl.checks import check_input_path, check_positive_int, check_seed
+from sb3_genrl.genrl import GenRL
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED
 
 EVAL_GOALS = 100  # held-out goals of every final evaluation (seed EVAL_GOAL_SEED, never used for tuning)
@@ -84,8 +87,6 @@ def load_trained(algorithm: str, path: str | os.PathLike, task: str, *, generato
     ``genrl_policy.zip`` needs its generator, SAC + HER's the goal-conditioned task, as SB3 loads its buffer class)."""
     check_input_path(path, "path")
     if algorithm == "genrl":
-        from sb3_genrl.genrl import GenRL
-
         return GenRL.load(path, device=device, generator=generator)
     if algorithm == "sac-her":
         return SAC.load(path, env=gym.make(get_task(task).goal_env_id), device=device)
@@ -105,9 +106,6 @@ def training_health(out_dir: str | os.PathLike) -> dict[str, Any]:
 
     :param out_dir: the run folder
     """
-    import csv
-    import re
-
     logs = pathlib.Path(out_dir) / "logs"
     earlier = sorted(
         logs.glob("progress.until_episode_*.csv"), key=lambda path: int(re.search(r"_(\d+)\.csv$", path.name).group(1))

@@ -9,8 +9,19 @@ replace the zoo's random warm-up.
 
 from __future__ import annotations
 
+import argparse
+import inspect
+import json
 from typing import Any
 
+from sb3_contrib import TRPO
+from sb3_genrl.baselines import BASELINES, FEEDBACK_BASELINES
+from sb3_genrl.baselines.bc import behaviour_cloning, fit_actor
+from sb3_genrl.baselines.normalization import CLIP, STD_FLOOR
+from sb3_genrl.envs import get_task
+from stable_baselines3 import PPO, SAC
+
+from sb3_genrl.checks import json_object_argument
 from sb3_genrl.hyperparams import ZOO_KEYS, load_hyperparams
 
 # the settings file of each baseline
@@ -35,8 +46,6 @@ def zoo_hyperparams(algorithm: str, task: str) -> dict[str, Any]:
     :param algorithm: one of :data:`sb3_genrl.baselines.BASELINES`
     :param task: a task name from :data:`sb3_genrl.envs.TASKS` (or its Gymnasium id)
     """
-    from sb3_genrl.envs import get_task
-
     if algorithm not in ZOO_FILES:
         raise ValueError(f"unknown baseline {algorithm!r}; expected one of {tuple(ZOO_FILES)}")
     spec = get_task(task)
@@ -80,14 +89,9 @@ RESERVED = frozenset(
 
 def algorithm_class(algorithm: str) -> type:
     """The SB3 / sb3-contrib class of a baseline (PPO, SAC or TRPO)."""
-    from sb3_genrl.baselines import BASELINES
-    from stable_baselines3 import PPO, SAC
-
     if algorithm not in BASELINES:
         raise ValueError(f"unknown baseline {algorithm!r}; expected one of {BASELINES}")
     if algorithm == "latent-trpo":
-        from sb3_contrib import TRPO
-
         return TRPO
     return PPO if algorithm in ("ppo", "latent-ppo") else SAC
 
@@ -96,9 +100,6 @@ def check_algorithm_kwargs(algorithm: str, kwargs: dict[str, Any] | None) -> dic
     """Check a user's changes to a baseline's settings: names of the algorithm's constructor arguments (e.g.
     ``{"target_kl": 0.02}`` for PPO, ``{"gamma": 1.0}`` for SAC), none of :data:`RESERVED`, values as JSON holds
     them. Returns them as a plain dict (empty for ``None``)."""
-    import inspect
-    import json
-
     if kwargs is None:
         return {}
     if not isinstance(kwargs, dict):
@@ -120,10 +121,6 @@ def check_algorithm_kwargs(algorithm: str, kwargs: dict[str, Any] | None) -> dic
 def baseline_kwargs_argument(text: str) -> dict[str, dict[str, Any]]:
     """An argparse ``type``: a JSON object of changes per baseline, ``{"ppo": {"target_kl": 0.02}, ...}``, each
     checked by :func:`check_algorithm_kwargs`."""
-    import argparse
-
-    from sb3_genrl.checks import json_object_argument
-
     value = json_object_argument(text)
     try:
         return {name: check_algorithm_kwargs(name, kwargs) for name, kwargs in value.items()}
@@ -135,11 +132,6 @@ def settings_record(task: str, algorithm_kwargs: dict[str, dict[str, Any]] | Non
     """The feedback baselines' settings on ``task`` as plain JSON values (recorded in each run's summary and checked
     when a benchmark resumes), with a user's changes (``{baseline: {argument: value}}``, see
     :func:`check_algorithm_kwargs`) applied."""
-    import inspect
-
-    from sb3_genrl.baselines import FEEDBACK_BASELINES
-    from sb3_genrl.baselines.bc import behaviour_cloning, fit_actor
-    from sb3_genrl.baselines.normalization import CLIP, STD_FLOOR
 
     def plain(values: dict[str, Any]) -> dict[str, Any]:
         return {key: value.__name__ if isinstance(value, type) else value for key, value in values.items()}

@@ -78,10 +78,13 @@ from sb3_genrl.checks import (
     sub_seed,
 )
 from sb3_genrl.curves import LOG_DIR, MONITOR_FILE, monitor_episodes, read_monitor, training_logger, write_learning_curve
+from sb3_genrl.data import load_transitions
+from sb3_genrl.generative import load
 from sb3_genrl.genrl.generator_files import generator_digest
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED
 from sb3_genrl.run.folder import open_run
 from sb3_genrl.utils import atomic_path, atomic_write_json, folder_lock
+from sb3_genrl.wrappers import LatentActionWrapper
 
 CHECKPOINT_EVERY = 250  # episodes between checkpoints of an off-policy baseline (about 5 minutes of one core)
 
@@ -178,8 +181,6 @@ def _inputs(algorithm: str, task: str, demos: Any, demo_episodes: int | None, ge
     if algorithm not in LATENT_BASELINES:
         return _demonstrations(demos, demo_episodes, task), generator
     if isinstance(generator, str | os.PathLike):
-        from sb3_genrl.generative import load
-
         generator = load(generator)
     return None, generator
 
@@ -434,8 +435,6 @@ def _demonstrations(demos: Any, demo_episodes: int | None, task: str) -> dict[st
     if isinstance(demos, dict):
         transitions = demos
     else:
-        from sb3_genrl.data import load_transitions
-
         transitions = load_transitions(demos, task=task)  # refuses another task's demonstrations
     if demo_episodes is None:
         return transitions
@@ -448,7 +447,5 @@ def _demonstrations(demos: Any, demo_episodes: int | None, task: str) -> dict[st
 
 def _latent_model(algorithm: str, task: str, generator: Any, settings: dict[str, Any], common: dict, out: pathlib.Path) -> Any:
     """A latent-space baseline on the task's :class:`~sb3_genrl.LatentActionWrapper`, under the run's Monitor."""
-    from sb3_genrl import LatentActionWrapper
-
     env = monitor_episodes(LatentActionWrapper(gym.make(get_task(task).env_id), generator), out)
     return algorithm_class(algorithm)(zoo_hyperparams(algorithm, task)["policy"], env, **settings, **common)
