@@ -1,0 +1,210 @@
+"""A task from outside the package (sb3_genrl.envs.external): an expert's demonstrations recorded on an env the
+package does not ship, kept only when their open-loop replay succeeds, a generator trained on them and a GenRL
+policy trained through the public path."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium import spaces
+from sb3_genrl.envs.external import (
+    check_reproducible_reset,
+    load_expert,
+    make_task_env,
+    record_demonstrations,
+    resolve_task,
+    smooth_noise,
+)
+
+from sb3_genrl import GenRL, LatentActionWrapper
+from sb3_genrl.data import dataset_info, load_actions, load_arrays
+from sb3_genrl.generative import train_generator
+
+HORIZON = 20
+STEP = 0.1  # metres moved per unit of action and step
+SHOVE_STEP = 10  # the step at which a replay of a left-hand goal is shoved
+
+
+class PointGoalEnv(gym.Env):
+    """A point mass that must end within 5 cm of a goal drawn from the reset seed (not a task of the package).
+
+    Observation: goal (2), position (2). Action: velocity in [-1, 1]^2, ``STEP`` m a unit. Reward: minus the distance.
+    ``info["is_success"]``: within 5 cm. With ``shove``, every play of a goal left of the start (x < 0) after its first
+    is shoved 0.3 m in x at step ``SHOVE_STEP``: a disturbance the closed-loop expert corrects when it meets it, but that
+    an open-loop replay of the first play's actions meets uncorrected.
+    """
+
+    metadata = {"render_modes": []}
+
+    def __init__(self, shove: bool = False) -> None:
+        self.observation_space = spaces.Box(-2.0, 2.0, shape=(4,), dtype=np.float32)
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
+        self.shove = shove
+        self.plays: dict[tuple[float, float], int] = {}
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.goal = self.np_random.uniform(-0.8, 0.8, size=2)
+        self.position, self.t = np.zeros(2), 0
+        return self._obs(), {}
+
+    def _obs(self):
+        return np.concatenate([self.goal, self.position]).astype(np.float32)
+
+    def step(self, action):
+        self.position = self.position + STEP * np.clip(action, -1.0, 1.0)
+        self.t += 1
+        if self.t == SHOVE_STEP:
+            key = tuple(self.goal)
+            self.plays[key] = self.plays.get(key, 0) + 1
+            if self.shove and self.goal[0] < 0 and self.plays[key] > 1:
+                self.position = self.position + np.array([0.3, 0.0])
+        distance = float(np.linalg.norm(self.position - self.goal))
+        return self._obs(), -distance, False, False, {"is_success": distance < 0.05}
+
+
+class UnseededEnv(PointGoalEnv):
+    """Draws its goal from a generator that ``reset(seed=...)`` does not reseed."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.draws = np.random.default_rng(0)
+
+    def reset(self, *, seed=None, options=None):
+        observation, info = super().reset(seed=seed)
+        self.goal = self.draws.uniform(-0.8, 0.8, size=2)
+        return self._obs(), info
+
+
+class SilentEnv(PointGoalEnv):
+    """Reports its success under another key."""
+
+    def step(self, action):
+        observation, reward, terminated, truncated, info = super().step(action)
+        return observation, reward, terminated, truncated, {"solved": info["is_success"]}
+
+
+gym.register("TestExternal/PointGoal-v0", entry_point=PointGoalEnv, max_episode_steps=HORIZON)
+gym.register("TestExternal/PointGoalShove-v0", entry_point=PointGoalEnv, kwargs={"shove": True}, max_episode_steps=HORIZON)
+
+
+def point_expert(observation: np.ndarray) -> np.ndarray:
+    """Closes half the distance to the goal at each step."""
+    return np.clip(0.5 * (observation[:2] - observation[2:]) / STEP, -1.0, 1.0)
+
+
+def goal_of(reset_seed: int) -> np.ndarray:
+    env = PointGoalEnv()
+    env.reset(seed=reset_seed)
+    return env.goal
+
+
+def test_record_demonstrations_keeps_those_whose_open_loop_replay_succeeds(tmp_path):
+    calm = record_demonstrations("TestExternal/PointGoal-v0", point_expert, 30, tmp_path / "calm", seed=3, noise=0.6)
+    shoved = record_demonstrations("TestExternal/PointGoalShove-v0", point_expert, 10, tmp_path / "shoved", seed=3, noise=0.6)
+    calm_info, info = dataset_info(calm), dataset_info(shoved)
+    # A deterministic env replays every closed-loop success; the perturbation makes some expert episodes fail.
+    assert calm_info["failed_open_loop"] == 0 and calm_info["failed_closed_loop"] > 0
+    assert calm_info["tried"] == 30 + calm_info["failed_closed_loop"]
+    # The closed-loop plays are the same in both envs (a first play is never shoved): of the calm env's kept episodes,
+    # the shoved env keeps those of goals right of the start, and drops and counts the others, whose replay fails.
+    right = [s for s in calm_info["reset_seeds"] if goal_of(s)[0] >= 0]
+    assert len(right) >= 10
+    assert info["reset_seeds"] == right[:10]
+    left_before = [s for s in calm_info["reset_seeds"][: calm_info["reset_seeds"].index(right[9])] if goal_of(s)[0] < 0]
+    assert info["failed_open_loop"] == len(left_before) > 0
+    assert info["tried"] == 10 + info["failed_open_loop"] + info["failed_closed_loop"]
+    assert info["kept_share"] == pytest.approx(10 / info["tried"])
+    assert info["horizon"] == HORIZON and info["task"] == "TestExternal/PointGoalShove-v0"
+    # The stored actions, replayed open loop in a fresh env from their reset seeds, succeed; the observations are
+    # the closed-loop episode's.
+    arrays = load_arrays(shoved)
+    assert arrays["actions"].shape == (10, HORIZON, 2) and arrays["observations"].shape == (10, HORIZON + 1, 4)
+    for reset_seed, actions, observations in zip(info["reset_seeds"], arrays["actions"], arrays["observations"], strict=True):
+        env = gym.make("TestExternal/PointGoal-v0")
+        observation, _ = env.reset(seed=reset_seed)
+        np.testing.assert_array_equal(observation, observations[0])
+        for action in actions:
+            observation, _, _, _, step_info = env.step(action)
+        np.testing.assert_array_equal(observation, observations[-1])
+        assert step_info["is_success"]
+
+
+def test_record_demonstrations_is_a_prefix_of_a_larger_set(tmp_path):
+    small = record_demonstrations("TestExternal/PointGoal-v0", point_expert, 4, tmp_path / "small", seed=1)
+    large = record_demonstrations("TestExternal/PointGoal-v0", point_expert, 8, tmp_path / "large", seed=1)
+    np.testing.assert_array_equal(load_actions(small), load_actions(large)[:4])
+
+
+def test_demonstrations_train_a_generator_and_a_genrl_policy(tmp_path):
+    path = record_demonstrations("TestExternal/PointGoal-v0", point_expert, 40, tmp_path / "demos", seed=0)
+    generator = train_generator(path, preset="VAE1", epochs=5, batch_size=16, eval_every=5, seed=0)
+    assert (generator.horizon, generator.action_dim) == (HORIZON, 2)
+    model = GenRL(
+        LatentActionWrapper(make_task_env("TestExternal/PointGoal-v0"), generator), n_steps=16, batch_size=16, seed=0
+    )
+    model.learn(total_timesteps=32)
+    assert model.num_timesteps == 32
+    # the env's info["is_success"] reached SB3's success rate: one entry a finished episode
+    assert len(model.ep_success_buffer) == 32
+
+
+def test_an_env_without_episode_length_needs_a_horizon(tmp_path):
+    with pytest.raises(ValueError, match=r"declares no episode length .*horizon="):
+        record_demonstrations(PointGoalEnv, point_expert, 2, tmp_path / "out")
+    assert not (tmp_path / "out").exists()
+    path = record_demonstrations(PointGoalEnv, point_expert, 2, tmp_path / "out", horizon=12)
+    assert load_actions(path).shape == (2, 12, 2) and dataset_info(path)["horizon"] == 12
+    with pytest.raises(ValueError, match=r"horizon 30 is longer than .*\(20 steps\)"):
+        record_demonstrations("TestExternal/PointGoal-v0", point_expert, 2, tmp_path / "other", horizon=30)
+
+
+def test_an_env_whose_seeded_resets_differ_is_refused(tmp_path):
+    with pytest.raises(ValueError, match=r"reset\(seed=\d+\) gave two different observations"):
+        record_demonstrations(UnseededEnv, point_expert, 2, tmp_path / "out", horizon=HORIZON)
+    assert not (tmp_path / "out").exists()
+    check_reproducible_reset(PointGoalEnv(), 5)  # the seeded env passes
+
+
+def test_success_key_is_configurable_and_its_absence_refused(tmp_path):
+    with pytest.raises(ValueError, match=r"reports no success: its step's info has no 'is_success' or 'success'"):
+        record_demonstrations(SilentEnv, point_expert, 2, tmp_path / "out", horizon=HORIZON)
+    assert not (tmp_path / "out").exists()
+    path = record_demonstrations(SilentEnv, point_expert, 2, tmp_path / "out", horizon=HORIZON, success_key="solved")
+    assert dataset_info(path)["success_key"] == "solved"
+
+
+def test_bad_expert_and_noise_are_refused_before_any_work(tmp_path):
+    with pytest.raises(ValueError, match=r"the expert returned .*shape \(3,\).*expected 2 finite numbers"):
+        record_demonstrations("TestExternal/PointGoal-v0", lambda observation: np.zeros(3), 2, tmp_path / "out")
+    with pytest.raises(ValueError, match="noise"):
+        record_demonstrations("TestExternal/PointGoal-v0", point_expert, 2, tmp_path / "out", noise=-0.1)
+    with pytest.raises(ValueError, match="has no expert of the package's"):
+        record_demonstrations("TestExternal/PointGoal-v0", None, 2, tmp_path / "out")
+    assert not (tmp_path / "out").exists()
+
+
+def test_smooth_noise_heights_are_bounded_by_the_noise_scale():
+    heights = np.array([0.5, 0.0])
+    for k in range(50):
+        noise = smooth_noise(HORIZON, np.random.default_rng(k), heights)
+        assert noise.shape == (HORIZON, 2) and np.all(noise[:, 1] == 0.0)
+        assert np.abs(noise[:, 0]).max() <= 4 * 0.5  # at most 4 bumps, each at most 0.5 high
+
+
+def test_task_names_and_experts_resolve_or_are_refused():
+    assert resolve_task("TestExternal/PointGoal-v0").env_id == "TestExternal/PointGoal-v0"
+    assert resolve_task("test_external:TestExternal/PointGoal-v0").env_id == "TestExternal/PointGoal-v0"
+    assert resolve_task("hockey").env_id == "GenRL/Hockey-v0"
+    with pytest.raises(ValueError, match="unknown task 'NoSuch-v0'"):
+        resolve_task("NoSuch-v0")
+    with pytest.raises(ValueError, match="unknown Meta-World task 'no-such-v3'"):
+        resolve_task("metaworld/no-such-v3")
+    assert load_expert("test_external:point_expert") is point_expert
+    for spec, message in (
+        ("no_such_module:f", "cannot import the module 'no_such_module'"),
+        ("test_external:no_such", "has no attribute 'no_such'"),
+        ("test_external:HORIZON", "is a int, not a callable"),
+        ("point_expert", "module:function"),
+    ):
+        with pytest.raises(ValueError, match=message):
+            load_expert(spec)
