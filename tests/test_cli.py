@@ -52,7 +52,7 @@ def test_help_lists_the_commands_in_workflow_order_and_version(cli):
             ("demos", "--task", "hockey", "--episodes", "2.5", "--out", "D"),
             "argument --episodes: expected an integer, got '2.5'",
         ),
-        (("demos", "--task", "golf", "--out", "D"), "argument --task: invalid choice: 'golf'"),
+        (("demos", "--task", "golf", "--out", "D"), "argument --task: unknown task 'golf'"),
         (("demos", "--task", "hockey", "--out", "FILE"), "argument --out: 'FILE' is a file; expected a folder"),
         (("demos", "--task", "hockey", "--out", "FILE/sub"), "argument --out: 'FILE/sub' cannot be created: 'FILE' is a file"),
         (("demos", "--task", "hockey", "--threads", "0", "--out", "D"), "argument --threads: must be an integer >= 1, got 0"),

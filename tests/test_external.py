@@ -2,6 +2,9 @@
 package does not ship, kept only when their open-loop replay succeeds, a generator trained on them and a GenRL
 policy trained through the public path."""
 
+import json
+import re
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -208,3 +211,44 @@ def test_task_names_and_experts_resolve_or_are_refused():
     ):
         with pytest.raises(ValueError, match=message):
             load_expert(spec)
+
+
+def test_genrl_demos_and_train_policy_take_a_task_the_package_does_not_register(cli, tmp_path):
+    demos = tmp_path / "demos"
+    code, out, err = cli(
+        "demos", "--task", "TestExternal/PointGoalShove-v0", "--expert", "test_external:point_expert", "--noise", 0.6,
+        "--episodes", 12, "--seed", 3, "--out", demos, "--no-progress-bar",
+    )  # fmt: skip
+    assert code == 0, err
+    info = dataset_info(demos)
+    assert info["failed_open_loop"] > 0 and info["expert"] == "test_external:point_expert"
+    assert f"12 demonstrations of TestExternal/PointGoalShove-v0 (20 steps) kept of {info['tried']} tried" in out
+    assert f"{info['failed_open_loop']} failed when replayed open loop" in out
+    code, _, err = cli(
+        "train-generator", "--data", demos, "--preset", "VAE1", "--epochs", 3, "--batch-size", 8, "--eval-every", 3,
+        "--out", tmp_path / "vae.pt", "--no-progress-bar",
+    )  # fmt: skip
+    assert code == 0, err
+    code, out, err = cli(
+        "train-policy", "--task", "test_external:TestExternal/PointGoal-v0", "--generator", tmp_path / "vae.pt",
+        "--episodes", 32, "--batch-episodes", 16, "--checkpoint-every", 0, "--out", tmp_path / "policy", "--no-progress-bar",
+    )  # fmt: skip
+    assert code == 0, err
+    summary = json.loads((tmp_path / "policy" / "summary.json").read_text())
+    assert summary["task"] == "TestExternal/PointGoal-v0" and summary["episodes"] == 32
+    assert re.search(r"success: [0-9.]+ of the last iteration's episodes \(info\['is_success'\]", out), out
+
+
+def test_genrl_demos_refuses_bad_tasks_and_experts_before_any_work(cli, tmp_path):
+    out = tmp_path / "demos"
+    for arguments, message in (
+        (("--task", "NoSuch-v0", "--expert", "test_external:point_expert"), "unknown task 'NoSuch-v0'"),
+        (("--task", "TestExternal/PointGoal-v0", "--expert", "test_external:nope"), "has no attribute 'nope'"),
+        (("--task", "TestExternal/PointGoal-v0", "--expert", "no_such_module:f"), "cannot import the module"),
+        (("--task", "TestExternal/PointGoal-v0"), "give its expert as --expert MODULE:FUNCTION"),
+        (("--task", "hockey", "--horizon", "10"), "--horizon apply to demonstrations from an expert"),
+        (("--task", "TestExternal/PointGoal-v0", "--expert", "test_external:point_expert", "--threads", "2"), "--threads"),
+    ):
+        code, _, err = cli("demos", *arguments, "--episodes", 2, "--out", out, "--no-progress-bar")
+        assert code == 2 and message in err, (arguments, err)
+        assert not out.exists()

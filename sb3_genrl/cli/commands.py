@@ -18,8 +18,14 @@ def demos_command(args: argparse.Namespace) -> int:
     import time
 
     from sb3_genrl.data import dataset_info
+    from sb3_genrl.envs import TASKS
     from sb3_genrl.envs.demonstrations import make_demonstrations
 
+    if args.expert is not None or args.task not in TASKS:
+        return _expert_demos(args)
+    given = [f"--{name.replace('_', '-')}" for name in ("noise", "horizon", "success_key") if getattr(args, name) is not None]
+    if given:
+        raise ValueError(f"{', '.join(given)} apply to demonstrations from an expert (--expert), not to {args.task}'s own")
     began = time.perf_counter()
     path = make_demonstrations(
         args.task, args.episodes, args.out, seed=args.seed, n_threads=args.threads, progress_bar=not args.no_progress_bar
@@ -33,6 +39,38 @@ def demos_command(args: argparse.Namespace) -> int:
     print(
         f"coverage: {100 * report['coverage']:.1f}% of {report['cells']} goal-region cells of {report['cell_size']} m"
         f" ({100 * report['in_region']:.1f}% of reached points in the region) -> {report['png']}"
+    )
+    return 0
+
+
+def _expert_demos(args: argparse.Namespace) -> int:
+    """``genrl demos`` of a task from an expert (:func:`sb3_genrl.envs.external.record_demonstrations`)."""
+    import time
+
+    from sb3_genrl.data import dataset_info
+    from sb3_genrl.envs.external import DEFAULT_NOISE, record_demonstrations, resolve_task
+
+    if args.threads is not None:
+        raise ValueError("--threads applies to the package's own tasks; demonstrations from an expert play in one process")
+    if args.expert is None and resolve_task(args.task).make_expert is None:
+        raise ValueError(f"task {args.task!r} is not one of the package's: give its expert as --expert MODULE:FUNCTION")
+    began = time.perf_counter()
+    path = record_demonstrations(
+        args.task,
+        args.expert,
+        args.episodes,
+        args.out,
+        seed=args.seed,
+        noise=DEFAULT_NOISE if args.noise is None else args.noise,
+        horizon=args.horizon,
+        success_key=args.success_key or "is_success",
+        progress_bar=not args.no_progress_bar,
+    )
+    info = dataset_info(path)
+    print(
+        f"{info['episodes']} demonstrations of {info['task']} ({info['horizon']} steps) kept of {info['tried']} tried "
+        f"({100 * info['kept_share']:.1f}%: {info['failed_closed_loop']} failed closed loop, {info['failed_open_loop']} "
+        f"failed when replayed open loop) in {time.perf_counter() - began:.1f} s -> {path}"
     )
     return 0
 
@@ -101,8 +139,12 @@ def evaluate_command(args: argparse.Namespace) -> int:
 
 
 def train_policy_command(args: argparse.Namespace) -> int:
+    from sb3_genrl.envs import TASKS
+    from sb3_genrl.envs.external import resolve_task
     from sb3_genrl.run import train_policy
 
+    if args.task not in TASKS:  # metaworld/<name>, module:Id: the Gymnasium id
+        args.task = resolve_task(args.task).env_id
     result = train_policy(
         args.task,
         str(args.generator),
@@ -121,7 +163,28 @@ def train_policy_command(args: argparse.Namespace) -> int:
         f"GenRL on {args.task}: {result['episodes']} episodes, {result['iterations']} iterations, mean reward "
         f"final {result['final_mean_reward']:.4g}, best {result['best_mean_reward']:.4g} -> {result['model_path']}"
     )
+    print(_success_line(result["log_dir"]))
     return 0
+
+
+def _success_line(log_dir: str) -> str:
+    """What a run learnt of the task's success: the last iteration's ``rollout/success_rate`` in SB3's log, or that the
+    env reported none."""
+    import csv
+    from pathlib import Path
+
+    with open(Path(log_dir) / "progress.csv", newline="", encoding="utf-8") as file:
+        rates = [row.get("rollout/success_rate") for row in csv.DictReader(file)]
+    rates = [float(rate) for rate in rates if rate]
+    if not rates:
+        return (
+            "success: the env reports no info['is_success'] at an episode's last step, so none is logged; the run "
+            "learns from the rewards alone"
+        )
+    return (
+        f"success: {rates[-1]:.3f} of the last iteration's episodes (info['is_success'] at their last step; "
+        f"rollout/success_rate in {Path(log_dir) / 'progress.csv'})"
+    )
 
 
 def policy_arguments(args: argparse.Namespace) -> dict:
@@ -129,15 +192,18 @@ def policy_arguments(args: argparse.Namespace) -> dict:
     ``--library-defaults``) with ``--e-step``, ``--batch-episodes`` and ``--genrl-kwargs`` laid over it, checked by
     :func:`sb3_genrl.genrl.check_genrl_settings` before any work; the entry's ``callback`` (``--genrl-kwargs
     '{"callback": null}'``: none) is checked by :func:`sb3_genrl.genrl.demonstrations.callback_entries`."""
+    from sb3_genrl.envs import TASKS
     from sb3_genrl.genrl import check_genrl_settings
     from sb3_genrl.genrl.demonstrations import callback_entries
     from sb3_genrl.hyperparams import lay_over
-    from sb3_genrl.study.quickstart import task_settings
+    from sb3_genrl.study.quickstart import DEFAULT_BATCH_EPISODES, task_settings
 
     if args.library_defaults:
         batch_episodes, genrl_kwargs = None, {}
-    else:
+    elif args.task in TASKS or args.task in {spec.env_id for spec in TASKS.values()}:
         _, batch_episodes, genrl_kwargs = task_settings(args.task)
+    else:  # a task of the user's own has no entry: GenRL's defaults, as task_settings gives a task without one
+        batch_episodes, genrl_kwargs = DEFAULT_BATCH_EPISODES, {}
     genrl_kwargs = lay_over({**genrl_kwargs, "e_step": args.e_step}, args.genrl_kwargs)
     source = "GenRL's defaults" if args.library_defaults else f"{args.task}'s entry in hyperparams/genrl.yml"
     name = f"argument --e-step/--genrl-kwargs: {source}, --e-step {args.e_step}" + (

@@ -36,9 +36,20 @@ def _task_option(
     extra: tuple[str, ...] = (),
     nargs: str | None = None,
     arm_only: bool = False,
+    external: bool = False,
 ) -> None:
     from sb3_genrl.envs import TASKS, arm_tasks
 
+    if external:  # any episodic Gymnasium task, checked as it parses (sb3_genrl.envs.external.resolve_task)
+        parser.add_argument(
+            "--task",
+            required=required,
+            default=default,
+            type=option(_check_task),
+            help="a registered task, metaworld/<name> (one of Meta-World's 50 v3 tasks), a registered Gymnasium id, "
+            "or module:Id (the module registers Id when imported)",
+        )
+        return
     parser.add_argument(
         "--task",
         required=required,
@@ -84,15 +95,58 @@ def add_play(sub: argparse._SubParsersAction) -> None:
     play.set_defaults(func=commands.play_command)
 
 
+def _check_task(task: str, name: str = "") -> str:
+    """A task of any kind that ``--task`` takes where it says so (:func:`sb3_genrl.envs.external.resolve_task`)."""
+    from sb3_genrl.envs.external import resolve_task
+
+    resolve_task(task)
+    return task
+
+
+def _check_expert(spec: str, name: str = "") -> object:
+    """The expert callable named ``module:function`` (:func:`sb3_genrl.envs.external.load_expert`)."""
+    from sb3_genrl.envs.external import load_expert
+
+    return load_expert(spec)
+
+
 def add_demos(sub: argparse._SubParsersAction) -> None:
+    from sb3_genrl.envs.external import DEFAULT_NOISE
+
     demos = sub.add_parser("demos", help="generate a task's demonstrations as a Minari dataset, with a coverage report")
-    _task_option(demos)
+    _task_option(demos, external=True)
+    demos.add_argument(
+        "--expert",
+        type=option(_check_expert),
+        default=None,
+        metavar="MODULE:FUNCTION",
+        help="an expert, observation -> action, played closed loop with perturbations; each demonstration is kept only "
+        "when its actions replayed open loop from its seeded reset still succeed (needed for a task the package does "
+        "not register; metaworld/<name> comes with Meta-World's scripted expert)",
+    )
+    demos.add_argument(
+        "--noise",
+        type=option(check_non_negative_float, float),
+        default=None,
+        help=f"with an expert: largest height of one perturbation bump, as a share of the action range's half "
+        f"(default {DEFAULT_NOISE}; 0: unperturbed)",
+    )
+    demos.add_argument(
+        "--horizon", type=COUNT, default=None, help="with an expert: control steps of a demonstration (default: the env's)"
+    )
+    demos.add_argument(
+        "--success-key",
+        default=None,
+        help="with an expert: the info key of the env's success (default is_success, falling back to success)",
+    )
     demos.add_argument("--episodes", type=EPISODES, default=40000, help="valid demonstrations to keep (paper: 40000)")
     demos.add_argument(
         "--out", required=True, type=option(_check_dataset_out), help="dataset folder to create (must not exist or be empty)"
     )
     _seed_option(demos)
-    demos.add_argument("--threads", type=COUNT, default=None, help="simulation threads (default: available cores)")
+    demos.add_argument(
+        "--threads", type=COUNT, default=None, help="simulation threads of a package's own task (default: available cores)"
+    )
     _progress_option(demos)
     demos.set_defaults(func=commands.demos_command)
 
@@ -185,7 +239,7 @@ def add_train_policy(sub: argparse._SubParsersAction) -> None:
     from sb3_genrl.run.checkpoint import CHECKPOINT_EVERY
 
     policy = sub.add_parser("train-policy", help="train a GenRL policy over a generator's latent space (Algorithm 1)")
-    _task_option(policy)
+    _task_option(policy, external=True)
     policy.add_argument("--generator", required=True, type=EXISTING, help="file of a trained generator")
     policy.add_argument(
         "--data",
