@@ -21,7 +21,8 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from sb3_genrl.utils import CHECKPOINT_STATE, atomic_write_json
+from sb3_genrl.curves import LOG_DIR, MONITOR_FILE
+from sb3_genrl.utils import CHECKPOINT_STATE, atomic_write_json, atomic_write_text
 
 RUN_RECORD = "run_record.json"
 SUMMARY = "summary.json"
@@ -110,9 +111,6 @@ def keep_episodes(out: str | os.PathLike[str], episodes: int) -> None:
     :param out: the run folder
     :param episodes: the episodes the checkpoint had played
     """
-    from sb3_genrl.curves import LOG_DIR, MONITOR_FILE
-    from sb3_genrl.utils import atomic_write_text
-
     out = Path(out)
     monitor_file = out / MONITOR_FILE
     lines = monitor_file.read_text().splitlines(keepends=True)

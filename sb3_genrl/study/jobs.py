@@ -16,10 +16,19 @@ import time
 from typing import Any
 
 import numpy as np
+import torch
 
+from sb3_genrl.baselines.train import train_baseline
+from sb3_genrl.curves import MONITOR_FILE, read_curve, read_monitor
+from sb3_genrl.data import load_actions
 from sb3_genrl.data.fingerprints import file_fingerprint
+from sb3_genrl.generative import PRESETS, load, train_generator
+from sb3_genrl.metrics import MEASURES, evaluate_generator, real_subset
 from sb3_genrl.metrics.prior_rollout import PRIOR_ROLLOUT_SEED  # the prior rollout's goals (not the evaluations')
+from sb3_genrl.run import train_policy
 from sb3_genrl.run.stages import STAGE_FILE, check_and_record, read_settings, refuse_conflicts, settings_conflicts
+from sb3_genrl.study.quickstart import task_settings
+from sb3_genrl.study.report import SCORECARD_MEASURES
 from sb3_genrl.utils import atomic_write_json
 
 # Fixed settings of the study's stages (recorded with each stage, see sb3_genrl.study.runner).
@@ -48,12 +57,6 @@ def generator_job(
         best ``score``), the best within the first half of the budget (``half_rewards``, ``half_score``) and the final
         iteration's (``final_rewards``, their mean ``final``)
     """
-    import torch
-
-    from sb3_genrl.generative import PRESETS, load, train_generator
-    from sb3_genrl.metrics import MEASURES
-    from sb3_genrl.study.report import SCORECARD_MEASURES
-
     torch.set_num_threads(torch_threads)
     root = pathlib.Path(task_dir)
     for folder in ("generators", "evaluation", "policies"):
@@ -130,9 +133,6 @@ def _evaluation(
 ) -> dict[str, Any]:
     """Precision/recall against the fixed real subset and DwPR (paper 5.2), density, coverage and the prior rollout,
     or the stored result of this file."""
-    from sb3_genrl.data import load_actions
-    from sb3_genrl.metrics import evaluate_generator, real_subset
-
     path = root / "evaluation" / f"{name}.json"
     stored = read_settings(path)
     if stored is not None:
@@ -165,8 +165,6 @@ def task_genrl_kwargs(task: str) -> dict[str, Any]:
     """The task's own GenRL settings (its entry in ``hyperparams/genrl.yml``, see
     :func:`~sb3_genrl.study.quickstart.task_settings`), used by every GenRL run of the study; the scale sets the
     episodes and the episodes per iteration."""
-    from sb3_genrl.study.quickstart import task_settings
-
     return task_settings(task)[2]
 
 
@@ -175,9 +173,6 @@ def _policy_rewards(
 ) -> dict[str, float]:
     """One GenRL run's best iteration mean reward, the best within the first half of its budget (from its learning
     curve), its final iteration's and its CPU seconds (its Monitor file's, the process that played and learned)."""
-    from sb3_genrl.curves import MONITOR_FILE, read_curve, read_monitor
-    from sb3_genrl.run import train_policy
-
     if not (run_dir / "summary.json").exists():
         train_policy(
             task,
@@ -222,10 +217,6 @@ def baseline_job(
     """One run of the comparison: a feedback baseline on the demonstrations (PPO with behaviour cloning, SAC with and
     without them in its buffer, SAC + HER) or a stock algorithm on the latent space of ``generator``
     (``latent-ppo``, ``latent-sac``, ``latent-trpo``); skipped when already done."""
-    import torch
-
-    from sb3_genrl.baselines.train import train_baseline
-
     torch.set_num_threads(torch_threads)
     if not (pathlib.Path(run_dir) / "summary.json").exists():
         latent = algorithm.startswith("latent-")

@@ -10,11 +10,33 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from sb3_genrl.checks import sub_seed
+import torch
+
+import sb3_genrl
+from sb3_genrl.checks import (
+    MAX_EPISODES,
+    check_device,
+    check_episodes,
+    check_int,
+    check_output_dir,
+    check_positive_int,
+    check_seed,
+    sub_seed,
+)
+from sb3_genrl.data import dataset_info
 from sb3_genrl.data.fingerprints import dataset_fingerprint, file_fingerprint
-from sb3_genrl.hyperparams import EVAL_GOAL_SEED
+from sb3_genrl.envs import get_task
+from sb3_genrl.envs.demonstrations import make_demonstrations
+from sb3_genrl.generative import load, train_generator
+from sb3_genrl.genrl import GenRL
+from sb3_genrl.genrl.demonstrations import uses_demonstrations
+from sb3_genrl.hyperparams import EVAL_GOAL_SEED, known_env_ids, load_genrl_settings
+from sb3_genrl.metrics import MEASURES, evaluate_generators
+from sb3_genrl.run import evaluate_on_goals, train_policy
 from sb3_genrl.run.stages import check_and_record, read_settings, refuse_conflicts, settings_conflicts
+from sb3_genrl.run.train import genrl_settings, run_settings
 from sb3_genrl.utils import atomic_write_json, atomic_write_text, folder_lock
+from sb3_genrl.video import record_video
 
 # Paper table 1's VAE1 (N_alpha = 2, beta = 0.01). Of the 2-D VAEs, its stronger prior term lays the hockey
 # demonstrations out as one unfolded sheet (shot distance along one latent axis, direction along the other); with
@@ -73,11 +95,6 @@ def quickstart(
     :param log: called with a line after each stage
     :return: the report's path
     """
-    import torch
-
-    from sb3_genrl.checks import check_device, check_output_dir, check_seed
-    from sb3_genrl.envs import get_task
-
     episodes, batch_episodes, genrl_kwargs = task_settings(task)
     policy_episodes = episodes if policy_episodes is None else policy_episodes
     video = video and get_task(task).video  # a task without the arm tasks' renderer is not filmed
@@ -118,8 +135,6 @@ def quickstart(
 
 def _check_counts(*, demo_episodes: int, epochs: int, policy_episodes: int, pr_samples: int, dwpr_samples: int) -> None:
     """Refuse counts the stages cannot run with, before the demonstrations are made."""
-    from sb3_genrl.checks import MAX_EPISODES, check_episodes, check_int, check_positive_int
-
     for name, value in dict(epochs=epochs, dwpr_samples=dwpr_samples).items():
         check_positive_int(value, name)
     check_episodes(policy_episodes, "policy_episodes")
@@ -140,9 +155,6 @@ def _stage_settings(
     video: bool,
 ) -> dict[str, dict[str, Any]]:
     """What each stage is made with: recorded beside its output, and compared with the record on a rerun."""
-    import sb3_genrl
-    from sb3_genrl.run.train import genrl_settings, run_settings
-
     return {
         "demonstrations": {"task": task, "episodes": demo_episodes, "seed": seed, "version": sb3_genrl.__version__},
         "generator": {"preset": quickstart_preset(task), "epochs": epochs, "eval_every": GENERATOR_EVAL_EVERY, "seed": seed},
@@ -196,8 +208,6 @@ def _done(out: pathlib.Path, stage: str) -> bool:
 def _recorded(out: pathlib.Path, stage: str) -> tuple[pathlib.Path, dict[str, Any] | None]:
     """Where a stage's settings are recorded, and what is recorded (None: nothing)."""
     if stage == "demonstrations":
-        from sb3_genrl.data import dataset_info
-
         dataset = out / "demonstrations"
         return dataset, dataset_info(dataset) if _done(out, stage) else None
     return out / _RECORDS[stage], read_settings(out / _RECORDS[stage])
@@ -206,12 +216,6 @@ def _recorded(out: pathlib.Path, stage: str) -> tuple[pathlib.Path, dict[str, An
 def _run_stages(
     out: pathlib.Path, settings: dict[str, dict[str, Any]], device: str, progress_bar: bool, log: Callable[[str], None]
 ) -> dict[str, float]:
-    from sb3_genrl.envs.demonstrations import make_demonstrations
-    from sb3_genrl.generative import train_generator
-    from sb3_genrl.genrl.demonstrations import uses_demonstrations
-    from sb3_genrl.metrics import evaluate_generators
-    from sb3_genrl.run import train_policy
-
     dataset, model_path, policy = out / "demonstrations", out / "vae.pt", out / "policy"
     demos, generator, evaluation, policy_stage = (
         settings[name] for name in ("demonstrations", "generator", "evaluation", "policy")
@@ -288,8 +292,6 @@ def _run_stages(
         ),
     )
     if "video" in settings:
-        from sb3_genrl.video import record_video
-
         shown = settings["video"]
         stage(
             "video",
@@ -312,9 +314,6 @@ def _write_report(
     out: pathlib.Path, task: str, seed: int, video: bool, timings: dict[str, float], log: Callable[[str], None]
 ) -> pathlib.Path:
     """``report.md``, with every number read from what the stages recorded."""
-    from sb3_genrl.data import dataset_info
-    from sb3_genrl.generative import load
-
     dataset = out / "demonstrations"
     summary = json.loads((out / "policy" / "summary.json").read_text())
     measures = json.loads((out / "evaluation" / "results.json").read_text())
@@ -356,10 +355,6 @@ def _write_report(
 def _policy_score(out: pathlib.Path, task: str, seed: int) -> tuple[str, str]:
     """The trained policy played deterministically from 100 held-out goals (or initial states): the report's words
     and the log's line (the success rate for a task scored by success, else the mean distance to the goal)."""
-    from sb3_genrl.envs import get_task
-    from sb3_genrl.genrl import GenRL
-    from sb3_genrl.run import evaluate_on_goals
-
     model = GenRL.load(out / "policy" / "genrl_policy.zip", device="cpu")
     spec = get_task(task)
     if spec.evaluate is not None:
@@ -380,8 +375,6 @@ def _policy_score(out: pathlib.Path, task: str, seed: int) -> tuple[str, str]:
 def quickstart_preset(task: str) -> str:
     """The generator preset the quickstart trains for ``task``: the task's own (its ``TaskSpec.generator_preset``, a
     latent space as large as its expert's family of motions) or :data:`QUICKSTART_PRESET`."""
-    from sb3_genrl.envs import get_task
-
     return get_task(task).generator_preset or QUICKSTART_PRESET
 
 
@@ -395,9 +388,6 @@ def task_settings(task: str) -> tuple[int, int, dict[str, Any]]:
         the further GenRL arguments (``policy`` among them, and the entry's ``callback`` where it has one, which
         :func:`~sb3_genrl.run.train_policy` takes: the Fetch tasks' learning from demonstrations)
     """
-    from sb3_genrl.envs import get_task
-    from sb3_genrl.hyperparams import known_env_ids, load_genrl_settings
-
     env_id = get_task(task).env_id
     if env_id not in known_env_ids("genrl"):
         return DEFAULT_POLICY_EPISODES, DEFAULT_BATCH_EPISODES, {}
@@ -405,7 +395,5 @@ def task_settings(task: str) -> tuple[int, int, dict[str, Any]]:
 
 
 def _measure_line(measures: list[dict[str, Any]]) -> str:
-    from sb3_genrl.metrics import MEASURES
-
     row = measures[0]
     return ", ".join(f"{key} {row[key]:.3f}" for key in MEASURES if key in row)

@@ -8,15 +8,21 @@ before any work, with the stage folders and settings named. The reports read the
 from __future__ import annotations
 
 import json
+import multiprocessing
 import os
 import pathlib
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any
 
+import sb3_genrl
 from sb3_genrl.baselines import BASELINES
+from sb3_genrl.baselines.compare import compare_runs
 from sb3_genrl.checks import check_device, check_output_dir, check_positive_int
+from sb3_genrl.data import dataset_info
 from sb3_genrl.data.fingerprints import dataset_fingerprint, file_fingerprint
+from sb3_genrl.envs import arm_tasks
+from sb3_genrl.envs.demonstrations import make_demonstrations
 from sb3_genrl.provenance import package_versions
 from sb3_genrl.run.stages import (
     STAGE_FILE,
@@ -26,7 +32,8 @@ from sb3_genrl.run.stages import (
     refuse_conflicts,
     settings_conflicts,
 )
-from sb3_genrl.study.cluster import DEFAULT_CONNECT_TIMEOUT
+from sb3_genrl.run.train import genrl_settings
+from sb3_genrl.study.cluster import DEFAULT_CONNECT_TIMEOUT, connect_ray
 from sb3_genrl.study.jobs import (
     EVALUATION_SEED,
     GENERATOR_SEED,
@@ -78,8 +85,6 @@ def run_study(
     :param log: called with a line of progress after each finished job
     :return: the report's path
     """
-    from sb3_genrl.envs import arm_tasks
-
     if task not in (*arm_tasks(), "all"):  # the study's baselines and measures are those of the arm's tasks
         raise ValueError(f"unknown task {task!r} for the study; expected one of {arm_tasks()} or 'all'")
     if not isinstance(scale, StudyScale) and scale not in SCALES:
@@ -116,8 +121,6 @@ def run_study(
 def _write_index(out: pathlib.Path) -> pathlib.Path:
     """``report.md`` linking each task's report in ``out``, and, once every arm task has finished (in this run or an
     earlier one into the same folder), the pooled table over the tasks (paper table 6)."""
-    from sb3_genrl.envs import arm_tasks
-
     finished = {name: out / name / "results.json" for name in arm_tasks() if (out / name / "report.md").is_file()}
     lines = ["# GenRL study", "", *(f"- [{name}]({name}/report.md)" for name in finished)]
     if len(finished) == len(arm_tasks()):
@@ -129,8 +132,6 @@ def _write_index(out: pathlib.Path) -> pathlib.Path:
 
 
 def _demonstration_settings(task: str, scale: dict[str, Any]) -> dict[str, Any]:
-    import sb3_genrl
-
     return {"task": task, "episodes": scale["demo_episodes"], "seed": DEMONSTRATION_SEED, "version": sb3_genrl.__version__}
 
 
@@ -139,8 +140,6 @@ def _stages(
 ) -> list[tuple[pathlib.Path, dict, bool]]:
     """Each stage's record, this run's settings for it and whether it has output. ``dataset`` is the fingerprint
     of the demonstrations (None: not known yet, left out of the settings)."""
-    from sb3_genrl.run.train import genrl_settings
-
     made_from = {} if dataset is None else {"dataset": dataset}
     generators, evaluation, policies, comparison = (
         task_dir / name for name in ("generators", "evaluation", "policies", "comparison")
@@ -191,8 +190,6 @@ def _stages(
 
 def _conflicts(task: str, scale: dict[str, Any], task_dir: pathlib.Path) -> list[str]:
     """What of ``task_dir`` was made with other settings than ``scale`` (checked before any work)."""
-    from sb3_genrl.data import dataset_info
-
     dataset = task_dir / "demonstrations"
     lines = []
     if dataset.is_dir() and any(dataset.iterdir()):
@@ -203,8 +200,6 @@ def _conflicts(task: str, scale: dict[str, Any], task_dir: pathlib.Path) -> list
 
 
 def _run_task(task: str, scale: dict[str, Any], task_dir: pathlib.Path, run, models, device, log) -> pathlib.Path:
-    from sb3_genrl.envs.demonstrations import make_demonstrations
-
     dataset = task_dir / "demonstrations"
     if not dataset.is_dir() or not any(dataset.iterdir()):
         make_demonstrations(task, scale["demo_episodes"], dataset, seed=DEMONSTRATION_SEED, progress_bar=False)
@@ -228,8 +223,6 @@ def _run_task(task: str, scale: dict[str, Any], task_dir: pathlib.Path, run, mod
 
     comparison = None
     if scale["baseline_episodes"] > 0:
-        from sb3_genrl.baselines.compare import compare_runs
-
         best = max(rows, key=lambda r: r["score"])["model"]
         runs_dir = task_dir / "comparison"
         generator = str(task_dir / "generators" / f"{best}.pt")
@@ -270,8 +263,6 @@ def _recorded_scale(
     task_dir: pathlib.Path, dataset: pathlib.Path, rows: list[dict[str, Any]], comparison: pathlib.Path | None
 ) -> dict[str, Any]:
     """The settings the report states, read from what the stages recorded (not from this run's request)."""
-    from sb3_genrl.data import dataset_info
-
     generators, evaluation, policies = (
         read_settings(task_dir / name / STAGE_FILE) for name in ("generators", "evaluation", "policies")
     )
@@ -297,7 +288,6 @@ def _local_map(workers: int):
             for fn, args in jobs:
                 yield fn(*args)
             return
-        import multiprocessing
 
         # The workers exit when this process dies (even on kill -9), so none finishes a stale job after it.
         with ProcessPoolExecutor(
@@ -318,7 +308,6 @@ def _ray_map(address: str | None, connect_timeout: float = DEFAULT_CONNECT_TIMEO
         import ray
     except ImportError as error:
         raise ValueError("the ray executor needs Ray: pip install 'sb3-genrl[ray]'") from error
-    from sb3_genrl.study.cluster import connect_ray
 
     connect_ray(address, connect_timeout, include_dashboard=False, log_to_driver=False)
 

@@ -7,6 +7,7 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 from sb3_genrl.envs import basketball, hockey
+from sb3_genrl.study.quickstart import task_settings
 
 _HOCKEY, _BASKETBALL = hockey.TASK.name, basketball.TASK.name
 
@@ -56,8 +57,6 @@ def task_scale(scale: Mapping[str, Any], task: str) -> dict[str, Any]:
     :param scale: a scale as a dict
     :param task: a task name
     """
-    from sb3_genrl.study.quickstart import task_settings
-
     resolved = dict(scale)
     for key in ("policy_episodes", "seeds"):
         value = scale[key]
