@@ -9,6 +9,16 @@ its :class:`~sb3_genrl.LatentActionWrapper` returns the result already played fo
 Monitor records, ``VecMonitor``, callbacks, ``EvalCallback``, ``get_attr``/``env_method``, seeding and resets are
 SB3's own, and every reward and info is the one the env's own ``step`` gives (each latent action is decoded alone, as
 ``step`` decodes it: a batch decode rounds in the last bit, which would change a run's results).
+
+The route of a result, all through public methods: the VecEnv asks each env's wrapper for the checked latent action
+(``check_action``), its trajectory (``trajectory``) and the goal the fast path plays (``fast_path_goal``), plays the batch
+with the task's ``play_trajectories``, and hands each result to its wrapper with
+:meth:`~sb3_genrl.LatentActionWrapper.prepare_step` before stepping the env. A step cannot carry the result itself:
+Gymnasium's ``step`` takes only the action, and the VecEnv cannot return the result in the env's place, since every
+wrapper above the latent-action wrapper (Monitor, the run's recorders, a user's) must see the step. ``prepare_step`` is
+the wrapper's documented way to be told that an action was played elsewhere: it holds the result for the one action it
+was played for, and a ``step`` with any other action plays that action itself, so a wrapper above that changes actions
+gets what it asked for.
 """
 
 from __future__ import annotations
@@ -79,7 +89,7 @@ def play_together(wrappers: Sequence[LatentActionWrapper], actions: np.ndarray, 
     task, and leave each result with its wrapper, for its next ``step`` with that action
     (:meth:`~sb3_genrl.LatentActionWrapper.prepare_step`)."""
     alphas = [wrapper.check_action(action)[0] for wrapper, action in zip(wrappers, actions, strict=True)]
-    trajectories = np.stack([wrapper._decode(alpha[None])[0] for wrapper, alpha in zip(wrappers, alphas, strict=True)])
+    trajectories = np.stack([wrapper.trajectory(alpha) for wrapper, alpha in zip(wrappers, alphas, strict=True)])
     goals = np.stack([wrapper.fast_path_goal() for wrapper in wrappers])
     rewards, infos = wrappers[0].env.unwrapped.play_trajectories(trajectories, goals, n_threads=n_threads)
     for wrapper, alpha, reward, info in zip(wrappers, alphas, rewards, infos, strict=True):

@@ -210,7 +210,8 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         return clipped, bool(np.any(clipped != alpha))
 
     def trajectory(self, alpha: np.ndarray) -> np.ndarray:
-        """Decode one latent action (clipped to the action box) into its ``(horizon, action_dim)`` trajectory."""
+        """Decode one latent action (clipped to the action box) into its ``(horizon, action_dim)`` trajectory, as ``step``
+        and :class:`~sb3_genrl.vec_env.BatchedLatentVecEnv` play it."""
         alpha, _ = self.check_action(alpha)
         return self._decode(alpha[None])[0]
 
@@ -231,9 +232,9 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         if prepared is not None and np.array_equal(prepared[0], alpha):  # already played (prepare_step)
             info = prepared[1]
         elif self.use_fast_path:
-            info = self._play_fast(self._decode(alpha[None])[0])
+            info = self._play_fast(self.trajectory(alpha))
         else:
-            info = self._play_steps(self._decode(alpha[None])[0])
+            info = self._play_steps(self.trajectory(alpha))
         info["latent_clipped"] = latent_clipped
         if not np.isfinite(info["reward"]):  # refused here: a NaN would silently stall any learner downstream
             raise ValueError(

@@ -10,10 +10,9 @@ uses them in two ways, both switched by its arguments:
 - ``fit_steps``: before the first iteration of a fresh run, the policy's mean is fitted to the pairs by the regression
   of the hindsight component (:func:`~sb3_genrl.genrl.regression.regress_mean`), so that GenRL starts where the
   demonstrations are (as behaviour cloning starts PPO); a resumed run is not fitted again;
-- ``keep``: the pulls are kept by :class:`~sb3_genrl.genrl.hindsight.HindsightRelabelling` for the whole run
-  (:meth:`~sb3_genrl.genrl.hindsight.HindsightRelabelling.keep_pulls`), beside the relabelled pulls of the last
-  ``history`` batches: they join every E-step's batch and every regression of the mean, as demonstrations stay in
-  SAC+HER's replay buffer.
+- ``keep``: the pulls are kept for the whole run (GenRL's :class:`~sb3_genrl.genrl.kept_pulls.KeptPulls`), beside the
+  relabelled pulls of the last ``history`` batches of :class:`~sb3_genrl.genrl.hindsight.HindsightRelabelling`: they
+  join every E-step's batch and every regression of the mean, as demonstrations stay in SAC+HER's replay buffer.
 
 The callback is an SB3 callback, given to ``learn`` or named in a task's entry of ``hyperparams/genrl.yml`` in
 rl-zoo3's ``callback`` form (see :func:`build_callbacks`)::
@@ -139,7 +138,7 @@ class DemonstrationCallback(BaseCallback):
         model = self.model
         contexts, latents = (
             tensor.to(model.device)
-            for tensor in self.check(model.generator, model.observation_space, model.latent_clip, model.hindsight is not None)
+            for tensor in self.check(model.generator, model.observation_space, model.latent_clip, model.kept_pulls is not None)
         )
         if self.fit_steps and model.num_timesteps == 0 and model._n_updates == 0:  # a fresh run, never a resumed one
             self.fit = fit_mean_to_demonstrations(
@@ -159,8 +158,8 @@ class DemonstrationCallback(BaseCallback):
                     f"policy mean fitted to {self.fit['demonstrations']} demonstrations: loss "
                     f"{self.fit['first_loss']:.4g} -> {self.fit['last_loss']:.4g}"
                 )
-        if self.keep and model.hindsight.kept_pulls is None:  # (a resumed run's checkpoint holds them already)
-            model.hindsight.keep_pulls(contexts, latents, th.zeros(len(latents), device=model.device))
+        if self.keep and model.kept_pulls.pulls is None:  # (a resumed run's checkpoint holds them already)
+            model.kept_pulls.keep(contexts, latents, th.zeros(len(latents), device=model.device))
 
     def _on_step(self) -> bool:
         return True

@@ -11,6 +11,7 @@ from typing import Any, ClassVar, Literal, TypeVar
 import numpy as np
 import torch as th
 from gymnasium import spaces
+from stable_baselines3.common.callbacks import BaseCallback, ConvertCallback
 from stable_baselines3.common.distributions import Distribution, kl_divergence
 from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
 from stable_baselines3.common.policies import ActorCriticPolicy, BasePolicy
@@ -24,7 +25,10 @@ from sb3_genrl.genrl import generator_files
 from sb3_genrl.genrl.averaging import averaged_copy, update_average
 from sb3_genrl.genrl.buffers import FiniteRewardDictRolloutBuffer, FiniteRewardRolloutBuffer
 from sb3_genrl.genrl.e_step import kl_penalty_e_step, trpo_e_step, variational_copy
+from sb3_genrl.genrl.hindsight import DEFAULTS as HINDSIGHT_DEFAULTS
 from sb3_genrl.genrl.hindsight import HindsightRelabelling
+from sb3_genrl.genrl.hindsight_buffer import HindsightRolloutBuffer, PullInfosCallback
+from sb3_genrl.genrl.kept_pulls import KeptPulls
 from sb3_genrl.genrl.latent_critic import LatentCritic, check_latent_critic_kwargs
 from sb3_genrl.genrl.policies import (
     BoxScaler,
@@ -34,6 +38,7 @@ from sb3_genrl.genrl.policies import (
     limit_log_std_change,
     log_std_parameters,
 )
+from sb3_genrl.genrl.refits import Refits
 from sb3_genrl.genrl.settings import POLICY_ALIASES, SETTINGS, check_genrl_settings
 from sb3_genrl.genrl.value import fit_value_function
 from sb3_genrl.utils import atomic_path
@@ -86,9 +91,11 @@ class GenRL(OnPolicyAlgorithm):
     :param policy_averaging: decay of a moving average of the policy's weights, with which ``predict`` acts
         (default None: none; see :mod:`sb3_genrl.genrl.averaging`)
     :param hindsight_kwargs: relabel each pull with the context it solved (default None: no relabelling, as in the
-        paper): the arguments of :class:`~sb3_genrl.genrl.hindsight.HindsightRelabelling` (``{}``: its defaults),
-        among them ``history``, ``regression_steps`` and ``refit_every``. Needs ``e_step="trpo"``, a Box context and
-        ``info["hindsight"]`` (the refits also ``info["is_success"]``)
+        paper): the rollout buffer becomes :class:`~sb3_genrl.genrl.hindsight_buffer.HindsightRolloutBuffer` (SB3's
+        ``rollout_buffer_class`` slot), and the settings (``{}``: the defaults) are those of
+        :class:`~sb3_genrl.genrl.hindsight.HindsightRelabelling` (``history`` and the ``regression_*``) and of
+        :class:`~sb3_genrl.genrl.refits.Refits` (``refit_every``, ``refit_start``, ``refit_steps``). Needs
+        ``e_step="trpo"``, a Box context and ``info["hindsight"]`` (the refits also ``info["is_success"]``)
     :param latent_critic_kwargs: take the E-step's baseline from a critic over latent actions fitted to the pulls of
         the last batches, ``A = r - E_{alpha ~ pi}[Q(s0, alpha)]``, instead of ``A = r - V(s0)`` (default None: the
         paper's ``V``): the arguments of :class:`~sb3_genrl.genrl.latent_critic.LatentCritic` (``{}``: its defaults)
@@ -186,9 +193,15 @@ class GenRL(OnPolicyAlgorithm):
             self._setup_model()
 
     def _setup_model(self) -> None:
-        # SB3's rollout buffer, refusing a non-finite reward where it enters GenRL (after every wrapper of the env)
+        # SB3's rollout buffer, refusing a non-finite reward where it enters GenRL (after every wrapper of the env); with
+        # hindsight, one that also stores each pull's relabelling (and success, for the refits), as HER is a buffer class
+        hindsight = None if self.hindsight_kwargs is None else HINDSIGHT_DEFAULTS | self.hindsight_kwargs
         dict_context = isinstance(self.observation_space, spaces.Dict)
         self.rollout_buffer_class = FiniteRewardDictRolloutBuffer if dict_context else FiniteRewardRolloutBuffer
+        self.rollout_buffer_kwargs = {}
+        if hindsight is not None:
+            self.rollout_buffer_class = HindsightRolloutBuffer
+            self.rollout_buffer_kwargs = {"success": bool(hindsight["refit_every"])}
         super()._setup_model()
         extractor = self.policy.pi_features_extractor
         if (
@@ -204,7 +217,7 @@ class GenRL(OnPolicyAlgorithm):
         # (observations, returns) of the last value_history batches, for the value-function fit
         self._value_memory: collections.deque[tuple[Any, th.Tensor]] = collections.deque(maxlen=self.value_history)
         self.policy_average = None if self.policy_averaging is None else averaged_copy(self.policy)
-        self.hindsight = None if self.hindsight_kwargs is None else HindsightRelabelling(self.policy, **self.hindsight_kwargs)
+        self.hindsight, self.kept_pulls, self.refits = self._hindsight_components(hindsight)
         critic_kwargs = getattr(self, "latent_critic_kwargs", None)  # (absent from a model saved before it existed)
         self.latent_critic = (
             None if critic_kwargs is None else LatentCritic(self.policy, **check_latent_critic_kwargs(critic_kwargs))
@@ -227,9 +240,9 @@ class GenRL(OnPolicyAlgorithm):
             advantages, stats = self.latent_critic.advantages(self.policy, observations, actions, data.returns)
         advantage_mean, advantage_std = (advantages.mean(), advantages.std() + 1e-8) if self.normalize_advantage else (0, 1)
         batch = (observations, actions, log_prob_pi, (advantages - advantage_mean) / advantage_std)
-        if self.hindsight is not None:  # the relabelled pulls join the E-step's batch
+        if self.hindsight is not None:  # the relabelled pulls (and those kept for the run) join the E-step's batch
             batch, stats["hindsight_pulls"] = self.hindsight.extend_batch(
-                batch, self.rollout_buffer, advantage_mean, advantage_std
+                batch, self.rollout_buffer.relabelled_pulls(), advantage_mean, advantage_std
             )
 
         log_std_before = log_std_parameters(self.policy)
@@ -249,10 +262,10 @@ class GenRL(OnPolicyAlgorithm):
             limit_log_std_change(self.policy, log_std_before, self.max_log_std_change)
 
         self.policy.set_training_mode(True)
-        if self.hindsight is not None:  # the mean refitted to the run's solving pulls, then fitted to the kept pulls
-            stats.update(self.hindsight.refit(self.rollout_buffer, self.num_timesteps))
-            if losses := self.hindsight.regress():
-                stats["hindsight_regression_loss"] = float(np.mean(losses))
+        if self.refits is not None:  # the mean refitted to the run's solving pulls
+            stats.update(self.refits.refit(self.rollout_buffer, self.num_timesteps))
+        if self.hindsight is not None and (losses := self.hindsight.regress()):  # and fitted to the kept pulls
+            stats["hindsight_regression_loss"] = float(np.mean(losses))
         # Value function (Algorithm 1, last line): V = argmin_V' sum_i (V'(s_i) - r_i)^2, by Adam on minibatches.
         value_losses = self._fit_value_function()
         self.policy.set_training_mode(False)
@@ -309,15 +322,27 @@ class GenRL(OnPolicyAlgorithm):
         self._value_memory.append((data.observations, data.returns))
         return fit_value_function(self.policy, self._value_memory, epochs=self.n_critic_updates, batch_size=self.batch_size)
 
-    def collect_rollouts(self, env: Any, callback: Any, rollout_buffer: Any, n_rollout_steps: int) -> bool:
-        if self.hindsight is not None:
-            self.hindsight.reset()
-        return super().collect_rollouts(env, callback, rollout_buffer, n_rollout_steps)
-
-    def _update_info_buffer(self, infos: list[dict[str, Any]], dones: np.ndarray | None = None) -> None:
-        super()._update_info_buffer(infos, dones)
-        if self.hindsight is not None:  # refused at the first pull, not after a rollout
-            self.hindsight.add_infos(infos)
+    def _hindsight_components(
+        self, hindsight: dict[str, Any] | None
+    ) -> tuple[HindsightRelabelling | None, KeptPulls | None, Refits | None]:
+        """The components ``hindsight_kwargs`` (with its defaults filled in) switches on: the relabelling, the pulls
+        kept for the whole run, and the refits (with ``refit_every``); all None without hindsight."""
+        if hindsight is None:
+            return None, None, None
+        kept_pulls = KeptPulls(self.observation_space, self.action_space, self.device)  # type: ignore[arg-type]
+        regression = {key: value for key, value in hindsight.items() if not key.startswith("refit_")}
+        relabelling = HindsightRelabelling(self.policy, kept_pulls=kept_pulls, **regression)
+        refits = None
+        if hindsight["refit_every"]:
+            refits = Refits(
+                self.policy,
+                every=hindsight["refit_every"],
+                start=hindsight["refit_start"],
+                steps=hindsight["refit_steps"],
+                learning_rate=hindsight["regression_lr"],
+                batch_size=hindsight["regression_batch_size"],
+            )
+        return relabelling, kept_pulls, refits
 
     def predict(
         self,
@@ -347,7 +372,12 @@ class GenRL(OnPolicyAlgorithm):
         reset_num_timesteps: bool = True,
         progress_bar: bool = False,
     ) -> SelfGenRL:
-        """Train for ``total_timesteps`` episodes (one step = one episode = one trajectory played)."""
+        """Train for ``total_timesteps`` episodes (one step = one episode = one trajectory played). With hindsight, a
+        :class:`~sb3_genrl.genrl.hindsight_buffer.PullInfosCallback` comes first among the callbacks: it hands each
+        step's infos to the rollout buffer."""
+        if isinstance(self.rollout_buffer, HindsightRolloutBuffer):
+            given = callback if isinstance(callback, list) else [] if callback is None else [callback]
+            callback = [PullInfosCallback(), *(c if isinstance(c, BaseCallback) else ConvertCallback(c) for c in given)]
         return super().learn(total_timesteps, callback, log_interval, tb_log_name, reset_num_timesteps, progress_bar)
 
     def set_env(self, env: GymEnv, force_reset: bool = True) -> None:
@@ -376,6 +406,8 @@ class GenRL(OnPolicyAlgorithm):
             "_value_memory",
             "policy_average",
             "hindsight",
+            "kept_pulls",
+            "refits",
             "_q",
             "latent_critic",
         ]

@@ -7,11 +7,10 @@ played), :class:`GenRLCheckpoint` writes into ``OUT/checkpoint/``, as one unit (
 - ``model.zip``: SB3's save of the model: the weights, the value function's and the regression's Adam, the policy
   average, and SB3's counters (``num_timesteps``, ``_n_updates``, ``_last_obs``, ``_last_episode_starts``, the
   ``ep_info_buffer``);
-- ``memories.pt`` (read back with ``torch.load(weights_only=True)``): the value function's batches and the hindsight
-  relabelling's kept pulls (the demonstrations kept for the whole run among them, and the solving pulls and initial
-  weights its refits use), the random states (torch, NumPy,
-  Python, and every env's: its own, its goal sampler's and its spaces', as they were before the env drew its current
-  context), and the logger's values not yet written;
+- ``memories.pt`` (read back with ``torch.load(weights_only=True)``): the value function's batches, the hindsight
+  relabelling's pulls of the last batches, the pulls kept for the whole run (the demonstrations), the solving pulls and
+  initial weights of the refits, the random states (torch, NumPy, Python, and every env's: its own, its goal sampler's
+  and its spaces', as they were before the env drew its current context), and the logger's values not yet written;
 - ``state.json``: the run's identity, the episodes done (the Monitor file's rows) and its clocks.
 
 :func:`resume_genrl` rebuilds the model from it on a new env, which draws the same context again from the restored
@@ -94,9 +93,9 @@ class GenRLCheckpoint(BaseCallback):
         memories = {
             "value_memory": list(model._value_memory),
             "hindsight_memory": [] if model.hindsight is None else list(model.hindsight.memory),
-            "hindsight_kept_pulls": None if model.hindsight is None else model.hindsight.kept_pulls,
-            "hindsight_solved": [] if model.hindsight is None else list(model.hindsight.solved),
-            "hindsight_initial_mean": None if model.hindsight is None else model.hindsight.initial_mean,
+            "hindsight_kept_pulls": None if model.kept_pulls is None else model.kept_pulls.pulls,
+            "hindsight_solved": [] if model.refits is None else list(model.refits.solved),
+            "hindsight_initial_mean": None if model.refits is None else model.refits.initial_mean,
             "random_states": _global_random_states(model),
             "env_random_states": env.env_method("random_states_before_reset"),
             "logger": _pending_logs(model.logger),
@@ -133,10 +132,11 @@ def resume_genrl(state: dict[str, Any], env: Any, generator: TrajectoryGenerator
     if model.hindsight is not None:
         model.hindsight.memory.extend(_to_device(memories["hindsight_memory"], model.device))
         if memories.get("hindsight_kept_pulls") is not None:  # the demonstrations kept for the whole run
-            model.hindsight.keep_pulls(*memories["hindsight_kept_pulls"])
-        model.hindsight.solved.extend(_to_device(memories.get("hindsight_solved", []), model.device))
-        if memories.get("hindsight_initial_mean") is not None and model.hindsight.initial_mean is not None:
-            model.hindsight.initial_mean = _to_device(memories["hindsight_initial_mean"], model.device)
+            model.kept_pulls.keep(*memories["hindsight_kept_pulls"])
+    if model.refits is not None:  # the solving pulls and the initial weights of the refits
+        model.refits.solved.extend(_to_device(memories.get("hindsight_solved", []), model.device))
+        if memories.get("hindsight_initial_mean") is not None:
+            model.refits.initial_mean = _to_device(memories["hindsight_initial_mean"], model.device)
     venv = model.get_env()
     for index, states in enumerate(memories["env_random_states"]):
         venv.env_method("set_random_states", states, indices=[index])

@@ -130,3 +130,23 @@ def test_a_batched_env_refuses_envs_without_the_fast_path_and_bad_thread_counts(
         with pytest.raises(ValueError, match="n_threads must be a positive integer"):
             BatchedLatentVecEnv(_toy_envs(1), n_threads=bad)
     assert BatchedLatentVecEnv(_toy_envs(1)).n_threads == default_threads() >= 1
+
+
+class _ShiftedTrajectories(LatentActionWrapper):
+    """A wrapper whose latent actions become the generator's trajectories shifted by 0.1."""
+
+    def trajectory(self, alpha):
+        return super().trajectory(alpha) + 0.1
+
+
+def test_the_batched_env_takes_each_trajectory_from_the_wrappers_public_trajectory():
+    """The batched step asks each wrapper for its trajectory through the public ``trajectory`` (it used a private
+    decode), so a wrapper that says how its latent actions become trajectories is played as its own step plays it."""
+    actions = np.random.default_rng(0).normal(size=(2, 2)).astype(np.float32)
+    for venv_class in (DummyVecEnv, BatchedLatentVecEnv):
+        venv = venv_class([lambda: _ShiftedTrajectories(CountingReachEnv(), LinearGenerator()) for _ in range(2)])
+        venv.seed(1)
+        goals = venv.reset()
+        rewards = venv.step(actions)[1]
+        reached = np.clip(LinearGenerator().decode(np.clip(actions, -3, 3)) + 0.1, -1, 1).sum(axis=1)  # the toy's play
+        np.testing.assert_allclose(rewards, -np.sum((reached - goals) ** 2, axis=1), rtol=1e-6)

@@ -1,8 +1,10 @@
-"""Hindsight relabelling (sb3_genrl/genrl/hindsight.py): the relabelled batch, the history, the regression of the
-mean, on their own and inside GenRL."""
+"""Hindsight relabelling (sb3_genrl/genrl/hindsight.py, hindsight_buffer.py, refits.py): the relabelled batch, the
+history, the regression of the mean, the rollout buffer that stores each pull's relabelling, the refits, on their own and
+inside GenRL."""
 
 from __future__ import annotations
 
+import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
@@ -12,10 +14,13 @@ from conftest import (
     optimal_latent,
 )
 from genrl_test_helpers import GOALS, EStepBatchRecorder, HindsightReachEnv, SuccessReachEnv
+from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from sb3_genrl import GenRL, LatentActionWrapper
 from sb3_genrl.genrl.hindsight import HindsightRelabelling
+from sb3_genrl.genrl.hindsight_buffer import HindsightRolloutBuffer
+from sb3_genrl.genrl.refits import Refits
 from sb3_genrl.genrl.regression import mean_parameters, regress_mean
 
 
@@ -166,6 +171,21 @@ def _relabel_infos(contexts, rewards):
     ]
 
 
+def _buffer(trained, **kwargs):
+    """An empty hindsight rollout buffer of 8 pulls for the trained model's spaces."""
+    return HindsightRolloutBuffer(8, trained.observation_space, trained.action_space, device="cpu", **kwargs)
+
+
+def _filled(trained, step_infos, **kwargs):
+    """A hindsight rollout buffer holding the trained model's 8 pulls as played (one env), each step with its infos."""
+    played, buffer = trained.rollout_buffer, _buffer(trained, **kwargs)
+    for step, infos in enumerate(step_infos):
+        buffer.add_infos(infos)
+        observation, action = played.observations[step][None], played.actions[step][None]
+        buffer.add(observation, action, np.zeros(1), np.ones(1), th.zeros(1, 1), th.zeros(1))
+    return buffer
+
+
 # contexts of 8 pulls: inside the box, None (nothing reached), outside the box, not finite
 CONTEXTS = [[0.1, 0.2], None, [0.9, 0.0], [-0.3, 0.5], [np.nan, 0.0], [0.8, -0.8], [0.0, 0.0], None]
 REWARDS = [0.0, 0.0, -1.0, -0.5, 0.0, -0.1, -2.0, 0.0]
@@ -174,10 +194,9 @@ INSIDE = [0, 3, 5, 6]
 
 def test_extend_batch_against_an_independent_recomputation(trained):
     hindsight = HindsightRelabelling(trained.policy)
-    for infos in _relabel_infos(CONTEXTS, REWARDS):
-        hindsight.add_infos(infos)
+    buffer = _filled(trained, _relabel_infos(CONTEXTS, REWARDS))
     played = (th.randn(8, 2), th.randn(8, 2), th.randn(8), th.randn(8))
-    joined, fraction = hindsight.extend_batch(played, trained.rollout_buffer, 0.5, 2.0)
+    joined, fraction = hindsight.extend_batch(played, buffer.relabelled_pulls(), 0.5, 2.0)
     assert fraction == len(INSIDE) / 8 and all(len(part) == 8 + len(INSIDE) for part in joined)
     for part, original in zip(joined, played, strict=True):
         th.testing.assert_close(part[:8], original, rtol=0, atol=0)  # the pulls as played come first, unchanged
@@ -201,10 +220,8 @@ def test_history_keeps_the_relabelled_pulls_of_the_last_batches_only(trained):
     kept = []
     for batch in range(3):
         contexts = [[0.1 * batch, 0.0]] * (batch + 1) + [None] * (7 - batch)  # batch + 1 pulls relabelled
-        hindsight.reset()
-        for infos in _relabel_infos(contexts, [0.0] * 8):
-            hindsight.add_infos(infos)
-        joined, fraction = hindsight.extend_batch(played, trained.rollout_buffer, 0.0, 1.0)
+        buffer = _filled(trained, _relabel_infos(contexts, [0.0] * 8))
+        joined, fraction = hindsight.extend_batch(played, buffer.relabelled_pulls(), 0.0, 1.0)
         kept.append(batch + 1)
         assert len(hindsight.memory) == min(batch + 1, 2) and hindsight.memory.maxlen == 2
         assert len(joined[0]) == 8 + sum(kept[-2:]) and fraction == sum(kept[-2:]) / 8
@@ -231,16 +248,16 @@ def test_regression_moves_the_mean_towards_the_kept_pulls(trained):
 
 
 def test_infos_are_checked_and_reset(trained):
-    hindsight = HindsightRelabelling(trained.policy)
+    buffer = _buffer(trained)
     with pytest.raises(ValueError, match=r"info\['hindsight'\]"):
-        hindsight.add_infos([{"reached": np.zeros(2)}])
-    for infos in _relabel_infos(CONTEXTS[:3], REWARDS[:3]):
-        hindsight.add_infos(infos)
-    played = (th.zeros(8, 2), th.zeros(8, 2), th.zeros(8), th.zeros(8))
-    with pytest.raises(RuntimeError, match="3 steps of infos for a rollout of 8"):
-        hindsight.extend_batch(played, trained.rollout_buffer, 0.0, 1.0)
-    hindsight.reset()
-    assert hindsight.pull_infos == []
+        buffer.add_infos([{"reached": np.zeros(2)}])
+    with pytest.raises(ValueError, match="add_infos: 2 infos for a step of 1 envs"):
+        buffer.add_infos(_relabel_infos(CONTEXTS[:2], REWARDS[:2])[0] * 2)
+    with pytest.raises(RuntimeError, match="HindsightRolloutBuffer.add: no infos for this step"):
+        buffer.add(np.zeros((1, 2)), np.zeros((1, 2)), np.zeros(1), np.ones(1), th.zeros(1, 1), th.zeros(1))
+    buffer.add_infos(_relabel_infos(CONTEXTS[:1], REWARDS[:1])[0])
+    buffer.reset()  # a rollout starts: the infos held before are forgotten
+    assert buffer.infos is None and buffer.pos == 0
 
 
 SOLVED = [True, False, True, True, False, False, True, False]
@@ -254,20 +271,16 @@ def _success_infos(solved):
 def test_refit_fits_the_mean_from_its_initial_weights_to_the_solving_pulls_alone(trained):
     import copy
 
-    policy, buffer = trained.policy, trained.rollout_buffer
-    hindsight = HindsightRelabelling(
-        policy, refit_every=16, refit_start=8, refit_steps=50, regression_lr=1e-2, regression_batch_size=4
-    )
+    policy, played = trained.policy, trained.rollout_buffer
+    mean_refits = Refits(policy, every=16, start=8, steps=50, learning_rate=1e-2, batch_size=4)
     initial = [parameter.detach().clone() for parameter in mean_parameters(policy)]
     rows = [i for i, flag in enumerate(SOLVED) if flag]
-    contexts = th.as_tensor(buffer.observations[rows]).float()
-    actions = th.as_tensor(np.clip(buffer.actions[rows], -3, 3)).float()
+    contexts = th.as_tensor(played.observations[rows]).float()
+    actions = th.as_tensor(np.clip(played.actions[rows], -3, 3)).float()
     for episodes, refits in ((8, True), (16, False), (24, True), (32, False)):  # at 8, then every 16; 8 per batch
         for parameter in mean_parameters(policy):  # the mean moves on between refits
             parameter.data.add_(0.5)
-        hindsight.reset()
-        for infos in _success_infos(SOLVED):
-            hindsight.add_infos(infos)
+        buffer = _filled(trained, _success_infos(SOLVED), success=True)
         before = [parameter.detach().clone() for parameter in mean_parameters(policy)]
         if refits:  # recomputed here: the initial weights fitted by a new Adam to the solving pulls so far, as played
             expected = copy.deepcopy(policy)
@@ -284,8 +297,8 @@ def test_refit_fits_the_mean_from_its_initial_weights_to_the_solving_pulls_alone
                 batch_size=4,
             )
             th.manual_seed(episodes)
-        stats = hindsight.refit(buffer, episodes)
-        assert len(hindsight.solved) == episodes // 8
+        stats = mean_refits.refit(buffer, episodes)
+        assert len(mean_refits.solved) == episodes // 8
         if not refits:
             assert stats == {}
             for parameter, value in zip(mean_parameters(policy), before, strict=True):
@@ -297,8 +310,9 @@ def test_refit_fits_the_mean_from_its_initial_weights_to_the_solving_pulls_alone
             th.testing.assert_close(parameter, value, rtol=0, atol=0)
         th.testing.assert_close(policy.log_std, expected.log_std, rtol=0, atol=0)  # the spread is left as it was
     with pytest.raises(ValueError, match=r"info\['is_success'\]"):
-        hindsight.add_infos([{"hindsight": None}])
-    assert HindsightRelabelling(policy).refit(buffer, 16) == {} and HindsightRelabelling(policy).initial_mean is None
+        _buffer(trained, success=True).add_infos([{"hindsight": None}])
+    no_refits = GenRL(LatentActionWrapper(HindsightReachEnv(), LinearGenerator()), hindsight_kwargs={})
+    assert no_refits.refits is None and no_refits.rollout_buffer_kwargs == {"success": False}
 
 
 def test_refit_inside_genrl_logs_its_pairs_and_brings_the_mean_to_the_solving_pulls():
@@ -311,8 +325,8 @@ def test_refit_inside_genrl_logs_its_pairs_and_brings_the_mean_to_the_solving_pu
     )
     model.learn(64)
     pairs = model.logger.name_to_value["train/refit_pairs"]
-    contexts, actions = (th.cat(part) for part in zip(*model.hindsight.solved, strict=True))
-    assert pairs == len(actions) > 0 and len(model.hindsight.solved) == 2
+    contexts, actions = (th.cat(part) for part in zip(*model.refits.solved, strict=True))
+    assert pairs == len(actions) > 0 and len(model.refits.solved) == 2
     with th.no_grad():
         error = (model.policy.get_distribution(contexts).distribution.mean - actions).pow(2).mean().item()
     assert error < 0.5 * actions.var(0).mean().item()  # closer to the pairs than their own spread
@@ -332,12 +346,12 @@ def test_a_non_finite_relabelled_reward_is_refused_where_it_enters_genrl(trained
     with pytest.raises(ValueError, match=r"info\['hindsight'\] holds the relabelled reward nan, not one finite number"):
         model.learn(32)
     assert model.num_timesteps == 1
-    hindsight = HindsightRelabelling(trained.policy)
+    buffer = _buffer(trained)
     for bad in ((np.zeros(2), np.array([0.0, 1.0])), (np.zeros(2), "0"), (np.zeros(2), float("inf"))):
         with pytest.raises(ValueError, match=r"info\['hindsight'\] holds the relabelled reward"):
-            hindsight.add_infos([{"hindsight": bad}])
+            buffer.add_infos([{"hindsight": bad}])
     with pytest.raises(ValueError, match=r"info\['hindsight'\] must be \(context, reward\) or None"):
-        hindsight.add_infos([{"hindsight": np.zeros(2)}])
+        buffer.add_infos([{"hindsight": np.zeros(2)}])
 
 
 def test_a_goal_env_whose_compute_reward_gives_nan_for_a_relabelled_goal_is_refused_naming_compute_reward():
@@ -356,3 +370,66 @@ def test_a_goal_env_whose_compute_reward_gives_nan_for_a_relabelled_goal_is_refu
     ):
         model.learn(16)
     assert model.num_timesteps == 0
+
+
+def test_hindsight_is_a_rollout_buffer_class_in_sb3s_slot_with_no_private_method_of_sb3_overridden():
+    """As SB3's HER is a buffer class given by one argument: hindsight_kwargs puts HindsightRolloutBuffer in SB3's
+    rollout_buffer_class slot (storing the pulls' success for the refits), and GenRL overrides neither SB3's private
+    _update_info_buffer nor collect_rollouts to get the infos there (it did both)."""
+    env = LatentActionWrapper(SuccessReachEnv(), LinearGenerator())
+    model = GenRL(env, seed=0, n_steps=8, hindsight_kwargs={"refit_every": 16})
+    assert model.rollout_buffer_class is HindsightRolloutBuffer and type(model.rollout_buffer) is HindsightRolloutBuffer
+    assert model.rollout_buffer_kwargs == {"success": True} and model.rollout_buffer.success
+    assert "_update_info_buffer" not in GenRL.__dict__ and "collect_rollouts" not in GenRL.__dict__
+    model.learn(16)
+    assert len(model.refits.solved) == 2 and model.logger.name_to_value["train/hindsight_pulls"] > 0
+    assert type(GenRL(env, seed=0).rollout_buffer) is not HindsightRolloutBuffer  # no hindsight: SB3's, checking rewards
+
+
+def test_the_buffer_stores_each_pulls_relabelling_in_its_own_row_with_several_envs():
+    """Three envs, four steps: each relabelled pull keeps the latent action it was played with, and the relabelled and
+    solving pulls come step by step (the envs of a step in order), recomputed here from what was added."""
+    space = gym.spaces.Box(-0.8, 0.8, (2,), np.float32)
+    buffer = HindsightRolloutBuffer(4, space, gym.spaces.Box(-3, 3, (2,), np.float32), device="cpu", n_envs=3, success=True)
+    rng = np.random.default_rng(0)
+    expected, solving = [], []
+    for step in range(4):
+        contexts = rng.uniform(-1, 1, (3, 2)).astype(np.float32)  # some outside the box: left out
+        actions = rng.normal(0, 2, (3, 2)).astype(np.float32)
+        infos = []
+        for env_index in range(3):
+            relabel = (step + env_index) % 3 != 0
+            infos.append({"hindsight": (contexts[env_index], -float(step)) if relabel else None, "is_success": env_index == 1})
+            if relabel and np.all(np.abs(contexts[env_index]) <= 0.8):
+                expected.append((contexts[env_index], actions[env_index], -float(step)))
+        solving.append(np.clip(actions[1], -3, 3))
+        buffer.add_infos(infos)
+        buffer.add(rng.normal(size=(3, 2)), actions, np.zeros(3), np.ones(3), th.zeros(3, 1), th.zeros(3))
+    contexts, actions, rewards = buffer.relabelled_pulls()
+    assert 0 < len(expected) < 8
+    np.testing.assert_array_equal(contexts.numpy(), np.array([pull[0] for pull in expected]))
+    np.testing.assert_array_equal(actions.numpy(), np.array([pull[1] for pull in expected]))
+    np.testing.assert_array_equal(rewards.numpy(), np.array([pull[2] for pull in expected], np.float32))
+    np.testing.assert_array_equal(buffer.solving_pulls()[1].numpy(), np.array(solving))
+    next(buffer.get(batch_size=None))  # SB3 flattens its own arrays; the relabelling is read as it was stored
+    np.testing.assert_array_equal(buffer.relabelled_pulls()[1].numpy(), np.array([pull[1] for pull in expected]))
+    with pytest.raises(ValueError, match="hindsight_kwargs relabels Box contexts"):
+        HindsightRolloutBuffer(4, gym.spaces.Dict({"goal": space}), space)
+
+
+class _Counter(BaseCallback):
+    def _on_step(self) -> bool:
+        self.steps = getattr(self, "steps", 0) + 1
+        return True
+
+
+def test_learn_hands_the_infos_to_the_buffer_beside_the_users_callbacks_of_every_form():
+    env = LatentActionWrapper(HindsightReachEnv(), LinearGenerator())
+    calls = []
+    for callback in (None, _Counter(), [_Counter(), _Counter()], lambda local, global_: calls.append(1) or True):
+        model = GenRL(env, seed=0, n_steps=8, hindsight_kwargs={})
+        model.learn(16, callback=callback)
+        assert model.logger.name_to_value["train/hindsight_pulls"] > 0
+        for counter in callback if isinstance(callback, list) else [callback]:
+            assert not isinstance(counter, _Counter) or counter.steps == 16
+    assert len(calls) == 16
