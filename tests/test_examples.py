@@ -59,3 +59,15 @@ def test_custom_env_example_improves_its_policy(tmp_path):
     before = float(re.search(r"before training: mean reward (-?[0-9.]+)", stdout).group(1))
     after = float(re.search(r"after \d+ episodes: mean reward (-?[0-9.]+)", stdout).group(1))
     assert after > before, stdout
+
+
+def test_your_task_example_goes_from_an_expert_to_a_saved_policy(tmp_path):
+    from sb3_genrl.data import dataset_info
+
+    stdout = run_example("your_task.py", "--out", "out", "--demos", "40", "--epochs", "2", "--episodes", "128", cwd=tmp_path)
+    info = dataset_info(tmp_path / "out" / "demonstrations")
+    assert info["episodes"] == 40 and info["failed_open_loop"] == 0  # the example's env is deterministic
+    assert f"demonstrations: 40 kept of {info['tried']} tried ({info['failed_closed_loop']} failed closed loop" in stdout
+    assert "generator: T=20, M=2, N_alpha=2" in stdout
+    assert re.search(r"success after 128 episodes: [0-9.]+ of 100 held-out resets", stdout), stdout
+    assert (tmp_path / "out" / "vae.pt").is_file() and (tmp_path / "out" / "genrl_policy.zip").is_file()

@@ -9,6 +9,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium import spaces
+from sb3_genrl.envs import metaworld
 from sb3_genrl.envs.external import (
     check_reproducible_reset,
     load_expert,
@@ -252,3 +253,20 @@ def test_genrl_demos_refuses_bad_tasks_and_experts_before_any_work(cli, tmp_path
         code, _, err = cli("demos", *arguments, "--episodes", 2, "--out", out, "--no-progress-bar")
         assert code == 2 and message in err, (arguments, err)
         assert not out.exists()
+
+
+@pytest.mark.skipif(not metaworld.installed(), reason=metaworld.INSTALL_HINT)
+def test_a_metaworld_task_by_name_records_its_experts_demonstrations(tmp_path):
+    task = resolve_task("metaworld/reach-v3")
+    assert task.env_id == "GenRL/metaworld-reach-v3" and task.make_expert is not None
+    path = record_demonstrations("metaworld/reach-v3", None, 2, tmp_path / "reach", horizon=60, noise=0.1)
+    info = dataset_info(path)
+    assert info["env_id"] == "GenRL/metaworld-reach-v3" and info["expert"].endswith("MetaWorldExpert")
+    assert load_actions(path).shape == (2, 60, 4)
+    # the kept actions replayed open loop from their reset seeds succeed at the last step
+    env = make_task_env("metaworld/reach-v3", horizon=60)
+    for reset_seed, actions in zip(info["reset_seeds"], load_actions(path), strict=True):
+        env.reset(seed=reset_seed)
+        for action in actions:
+            _, _, _, _, step_info = env.step(action)
+        assert step_info["is_success"]
