@@ -10,6 +10,8 @@ algorithms); the settings are ``hyperparams/genrl.yml`` (the default ``--conf-fi
 ``env_wrapper`` :func:`latent_action` builds the latent-action wrapper with the task's generator.
 """
 
+from sb3_genrl import GenRL
+from sb3_genrl.zoo.sampler import convert_genrl_params, sample_genrl_params
 from sb3_genrl.zoo.wrapper import latent_action
 
 __all__ = ["latent_action", "register"]
@@ -20,9 +22,6 @@ def register() -> None:
     (idempotent)."""
     from rl_zoo3.hyperparams_opt import HYPERPARAMS_CONVERTER, HYPERPARAMS_SAMPLER
     from rl_zoo3.utils import ALGOS
-
-    from sb3_genrl import GenRL
-    from sb3_genrl.zoo.sampler import convert_genrl_params, sample_genrl_params
 
     ALGOS["genrl"] = GenRL
     HYPERPARAMS_SAMPLER["genrl"] = sample_genrl_params

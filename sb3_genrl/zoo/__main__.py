@@ -21,6 +21,12 @@ import gymnasium as gym
 
 from sb3_genrl.checks import check_device, option
 from sb3_genrl.cli import KNOWN_ERRORS
+from sb3_genrl.envs import get_task
+from sb3_genrl.envs.fetch import FETCH_IDS
+from sb3_genrl.envs.fetch_mujoco import ROBOTICS_HINT
+from sb3_genrl.hyperparams import hyperparams_file
+from sb3_genrl.zoo import register
+from sb3_genrl.zoo.generators import build_default_generator, check_cache, default_generator
 
 SCRIPTS = ("train", "enjoy", "record_video", "build-generator")
 USAGE = f"usage: python -m sb3_genrl.zoo {{{','.join(SCRIPTS)}}} [arguments...]"
@@ -55,8 +61,6 @@ def main(argv: list[str] | None = None) -> int:
 def run_script(script: str, arguments: list[str]) -> int:
     """Run rl-zoo3's ``script`` with ``arguments``, GenRL registered; ``train`` with GenRL's experiment manager and
     its parsed arguments completed and checked by :func:`checked_train_arguments`."""
-    from sb3_genrl.zoo import register
-
     register()
     saved_argv, sys.argv = sys.argv, [f"rl_zoo3.{script}", *arguments]
     try:
@@ -99,8 +103,6 @@ def checked_train_arguments(args: argparse.Namespace) -> argparse.Namespace:
     :return: ``args``
     :raises ValueError: for a Fetch env id without Gymnasium-Robotics
     """
-    from sb3_genrl.hyperparams import hyperparams_file
-
     check_env_id(args.env)
     if args.algo == "genrl" and args.conf_file is None:
         args.conf_file = str(hyperparams_file("genrl"))
@@ -114,9 +116,6 @@ def check_env_id(env_id: str) -> None:
     :param env_id: a Gymnasium id
     :raises ValueError: naming the extra
     """
-    from sb3_genrl.envs.fetch import FETCH_IDS  # the tasks (envs), kept apart from the core as elsewhere
-    from sb3_genrl.envs.fetch_mujoco import ROBOTICS_HINT
-
     if env_id in FETCH_IDS and env_id not in gym.registry:
         raise ValueError(f"{env_id} is not available: {ROBOTICS_HINT}")
 
@@ -124,9 +123,6 @@ def check_env_id(env_id: str) -> None:
 def build_generator(arguments: list[str]) -> int:
     """``build-generator --env ID``: make the task's cached generator (:mod:`sb3_genrl.zoo.generators`) now, so that
     the first ``train --algo genrl`` of the task starts training at once."""
-    from sb3_genrl.envs import get_task
-    from sb3_genrl.zoo.generators import build_default_generator, check_cache, default_generator
-
     parser = argparse.ArgumentParser(
         prog="python -m sb3_genrl.zoo build-generator",
         description="Make a task's generator into the cache ($SB3_GENRL_CACHE, default ~/.cache/sb3-genrl) ahead of "

@@ -31,9 +31,12 @@ from stable_baselines3.common.save_util import load_from_zip_file
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 
 from sb3_genrl.checks import check_positive_float
+from sb3_genrl.data.fingerprints import dataset_fingerprint
+from sb3_genrl.genrl.demonstrations import DEMONSTRATION_CALLBACK, callback_entries, with_dataset
 from sb3_genrl.genrl.generator_files import check_model_data, generator_digest, generator_file
 from sb3_genrl.hyperparams import TUNING_GOAL_SEED, ZOO_KEYS, check_genrl_entry
 from sb3_genrl.zoo.generators import build_default_generator, default_demonstrations, default_generator
+from sb3_genrl.zoo.sampler import entry_params
 from sb3_genrl.zoo.wrapper import latent_action, load_generator, resolve_generator
 
 WRAPPER = "sb3_genrl.zoo.latent_action"
@@ -93,8 +96,6 @@ class GenRLExperimentManager(ExperimentManager):
     def _entry_as_first_trial(self) -> Iterator[None]:
         """rl-zoo3 makes its study inside ``hyperparameters_optimization``: a new study gets the entry's settings
         enqueued as its first trial."""
-        from sb3_genrl.zoo.sampler import entry_params
-
         params = entry_params(self._hyperparams) if self.algo == "genrl" else None
         if params is None:
             yield
@@ -225,9 +226,6 @@ def resolved_callback(callback: Any, wrapper: list[Any], env_id: str) -> list[di
     """The entry's ``callback`` with the dataset of a :class:`~sb3_genrl.genrl.demonstrations.DemonstrationCallback`
     that names none filled in: the cached quickstart demonstrations that the wrapper's generator (the cached one) was
     trained on, with their fingerprint; another generator needs the callback's dataset given."""
-    from sb3_genrl.data.fingerprints import dataset_fingerprint
-    from sb3_genrl.genrl.demonstrations import DEMONSTRATION_CALLBACK, callback_entries, with_dataset
-
     entries = callback_entries(callback, f"{env_id}: callback")
     if not any(path == DEMONSTRATION_CALLBACK and kwargs.get("dataset") is None for path, kwargs in entries):
         return [{path: kwargs} for path, kwargs in entries]

@@ -16,7 +16,11 @@ import os
 import pathlib
 from collections.abc import Callable
 
+import sb3_genrl
 from sb3_genrl.checks import check_output_dir
+from sb3_genrl.envs import get_task
+from sb3_genrl.envs.demonstrations import make_demonstrations
+from sb3_genrl.generative import train_generator
 from sb3_genrl.run.stages import STAGE_FILE, check_and_record, read_settings, settings_conflicts
 from sb3_genrl.study.quickstart import DEMO_EPISODES, GENERATOR_EPOCHS, GENERATOR_EVAL_EVERY, quickstart_preset
 from sb3_genrl.utils import folder_lock
@@ -35,8 +39,6 @@ def cache_folder() -> pathlib.Path:
 
 def default_generator(task: str) -> pathlib.Path:
     """Where the task's quickstart generator is cached (it may not exist yet)."""
-    from sb3_genrl.envs import get_task
-
     return cache_folder() / "generators" / get_task(task).name / "vae.pt"
 
 
@@ -47,16 +49,11 @@ def default_demonstrations(task: str) -> pathlib.Path:
 
 def build_command(task: str) -> str:
     """The command that makes the task's cached generator ahead of time."""
-    from sb3_genrl.envs import get_task
-
     return f"python -m sb3_genrl.zoo build-generator --env {get_task(task).env_id}"
 
 
 def generator_settings(task: str) -> dict[str, object]:
     """What the cached generator of ``task`` is made with (recorded beside it)."""
-    import sb3_genrl
-    from sb3_genrl.envs import get_task
-
     return {
         "task": get_task(task).name,
         "demo_episodes": DEMO_EPISODES,
@@ -116,10 +113,6 @@ def build_default_generator(
     :param log: called with what is about to be made (and how long it takes), then a line before each stage
     :return: the generator's file
     """
-    from sb3_genrl.envs import get_task
-    from sb3_genrl.envs.demonstrations import make_demonstrations
-    from sb3_genrl.generative import train_generator
-
     path = default_generator(task)
     settings = generator_settings(task)
     folder = path.parent

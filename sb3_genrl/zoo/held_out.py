@@ -20,20 +20,28 @@ import pathlib
 import platform
 import shutil
 import sys
+import tempfile
 from typing import Any
 
 import numpy as np
+import optuna
+import yaml
 from huggingface_sb3 import EnvironmentName
 
+from sb3_genrl import GenRL
+from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT
+from sb3_genrl.genrl.generator_files import generator_digest, generator_file
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED
+from sb3_genrl.run.train import evaluate_on_goals
+from sb3_genrl.utils import atomic_write_json
+from sb3_genrl.zoo.__main__ import main as zoo
+from sb3_genrl.zoo.experiment import WRAPPER
+from sb3_genrl.zoo.sampler import convert_genrl_params
+from sb3_genrl.zoo.wrapper import load_generator
 
 
 def compare(env_id: str, storage: str, study_name: str, trials_folder: str, goals: int = 300) -> dict[str, Any]:
     """The study's trials, and the entry's and the best trial's policies on ``goals`` held-out goals."""
-    import optuna
-
-    from sb3_genrl.zoo.sampler import convert_genrl_params
-
     study = optuna.load_study(study_name=study_name, storage=storage)
     complete = [trial for trial in study.trials if trial.state == optuna.trial.TrialState.COMPLETE]
     entry = next((trial for trial in complete if "settings" in trial.user_attrs), None)
@@ -73,9 +81,6 @@ def compare(env_id: str, storage: str, study_name: str, trials_folder: str, goal
 
 def held_out_distances(model_path: str, env_id: str, goals: int) -> np.ndarray:
     """The final distances of a saved policy's deterministic trajectories to the held-out goals."""
-    from sb3_genrl import GenRL
-    from sb3_genrl.run.train import evaluate_on_goals
-
     model = GenRL.load(model_path, device="cpu")
     _, rewards, _ = evaluate_on_goals(model, env_id, goals=goals, seed=EVAL_GOAL_SEED)
     return -np.asarray(rewards)
@@ -85,15 +90,6 @@ def enjoy_rewards(model_path: str, env_id: str, goals: int) -> np.ndarray:
     """The episode rewards of rl-zoo3's ``enjoy --no-render -n goals --seed EVAL_GOAL_SEED`` on a saved policy, put in
     an rl-zoo3 log folder of its own (the policy as its best model, the generator saved beside it as the env
     wrapper's)."""
-    import tempfile
-
-    import yaml
-
-    from sb3_genrl.genrl.generator_files import generator_digest, generator_file
-    from sb3_genrl.zoo.__main__ import main as zoo
-    from sb3_genrl.zoo.experiment import WRAPPER
-    from sb3_genrl.zoo.wrapper import load_generator
-
     generator = generator_file(model_path)
     wrapper = {WRAPPER: {"generator": str(generator), "generator_sha256": generator_digest(load_generator(generator))}}
     with tempfile.TemporaryDirectory() as folder:
@@ -131,9 +127,6 @@ def enjoy_rewards(model_path: str, env_id: str, goals: int) -> np.ndarray:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT
-    from sb3_genrl.utils import atomic_write_json
-
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--env", required=True, help="the study's env id, e.g. GenRL/Hockey-v0")
     parser.add_argument("--storage", required=True, help="the study's optuna storage (rl-zoo3's --storage)")

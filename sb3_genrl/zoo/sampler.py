@@ -7,8 +7,11 @@ and regression. The other settings of the task's entry (the policy and its netwo
 
 from __future__ import annotations
 
+import inspect
 import math
 from typing import Any
+
+from sb3_genrl.genrl.genrl import GenRL
 
 # name -> ("float", low, high) on a log scale, ("int", low, high), or ("categorical", choices)
 SEARCH_SPACE: dict[str, tuple[Any, ...]] = {
@@ -48,10 +51,6 @@ def convert_genrl_params(params: dict[str, Any], n_envs: int = 1) -> dict[str, A
 def entry_params(hyperparams: dict[str, Any]) -> dict[str, Any] | None:
     """The trial parameters that give a task entry's own settings (GenRL's defaults for those it leaves out), so that
     a study can try them first; ``None`` when one of them lies outside :data:`SEARCH_SPACE`."""
-    import inspect
-
-    from sb3_genrl.genrl.genrl import GenRL
-
     defaults = {name: parameter.default for name, parameter in inspect.signature(GenRL.__init__).parameters.items()}
     settings = {
         name: hyperparams.get(name, defaults[name])

@@ -16,7 +16,9 @@ import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.monitor import Monitor
 
+from sb3_genrl.generative import load
 from sb3_genrl.generative.base import TrajectoryGenerator
+from sb3_genrl.genrl.generator_files import generator_digest
 from sb3_genrl.wrappers import LatentActionWrapper
 from sb3_genrl.zoo.generators import build_command, check_cache, default_generator
 
@@ -63,8 +65,6 @@ def latent_action(
     path = resolve_generator(generator, task_env.spec.id if task_env.spec is not None else None)
     loaded = load_generator(path)
     if generator_sha256 is not None:
-        from sb3_genrl.genrl.generator_files import generator_digest
-
         if generator_digest(loaded) != generator_sha256:
             raise ValueError(
                 f"the generator {path} is not the one this run was trained with (content SHA-256 "
@@ -106,6 +106,4 @@ def load_generator(path: pathlib.Path) -> TrajectoryGenerator:
 
 @functools.lru_cache(maxsize=4)
 def _load(path: str, mtime_ns: int) -> TrajectoryGenerator:
-    from sb3_genrl.generative import load
-
     return load(path, device="cpu")
