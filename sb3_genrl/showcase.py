@@ -8,9 +8,11 @@ from __future__ import annotations
 import errno
 from pathlib import Path
 
+import imageio.v3 as iio
 import numpy as np
 
 from sb3_genrl.checks import check_output_dir, check_positive_int, check_seed
+from sb3_genrl.envs import arm_tasks, get_task
 from sb3_genrl.utils import atomic_path, atomic_write_bytes, atomic_write_text
 
 
@@ -24,8 +26,6 @@ def save_animation(frames: list[np.ndarray], path: str | Path, fps: int = 25) ->
     """Write frames as a GIF or MP4 (by the file's suffix), atomically. An MP4 is read back before it takes its name:
     one that does not hold every frame (ffmpeg prints its failures, a full disk among them, and exits without an
     error reaching Python) raises ``OSError`` naming ``path``, and nothing is left there."""
-    import imageio.v3 as iio
-
     path = Path(path)
     if path.suffix.lower() == ".gif":  # made in memory: a failed write is the file's own, naming it
         atomic_write_bytes(path, iio.imwrite("<bytes>", np.stack(frames), extension=".gif", duration=1000 / fps, loop=0))
@@ -52,8 +52,6 @@ def _check_video_frames(video: Path, expected: int, final: Path) -> None:
 
 def save_image(image: np.ndarray, path: str | Path) -> Path:
     """Write one image (format by the file's suffix) atomically."""
-    import imageio.v3 as iio
-
     return atomic_write_bytes(path, iio.imwrite("<bytes>", image, extension=Path(path).suffix))
 
 
@@ -72,8 +70,6 @@ def play_scripted(
     :param height: frame height (pixels)
     :return: the report's path
     """
-    from sb3_genrl.envs import arm_tasks, get_task
-
     specs = [get_task(name) for name in tasks or arm_tasks()]
     others = [spec.name for spec in specs if spec.name not in arm_tasks()]
     if others:

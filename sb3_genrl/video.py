@@ -11,6 +11,9 @@ import pathlib
 import numpy as np
 
 from sb3_genrl.checks import check_input_path, check_output_file, check_positive_int, check_seed
+from sb3_genrl.envs import get_task
+from sb3_genrl.generative import load
+from sb3_genrl.run.loading import load_policy
 from sb3_genrl.showcase import frame_strip, save_animation, save_image
 
 VIDEO_SUFFIXES = (".mp4", ".gif")
@@ -26,7 +29,7 @@ def check_mp4_writer(out: str | os.PathLike) -> None:
     if pathlib.Path(out).suffix.lower() != ".mp4":
         return
     try:
-        import imageio_ffmpeg
+        import imageio_ffmpeg  # MP4 only: without it a GIF is still written and an MP4 refused here, as one error
 
         imageio_ffmpeg.get_ffmpeg_exe()
     except (ImportError, RuntimeError) as error:
@@ -62,8 +65,6 @@ def record_video(
         by default nothing in it is unpickled
     :return: ``video``, ``strip`` paths and per-episode ``rewards``
     """
-    from sb3_genrl.envs import get_task
-
     spec = get_task(task)
     if (policy is None) == (generator is None):
         raise ValueError("give exactly one of policy= (a GenRL run) or generator= (a generator file)")
@@ -77,15 +78,11 @@ def record_video(
     rng = np.random.default_rng(seed)
     goal_list = np.array([env.sample_goal(rng) for _ in range(goals)])
     if policy is not None:
-        from sb3_genrl.run.loading import load_policy
-
         path = pathlib.Path(policy)
         model = load_policy(path / "genrl_policy.zip" if path.is_dir() else path, env, trust=trust_policy)
         alphas, _ = model.predict(goal_list.astype(np.float32), deterministic=True)
         trajectories = model.generator.decode(alphas)
     else:
-        from sb3_genrl.generative import load
-
         model_generator = load(generator, device="cpu")
         if model_generator.horizon != env.horizon:
             raise ValueError(f"the generator's horizon {model_generator.horizon} is not the {task} task's {env.horizon}")

@@ -15,6 +15,11 @@ import sys
 import time
 from collections.abc import Callable
 
+import torch
+
+from sb3_genrl import __version__
+from sb3_genrl.cli import parsers
+
 WORKFLOW = (
     "play",
     "demos",
@@ -33,9 +38,6 @@ KNOWN_ERRORS = (ValueError, FileNotFoundError, PermissionError, FileExistsError,
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``genrl`` parser: one sub-parser per command, in workflow order (:data:`WORKFLOW`)."""
-    from sb3_genrl import __version__
-    from sb3_genrl.cli import parsers
-
     parser = argparse.ArgumentParser(
         prog="genrl",
         description="GenRL for Stable-Baselines3: tasks, demonstrations, generators, evaluation, policies, "
@@ -69,7 +71,6 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     command: Callable[[argparse.Namespace], int] = args.func
-    import torch
 
     # The networks are small: torch's default of one thread per core only oversubscribes the cores MuJoCo and the
     # env processes use (a run took 5 times as long beside a second busy process), as the quickstart found first.
