@@ -22,6 +22,7 @@ from sb3_genrl.envs.external import (
 from sb3_genrl import GenRL, LatentActionWrapper
 from sb3_genrl.data import dataset_info, load_actions, load_arrays
 from sb3_genrl.generative import train_generator
+from sb3_genrl.run.train import _make_env
 
 HORIZON = 20
 STEP = 0.1  # metres moved per unit of action and step
@@ -88,6 +89,7 @@ class SilentEnv(PointGoalEnv):
 
 
 gym.register("TestExternal/PointGoal-v0", entry_point=PointGoalEnv, max_episode_steps=HORIZON)
+gym.register("TestExternal/Silent-v0", entry_point=SilentEnv, max_episode_steps=HORIZON)
 gym.register("TestExternal/PointGoalShove-v0", entry_point=PointGoalEnv, kwargs={"shove": True}, max_episode_steps=HORIZON)
 
 
@@ -237,7 +239,13 @@ def test_genrl_demos_and_train_policy_take_a_task_the_package_does_not_register(
     assert code == 0, err
     summary = json.loads((tmp_path / "policy" / "summary.json").read_text())
     assert summary["task"] == "TestExternal/PointGoal-v0" and summary["episodes"] == 32
-    assert re.search(r"success: [0-9.]+ of the last iteration's episodes \(info\['is_success'\]", out), out
+    assert re.search(r"success: [0-9.]+ of the last episodes played \(info\['is_success'\]", out), out
+    code, out, err = cli(
+        "train-policy", "--task", "TestExternal/Silent-v0", "--generator", tmp_path / "vae.pt", "--episodes", 16,
+        "--batch-episodes", 16, "--checkpoint-every", 0, "--out", tmp_path / "silent", "--no-progress-bar",
+    )  # fmt: skip
+    assert code == 0, err
+    assert "success: the env reports no info['is_success']" in out
 
 
 def test_genrl_demos_refuses_bad_tasks_and_experts_before_any_work(cli, tmp_path):
@@ -270,3 +278,35 @@ def test_a_metaworld_task_by_name_records_its_experts_demonstrations(tmp_path):
         for action in actions:
             _, _, _, _, step_info = env.step(action)
         assert step_info["is_success"]
+
+
+def test_train_policy_truncates_the_env_to_the_demonstrations_horizon(cli, tmp_path):
+    demos = record_demonstrations("TestExternal/PointGoal-v0", point_expert, 12, tmp_path / "demos", horizon=12)
+    generator = train_generator(demos, preset="VAE1", epochs=2, batch_size=8, eval_every=2, out=tmp_path / "vae.pt")
+    assert generator.horizon == 12
+    arguments = (
+        "--generator",
+        tmp_path / "vae.pt",
+        "--episodes",
+        16,
+        "--batch-episodes",
+        16,
+        "--checkpoint-every",
+        0,
+        "--no-progress-bar",
+    )
+    code, _, err = cli(
+        "train-policy", "--task", "TestExternal/PointGoal-v0", "--horizon", 30, *arguments, "--out", tmp_path / "p"
+    )
+    assert code == 2 and "horizon 30 is longer than TestExternal/PointGoal-v0's episodes (20 steps)" in err
+    assert not (tmp_path / "p").exists()
+    code, _, err = cli(
+        "train-policy", "--task", "TestExternal/PointGoal-v0", "--horizon", 12, *arguments, "--out", tmp_path / "p"
+    )
+    assert code == 0, err
+    assert json.loads((tmp_path / "p" / "summary.json").read_text())["horizon"] == 12
+    # the run's env: 12 steps played, none held
+    env = LatentActionWrapper(_make_env("TestExternal/PointGoal-v0", 12), generator)
+    env.reset(seed=0)
+    _, _, _, _, info = env.step(np.zeros(generator.latent_dim, dtype=np.float32))
+    assert (info["steps_played"], info["hold_steps"], info["ended"]) == (12, 0, True)

@@ -157,6 +157,7 @@ def train_policy_command(args: argparse.Namespace) -> int:
         checkpoint_every=args.checkpoint_every or None,
         overwrite=args.overwrite,
         demonstrations=args.data and str(args.data),
+        horizon=args.horizon,
         **policy_arguments(args),
     )
     print(
@@ -168,8 +169,8 @@ def train_policy_command(args: argparse.Namespace) -> int:
 
 
 def _success_line(log_dir: str) -> str:
-    """What a run learnt of the task's success: the last iteration's ``rollout/success_rate`` in SB3's log, or that the
-    env reported none."""
+    """What a run logged of the task's success: the last ``rollout/success_rate`` in SB3's log (its share over the last
+    episodes played, up to 100), or that the env reported none."""
     import csv
     from pathlib import Path
 
@@ -182,8 +183,8 @@ def _success_line(log_dir: str) -> str:
             "learns from the rewards alone"
         )
     return (
-        f"success: {rates[-1]:.3f} of the last iteration's episodes (info['is_success'] at their last step; "
-        f"rollout/success_rate in {Path(log_dir) / 'progress.csv'})"
+        f"success: {rates[-1]:.3f} of the last episodes played (info['is_success'] at their last step; SB3's "
+        f"rollout/success_rate over up to 100 episodes, in {Path(log_dir) / 'progress.csv'})"
     )
 
 

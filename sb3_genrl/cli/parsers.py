@@ -250,6 +250,13 @@ def add_train_policy(sub: argparse._SubParsersAction) -> None:
         "generator's own dataset, as genrl demos wrote it",
     )
     policy.add_argument("--episodes", type=EPISODES, required=True, help="episodes (trajectories played) in total")
+    policy.add_argument(
+        "--horizon",
+        type=COUNT,
+        default=None,
+        help="the env's episodes truncated to this many steps: the --horizon its demonstrations were recorded with "
+        "(default: the env's own length)",
+    )
     _seed_option(policy)
     policy.add_argument("--out", required=True, type=OUT_DIR, help="output folder (model, learning curve, logs)")
     policy.add_argument("--e-step", choices=("trpo", "kl_penalty"), default="trpo", help="E-step variant")

@@ -101,6 +101,7 @@ def train_policy(
     n_threads: int | None = None,
     demonstrations: str | os.PathLike | None = None,
     callback: Any = None,
+    horizon: int | None = None,
     **genrl_kwargs: Any,
 ) -> dict[str, Any]:
     """Train a GenRL policy for ``episodes`` episodes on ``task`` and write everything to ``out_dir``.
@@ -140,6 +141,9 @@ def train_policy(
     :param callback: the run's callbacks in rl-zoo3's form (a task's entry's ``callback``, which
         :func:`~sb3_genrl.study.quickstart.task_settings` puts among the settings; see
         :func:`~sb3_genrl.genrl.demonstrations.build_callbacks`), built and checked before any work
+    :param horizon: the env's episodes truncated to this many steps (``max_episode_steps`` of ``gymnasium.make``): an
+        outside task's demonstrations recorded with a ``horizon`` shorter than its own (see
+        :func:`sb3_genrl.envs.external.record_demonstrations`); None: the env's own episode length
     :param genrl_kwargs: further :class:`~sb3_genrl.GenRL` arguments
     :return: paths of the outputs and a summary (``episodes``, ``iterations``, ``final_mean_reward``,
         ``best_mean_reward``, ``genrl_settings``: every GenRL hyperparameter in effect, see :func:`genrl_settings`)
@@ -153,7 +157,7 @@ def train_policy(
     # Built first: a generator that does not fit the task is refused before anything is written. The settings'
     # latent_clip is the wrapper's (GenRL refuses a wrapped env with another).
     latent_clip = genrl_kwargs.get("latent_clip", SETTINGS["latent_clip"].default)
-    env = LatentActionWrapper(gym.make(env_id), _as_generator(generator), latent_clip=latent_clip)
+    env = LatentActionWrapper(_make_env(env_id, horizon), _as_generator(generator), latent_clip=latent_clip)
     if n_envs is None:  # a fixed choice of the task, never of the machine: the result depends on n_envs
         n_envs = default_n_envs(env, batch_episodes)
     arguments = {
@@ -173,10 +177,22 @@ def train_policy(
         "generator_sha256": generator_digest(env.generator),
         "genrl_settings": genrl_settings(arguments),
         **_callback_identity(callback, callbacks, env, arguments),
+        **({} if horizon is None else {"horizon": int(horizon)}),
     }
     return _open_and_run(
         env, generator, out, identity, arguments, checkpoint_every, progress_bar, env_id, n_threads, callbacks, overwrite
     )
+
+
+def _make_env(env_id: str, horizon: int | None) -> gym.Env:
+    """``gymnasium.make(env_id)``, its episodes truncated to ``horizon`` steps when given (at most its own length)."""
+    if horizon is None:
+        return gym.make(env_id)
+    check_positive_int(horizon, "horizon")
+    own = gym.spec(env_id).max_episode_steps
+    if own is not None and horizon > own:
+        raise ValueError(f"horizon {horizon} is longer than {env_id}'s episodes ({own} steps); expected at most {own}")
+    return gym.make(env_id, max_episode_steps=int(horizon))
 
 
 def _open_and_run(
@@ -279,6 +295,7 @@ def _run(
             "best_mean_reward": float(np.max(curve["mean_reward"])),
             "genrl_settings": identity["genrl_settings"],
         }
+        | ({"horizon": identity["horizon"]} if "horizon" in identity else {})
     )
     if state is not None:
         result["resumed_at_episodes"] = [*state.get("resumed_at_episodes", []), state["episodes"]]
