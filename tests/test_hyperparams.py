@@ -162,7 +162,9 @@ def test_the_genrl_that_train_policy_builds_is_the_entrys(hockey_generator, tmp_
     assert code == 0, err
     _, batch_episodes, kwargs = load_genrl_settings("GenRL/Hockey-v0")
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
-    assert summary["genrl_settings"] == genrl_settings(kwargs | {"n_steps": batch_episodes})
+    # the command plays an iteration's episodes together by default: N = n_steps x n_envs = batch_episodes
+    assert summary["n_envs"] == batch_episodes
+    assert summary["genrl_settings"] == genrl_settings(kwargs | {"n_steps": batch_episodes // summary["n_envs"]})
     assert summary["iterations"] == 32 // batch_episodes
 
 

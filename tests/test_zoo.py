@@ -138,6 +138,8 @@ def test_the_zoo_and_train_policy_build_the_same_genrl_from_the_file(trained, ho
         hockey_generator,
         "--episodes",
         16,
+        "--n-envs",
+        1,  # as the zoo's run plays
         "--seed",
         3,
         "--device",

@@ -85,13 +85,15 @@ def test_on_paper_task_with_saved_generator(tmp_path):
 def test_a_generator_file_is_loaded_onto_the_models_device(tmp_path, monkeypatch):
     """GenRL(..., "vae.pt", device=D), GenRL.load(..., device=D) and load_policy(..., device=D) place the generator
     they load from a file on D."""
-    import sb3_genrl.generative as generative
     from sb3_genrl.generative import make_generator
+    from sb3_genrl.genrl import generator_files
     from sb3_genrl.run.loading import load_policy
 
     make_generator("VAE1", horizon=69, action_dim=7, device="cpu").save(str(tmp_path / "vae.pt"))
-    devices, real_load = [], generative.load
-    monkeypatch.setattr(generative, "load", lambda path, device="auto": devices.append(str(device)) or real_load(path, device))
+    devices, real_load = [], generator_files.load  # where every path loads a generator file
+    monkeypatch.setattr(
+        generator_files, "load", lambda path, device="auto": devices.append(str(device)) or real_load(path, device)
+    )
     model = GenRL("GenRL/Hockey-v0", str(tmp_path / "vae.pt"), n_steps=8, device="cpu")
     model.save(tmp_path / "policy.zip")
     loaded = GenRL.load(tmp_path / "policy.zip", device="cpu")
