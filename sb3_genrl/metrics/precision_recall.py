@@ -199,45 +199,47 @@ def _merge_nearest(
     A line's positions are split into ``length // _GROUP_SIZE`` interleaved groups (position ``p`` in group
     ``p % groups``, the last ``length % _GROUP_SIZE`` positions on their own): one reduction pass over the block,
     along its contiguous dimension, gives each group's minimum, a line's ``keep`` smallest values lie in its
-    ``keep`` groups of smallest minimum and its own positions, and only those are ranked, together with the line's
-    running values. Rows and columns are ranked together, so that a block costs a few passes whatever its shape.
+    ``keep`` groups of smallest minimum and its own positions, and only those are ranked. Rows and columns are
+    ranked together, so that a block costs a few passes whatever its shape.
     """
     keep = values.shape[1]
-    rows, cols = block.shape
-    length = cols if dims == (1,) else rows
     device = block.device
-    starts = {1: row_start, 0: col_start}
-    counts = {1: rows, 0: cols}
+    # Per dimension: its lines (a view of the block, one line per row), the points they are, the point of their
+    # first position, and their rows in the stacked tensors below.
+    line_sets = []
+    num_lines = 0
+    for dim in dims:
+        lines = block if dim == 1 else block.T
+        points = slice(row_start, row_start + len(lines)) if dim == 1 else slice(col_start, col_start + len(lines))
+        line_sets.append((dim, lines, points, col_start if dim == 1 else row_start, slice(num_lines, num_lines + len(lines))))
+        num_lines += len(lines)
+    length = line_sets[0][1].shape[1]
     groups = length // _GROUP_SIZE
     if groups > 2 * keep:
         main = groups * _GROUP_SIZE
-        group_min = [
-            block[:, :main].unflatten(1, (_GROUP_SIZE, groups)).amin(1)
-            if dim == 1
-            else block[:main].unflatten(0, (_GROUP_SIZE, groups)).amin(0).T
-            for dim in dims
-        ]
-        chosen = torch.topk(torch.cat(group_min) if len(dims) > 1 else group_min[0], keep, dim=1, largest=False).indices
-        positions = (chosen[:, :, None] + torch.arange(0, main, groups, device=device)).flatten(1)
-        if main < length:
-            positions = torch.cat([positions, torch.arange(main, length, device=device).expand(len(positions), -1)], dim=1)
+        group_min = torch.empty(num_lines, groups, device=device)
+        for dim, _, _, _, stacked in line_sets:
+            if dim == 1:  # the minimum runs over the middle dimension, along whole contiguous runs of groups
+                torch.amin(block[:, :main].unflatten(1, (_GROUP_SIZE, groups)), 1, out=group_min[stacked])
+            else:  # computed along the rows, then copied (written through a transposed view, it is slow)
+                group_min[stacked] = block[:main].unflatten(0, (_GROUP_SIZE, groups)).amin(0).T
+        chosen = torch.topk(group_min, keep, dim=1, largest=False, sorted=False).indices
+        positions = torch.empty(num_lines, keep * _GROUP_SIZE + length - main, dtype=torch.long, device=device)
+        members = torch.arange(0, main, groups, device=device)
+        torch.add(chosen[:, :, None], members, out=positions[:, : keep * _GROUP_SIZE].view(-1, keep, _GROUP_SIZE))
+        positions[:, keep * _GROUP_SIZE :] = torch.arange(main, length, device=device)
     else:
-        positions = torch.arange(length, device=device).expand(sum(counts[dim] for dim in dims), -1)
-    # Line l's position p is the block's flat element base[l] + p * stride[l]; its point is offset[l] + p.
-    base = torch.cat([torch.arange(counts[dim], device=device) * (cols if dim == 1 else 1) for dim in dims])
-    stride = torch.cat([torch.full((counts[dim],), 1 if dim == 1 else cols, device=device) for dim in dims])
-    offset = torch.cat([torch.full((counts[dim],), starts[1 - dim], device=device) for dim in dims])
-    candidates = torch.take(block, base[:, None] + positions * stride[:, None])
-    lines = [slice(starts[dim], starts[dim] + counts[dim]) for dim in dims]
-    running_values = torch.cat([values[line] for line in lines])
-    running_indices = torch.cat([indices[line] for line in lines])
-    best = torch.topk(torch.cat([candidates, running_values], dim=1), keep, dim=1, largest=False)
-    best_indices = torch.cat([positions + offset[:, None], running_indices], dim=1).gather(1, best.indices)
-    first = 0
-    for line in lines:
-        values[line] = best.values[first : first + line.stop - line.start]
-        indices[line] = best_indices[first : first + line.stop - line.start]
-        first += line.stop - line.start
+        positions = torch.arange(length, device=device).expand(num_lines, -1)
+    candidates = torch.empty(positions.shape, device=device)
+    for _, lines, _, _, stacked in line_sets:
+        torch.gather(lines, 1, positions[stacked], out=candidates[stacked])
+    best = torch.topk(candidates, min(keep, length), dim=1, largest=False)
+    found = positions.gather(1, best.indices)
+    for _, _, points, first_neighbour, stacked in line_sets:
+        merged = torch.topk(torch.cat([values[points], best.values[stacked]], dim=1), keep, dim=1, largest=False)
+        merged_indices = torch.cat([indices[points], found[stacked] + first_neighbour], dim=1)
+        values[points] = merged.values
+        indices[points] = merged_indices.gather(1, merged.indices)
 
 
 def _exact_sq_radii_rows(
