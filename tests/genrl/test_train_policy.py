@@ -84,7 +84,7 @@ def test_train_policy_writes_curve_model_and_logs(fast_reach_task, tmp_path, cap
     argv = ["train-policy", "--task", "curling", "--generator", "x.pt", "--episodes", "8", "--out", str(tmp_path)]
     with pytest.raises(SystemExit) as exit_info:  # --task takes its choices from the registry
         cli_main(argv)
-    assert exit_info.value.code == 2 and "invalid choice: 'curling'" in capsys.readouterr().err
+    assert exit_info.value.code == 2 and "unknown task 'curling'" in capsys.readouterr().err
     argv = [
         "train-policy",
         "--task",
