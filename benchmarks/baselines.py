@@ -46,13 +46,25 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any
 
 import gymnasium as gym
-from sb3_genrl.baselines.hyperparameters import baseline_kwargs_argument
+import torch
+from sb3_genrl.baselines.evaluation import EVAL_GOALS, evaluate_trained, load_trained
+from sb3_genrl.baselines.hyperparameters import baseline_kwargs_argument, settings_record
+from sb3_genrl.baselines.train import train_baseline
 from sb3_genrl.benchmarks.baselines_results import METHODS, WINDOW, core_hours, merge_results, method_result, write_outputs
-from sb3_genrl.envs import arm_tasks
+from sb3_genrl.envs import arm_tasks, get_task
+from sb3_genrl.envs.demonstrations import make_demonstrations
 
+from sb3_genrl import __version__
 from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, OUT_DIR, SEED, json_object_argument
+from sb3_genrl.curves import MONITOR_FILE, read_monitor
+from sb3_genrl.data import dataset_info
+from sb3_genrl.generative import load, train_generator
+from sb3_genrl.genrl import check_genrl_settings
+from sb3_genrl.hyperparams import EVAL_GOAL_SEED
 from sb3_genrl.provenance import provenance
+from sb3_genrl.run import train_policy
 from sb3_genrl.run.folder import differing
+from sb3_genrl.run.train import genrl_settings
 from sb3_genrl.utils import atomic_write_json
 
 HERE = pathlib.Path(__file__).resolve().parent
@@ -70,15 +82,11 @@ def _file_digest(path: str) -> str:
 
 
 def _version() -> str:
-    import sb3_genrl
-
-    return sb3_genrl.__version__
+    return __version__
 
 
 def _dataset(demos: str) -> dict[str, Any]:
     """What identifies a demonstration dataset made by the package: its task, seed and number of episodes."""
-    from sb3_genrl.data import dataset_info
-
     info = dataset_info(demos)
     return {key: info.get(key) for key in ("task", "seed", "episodes")}
 
@@ -92,11 +100,6 @@ def _shown(path: str) -> str:
 
 def run_settings(method: str, args: argparse.Namespace, seed: int, demos: str, generator: str) -> dict[str, Any]:
     """What a run's result depends on: compared with a finished run's record before it is reused."""
-    from sb3_genrl.baselines.hyperparameters import settings_record
-
-    from sb3_genrl import __version__
-    from sb3_genrl.data import dataset_info
-
     info = dataset_info(demos)
     settings: dict[str, Any] = {
         "method": method,
@@ -115,8 +118,6 @@ def run_settings(method: str, args: argparse.Namespace, seed: int, demos: str, g
             "batch_episodes": args.genrl_kwargs.get("n_steps", WINDOW) if method == "genrl" else WINDOW,
         }
         if method == "genrl":  # the chosen GenRL arguments, and every setting in effect
-            from sb3_genrl.run.train import genrl_settings
-
             settings["genrl_kwargs"] = args.genrl_kwargs
             settings["genrl"] = genrl_settings(settings["genrl_kwargs"])
     else:
@@ -131,8 +132,6 @@ def run_settings(method: str, args: argparse.Namespace, seed: int, demos: str, g
 
 def run_one(method: str, settings: dict[str, Any], demos: str, generator: str, run_dir: str) -> str:
     """One run (a worker process' job); skipped when done with the same settings, refused when done with others."""
-    import torch
-
     torch.set_num_threads(1)
     run = pathlib.Path(run_dir)
     if finished(run, settings):
@@ -140,8 +139,6 @@ def run_one(method: str, settings: dict[str, Any], demos: str, generator: str, r
     run.mkdir(parents=True, exist_ok=True)
     began = time.perf_counter()
     if method == "genrl":
-        from sb3_genrl.run import train_policy
-
         genrl_kwargs = {key: value for key, value in settings["genrl_kwargs"].items() if key != "n_steps"}
         summary = train_policy(
             settings["task"],
@@ -156,8 +153,6 @@ def run_one(method: str, settings: dict[str, Any], demos: str, generator: str, r
         )
         timing = {"setup_seconds": 0.0, "setup_cpu_seconds": 0.0, "learn_seconds": time.perf_counter() - began}
     else:
-        from sb3_genrl.baselines.train import train_baseline
-
         latent = method.startswith("latent-")
         summary = train_baseline(
             method,
@@ -198,8 +193,6 @@ def finished(run: pathlib.Path, settings: dict[str, Any]) -> bool:
 
 
 def _episodes_played(run: pathlib.Path) -> int:
-    from sb3_genrl.curves import MONITOR_FILE, read_monitor
-
     return len(read_monitor(run / MONITOR_FILE).get("return", []))
 
 
@@ -209,16 +202,12 @@ def prepare(args: argparse.Namespace, work: pathlib.Path) -> tuple[str, str]:
     if demos is None:
         demos = str(work / "demonstrations")
         if not pathlib.Path(demos).exists():
-            from sb3_genrl.envs.demonstrations import make_demonstrations
-
             make_demonstrations(args.task, args.demo_count, demos, seed=0, progress_bar=False)
     generator = args.generator
     needs_generator = any(m == "genrl" or m.startswith("latent-") for m in args.methods)
     if generator is None and needs_generator:
         generator = str(work / f"{GENERATOR_PRESET}.pt")
         if not pathlib.Path(generator).exists():
-            from sb3_genrl.generative import train_generator
-
             tmp = work / f".{GENERATOR_PRESET}.pt.tmp"
             train_generator(demos, preset=GENERATOR_PRESET, epochs=GENERATOR_EPOCHS, seed=0, out=tmp, device="cpu")
             os.replace(tmp, generator)
@@ -230,11 +219,6 @@ def final_evaluation(run: pathlib.Path, method: str, task: str, generator: str |
     policy's, ``sb3_genrl.baselines.evaluation.EVAL_GOALS``); kept in the run's ``final_eval.json`` under the digests of
     the policy and generator files and the package's version, so a rerun reads it and a retrained policy, another
     generator or another version is evaluated again."""
-    from sb3_genrl.baselines.evaluation import EVAL_GOALS, evaluate_trained, load_trained
-
-    import sb3_genrl
-    from sb3_genrl.hyperparams import EVAL_GOAL_SEED
-
     policy = run / f"{method}_policy.zip"
     key = {
         "policy_sha256": _file_digest(str(policy)) if policy.exists() else None,
@@ -242,7 +226,7 @@ def final_evaluation(run: pathlib.Path, method: str, task: str, generator: str |
         "goals": EVAL_GOALS,
         "goal_seed": EVAL_GOAL_SEED,
         "generator_sha256": _file_digest(generator) if generator else None,
-        "sb3_genrl": sb3_genrl.__version__,
+        "sb3_genrl": __version__,
     }
     cache = run / "final_eval.json"
     if not policy.exists():  # an archived run (see the module doc): its evaluation is all there is
@@ -262,8 +246,6 @@ def final_evaluation(run: pathlib.Path, method: str, task: str, generator: str |
             return record
     latent = None
     if method == "genrl" or method.startswith("latent-"):
-        from sb3_genrl.generative import load
-
         latent = load(generator)
     model = load_trained(method, policy, task, generator=latent)
     record = key | evaluate_trained(method, model, task, generator=latent, goals=EVAL_GOALS, seed=EVAL_GOAL_SEED)
@@ -273,8 +255,6 @@ def final_evaluation(run: pathlib.Path, method: str, task: str, generator: str |
 
 def arguments(argv: list[str] | None = None) -> argparse.Namespace:
     """The benchmark's checked arguments (``--genrl-kwargs`` by :func:`sb3_genrl.genrl.check_genrl_settings`)."""
-    from sb3_genrl.genrl import check_genrl_settings
-
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--task", default="hockey", choices=arm_tasks(), help="a task on the arm (default: hockey)")
     parser.add_argument("--episodes", type=COUNT, default=3000, help="episode budget of every run")
@@ -351,8 +331,6 @@ class MergeCheck:
 
 def main(argv: list[str] | None = None) -> None:
     """Run the benchmark from the command line."""
-    from sb3_genrl.envs import get_task
-
     args = arguments(argv)
     spec = get_task(args.task)
     args.task = spec.name
@@ -422,8 +400,6 @@ def collect(
 ) -> dict[str, Any]:
     """``result`` with each method's :func:`method_result` (its runs' final evaluations made or read first);
     ``settings``: each method's run settings (the same for all its seeds)."""
-    from sb3_genrl.envs import get_task
-
     spec = get_task(args.task)
     worst_reward = result["worst_reward"] = float(gym.make(spec.env_id).unwrapped.worst_reward)
     for method in args.methods:

@@ -9,8 +9,13 @@ import pathlib
 from typing import Any
 
 import numpy as np
+from sb3_genrl.baselines.compare import LABELS
+from sb3_genrl.baselines.evaluation import UNMOVED, training_health
+from sb3_genrl.baselines.hyperparameters import baseline_settings
 
-from sb3_genrl.utils import atomic_write_json
+from sb3_genrl.curves import MONITOR_FILE, plot_curves, read_monitor, windowed_curve
+from sb3_genrl.markdown import markdown_table
+from sb3_genrl.utils import atomic_write_json, atomic_write_text
 
 METHODS = ("genrl", "ppo", "sac", "sac-no-prefill", "sac-her", "latent-ppo", "latent-sac", "latent-trpo")
 MILESTONES = (100, 300, 1000, 3000)  # episodes at which the table reports the mean distance
@@ -20,10 +25,6 @@ WINDOW = 64  # episodes averaged per point (GenRL's batch)
 def method_result(runs: list[pathlib.Path], horizon: int, finals: list[dict[str, Any]], worst_reward: float) -> dict[str, Any]:
     """Distances, table contacts and timings of one method's runs (one per seed); ``finals``: their
     :func:`final_evaluation`; ``worst_reward``: the task's (the reward's floor)."""
-    from sb3_genrl.baselines.evaluation import training_health
-
-    from sb3_genrl.curves import MONITOR_FILE, read_monitor, windowed_curve
-
     per_seed = [read_monitor(run / MONITOR_FILE) for run in runs]
     records = [json.loads((run / "run.json").read_text()) for run in runs]
     n = min(len(columns["return"]) for columns in per_seed)
@@ -125,13 +126,6 @@ def merge_results(previous: dict[str, Any], current: dict[str, Any]) -> dict[str
 
 def write_outputs(result: dict[str, Any], out: pathlib.Path) -> None:
     """The JSON, the Markdown table and the three plots."""
-    from sb3_genrl.baselines.compare import LABELS
-    from sb3_genrl.baselines.evaluation import UNMOVED
-
-    from sb3_genrl.curves import plot_curves
-    from sb3_genrl.markdown import markdown_table
-    from sb3_genrl.utils import atomic_write_text
-
     out.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_json(out, result)
     stem, task = out.with_suffix(""), result["task"]
@@ -230,8 +224,6 @@ def core_hours(result: dict[str, Any], episodes: int, seeds: int) -> float:
     """Single-core hours of the whole benchmark at ``episodes`` x ``seeds``, from the measured CPU costs (setup and
     steady-state episodes). SAC without prefill plays random actions until ``learning_starts``; a run too short to
     pass it is charged SAC (prefilled)'s rate, its cost once learning, beyond that point."""
-    from sb3_genrl.baselines.hyperparameters import baseline_settings
-
     methods, seconds = result["methods"], 0.0
     warm_up = baseline_settings("sac-no-prefill", result["task"])[0]["learning_starts"] / result["horizon"]
     for method, row in methods.items():

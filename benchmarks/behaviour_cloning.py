@@ -24,6 +24,17 @@ import sys
 from typing import Any
 
 import numpy as np
+from sb3_genrl.baselines.bc import split_episodes
+from sb3_genrl.baselines.evaluation import EVAL_GOALS
+from sb3_genrl.baselines.feedback import add_time_feature, evaluate_feedback_policy, open_loop_rewards
+from sb3_genrl.envs import arm_tasks, get_task
+from stable_baselines3 import PPO
+
+from sb3_genrl.checks import EXISTING, JSON_OUT, SEED
+from sb3_genrl.data import load_transitions
+from sb3_genrl.hyperparams import EVAL_GOAL_SEED
+from sb3_genrl.provenance import provenance
+from sb3_genrl.utils import atomic_write_json
 
 HERE = pathlib.Path(__file__).resolve().parent
 
@@ -37,10 +48,6 @@ class HoldStill:
 
 def seed_result(run: pathlib.Path, task: str, transitions: dict[str, np.ndarray], seed: int) -> dict[str, Any]:
     """One seed's cloned policy on the held-out goals and on the demonstrations it held out."""
-    from sb3_genrl.baselines.bc import split_episodes
-    from sb3_genrl.baselines.feedback import evaluate_feedback_policy, open_loop_rewards
-    from stable_baselines3 import PPO
-
     summary = json.loads((run / "summary.json").read_text())
     policy = PPO.load(run / "bc_policy.zip", device="cpu")
     # the split the cloning's early stopping held out: its recorded share, drawn with the run's seed
@@ -71,16 +78,6 @@ def seed_result(run: pathlib.Path, task: str, transitions: dict[str, np.ndarray]
 
 
 def main(argv: list[str] | None = None) -> int:
-    from sb3_genrl.baselines.evaluation import EVAL_GOALS
-    from sb3_genrl.baselines.feedback import add_time_feature, evaluate_feedback_policy
-    from sb3_genrl.envs import arm_tasks, get_task
-
-    from sb3_genrl.checks import EXISTING, JSON_OUT, SEED
-    from sb3_genrl.data import load_transitions
-    from sb3_genrl.hyperparams import EVAL_GOAL_SEED
-    from sb3_genrl.provenance import provenance
-    from sb3_genrl.utils import atomic_write_json
-
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--task", default="hockey", choices=arm_tasks())
     parser.add_argument(

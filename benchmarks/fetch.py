@@ -54,8 +54,10 @@ from sb3_genrl.envs.fetch_demonstrations import (
 )
 
 from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, SEED
+from sb3_genrl.data import dataset_info
 from sb3_genrl.generative import load, train_generator
 from sb3_genrl.generative.presets import resolve_generator_spec
+from sb3_genrl.genrl import GenRL
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED, TUNING_GOAL_SEED
 from sb3_genrl.provenance import provenance
 from sb3_genrl.study.quickstart import quickstart_preset, task_settings
@@ -206,8 +208,6 @@ def generator_stage(args: argparse.Namespace, result: dict, write) -> str:
     if args.data is None and os.path.isdir(data) and os.listdir(data):
         args.data = data  # made before the stop (a dataset folder is written as one unit)
     args.data = args.data or make_benchmark_demonstrations(args.task, args.demos, args.work, args.threads)
-    from sb3_genrl.data import dataset_info
-
     record = result.setdefault("generator", {})
     record.update(
         demonstrations=args.demos if args.data == data else os.path.abspath(args.data),
@@ -264,8 +264,6 @@ def generator_limit(args: argparse.Namespace, generator: object, result: dict, w
 def neighbourhood_limit(args: argparse.Namespace, generator: object, seed: int, result: dict, write) -> None:
     """What the generator allows near the first seed's final policy (stage 5), unless the JSON has it."""
     if "policy_neighbourhood" not in result:
-        from sb3_genrl.genrl import GenRL
-
         begin = time.perf_counter()
         model = GenRL.load(os.path.join(args.work, f"seed_{seed}", "genrl_policy.zip"), generator=generator, device="cpu")
         result["policy_neighbourhood"] = policy_neighbourhood_success(

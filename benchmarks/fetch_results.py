@@ -15,13 +15,18 @@ logs is kept in ``fetch_tqc_progress.json`` beside the JSON files, each run as f
 from __future__ import annotations
 
 import argparse
+import csv
+import glob
 import json
 import os
 
 import numpy as np
+from sb3_genrl.benchmarks.fetch_seed import recorded_genrl_settings
 
+from sb3_genrl.generative.presets import resolve_generator_spec
 from sb3_genrl.markdown import markdown_table
 from sb3_genrl.provenance import provenance
+from sb3_genrl.study.quickstart import quickstart_preset
 from sb3_genrl.utils import atomic_path, atomic_write_json, atomic_write_text
 
 RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
@@ -88,11 +93,6 @@ def former_settings(task: str, result: dict) -> list[str]:
     """The settings in which ``result``'s runs differ from those the benchmark would use now: GenRL's (the task's entry
     in ``hyperparams/genrl.yml``; the episodes per iteration compared as ``batch_episodes``: older JSON files record
     GenRL's default ``n_steps``), and the recipe of the generator it trains (``generator recipe``)."""
-    from sb3_genrl.benchmarks.fetch_seed import recorded_genrl_settings
-
-    from sb3_genrl.generative.presets import resolve_generator_spec
-    from sb3_genrl.study.quickstart import quickstart_preset
-
     settings = result.get("settings", {})
     if "genrl_settings" not in settings:
         return []
@@ -231,9 +231,6 @@ def tqc_progress(logs: str) -> list[list]:
     """TQC+HER's runs by ``benchmarks/tqc_fetch.sh`` in ``logs``: per env id, the episodes done and the success of
     rl-zoo3's own evaluation at the last segment's end (its ``evaluations.npz``; rl-zoo3's evaluation episodes, not the
     held-out states)."""
-    import csv
-    import glob
-
     rows = []
     for listing in sorted(glob.glob(os.path.join(logs, "*_segments.csv"))):
         with open(listing) as file:

@@ -30,6 +30,7 @@ import numpy as np
 import torch
 from sb3_genrl.benchmarks.reachable import generator_limit, held_out_goals, summary
 from sb3_genrl.envs import get_task
+from sb3_genrl.envs.demonstrations import make_demonstrations
 from stable_baselines3.common.callbacks import EvalCallback
 from stable_baselines3.common.monitor import Monitor
 
@@ -80,8 +81,6 @@ class Setting:
 def make_benchmark_demonstrations(task: str, episodes: int, work: str, threads: int | None = 1) -> str:
     """``episodes`` new demonstrations of ``task`` (seed 0, on ``threads`` threads) in ``work/demonstrations``; its
     path."""
-    from sb3_genrl.envs.demonstrations import make_demonstrations
-
     data = os.path.join(work, "demonstrations")
     start = time.perf_counter()
     make_demonstrations(task, episodes, data, seed=0, n_threads=threads, progress_bar=True)

@@ -32,10 +32,16 @@ from typing import Any
 import numpy as np
 import torch
 from sb3_genrl.benchmarks.sim_throughput import open_loop_rate, scripted_episodes
+from sb3_genrl.envs import get_task
 
 from sb3_genrl.checks import COUNT, JSON_OUT, check_input_path
+from sb3_genrl.generative import load
+from sb3_genrl.genrl import GenRL
+from sb3_genrl.genrl.hindsight import HindsightRelabelling
 from sb3_genrl.markdown import markdown_table
 from sb3_genrl.provenance import provenance
+from sb3_genrl.run import train_policy
+from sb3_genrl.study.quickstart import task_settings
 from sb3_genrl.utils import atomic_write_json
 from sb3_genrl.vec_env import default_threads
 
@@ -69,14 +75,6 @@ def timed(owner: Any, name: str, seconds: dict[str, float], key: str, keep: list
 
 def run_genrl(task: str, generator_path: str, episodes: int, n_envs: int, threads: int, work: str) -> dict[str, Any]:
     """One GenRL run with the task's settings; its wall time and the time in each part, and what it played."""
-    from sb3_genrl.envs import get_task
-
-    from sb3_genrl.generative import load
-    from sb3_genrl.genrl import GenRL
-    from sb3_genrl.genrl.hindsight import HindsightRelabelling
-    from sb3_genrl.run import train_policy
-    from sb3_genrl.study.quickstart import task_settings
-
     _, batch_episodes, genrl_kwargs = task_settings(task)
     generator = load(generator_path, device="cpu")
     task_class = type(get_task(task).make_env())
@@ -137,10 +135,6 @@ def played_sample(played: list[tuple[np.ndarray, np.ndarray]], n: int) -> tuple[
 
 
 def measure_task(task: str, generator_path: str, args: argparse.Namespace, work: str) -> list[dict[str, Any]]:
-    from sb3_genrl.envs import get_task
-
-    from sb3_genrl.study.quickstart import task_settings
-
     threads, episodes = args.threads, args.episodes or EPISODES[task]
     env = get_task(task).make_env()
     scripted = open_loop_rate(env, *scripted_episodes(task, env, args.bound_episodes), threads, args.repeats)

@@ -21,6 +21,8 @@ Usage: ``python benchmarks/precision_recall.py [--sizes 5000 15000] [--repeats 3
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import json
 import os
 import platform
@@ -31,6 +33,14 @@ import sys
 import time
 
 import numpy as np
+import torch
+
+from sb3_genrl.checks import check_output_file, check_positive_int
+from sb3_genrl.markdown import markdown_table
+from sb3_genrl.metrics import precision_recall
+from sb3_genrl.metrics.precision_recall import DEFAULT_MEMORY_BUDGET_MB, block_size
+from sb3_genrl.provenance import provenance
+from sb3_genrl.utils import atomic_write_json
 
 DEFAULT_OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "precision_recall.json")
 LARGE_SIZE = 50000
@@ -48,19 +58,11 @@ def _peak_mb() -> float:
 
 
 def _worker(method: str, size: int, dim: int, k: int, seed: int, threads: int | None) -> dict:
-    import torch
-
     if threads is not None:
         torch.set_num_threads(threads)
 
-    from sb3_genrl.metrics import precision_recall
-    from sb3_genrl.metrics.precision_recall import DEFAULT_MEMORY_BUDGET_MB, block_size
-
     real, generated = _data(size, dim, seed)
     if method == "prdc":
-        import contextlib
-        import io
-
         from prdc import compute_prdc
     baseline = _peak_mb()
     start = time.perf_counter()
@@ -127,8 +129,6 @@ def _ratios(runs: list[dict], size: int) -> list[float]:
 def _table(runs: list[dict]) -> str:
     """The runs as a Markdown table, one row per size and method: times (minimum and median over the repeats),
     peak memory, values and the time over the matrix-product bound (minimum and median of the repeats' ratios)."""
-    from sb3_genrl.markdown import markdown_table  # here: the worker processes measure their memory without it
-
     table = []
     for size in sorted({run["size"] for run in runs}):
         for method in ("matmul", "ours", "prdc"):
@@ -174,11 +174,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.worker is not None:
         print(json.dumps(_worker(args.worker, args.size, args.dim, args.k, args.seed, args.threads)))
         return 0
-    # The output is checked before any work; imported here, not at the top, since the workers measure their memory.
-    from sb3_genrl.checks import check_output_file, check_positive_int
-    from sb3_genrl.provenance import provenance
-    from sb3_genrl.utils import atomic_write_json
-
+    # The output is checked before any work.
     for option in ("repeats", "threads"):
         try:
             if getattr(args, option) is not None:

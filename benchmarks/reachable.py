@@ -11,7 +11,9 @@ a set of latent actions once gives every goal's best reward over that set exactl
 
 from __future__ import annotations
 
+import argparse
 import hashlib
+import json
 import os
 import pathlib
 from typing import Any
@@ -23,8 +25,11 @@ from sb3_genrl.envs.basketball import BASKET_HEIGHT
 from sb3_genrl.envs.control import default_threads
 from scipy.spatial import cKDTree
 
+from sb3_genrl.generative import load
 from sb3_genrl.generative.base import TrajectoryGenerator
-from sb3_genrl.utils import atomic_path
+from sb3_genrl.hyperparams import EVAL_GOAL_SEED
+from sb3_genrl.provenance import provenance
+from sb3_genrl.utils import atomic_path, atomic_write_json
 
 CACHE = pathlib.Path(__file__).resolve().parent / "runs" / "limits"  # the played grids (ignored by git)
 
@@ -197,14 +202,6 @@ def _check_by_replaying(task: str, trajectories: np.ndarray, goals: np.ndarray, 
 
 def main() -> None:
     """Measure a saved generator's best reachable distance to held-out goals and write it as JSON."""
-    import argparse
-    import json
-
-    from sb3_genrl.generative import load
-    from sb3_genrl.hyperparams import EVAL_GOAL_SEED
-    from sb3_genrl.provenance import provenance
-    from sb3_genrl.utils import atomic_write_json
-
     parser = argparse.ArgumentParser(description=main.__doc__)
     parser.add_argument("--task", required=True, choices=("hockey", "basketball"))
     parser.add_argument("--generator", required=True, help="a generator file")

@@ -16,8 +16,14 @@ import sys
 import time
 
 import torch
+from sb3_genrl.envs.demonstrations import make_demonstrations
 
+from sb3_genrl.data import load_actions
+from sb3_genrl.generative import load, train_generator
+from sb3_genrl.metrics import evaluate_generator, real_subset
 from sb3_genrl.provenance import provenance
+from sb3_genrl.run import train_policy
+from sb3_genrl.study.quickstart import task_settings
 from sb3_genrl.utils import atomic_write_json
 
 
@@ -36,14 +42,6 @@ def main() -> None:
         res[key] = {"wall_s": time.perf_counter() - w, "cpu_s": time.process_time() - c, **(extra or {})}
         atomic_write_json(res_path, res | provenance())
         print(key, res[key], flush=True)
-
-    from sb3_genrl.envs.demonstrations import make_demonstrations
-
-    from sb3_genrl.data import load_actions
-    from sb3_genrl.generative import load, train_generator
-    from sb3_genrl.metrics import evaluate_generator, real_subset
-    from sb3_genrl.run import train_policy
-    from sb3_genrl.study.quickstart import task_settings
 
     demos = out / "demonstrations"
     timed("demos_4000", lambda: make_demonstrations(task, 4000, demos, seed=0, progress_bar=False, n_threads=1) and None)
