@@ -193,7 +193,7 @@ def test_toy_task_through_the_cli(reach_task, tmp_path, capsys):
 
 def test_task_names_only_in_the_task_modules_and_the_registry():
     root = Path(__file__).resolve().parents[1]
-    allowed = {Path("envs/__init__.py")} | {Path(f"envs/{name}.py") for name in ("hockey", "basketball", "fetch")}
+    allowed = {Path("envs/__init__.py")} | {Path(f"envs/{name}.py") for name in ("hockey", "basketball", "fetch", "fetch_tasks")}
     pattern = re.compile(r'"(?:{})"'.format("|".join(TASKS)))
     found = [
         str(path.relative_to(root))
@@ -275,6 +275,8 @@ def test_train_policy_takes_the_tasks_genrl_settings(reach_task, tmp_path, monke
                     str(generator),
                     "--episodes",
                     "16",
+                    "--n-envs",
+                    "1",  # one env: the episodes per iteration are n_steps
                     "--device",
                     "cpu",
                     "--no-progress-bar",
