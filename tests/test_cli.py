@@ -253,12 +253,12 @@ def test_an_output_folder_that_cannot_be_written_is_refused(tmp_path, monkeypatc
     "error", [ValueError, FileNotFoundError, PermissionError, FileExistsError, IsADirectoryError, NotADirectoryError]
 )
 def test_known_errors_are_one_line_with_exit_status_2(tmp_path, monkeypatch, cli, error):
-    import sb3_genrl.showcase
+    from sb3_genrl.cli import commands
 
     def fail(*args, **kwargs):
         raise error("what went wrong, and where")
 
-    monkeypatch.setattr(sb3_genrl.showcase, "play_scripted", fail)
+    monkeypatch.setattr(commands, "play_scripted", fail)  # the library function the command calls
     assert cli("play", "--out", tmp_path) == (2, "", "genrl play: error: what went wrong, and where\n")
 
 

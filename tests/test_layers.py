@@ -78,9 +78,6 @@ DEFERRED = {
     ("benchmarks.genrl", "matplotlib.pyplot"): MPL,
     ("benchmarks.precision_recall", "prdc"): "prdc, the optional extra bench",
 }
-# Modules whose imports inside functions are still to be moved to the top (issue 66); every other module's are the
-# listed ones above.
-PENDING = ("sb3_genrl.run.train", "sb3_genrl.cli.parsers", "sb3_genrl.cli.commands")
 
 
 def _modules() -> dict[str, pathlib.Path]:
@@ -185,11 +182,5 @@ def test_every_module_is_in_one_layer():
 
 
 def test_the_deferred_imports_are_the_listed_ones():
-    deferred = {(a, b) for a, b, is_deferred in EDGES if is_deferred and a not in PENDING}
+    deferred = {(a, b) for a, b, is_deferred in EDGES if is_deferred}
     assert deferred == set(DEFERRED)
-
-
-def test_the_pending_modules_still_defer_imports():
-    """A module whose imports all moved to the top leaves :data:`PENDING`."""
-    deferring = {a for a, _, is_deferred in EDGES if is_deferred}
-    assert [module for module in PENDING if module not in deferring] == []

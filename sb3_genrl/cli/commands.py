@@ -4,22 +4,36 @@ function that a user could call too, and prints what it made."""
 from __future__ import annotations
 
 import argparse
+import csv
 import json
+import time
+from pathlib import Path
+
+from sb3_genrl.baselines.compare import compare_runs
+from sb3_genrl.baselines.train import train_baseline
+from sb3_genrl.data import dataset_info
+from sb3_genrl.envs import TASKS, get_task
+from sb3_genrl.envs.demonstrations import make_demonstrations
+from sb3_genrl.envs.external import DEFAULT_NOISE, record_demonstrations, resolve_task
+from sb3_genrl.generative import train_generator
+from sb3_genrl.genrl import check_genrl_settings
+from sb3_genrl.genrl.demonstrations import callback_entries
+from sb3_genrl.hyperparams import lay_over
+from sb3_genrl.metrics import evaluate_generators
+from sb3_genrl.metrics.scorecard import scorecard_markdown
+from sb3_genrl.run import train_policy
+from sb3_genrl.showcase import play_scripted
+from sb3_genrl.study import MODELS, run_study
+from sb3_genrl.study.quickstart import DEFAULT_BATCH_EPISODES, quickstart, task_settings
+from sb3_genrl.video import record_video
 
 
 def play_command(args: argparse.Namespace) -> int:
-    from sb3_genrl.showcase import play_scripted
-
     print(f"wrote {play_scripted(args.out, tasks=tuple(args.task) if args.task else None, seed=args.seed)}")
     return 0
 
 
 def demos_command(args: argparse.Namespace) -> int:
-    import time
-
-    from sb3_genrl.data import dataset_info
-    from sb3_genrl.envs import TASKS
-    from sb3_genrl.envs.demonstrations import make_demonstrations
 
     if args.expert is not None or args.task not in TASKS:
         return _expert_demos(args)
@@ -45,10 +59,6 @@ def demos_command(args: argparse.Namespace) -> int:
 
 def _expert_demos(args: argparse.Namespace) -> int:
     """``genrl demos`` of a task from an expert (:func:`sb3_genrl.envs.external.record_demonstrations`)."""
-    import time
-
-    from sb3_genrl.data import dataset_info
-    from sb3_genrl.envs.external import DEFAULT_NOISE, record_demonstrations, resolve_task
 
     if args.threads is not None:
         raise ValueError("--threads applies to the package's own tasks; demonstrations from an expert play in one process")
@@ -76,8 +86,6 @@ def _expert_demos(args: argparse.Namespace) -> int:
 
 
 def train_generator_command(args: argparse.Namespace) -> int:
-    from sb3_genrl.generative import train_generator
-
     generator = train_generator(
         args.data,
         model=args.model,
@@ -106,10 +114,6 @@ def train_generator_command(args: argparse.Namespace) -> int:
 
 
 def evaluate_command(args: argparse.Namespace) -> int:
-    from sb3_genrl.envs import get_task
-    from sb3_genrl.metrics import evaluate_generators
-    from sb3_genrl.metrics.scorecard import scorecard_markdown
-
     task = args.task
     if task is not None and not hasattr(get_task(task).env_class, "play_trajectories"):
         print(
@@ -139,10 +143,6 @@ def evaluate_command(args: argparse.Namespace) -> int:
 
 
 def train_policy_command(args: argparse.Namespace) -> int:
-    from sb3_genrl.envs import TASKS
-    from sb3_genrl.envs.external import resolve_task
-    from sb3_genrl.run import train_policy
-
     if args.task not in TASKS:  # metaworld/<name>, module:Id: the Gymnasium id
         args.task = resolve_task(args.task).env_id
     result = train_policy(
@@ -171,9 +171,6 @@ def train_policy_command(args: argparse.Namespace) -> int:
 def _success_line(log_dir: str) -> str:
     """What a run logged of the task's success: the last ``rollout/success_rate`` in SB3's log (its share over the last
     episodes played, up to 100), or that the env reported none."""
-    import csv
-    from pathlib import Path
-
     with open(Path(log_dir) / "progress.csv", newline="", encoding="utf-8") as file:
         rates = [row.get("rollout/success_rate") for row in csv.DictReader(file)]
     rates = [float(rate) for rate in rates if rate]
@@ -193,12 +190,6 @@ def policy_arguments(args: argparse.Namespace) -> dict:
     ``--library-defaults``) with ``--e-step``, ``--batch-episodes`` and ``--genrl-kwargs`` laid over it, checked by
     :func:`sb3_genrl.genrl.check_genrl_settings` before any work; the entry's ``callback`` (``--genrl-kwargs
     '{"callback": null}'``: none) is checked by :func:`sb3_genrl.genrl.demonstrations.callback_entries`."""
-    from sb3_genrl.envs import TASKS
-    from sb3_genrl.genrl import check_genrl_settings
-    from sb3_genrl.genrl.demonstrations import callback_entries
-    from sb3_genrl.hyperparams import lay_over
-    from sb3_genrl.study.quickstart import DEFAULT_BATCH_EPISODES, task_settings
-
     if args.library_defaults:
         batch_episodes, genrl_kwargs = None, {}
     elif args.task in TASKS or args.task in {spec.env_id for spec in TASKS.values()}:
@@ -222,8 +213,6 @@ def policy_arguments(args: argparse.Namespace) -> dict:
 
 
 def baseline_command(args: argparse.Namespace) -> int:
-    from sb3_genrl.baselines.train import train_baseline
-
     summary = train_baseline(
         args.algorithm,
         args.task,
@@ -262,15 +251,11 @@ def baseline_command(args: argparse.Namespace) -> int:
 
 
 def compare_command(args: argparse.Namespace) -> int:
-    from sb3_genrl.baselines.compare import compare_runs
-
     print(compare_runs(args.runs, args.out, task=args.task).read_text())
     return 0
 
 
 def video_command(args: argparse.Namespace) -> int:
-    from sb3_genrl.video import record_video
-
     result = record_video(
         args.task,
         args.out,
@@ -285,8 +270,6 @@ def video_command(args: argparse.Namespace) -> int:
 
 
 def quickstart_command(args: argparse.Namespace) -> int:
-    from sb3_genrl.study.quickstart import quickstart
-
     report = quickstart(
         args.out,
         task=args.task,
@@ -304,8 +287,6 @@ def quickstart_command(args: argparse.Namespace) -> int:
 
 
 def study_command(args: argparse.Namespace) -> int:
-    from sb3_genrl.study import MODELS, run_study
-
     report = run_study(
         args.task,
         args.scale,

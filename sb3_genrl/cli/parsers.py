@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from sb3_genrl.baselines import BASELINES
 from sb3_genrl.checks import (
     COUNT,
     EPISODES,
@@ -25,7 +26,16 @@ from sb3_genrl.checks import (
     option,
 )
 from sb3_genrl.cli import commands
+from sb3_genrl.envs import DEFAULT_TASK, TASKS, arm_tasks
+from sb3_genrl.envs.demonstrations import refuse_existing_output
+from sb3_genrl.envs.external import DEFAULT_NOISE, load_expert, resolve_task
+from sb3_genrl.generative import PRESETS
+from sb3_genrl.hyperparams import known_env_ids, load_hyperparams
 from sb3_genrl.metrics.scorecard import NOT_CONVERGED_PRECISION, RANK_MEASURES
+from sb3_genrl.run.checkpoint import CHECKPOINT_EVERY
+from sb3_genrl.study import MODELS, SCALES
+from sb3_genrl.study.quickstart import MIN_DEMO_EPISODES
+from sb3_genrl.video import VIDEO_SUFFIXES
 
 
 def _task_option(
@@ -38,8 +48,6 @@ def _task_option(
     arm_only: bool = False,
     external: bool = False,
 ) -> None:
-    from sb3_genrl.envs import TASKS, arm_tasks
-
     if external:  # any episodic Gymnasium task, checked as it parses (sb3_genrl.envs.external.resolve_task)
         parser.add_argument(
             "--task",
@@ -97,22 +105,16 @@ def add_play(sub: argparse._SubParsersAction) -> None:
 
 def _check_task(task: str, name: str = "") -> str:
     """A task of any kind that ``--task`` takes where it says so (:func:`sb3_genrl.envs.external.resolve_task`)."""
-    from sb3_genrl.envs.external import resolve_task
-
     resolve_task(task)
     return task
 
 
 def _check_expert(spec: str, name: str = "") -> object:
     """The expert callable named ``module:function`` (:func:`sb3_genrl.envs.external.load_expert`)."""
-    from sb3_genrl.envs.external import load_expert
-
     return load_expert(spec)
 
 
 def add_demos(sub: argparse._SubParsersAction) -> None:
-    from sb3_genrl.envs.external import DEFAULT_NOISE
-
     demos = sub.add_parser("demos", help="generate a task's demonstrations as a Minari dataset, with a coverage report")
     _task_option(demos, external=True)
     demos.add_argument(
@@ -157,16 +159,12 @@ def _check_dataset_out(path: str, name: str = "") -> Path:
     :param path: the folder
     :param name: the argument's name, for the error message
     """
-    from sb3_genrl.envs.demonstrations import refuse_existing_output
-
     out = check_output_dir(path, name)
     refuse_existing_output(out.absolute())
     return out
 
 
 def add_train_generator(sub: argparse._SubParsersAction) -> None:
-    from sb3_genrl.generative import PRESETS
-
     gen = sub.add_parser("train-generator", help="train a beta-VAE or InfoGAN on demonstration trajectories")
     gen.add_argument("--data", required=True, type=EXISTING, help="demonstration dataset or .npy/.npz (N, T, M) array")
     gen.add_argument("--model", choices=("vae", "gan"), default=None, help="model kind (default: vae)")
@@ -236,8 +234,6 @@ def add_evaluate(sub: argparse._SubParsersAction) -> None:
 
 
 def add_train_policy(sub: argparse._SubParsersAction) -> None:
-    from sb3_genrl.run.checkpoint import CHECKPOINT_EVERY
-
     policy = sub.add_parser("train-policy", help="train a GenRL policy over a generator's latent space (Algorithm 1)")
     _task_option(policy, external=True)
     policy.add_argument("--generator", required=True, type=EXISTING, help="file of a trained generator")
@@ -302,8 +298,6 @@ def add_train_policy(sub: argparse._SubParsersAction) -> None:
 
 
 def add_baseline(sub: argparse._SubParsersAction) -> None:
-    from sb3_genrl.baselines import BASELINES
-
     baseline = sub.add_parser(
         "baseline",
         help="train PPO (BC), SAC (with or without prefilled buffer), SAC+HER, or a stock algorithm on the latent space",
@@ -354,8 +348,6 @@ def add_compare(sub: argparse._SubParsersAction) -> None:
 
 
 def add_video(sub: argparse._SubParsersAction) -> None:
-    from sb3_genrl.video import VIDEO_SUFFIXES
-
     video = sub.add_parser("video", help="render a GenRL policy (or a generator's random trajectories) to MP4 or GIF")
     _task_option(video, arm_only=True)
     source = video.add_mutually_exclusive_group(required=True)
@@ -380,10 +372,6 @@ def add_video(sub: argparse._SubParsersAction) -> None:
 
 
 def add_quickstart(sub: argparse._SubParsersAction) -> None:
-    from sb3_genrl.envs import DEFAULT_TASK, TASKS
-    from sb3_genrl.hyperparams import known_env_ids, load_hyperparams
-    from sb3_genrl.study.quickstart import MIN_DEMO_EPISODES
-
     quick = sub.add_parser("quickstart", help="demonstrations -> VAE -> evaluation -> GenRL policy -> report, in minutes")
     quick.add_argument("--out", required=True, type=OUT_DIR, help="output folder (a rerun resumes it)")
     _task_option(quick, required=False, default=DEFAULT_TASK)
@@ -408,8 +396,6 @@ def add_quickstart(sub: argparse._SubParsersAction) -> None:
 
 
 def add_study(sub: argparse._SubParsersAction) -> None:
-    from sb3_genrl.study import MODELS, SCALES
-
     study = sub.add_parser("study", help="the paper's experiments at a scale, with tables, plots and report.md")
     _task_option(study, required=False, default="all", extra=("all",), arm_only=True)
     study.add_argument("--scale", choices=tuple(SCALES), default="small", help="size of every stage (default: small)")

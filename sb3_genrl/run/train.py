@@ -6,6 +6,7 @@ the functions so that the core library (:class:`~sb3_genrl.GenRL`) never imports
 
 from __future__ import annotations
 
+import argparse
 import multiprocessing
 import os
 import pathlib
@@ -14,7 +15,10 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+import torch
 from stable_baselines3.common.callbacks import CallbackList
+from stable_baselines3.common.monitor import ResultsWriter
+from stable_baselines3.common.vec_env import SubprocVecEnv, VecMonitor
 
 from sb3_genrl.checks import (
     check_device,
@@ -24,6 +28,7 @@ from sb3_genrl.checks import (
     check_output_dir,
     check_positive_int,
     check_seed,
+    json_argument,
 )
 from sb3_genrl.curves import (
     EPISODE_INFO,
@@ -34,6 +39,9 @@ from sb3_genrl.curves import (
     training_logger,
     write_learning_curve,
 )
+from sb3_genrl.data.fingerprints import dataset_fingerprint
+from sb3_genrl.envs import TASKS, get_task
+from sb3_genrl.generative import load
 from sb3_genrl.generative.base import TrajectoryGenerator
 from sb3_genrl.genrl.demonstrations import DemonstrationCallback, build_callbacks, callback_entries
 from sb3_genrl.genrl.generator_files import generator_digest
@@ -43,6 +51,7 @@ from sb3_genrl.genrl.settings import NOT_SETTINGS, SETTINGS, check_genrl_setting
 from sb3_genrl.run.checkpoint import CHECKPOINT_EVERY, GenRLCheckpoint, RandomStateRecorder, resume_genrl, resume_state
 from sb3_genrl.run.folder import CHECKPOINT_DIR, SUMMARY, keep_episodes, open_run, remove_checkpoint
 from sb3_genrl.utils import atomic_write_json, folder_lock
+from sb3_genrl.vec_env import BatchedLatentVecEnv
 from sb3_genrl.wrappers import LatentActionWrapper
 
 
@@ -60,8 +69,6 @@ def evaluate_on_goals(
     :param seed: seed of the goals
     :return: the goals ``(goals, 2)``, the rewards (minus the final distance, m) and the episodes' infos
     """
-    from sb3_genrl.envs import get_task
-
     if model.generator is None:
         raise ValueError("this GenRL model has no generator: pass generator= to GenRL.load()")
     env = get_task(task).make_env()
@@ -75,8 +82,6 @@ def evaluate_on_goals(
 
 def _resolve_env_id(task: str) -> tuple[str, str]:
     """The Gymnasium id and name of a registered task, or of any registered Gymnasium id (a user's own env)."""
-    from sb3_genrl.envs import TASKS, get_task
-
     if task not in TASKS and task in gym.registry:
         return task, task
     spec = get_task(task)  # raises, listing the registered tasks
@@ -229,7 +234,6 @@ def _callback_identity(
     when they are refused)."""
     if callback is None:
         return {}
-    from sb3_genrl.data.fingerprints import dataset_fingerprint
 
     settings = genrl_settings(arguments)
     datasets = []
@@ -348,9 +352,6 @@ def _train(
 def genrl_kwargs_argument(text: str) -> dict[str, Any]:
     """An argparse ``type`` for ``--genrl-kwargs``: a JSON object of GenRL settings, checked by
     :func:`~sb3_genrl.genrl.check_genrl_settings`."""
-    import argparse
-
-    from sb3_genrl.checks import json_argument
 
     try:
         return check_genrl_settings(json_argument(text))
@@ -432,10 +433,6 @@ def _training_env(
     to the Monitor file)."""
     if n_envs == 1:
         return monitor_episodes(RandomStateRecorder(env), out, append=append)
-    from stable_baselines3.common.monitor import ResultsWriter
-    from stable_baselines3.common.vec_env import SubprocVecEnv, VecMonitor
-
-    from sb3_genrl.vec_env import BatchedLatentVecEnv
 
     spec, generator = env.env.spec, env.generator  # the spec, not the id: the processes need not know the id
     batched, latent_clip = env.use_fast_path, env.latent_clip
@@ -467,8 +464,6 @@ def _episode_env(
     """One env of the training VecEnv (in its own process for a ``SubprocVecEnv``): the latent-action task, its action
     box ``latent_clip`` wide, with the Monitor's info keys."""
     if own_process:
-        import torch
-
         torch.set_num_threads(1)  # one core per env process
     return episode_info(RandomStateRecorder(LatentActionWrapper(gym.make(spec), generator, latent_clip=latent_clip)))
 
@@ -536,6 +531,5 @@ def _as_generator(generator: TrajectoryGenerator | str | os.PathLike) -> Traject
     if isinstance(generator, TrajectoryGenerator):
         return generator
     check_input_path(generator, "generator")
-    from sb3_genrl.generative import load
 
     return load(generator)
