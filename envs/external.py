@@ -39,6 +39,7 @@ from sb3_genrl.envs.registry import TASKS
 from tqdm.auto import tqdm
 
 import sb3_genrl
+from sb3_genrl import LatentActionWrapper
 from sb3_genrl.checks import check_non_negative_float, check_output_dir, check_positive_int, check_seed
 from sb3_genrl.data import write_dataset
 from sb3_genrl.provenance import package_versions
@@ -49,6 +50,11 @@ BUMP_DURATIONS = (6, 30)  # smallest and largest bump width (steps), as the arm'
 SUCCESS_KEYS = ("is_success", "success")  # read in this order when the default key is asked for
 METAWORLD_PREFIX = "metaworld/"
 FIRST_TRIES = 200  # episodes tried without any kept before the recorder gives up
+# The held-out resets of an outside task: reset seeds 2**31, 2**31 + 1, ... The recorder draws every reset seed below
+# 2**31 (_reset_seed) and GenRL's training resets follow the env's own random stream, so these resets are never used
+# to record, train or choose anything.
+HELD_OUT_SEED = 2**31
+HELD_OUT_RESETS = 200
 
 
 @dataclass(frozen=True)
@@ -58,11 +64,16 @@ class ExternalTask:
     :param name: the name as given (``"metaworld/push-v3"``, ``"GenRL/Hockey-v0"``, ``"my_module:MyEnv-v0"``)
     :param env_id: the registered Gymnasium id
     :param make_expert: makes the expert the package knows for the task (Meta-World's scripted policies); None: none
+    :param horizon: the control steps of a demonstration that suit the task, which ``genrl quickstart`` records with
+        (:data:`sb3_genrl.envs.metaworld.DEMONSTRATION_HORIZON` for Meta-World); None: the env's own episode length
+    :param generator_preset: the generator preset that ``genrl quickstart`` trains for the task (None: its default)
     """
 
     name: str
     env_id: str
     make_expert: Callable[[], Callable[[Any], np.ndarray]] | None = None
+    horizon: int | None = None
+    generator_preset: str | None = None
 
 
 def resolve_task(task: str) -> ExternalTask:
@@ -80,7 +91,13 @@ def resolve_task(task: str) -> ExternalTask:
         if not metaworld.installed():
             raise ValueError(f"task {task!r} needs Meta-World. {metaworld.INSTALL_HINT}")
         metaworld.register_metaworld_envs()
-        return ExternalTask(task, metaworld.metaworld_env_id(name), functools.partial(metaworld.metaworld_expert, name))
+        return ExternalTask(
+            task,
+            metaworld.metaworld_env_id(name),
+            functools.partial(metaworld.metaworld_expert, name),
+            horizon=metaworld.DEMONSTRATION_HORIZON,
+            generator_preset=metaworld.GENERATOR_PRESET,
+        )
     if task in TASKS:
         return ExternalTask(task, TASKS[task].env_id)
     env_id = task
@@ -197,6 +214,43 @@ def _make_env(task: str | Callable[[], gym.Env], horizon: int | None, success_ke
     if steps != declared_horizon(env):
         env = TimeLimit(env, max_episode_steps=steps)
     return SuccessInfo(env, success_key), steps
+
+
+def evaluate_success(
+    model: Any,
+    task: str | Callable[[], gym.Env],
+    *,
+    resets: int = HELD_OUT_RESETS,
+    horizon: int | None = None,
+    success_key: str = "is_success",
+) -> dict[str, Any]:
+    """A GenRL policy's success on held-out seeded resets of a task: for each reset seed ``HELD_OUT_SEED + i``
+    (:data:`HELD_OUT_SEED`, ``i < resets``), the policy's deterministic latent action for the reset's context, decoded
+    by its generator and played open loop; a success is ``info["is_success"]`` (from ``success_key``) at the last step.
+
+    :param model: a GenRL model with its generator (``GenRL.load`` of a saved policy)
+    :param task: a task name (:func:`resolve_task`) or a callable that makes the env
+    :param resets: held-out resets to play
+    :param horizon: control steps of an episode (the demonstrations'; None: the env's own)
+    :param success_key: the info key of the env's success
+    :return: ``success_rate``, ``successes`` (one 0/1 per reset), ``resets`` and ``seeds`` (first and last + 1)
+    """
+    if getattr(model, "generator", None) is None:
+        raise ValueError("this GenRL model has no generator: pass generator= to GenRL.load()")
+    check_positive_int(resets, "resets")
+    env = LatentActionWrapper(make_task_env(task, horizon=horizon, success_key=success_key), model.generator)
+    successes = []
+    for i in range(resets):
+        context, _ = env.reset(seed=HELD_OUT_SEED + i)
+        _, _, _, _, info = env.step(model.predict(context, deterministic=True)[0])
+        successes.append(float(bool(info.get("is_success", False))))
+    env.close()
+    return {
+        "success_rate": float(np.mean(successes)),
+        "successes": successes,
+        "resets": int(resets),
+        "seeds": [HELD_OUT_SEED, HELD_OUT_SEED + int(resets)],
+    }
 
 
 def check_reproducible_reset(env: gym.Env, seed: int, name: str = "the env") -> Any:
@@ -332,7 +386,7 @@ def record_demonstrations(
             "failed_open_loop": counts["failed_open_loop"],
             "noise": np.asarray(noise, dtype=np.float64).tolist(),
             "success_key": success_key,
-            "expert": _expert_name(expert),
+            "expert": expert_name(expert),
             "reset_seeds": [episode["reset_seed"] for episode in kept],
             "observation": "the env's observation"
             + (", flattened by gymnasium.spaces.flatten" if not isinstance(env.observation_space, spaces.Box) else ""),
@@ -358,7 +412,8 @@ def _task_name(task: str | Callable[[], gym.Env]) -> str:
     return getattr(task, "__qualname__", None) or type(task).__name__
 
 
-def _expert_name(expert: Callable[[Any], np.ndarray]) -> str:
+def expert_name(expert: Callable[[Any], np.ndarray]) -> str:
+    """How a dataset's metadata names an expert: ``module:qualified name`` of the function (or of a callable's class)."""
     name = getattr(expert, "__qualname__", None) or type(expert).__qualname__
     return f"{getattr(expert, '__module__', None) or type(expert).__module__}:{name}"
 

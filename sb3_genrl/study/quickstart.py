@@ -1,4 +1,11 @@
-"""The quickstart: demonstrations -> a beta-VAE -> its evaluation -> a GenRL policy -> a short report with plots."""
+"""The quickstart: demonstrations -> a beta-VAE -> its evaluation -> a GenRL policy -> a short report with plots.
+
+A task of the package's makes its demonstrations with its own generator
+(:func:`sb3_genrl.envs.demonstrations.make_demonstrations`); any other episodic Gymnasium task with an expert
+(``metaworld/<name>``, a Gymnasium id, ``module:Id``; see :mod:`sb3_genrl.envs.external`) records them with
+:func:`~sb3_genrl.envs.external.record_demonstrations`, and its policy is scored on the held-out seeded resets of
+:func:`~sb3_genrl.envs.external.evaluate_success`. The stages, their records and the resume are the same for both.
+"""
 
 from __future__ import annotations
 
@@ -10,6 +17,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+import gymnasium as gym
 import torch
 
 import sb3_genrl
@@ -25,8 +33,18 @@ from sb3_genrl.checks import (
 )
 from sb3_genrl.data import dataset_info
 from sb3_genrl.data.fingerprints import dataset_fingerprint, file_fingerprint
-from sb3_genrl.envs import get_task
+from sb3_genrl.envs import TASKS, get_task
 from sb3_genrl.envs.demonstrations import make_demonstrations
+from sb3_genrl.envs.external import (
+    DEFAULT_NOISE,
+    HELD_OUT_RESETS,
+    ExternalTask,
+    evaluate_success,
+    expert_name,
+    record_demonstrations,
+    resolve_task,
+    task_horizon,
+)
 from sb3_genrl.generative import load, train_generator
 from sb3_genrl.genrl import GenRL
 from sb3_genrl.genrl.demonstrations import uses_demonstrations
@@ -46,6 +64,9 @@ QUICKSTART_PRESET = "VAE1"
 DEFAULT_POLICY_EPISODES, DEFAULT_BATCH_EPISODES = 3000, 64
 # The generator stage's defaults (also the generator of the rl-zoo3 runs, sb3_genrl.zoo.generators)
 DEMO_EPISODES, GENERATOR_EPOCHS, GENERATOR_EVAL_EVERY = 4000, 300, 10
+# A task from outside the package records its demonstrations through its env's step path, closed loop and replayed
+# open loop (a Meta-World push-v3 episode of 150 steps: about 0.2 s of CPU each), so it records fewer by default.
+OUTSIDE_DEMO_EPISODES = 500
 # GenRL plays two envs at a time (the arm tasks: each step's two trajectories in one threaded simulation call, see
 # sb3_genrl.vec_env; other tasks: one process each). Fixed, not the machine's core count: the result depends on it.
 # All of an iteration's episodes per call would be faster, but would give other results than the quickstart's so far.
@@ -69,6 +90,8 @@ def quickstart(
     device: str = "auto",
     progress_bar: bool = True,
     log: Callable[[str], None] | None = None,
+    expert: Callable[[Any], Any] | None = None,
+    horizon: int | None = None,
 ) -> pathlib.Path:
     """Run the whole GenRL workflow at a small size and write ``report.md`` in ``out_dir``.
 
@@ -79,9 +102,17 @@ def quickstart(
     ``out_dir`` (:class:`~sb3_genrl.utils.FolderInUseError`). The README gives the stages' times of the committed
     reports.
 
+    A task from outside the package (``metaworld/<name>``, a Gymnasium id or ``module:Id`` with an ``expert``) records
+    its demonstrations from the expert (:func:`~sb3_genrl.envs.external.record_demonstrations`, with ``horizon``), takes
+    GenRL's defaults (or its entry in ``hyperparams/genrl.yml``), and its report and ``summary.json`` give the saved
+    policy's success on :data:`~sb3_genrl.envs.external.HELD_OUT_RESETS` held-out seeded resets
+    (:func:`~sb3_genrl.envs.external.evaluate_success`: reset seeds from ``2**31`` on, which nothing else uses).
+
     :param out_dir: output folder (a rerun resumes it)
-    :param task: a task name from :data:`sb3_genrl.envs.TASKS`
-    :param demo_episodes: demonstrations to generate
+    :param task: a task name from :data:`sb3_genrl.envs.TASKS`, or a task from outside the package
+        (:func:`~sb3_genrl.envs.external.resolve_task`)
+    :param demo_episodes: demonstrations to generate (default: :data:`DEMO_EPISODES`; a task from outside the
+        package: :data:`OUTSIDE_DEMO_EPISODES`)
     :param epochs: beta-VAE training epochs (:data:`QUICKSTART_PRESET` of paper table 1)
     :param policy_episodes: GenRL episodes (default: the task's); GenRL takes the task's settings and episodes per
         iteration too (its entry in ``hyperparams/genrl.yml``, see :func:`task_settings`)
@@ -93,11 +124,25 @@ def quickstart(
     :param device: torch device
     :param progress_bar: show the stages' progress bars
     :param log: called with a line after each stage
+    :param expert: a task from outside the package: its expert, observation -> action (None: the task's own, such as
+        Meta-World's scripted policies); a task of the package's takes none
+    :param horizon: a task from outside the package: the control steps of a demonstration and of GenRL's episodes
+        (None: the task's, :attr:`~sb3_genrl.envs.external.ExternalTask.horizon`, 150 for Meta-World; else the env's
+        own episode length)
     :return: the report's path
     """
-    episodes, batch_episodes, genrl_kwargs = task_settings(task)
+    outside = _outside_task(task, expert, horizon)
+    if outside is None:
+        episodes, batch_episodes, genrl_kwargs = task_settings(task)
+        video = video and get_task(task).video  # a task without the arm tasks' renderer is not filmed
+    else:
+        episodes, batch_episodes, genrl_kwargs = outside_task_settings(outside)
+        expert = expert if expert is not None else outside.make_expert()
+        horizon = _outside_horizon(outside, horizon)
+        video = False  # the video renders the package's arm tasks
     policy_episodes = episodes if policy_episodes is None else policy_episodes
-    video = video and get_task(task).video  # a task without the arm tasks' renderer is not filmed
+    if demo_episodes is None:
+        demo_episodes = DEMO_EPISODES if outside is None else OUTSIDE_DEMO_EPISODES
     _check_counts(
         demo_episodes=demo_episodes,
         epochs=epochs,
@@ -119,6 +164,8 @@ def quickstart(
     settings = _stage_settings(
         task, demo_episodes, epochs, policy_episodes, batch_episodes, genrl_kwargs, pr_samples, dwpr_samples, seed, video
     )
+    if outside is not None:
+        _add_outside_settings(settings, outside, expert, horizon)
     with folder_lock(out):
         refuse_conflicts(
             out,
@@ -129,8 +176,59 @@ def quickstart(
             ],
         )
         log = log or (lambda _line: None)
-        timings = _run_stages(out, settings, device, progress_bar, log)
-        return _write_report(out, task, seed, video, timings, log)
+        timings = _run_stages(out, settings, device, progress_bar, log, expert)
+        return _write_report(out, task, seed, video, timings, log, horizon if outside is not None else None)
+
+
+def _outside_task(task: str, expert: Callable[[Any], Any] | None, horizon: int | None) -> ExternalTask | None:
+    """The resolved task when it is not one of the package's (None for one of the package's), with its expert and
+    horizon checked before any work."""
+    if _is_package_task(task):
+        given = [name for name, value in dict(expert=expert, horizon=horizon).items() if value is not None]
+        if given:
+            raise ValueError(
+                f"{' and '.join(given)} apply to a task from outside the package; {task!r} is one of the package's, "
+                "which makes its own demonstrations"
+            )
+        return None
+    outside = resolve_task(task)
+    if expert is None and outside.make_expert is None:
+        raise ValueError(f"task {task!r} is not one of the package's: give its expert (expert=, --expert MODULE:FUNCTION)")
+    if expert is not None and not callable(expert):
+        raise ValueError(f"expert must be a callable observation -> action, got {type(expert).__name__}")
+    return outside
+
+
+def _outside_horizon(task: ExternalTask, horizon: int | None) -> int:
+    """The control steps of an outside task's demonstrations: ``horizon``, else the task's, else the env's own (checked
+    against the env by :func:`~sb3_genrl.envs.external.task_horizon`)."""
+    env = gym.make(task.env_id)
+    try:
+        return task_horizon(env, horizon if horizon is not None else task.horizon, task.name)
+    finally:
+        env.close()
+
+
+def outside_task_settings(task: ExternalTask) -> tuple[int, int, dict[str, Any]]:
+    """The GenRL settings of a task from outside the package, as :func:`task_settings` gives a registered task's: its
+    env id's entry in ``hyperparams/genrl.yml`` if it has one, else GenRL's defaults with
+    :data:`DEFAULT_POLICY_EPISODES` and :data:`DEFAULT_BATCH_EPISODES`.
+
+    :param task: the resolved task (:func:`~sb3_genrl.envs.external.resolve_task`)
+    :return: ``(episodes, batch_episodes, genrl_kwargs)``
+    """
+    if task.env_id not in known_env_ids("genrl"):
+        return DEFAULT_POLICY_EPISODES, DEFAULT_BATCH_EPISODES, {}
+    return load_genrl_settings(task.env_id)
+
+
+def _add_outside_settings(
+    settings: dict[str, dict[str, Any]], task: ExternalTask, expert: Callable[[Any], Any], horizon: int | None
+) -> None:
+    """What the stages of a task from outside the package are made with besides a registered task's: the recorder's
+    settings (compared with the dataset's metadata on a rerun), the env id and horizon of the policy."""
+    settings["demonstrations"] |= {"horizon": horizon, "expert": expert_name(expert), "noise": DEFAULT_NOISE}
+    settings["policy"] |= {"env_id": task.env_id, "horizon": horizon}
 
 
 def _check_counts(*, demo_episodes: int, epochs: int, policy_episodes: int, pr_samples: int, dwpr_samples: int) -> None:
@@ -182,6 +280,7 @@ _OUTPUTS = {
     "policy": ("policy/summary.json",),
     "video": ("policy.gif", "policy_strip.png"),
 }  # a stage is done when all exist
+SUMMARY = "summary.json"  # the run's score on held-out goals or resets, as numbers
 STAGE_TIMES = "stage_times.json"  # seconds each stage took when it was made, kept for the report of a resumed run
 _RECORDS = {
     "generator": "vae.stage.json",
@@ -214,7 +313,12 @@ def _recorded(out: pathlib.Path, stage: str) -> tuple[pathlib.Path, dict[str, An
 
 
 def _run_stages(
-    out: pathlib.Path, settings: dict[str, dict[str, Any]], device: str, progress_bar: bool, log: Callable[[str], None]
+    out: pathlib.Path,
+    settings: dict[str, dict[str, Any]],
+    device: str,
+    progress_bar: bool,
+    log: Callable[[str], None],
+    expert: Callable[[Any], Any] | None = None,
 ) -> dict[str, float]:
     dataset, model_path, policy = out / "demonstrations", out / "vae.pt", out / "policy"
     demos, generator, evaluation, policy_stage = (
@@ -249,11 +353,22 @@ def _run_stages(
             tensorboard_log=str(out / "tensorboard"),
         )
 
-    stage(
-        "demonstrations",
-        {},
-        lambda: make_demonstrations(demos["task"], demos["episodes"], dataset, seed=demos["seed"], progress_bar=progress_bar),
-    )
+    def demonstrate() -> None:
+        if "expert" not in demos:  # a task of the package's: its own demonstrations
+            make_demonstrations(demos["task"], demos["episodes"], dataset, seed=demos["seed"], progress_bar=progress_bar)
+            return
+        record_demonstrations(
+            demos["task"],
+            expert,
+            demos["episodes"],
+            dataset,
+            seed=demos["seed"],
+            noise=demos["noise"],
+            horizon=demos["horizon"],
+            progress_bar=progress_bar,
+        )
+
+    stage("demonstrations", {}, demonstrate)
     stage("generator", {"dataset": dataset_fingerprint(dataset)}, train)
     made_from = {"dataset": dataset_fingerprint(dataset), "generator": file_fingerprint(model_path)}
     stage(
@@ -278,7 +393,7 @@ def _run_stages(
         "policy",
         policy_made_from,
         lambda: train_policy(
-            policy_stage["task"],
+            policy_stage.get("env_id", policy_stage["task"]),  # a task from outside the package: its Gymnasium id
             str(model_path),
             episodes=policy_stage["episodes"],
             batch_episodes=policy_stage["batch_episodes"],
@@ -288,6 +403,7 @@ def _run_stages(
             device=device,
             demonstrations=demonstrations,
             progress_bar=progress_bar,
+            horizon=policy_stage.get("horizon"),
             **policy_stage["genrl_kwargs"],
         ),
     )
@@ -311,22 +427,29 @@ def _run_stages(
 
 
 def _write_report(
-    out: pathlib.Path, task: str, seed: int, video: bool, timings: dict[str, float], log: Callable[[str], None]
+    out: pathlib.Path,
+    task: str,
+    seed: int,
+    video: bool,
+    timings: dict[str, float],
+    log: Callable[[str], None],
+    horizon: int | None = None,
 ) -> pathlib.Path:
-    """``report.md``, with every number read from what the stages recorded."""
+    """``report.md`` and ``summary.json`` (the held-out score as a number), with every number read from what the
+    stages recorded (``horizon``: a task from outside the package, played for that many steps)."""
     dataset = out / "demonstrations"
     summary = json.loads((out / "policy" / "summary.json").read_text())
     measures = json.loads((out / "evaluation" / "results.json").read_text())
     generator_settings = read_settings(out / _RECORDS["generator"])
-    score, score_line = _policy_score(out, task, seed)
-    coverage_file = dataset / "coverage.json"
-    coverage = json.loads(coverage_file.read_text()) if coverage_file.is_file() else {}
+    if horizon is None:
+        score, score_line, held_out = _policy_score(out, task, seed)
+    else:
+        score, score_line, held_out = _outside_policy_score(out, task, horizon)
     generator = load(out / "vae.pt", device="cpu")
     lines = [
         f"# GenRL quickstart: {task}",
         "",
-        f"1. **Demonstrations**: {dataset_info(dataset)['episodes']} valid episodes from the scripted expert and its"
-        " perturbations" + (f" (goal-region coverage {coverage['coverage']:.1%})" if "coverage" in coverage else "") + ".",
+        _demonstrations_line(dataset),
         f"2. **Generator**: beta-VAE (preset {generator_settings['preset']}: N_alpha = {generator.latent_dim}, "
         f"beta = {generator.beta}), {generator_settings['epochs']} epochs, "
         f"best checkpoint at epoch {generator.best_epoch}.",
@@ -348,13 +471,44 @@ def _write_report(
     ]
     report = out / "report.md"
     atomic_write_text(report, "\n".join(lines))
+    atomic_write_json(
+        out / SUMMARY,
+        {
+            "task": task,
+            **held_out,
+            "policy": "policy/genrl_policy.zip",
+            "policy_episodes": summary["episodes"],
+            "stage_seconds": {k: v if math.isfinite(v) else None for k, v in timings.items()},
+        },
+    )
     log(f"GenRL on {task}: {score_line}")
     return report
 
 
-def _policy_score(out: pathlib.Path, task: str, seed: int) -> tuple[str, str]:
-    """The trained policy played deterministically from 100 held-out goals (or initial states): the report's words
-    and the log's line (the success rate for a task scored by success, else the mean distance to the goal)."""
+def _demonstrations_line(dataset: pathlib.Path) -> str:
+    """The report's line on the demonstrations: a registered task's (with its coverage of the goal region), or an
+    outside task's recorder's (kept of tried, and why the others were dropped)."""
+    info = dataset_info(dataset)
+    if "failed_open_loop" in info:
+        return (
+            f"1. **Demonstrations**: {info['episodes']} perturbed episodes of the expert `{info['expert']}`, "
+            f"{info['horizon']} steps each, kept of {info['tried']} tried ({info['kept_share']:.1%}: "
+            f"{info['failed_closed_loop']} failed closed loop, {info['failed_open_loop']} failed when their actions were "
+            "replayed open loop from their seeded reset)."
+        )
+    coverage_file = dataset / "coverage.json"
+    coverage = json.loads(coverage_file.read_text()) if coverage_file.is_file() else {}
+    return (
+        f"1. **Demonstrations**: {info['episodes']} valid episodes from the scripted expert and its perturbations"
+        + (f" (goal-region coverage {coverage['coverage']:.1%})" if "coverage" in coverage else "")
+        + "."
+    )
+
+
+def _policy_score(out: pathlib.Path, task: str, seed: int) -> tuple[str, str, dict[str, Any]]:
+    """The trained policy played deterministically from 100 held-out goals (or initial states): the report's words,
+    the log's line and the summary's numbers (the success rate for a task scored by success, else the mean distance
+    to the goal)."""
     model = GenRL.load(out / "policy" / "genrl_policy.zip", device="cpu")
     spec = get_task(task)
     if spec.evaluate is not None:
@@ -362,6 +516,11 @@ def _policy_score(out: pathlib.Path, task: str, seed: int) -> tuple[str, str]:
         return (
             f"the trained policy's own success rate from 100 new initial states (deterministic): **{success:.0%}**",
             f"the deterministic policy's success rate from 100 new initial states is {success:.0%}",
+            {
+                "held_out_success": success,
+                "held_out_resets": 100,
+                "held_out_seeds": [seed + EVAL_GOAL_SEED, seed + EVAL_GOAL_SEED + 100],
+            },
         )
     _, rewards, _ = evaluate_on_goals(model, task, goals=100, seed=seed + EVAL_GOAL_SEED)
     distance = float(-rewards.mean())
@@ -369,13 +528,35 @@ def _policy_score(out: pathlib.Path, task: str, seed: int) -> tuple[str, str]:
         f"the trained policy's own mean distance to 100 new goals (deterministic): **{distance:.3f} m** "
         f"({distance * 100:.1f} cm)",
         f"the deterministic policy's mean distance to 100 new goals is {distance:.3f} m",
+        {"held_out_mean_distance": distance, "held_out_goals": 100, "held_out_goal_seed": seed + EVAL_GOAL_SEED},
+    )
+
+
+def _outside_policy_score(out: pathlib.Path, task: str, horizon: int) -> tuple[str, str, dict[str, Any]]:
+    """An outside task's trained policy played deterministically from the held-out seeded resets of
+    :func:`~sb3_genrl.envs.external.evaluate_success`: the report's words, the log's line and the summary's numbers."""
+    model = GenRL.load(out / "policy" / "genrl_policy.zip", device="cpu")
+    result = evaluate_success(model, task, resets=HELD_OUT_RESETS, horizon=horizon)
+    success, (first, end) = result["success_rate"], result["seeds"]
+    where = f"{result['resets']} held-out seeded resets (reset seeds {first} to {end - 1}, never used to record or train)"
+    return (
+        f"the saved policy's success on {where}, deterministic: **{success:.1%}**",
+        f"the saved policy's success on {result['resets']} held-out seeded resets is {success:.1%}",
+        {"held_out_success": success, "held_out_resets": result["resets"], "held_out_seeds": [first, end]},
     )
 
 
 def quickstart_preset(task: str) -> str:
     """The generator preset the quickstart trains for ``task``: the task's own (its ``TaskSpec.generator_preset``, a
-    latent space as large as its expert's family of motions) or :data:`QUICKSTART_PRESET`."""
-    return get_task(task).generator_preset or QUICKSTART_PRESET
+    latent space as large as its expert's family of motions; a task from outside the package: its
+    ``ExternalTask.generator_preset``) or :data:`QUICKSTART_PRESET`."""
+    own = get_task(task).generator_preset if _is_package_task(task) else resolve_task(task).generator_preset
+    return own or QUICKSTART_PRESET
+
+
+def _is_package_task(task: str) -> bool:
+    """Whether ``task`` names a task of the package (:data:`sb3_genrl.envs.TASKS`) by its short name or Gymnasium id."""
+    return task in TASKS or task in {spec.env_id for spec in TASKS.values()}
 
 
 def task_settings(task: str) -> tuple[int, int, dict[str, Any]]:
