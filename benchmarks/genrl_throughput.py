@@ -8,7 +8,10 @@ episodes in one fast-path call), timing the fast path's ``play_trajectories`` ca
 ``decode`` calls (decoding) and GenRL's ``train`` (updates), and within the updates each of :data:`UPDATE_PARTS`
 (their shares of the updates: ``update_parts_share``). In the same run it measures the open-loop bound on all
 cores: the episodes GenRL played (a sample of them) and the scripted ones of ``benchmarks/sim_throughput.py``, each
-played in one ``play_trajectories`` call on every core (best of ``--repeats``). Writes JSON with the load average.
+played in one ``play_trajectories`` call on every core (best of ``--repeats``). With ``--cli``, each task also gets
+the row "the CLI's default command": ``genrl train-policy --task TASK --generator G --episodes E --out R`` with
+nothing else, timed as a whole process (start-up, set-up and outputs included) against the scripted open-loop bound.
+Writes JSON with the load average.
 
     python benchmarks/genrl_throughput.py --generator hockey=quickstart/vae.pt --generator basketball=qs_b/vae.pt
 
@@ -24,6 +27,8 @@ import contextlib
 import json
 import os
 import platform
+import subprocess
+import sys
 import tempfile
 import time
 from collections.abc import Iterator
@@ -126,6 +131,32 @@ def run_genrl(task: str, generator_path: str, episodes: int, n_envs: int, thread
     return row | {"played": played}
 
 
+def run_cli(task: str, generator_path: str, episodes: int, work: str) -> dict[str, Any]:
+    """The CLI's default command on ``task``, timed as a whole process: its episodes per wall second."""
+    out = os.path.join(work, f"{task}_cli")
+    argv = ["--task", task, "--generator", generator_path, "--episodes", str(episodes), "--out", out]
+    start = time.perf_counter()
+    done = subprocess.run(
+        [sys.executable, "-m", "sb3_genrl.cli", "train-policy", *argv, "--no-progress-bar"],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    wall = time.perf_counter() - start
+    if done.returncode:
+        raise RuntimeError(f"genrl train-policy failed: {done.stderr.strip().splitlines()[-1:]}")
+    with open(os.path.join(out, "summary.json")) as file:
+        summary = json.load(file)
+    return {
+        "task": task,
+        "n_envs": f"cli ({summary['n_envs']})",
+        "cli_command": "genrl train-policy " + " ".join(argv[:4]) + f" --episodes {episodes} --out R",
+        "episodes": summary["episodes"],
+        "wall_seconds": wall,
+        "episodes_per_second": summary["episodes"] / wall,
+    }
+
+
 def played_sample(played: list[tuple[np.ndarray, np.ndarray]], n: int) -> tuple[np.ndarray, np.ndarray]:
     """``n`` of the trajectories and goals a run played (evenly spaced over the run)."""
     trajectories = np.concatenate([np.asarray(t, dtype=np.float64).reshape(-1, *np.shape(t)[-2:]) for t, _ in played])
@@ -158,6 +189,15 @@ def measure_task(task: str, generator_path: str, args: argparse.Namespace, work:
             flush=True,
         )
         rows.append(row)
+    if args.cli:
+        row = run_cli(task, generator_path, episodes, work)
+        row.update(threads=threads, open_loop_bound=scripted, share_of_bound=row["episodes_per_second"] / scripted)
+        print(
+            f"{task} {row['cli_command']}: {row['episodes_per_second']:.1f} episodes/s, {row['share_of_bound']:.2f} of the "
+            f"scripted bound ({scripted:.1f}), whole command",
+            flush=True,
+        )
+        rows.append(row)
     env.close()
     return rows
 
@@ -170,7 +210,7 @@ def updated_runs(path: str, rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     if os.path.exists(path):
         with open(path) as file:
             kept = [row for row in json.load(file)["runs"] if (row["task"], row["n_envs"]) not in measured]
-    return sorted(kept + rows, key=lambda row: (list(EPISODES).index(row["task"]), row["n_envs"]))
+    return sorted(kept + rows, key=lambda row: (list(EPISODES).index(row["task"]), str(row["n_envs"])))
 
 
 def main() -> None:
@@ -189,6 +229,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=COUNT, default=2)
     parser.add_argument("--out", type=JSON_OUT, default="benchmarks/results/genrl_throughput.json")
     parser.add_argument("--update", action="store_true", help="keep --out's runs of other tasks and n_envs")
+    parser.add_argument("--cli", action="store_true", help="also time the CLI's default command, as a whole process")
     args = parser.parse_args()
     generators = dict(item.split("=", 1) if "=" in item else (item, "") for item in args.generator)
     for task, path in generators.items():
@@ -200,6 +241,7 @@ def main() -> None:
         "python benchmarks/genrl_throughput.py "
         + " ".join(f"--generator {task}=..." for task in generators)
         + (f" --n-envs {' '.join(args.n_envs)} --update" if args.update else "")
+        + (" --cli" if args.cli else "")
     )
     load_before = os.getloadavg()
     with tempfile.TemporaryDirectory() as work:
@@ -229,9 +271,14 @@ def main() -> None:
                     f"{r['episodes_per_second']:.1f}",
                     f"{r['open_loop_bound']:.1f}",
                     f"{r['share_of_bound']:.2f}",
-                    *(f"{r[f'{k}_share']:.0%}" for k in ("simulation", "decoding", "updates", "other")),
+                    *(
+                        f"{r[f'{k}_share']:.0%}" if f"{k}_share" in r else "-"
+                        for k in ("simulation", "decoding", "updates", "other")
+                    ),
                     " / ".join(f"{r['update_parts_share'][k]:.0%}" for k in UPDATE_PARTS)
                     if "update_parts_share" in r
+                    else "not measured (a whole command)"
+                    if "cli_command" in r
                     else "not measured",
                 ]
                 for r in rows
