@@ -11,7 +11,10 @@ import pytest
 from gymnasium import spaces
 from sb3_genrl.envs import metaworld
 from sb3_genrl.envs.external import (
+    HELD_OUT_RESETS,
+    HELD_OUT_SEED,
     check_reproducible_reset,
+    evaluate_success,
     load_expert,
     make_task_env,
     record_demonstrations,
@@ -310,3 +313,71 @@ def test_train_policy_truncates_the_env_to_the_demonstrations_horizon(cli, tmp_p
     env.reset(seed=0)
     _, _, _, _, info = env.step(np.zeros(generator.latent_dim, dtype=np.float32))
     assert (info["steps_played"], info["hold_steps"], info["ended"]) == (12, 0, True)
+
+
+def test_quickstart_of_an_outside_task_with_an_expert_reports_its_held_out_success(cli, tmp_path):
+    task, out = "test_external:TestExternal/PointGoal-v0", tmp_path / "quick"
+    arguments = (
+        "quickstart", "--task", task, "--expert", "test_external:point_expert", "--out", out, "--demo-episodes", 8,
+        "--epochs", 2, "--episodes", 64, "--no-progress-bar", "--device", "cpu",
+    )  # fmt: skip
+    code, printed, err = cli(*arguments)
+    assert code == 0, err
+    info = dataset_info(out / "demonstrations")
+    assert info["episodes"] == 8 and info["horizon"] == HORIZON and info["expert"] == "test_external:point_expert"
+    policy = json.loads((out / "policy" / "summary.json").read_text())
+    assert policy["task"] == "TestExternal/PointGoal-v0" and policy["episodes"] == 64 and policy["horizon"] == HORIZON
+    # The held-out success is the saved policy's, played again here on the documented reset seeds 2**31, 2**31 + 1, ...
+    summary = json.loads((out / "summary.json").read_text())
+    model = GenRL.load(out / "policy" / "genrl_policy.zip", device="cpu")
+    played = evaluate_success(model, task, resets=HELD_OUT_RESETS)
+    assert summary["held_out_success"] == played["success_rate"] and summary["held_out_resets"] == HELD_OUT_RESETS == 200
+    assert summary["held_out_seeds"] == [HELD_OUT_SEED, HELD_OUT_SEED + 200] and HELD_OUT_SEED == 2**31
+    assert max(info["reset_seeds"]) < HELD_OUT_SEED  # no demonstration starts from a held-out reset
+    report = (out / "report.md").read_text()
+    assert f"8 perturbed episodes of the expert `test_external:point_expert`, {HORIZON} steps each" in report
+    assert f"200 held-out seeded resets (reset seeds {2**31} to {2**31 + 199}" in report
+    assert f"deterministic: **{summary['held_out_success']:.1%}**" in report
+    # A rerun resumes without work; one with another horizon is refused before any, naming it.
+    code, printed, err = cli(*arguments)
+    assert code == 0 and all(f"{stage}: already there" in printed for stage in ("demonstrations", "generator", "policy"))
+    code, _, err = cli(*arguments, "--horizon", 12)
+    assert code == 2 and f"horizon {HORIZON} (recorded) vs 12 (this run)" in err, err
+
+
+def test_quickstart_refuses_an_expert_for_a_package_task_and_an_outside_task_without_one(cli, tmp_path):
+    out = tmp_path / "quick"
+    for arguments, message in (
+        (("--task", "hockey", "--expert", "test_external:point_expert"), "expert apply to a task from outside the package"),
+        (("--task", "hockey", "--horizon", 10), "horizon apply to a task from outside the package"),
+        (("--task", "TestExternal/PointGoal-v0"), "give its expert (expert=, --expert MODULE:FUNCTION)"),
+        (("--task", "TestExternal/PointGoal-v0", "--expert", "test_external:point_expert", "--horizon", 30), "horizon 30"),
+    ):
+        code, _, err = cli("quickstart", *arguments, "--out", out, "--no-progress-bar")
+        assert code == 2 and message in err, (arguments, err)
+        assert not out.exists()
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not metaworld.installed(), reason=metaworld.INSTALL_HINT)
+def test_quickstart_of_a_metaworld_task_writes_its_report_and_a_policy_that_loads(cli, tmp_path):
+    out = tmp_path / "quick"
+    code, printed, err = cli(
+        "quickstart", "--task", "metaworld/reach-v3", "--out", out, "--demo-episodes", 4, "--epochs", 2,
+        "--episodes", 64, "--no-progress-bar", "--device", "cpu",
+    )  # fmt: skip
+    assert code == 0, err
+    # Meta-World's defaults: 150-step demonstrations of its scripted expert, and its generator preset
+    info = dataset_info(out / "demonstrations")
+    assert info["horizon"] == metaworld.DEMONSTRATION_HORIZON == 150 and info["expert"].endswith(":MetaWorldExpert")
+    assert json.loads((out / "vae.stage.json").read_text())["preset"] == metaworld.GENERATOR_PRESET
+    summary = json.loads((out / "summary.json").read_text())
+    success = [key for key in summary if "success" in key]
+    assert success and all(isinstance(summary[key], float) and 0.0 <= summary[key] <= 1.0 for key in success)
+    assert f"**{summary['held_out_success']:.1%}**" in (out / "report.md").read_text()
+    assert f"held-out seeded resets is {summary['held_out_success']:.1%}" in printed
+    model = GenRL.load(out / "policy" / "genrl_policy.zip", device="cpu")
+    env = make_task_env("metaworld/reach-v3", horizon=150)
+    context, _ = env.reset(seed=0)
+    action, _ = model.predict(context, deterministic=True)
+    assert action.shape == (model.generator.latent_dim,) and model.generator.horizon == 150

@@ -281,6 +281,8 @@ def quickstart_command(args: argparse.Namespace) -> int:
         device=args.device,
         progress_bar=not args.no_progress_bar,
         log=print,
+        expert=args.expert,
+        horizon=args.horizon,
     )
     print(f"wrote {report}")
     return 0

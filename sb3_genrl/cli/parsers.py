@@ -34,7 +34,7 @@ from sb3_genrl.hyperparams import known_env_ids, load_hyperparams
 from sb3_genrl.metrics.scorecard import NOT_CONVERGED_PRECISION, RANK_MEASURES
 from sb3_genrl.run.checkpoint import CHECKPOINT_EVERY
 from sb3_genrl.study import MODELS, SCALES
-from sb3_genrl.study.quickstart import MIN_DEMO_EPISODES
+from sb3_genrl.study.quickstart import DEMO_EPISODES, MIN_DEMO_EPISODES, OUTSIDE_DEMO_EPISODES
 from sb3_genrl.video import VIDEO_SUFFIXES
 
 
@@ -55,7 +55,7 @@ def _task_option(
             default=default,
             type=option(_check_task),
             help="a registered task, metaworld/<name> (one of Meta-World's 50 v3 tasks), a registered Gymnasium id, "
-            "or module:Id (the module registers Id when imported)",
+            "or module:Id (the module registers Id when imported)" + (f" (default: {default})" if default else ""),
         )
         return
     parser.add_argument(
@@ -374,12 +374,29 @@ def add_video(sub: argparse._SubParsersAction) -> None:
 def add_quickstart(sub: argparse._SubParsersAction) -> None:
     quick = sub.add_parser("quickstart", help="demonstrations -> VAE -> evaluation -> GenRL policy -> report, in minutes")
     quick.add_argument("--out", required=True, type=OUT_DIR, help="output folder (a rerun resumes it)")
-    _task_option(quick, required=False, default=DEFAULT_TASK)
+    _task_option(quick, required=False, default=DEFAULT_TASK, external=True)
+    quick.add_argument(
+        "--expert",
+        type=option(_check_expert),
+        default=None,
+        metavar="MODULE:FUNCTION",
+        help="a task from outside the package: its expert, observation -> action, whose perturbed demonstrations are "
+        "kept when their actions replayed open loop still succeed (metaworld/<name> comes with Meta-World's scripted "
+        "expert)",
+    )
+    quick.add_argument(
+        "--horizon",
+        type=COUNT,
+        default=None,
+        help="a task from outside the package: control steps of a demonstration and of GenRL's episodes (default: the "
+        "task's, 150 for Meta-World; else the env's own)",
+    )
     quick.add_argument(
         "--demo-episodes",
         type=option(check_int, int, minimum=MIN_DEMO_EPISODES, maximum=MAX_EPISODES),
-        default=4000,
-        help=f"demonstrations to generate, at least {MIN_DEMO_EPISODES} (default 4000)",
+        default=None,
+        help=f"demonstrations to generate, at least {MIN_DEMO_EPISODES} (default {DEMO_EPISODES}; a task from outside "
+        f"the package: {OUTSIDE_DEMO_EPISODES})",
     )
     quick.add_argument("--epochs", type=COUNT, default=300, help="beta-VAE training epochs (default 300)")
     own = ", ".join(
