@@ -23,8 +23,9 @@ from sb3_genrl.envs.external import (
 )
 
 from sb3_genrl import GenRL, LatentActionWrapper
+from sb3_genrl.cli.commands import _outside_env_maker
 from sb3_genrl.data import dataset_info, load_actions, load_arrays
-from sb3_genrl.generative import train_generator
+from sb3_genrl.generative import load, train_generator
 from sb3_genrl.run.train import _make_env
 
 HORIZON = 20
@@ -381,3 +382,25 @@ def test_quickstart_of_a_metaworld_task_writes_its_report_and_a_policy_that_load
     context, _ = env.reset(seed=0)
     action, _ = model.predict(context, deterministic=True)
     assert action.shape == (model.generator.latent_dim,) and model.generator.horizon == 150
+
+
+def test_genrl_evaluate_takes_an_outside_task_and_plays_its_prior_rollout_as_long_as_the_data(cli, tmp_path):
+    demos = record_demonstrations("TestExternal/PointGoal-v0", point_expert, 12, tmp_path / "demos", horizon=12)
+    code, _, err = cli(
+        "train-generator", "--data", demos, "--preset", "VAE1", "--epochs", 2, "--batch-size", 8, "--eval-every", 2,
+        "--out", tmp_path / "vae.pt", "--no-progress-bar",
+    )  # fmt: skip
+    assert code == 0, err
+    code, printed, err = cli(
+        "evaluate", tmp_path / "vae.pt", "--data", demos, "--task", "test_external:TestExternal/PointGoal-v0", "--n", 8,
+        "--dwpr-n", 8, "--contexts", 3, "--draws", 2, "--device", "cpu", "--out", tmp_path / "evaluation",
+    )  # fmt: skip
+    assert code == 0, err
+    assert "is a task from outside the package: the prior rollout plays its 3 x 2 episodes" in printed
+    row = json.loads((tmp_path / "evaluation" / "results.json").read_text())[0]
+    assert row["prior_episodes"] == 6 and 0.0 <= row["prior_success"] <= 1.0
+    # the rollout's env ends with the data's 12-step trajectories: none of the env's 20 steps is held after them
+    env = LatentActionWrapper(_outside_env_maker("TestExternal/PointGoal-v0", demos)(), load(tmp_path / "vae.pt"))
+    env.reset(seed=0)
+    _, _, _, _, info = env.step(np.zeros(env.generator.latent_dim, dtype=np.float32))
+    assert (info["steps_played"], info["hold_steps"]) == (12, 0)

@@ -5,16 +5,19 @@ from __future__ import annotations
 
 import argparse
 import csv
+import functools
 import json
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from sb3_genrl.baselines.compare import compare_runs
 from sb3_genrl.baselines.train import train_baseline
-from sb3_genrl.data import dataset_info
+from sb3_genrl.data import dataset_info, load_trajectories
 from sb3_genrl.envs import TASKS, get_task
 from sb3_genrl.envs.demonstrations import make_demonstrations
-from sb3_genrl.envs.external import DEFAULT_NOISE, record_demonstrations, resolve_task
+from sb3_genrl.envs.external import DEFAULT_NOISE, make_task_env, record_demonstrations, resolve_task
 from sb3_genrl.generative import train_generator
 from sb3_genrl.genrl import check_genrl_settings
 from sb3_genrl.genrl.demonstrations import callback_entries
@@ -115,7 +118,13 @@ def train_generator_command(args: argparse.Namespace) -> int:
 
 def evaluate_command(args: argparse.Namespace) -> int:
     task = args.task
-    if task is not None and not hasattr(get_task(task).env_class, "play_trajectories"):
+    if task is not None and task not in TASKS and task not in {spec.env_id for spec in TASKS.values()}:
+        task = _outside_env_maker(task, args.data)
+        print(
+            f"{args.task} is a task from outside the package: the prior rollout plays its {args.contexts} x {args.draws} "
+            "episodes through its step path, as long as the data's trajectories"
+        )
+    elif task is not None and not hasattr(get_task(task).env_class, "play_trajectories"):
         print(
             f"{task} has no fast path (play_trajectories): the prior rollout plays its "
             f"{args.contexts} x {args.draws} episodes through the step path"
@@ -140,6 +149,14 @@ def evaluate_command(args: argparse.Namespace) -> int:
     print(scorecard_markdown([evaluation.row() for evaluation in evaluations], args.rank_by, args.min_precision))
     print(f"wrote {args.out}/scorecard.md, results.md, results.csv, results.json, precision_recall.png, disentanglement.png")
     return 0
+
+
+def _outside_env_maker(task: str, data: str | Path) -> Callable[[], Any]:
+    """Makes the env of a task from outside the package with episodes as long as the trajectories of ``data`` (a
+    dataset's recorded horizon, or the second axis of an array), for the prior rollout."""
+    path = Path(data)
+    horizon = dataset_info(path)["horizon"] if path.is_dir() else load_trajectories(path).shape[1]
+    return functools.partial(make_task_env, task, horizon=int(horizon))
 
 
 def train_policy_command(args: argparse.Namespace) -> int:

@@ -211,7 +211,7 @@ def add_evaluate(sub: argparse._SubParsersAction) -> None:
     evaluate.add_argument("--k", type=COUNT, default=3, help="neighbourhood size (paper: 3)")
     _seed_option(evaluate)
     _device_option(evaluate)
-    _task_option(evaluate, required=False)
+    _task_option(evaluate, required=False, external=True)
     evaluate.add_argument("--contexts", type=COUNT, default=64, help="prior rollout (with --task): goals (64)")
     evaluate.add_argument("--draws", type=COUNT, default=16, help="prior rollout: prior draws per goal (16)")
     evaluate.add_argument(

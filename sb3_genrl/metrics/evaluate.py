@@ -11,10 +11,11 @@ import csv
 import dataclasses
 import io
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 import torch
 
@@ -206,7 +207,7 @@ def evaluate_generator(
     name: str = "model",
     device: torch.device | str = "auto",
     batch_size: int | None = None,
-    task: str | None = None,
+    task: str | Callable[[], gym.Env] | None = None,
     contexts: int = DEFAULT_CONTEXTS,
     draws: int = DEFAULT_DRAWS,
     prior_seed: int = PRIOR_ROLLOUT_SEED,
@@ -227,7 +228,8 @@ def evaluate_generator(
     :param name: the model's name in the result
     :param device: torch device for the distances; ``"auto"`` uses a GPU when there is one
     :param batch_size: edge length of the distance blocks (default: from the memory budget)
-    :param task: a task for the prior rollout (None: none)
+    :param task: a task for the prior rollout, or a callable that makes its env (a task from outside the package,
+        ``functools.partial(sb3_genrl.envs.external.make_task_env, task, horizon=T)``; None: none)
     :param contexts: the prior rollout's goals
     :param draws: its prior draws per goal
     :param prior_seed: seed of its goals (:data:`~sb3_genrl.metrics.prior_rollout.PRIOR_ROLLOUT_SEED`)
@@ -257,7 +259,7 @@ def _check_settings(
     interventions: int,
     seed: int,
     device: torch.device | str,
-    task: str | None,
+    task: str | Callable[[], gym.Env] | None,
     contexts: int,
     draws: int,
     prior_seed: int,
@@ -290,7 +292,7 @@ def evaluate_generators(
     out_dir: str | os.PathLike,
     device: torch.device | str = "auto",
     batch_size: int | None = None,
-    task: str | None = None,
+    task: str | Callable[[], gym.Env] | None = None,
     contexts: int = DEFAULT_CONTEXTS,
     draws: int = DEFAULT_DRAWS,
     prior_seed: int = PRIOR_ROLLOUT_SEED,
@@ -320,7 +322,8 @@ def evaluate_generators(
     :param out_dir: output folder (created)
     :param device: torch device for loading and distances; ``"auto"`` uses a GPU when there is one
     :param batch_size: edge length of the distance blocks (default: from the memory budget)
-    :param task: a task for the prior rollout (None: none)
+    :param task: a task for the prior rollout, or a callable that makes its env (a task from outside the package,
+        ``functools.partial(sb3_genrl.envs.external.make_task_env, task, horizon=T)``; None: none)
     :param contexts: the prior rollout's goals
     :param draws: its prior draws per goal
     :param prior_seed: seed of its goals
@@ -375,7 +378,7 @@ def evaluate_generators(
     return evaluations
 
 
-def _check_rank_by(rank_by: str | None, task: str | None) -> None:
+def _check_rank_by(rank_by: str | None, task: str | Callable[[], gym.Env] | None) -> None:
     """Refuse a measure the scorecard cannot rank by, before any work."""
     if rank_by is not None and rank_by not in RANK_MEASURES:
         raise ValueError(f"rank_by must be one of {', '.join(RANK_MEASURES)}, got {rank_by!r}")
@@ -383,12 +386,13 @@ def _check_rank_by(rank_by: str | None, task: str | None) -> None:
         raise ValueError("rank_by='prior_median' needs a task: the prior rollout runs only with one")
 
 
-def _check_prior_task(task: str, contexts: int, draws: int, prior_seed: int) -> None:
+def _check_prior_task(task: str | Callable[[], gym.Env], contexts: int, draws: int, prior_seed: int) -> None:
     """Refuse an unknown task, or bad prior-rollout sizes, before any work."""
     check_positive_int(contexts, "contexts")
     check_positive_int(draws, "draws")
     check_seed(prior_seed)
-    task_env_id(task)  # raises, naming the registered tasks
+    if isinstance(task, str) or not callable(task):
+        task_env_id(task)  # raises, naming the registered tasks
 
 
 def _check_sample_sizes(real: np.ndarray, n: int, dwpr_n: int, interventions: int, data: Any) -> None:

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Callable
 from typing import Any
 
 import gymnasium as gym
@@ -81,9 +82,11 @@ class PriorRollout:
         }
 
 
-def _latent_env(task: str | gym.Env, generator: TrajectoryGenerator) -> Any:
+def _latent_env(task: str | gym.Env | Callable[[], gym.Env], generator: TrajectoryGenerator) -> Any:
     if isinstance(task, gym.Env):
         env = task
+    elif callable(task):  # a task from outside the package: a callable that makes its env
+        env = task()
     else:
         env = gym.make(task_env_id(task))
     return LatentActionWrapper(env, generator)
@@ -91,7 +94,7 @@ def _latent_env(task: str | gym.Env, generator: TrajectoryGenerator) -> Any:
 
 def prior_rollout(
     generator: TrajectoryGenerator,
-    task: str | gym.Env,
+    task: str | gym.Env | Callable[[], gym.Env],
     *,
     contexts: int | np.ndarray = DEFAULT_CONTEXTS,
     draws: int = DEFAULT_DRAWS,
@@ -102,7 +105,7 @@ def prior_rollout(
 
     :param generator: the trained generator
     :param task: a task name or Gymnasium id, or an env (with ``play_trajectories``: the fast path; else the step
-        path, see the module's description)
+        path, see the module's description), or a callable that makes the env
     :param contexts: how many goals to draw (the task's ``sample_goal``; the step path: reset seeds), or the goals
         themselves ``(G, goal_dim)`` (the fast path only)
     :param draws: prior draws per goal
