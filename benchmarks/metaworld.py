@@ -1,0 +1,343 @@
+"""GenRL on Meta-World's MT10 with one configuration: success on held-out seeded resets, beside the expert and SAC.
+
+Per task (``--tasks``, default the ten MT10 tasks), each unit is kept in ``--work`` (default ``runs/metaworld/TASK``) and
+in the JSON as it finishes, so that the same command after a stop resumes where it stopped (the settings are recorded
+and a rerun with others is refused before any work):
+
+1. ``--demos`` demonstrations of Meta-World's scripted expert, perturbed, 150 steps each
+   (:func:`~sb3_genrl.envs.external.record_demonstrations`, seed 0), kept when their open-loop replay succeeds;
+2. a generator of the quickstart's Meta-World preset (:data:`sb3_genrl.envs.metaworld.GENERATOR_PRESET`), ``--epochs``,
+   seed 0;
+3. the expert closed loop, unperturbed, from the held-out resets, and its actions replayed open loop from the same
+   resets;
+4. per seed, the fit to the demonstrations at episode 0: GenRL's policy mean fitted to the demonstrations' latent codes
+   (:class:`~sb3_genrl.genrl.demonstrations.DemonstrationCallback`'s fit, ``--fit-steps`` Adam steps), before any
+   episode is played;
+5. per seed, GenRL with its defaults (``GenRL(env, generator)``: the one configuration of every task, ``--batch-episodes``
+   a batch), ``--episodes`` episodes (checkpointed; a stopped run resumes);
+6. per seed, SB3's SAC (its defaults, learning from the first step, observations normalised with the demonstrations'
+   statistics) with the demonstrations' transitions in its replay buffer, for the same ``--episodes`` episodes of 150
+   steps.
+
+Every policy is scored deterministically on ``--held-out`` held-out seeded resets: reset seeds from ``2**31``
+(:func:`~sb3_genrl.envs.external.evaluate_success`), which the recorder never draws and which choose nothing. Each
+method's CPU seconds per seed are recorded (process time; every env plays in this process). The JSON (default
+``benchmarks/results/metaworld.json``, with :func:`sb3_genrl.provenance.provenance`) says ``"complete": false`` until
+every unit of every task asked for is done; the Markdown table is written beside it (``.md``).
+
+    python benchmarks/metaworld.py                                   # MT10 x seeds 0 1 2 (hours on a CPU)
+    python benchmarks/metaworld.py --tasks push-v3 --seeds 0 --out push.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from sb3_genrl.baselines.models import normalized_policy
+from sb3_genrl.baselines.prefill import prefill_replay_buffer
+from sb3_genrl.envs import metaworld
+from sb3_genrl.envs.external import HELD_OUT_SEED, evaluate_success, make_task_env, record_demonstrations
+from stable_baselines3 import SAC
+
+from sb3_genrl import GenRL, LatentActionWrapper
+from sb3_genrl.checks import COUNT, JSON_OUT, OUT_DIR, SEED, check_int, option
+from sb3_genrl.data import dataset_info, load_arrays, load_transitions
+from sb3_genrl.generative import load, train_generator
+from sb3_genrl.genrl.demonstrations import DemonstrationCallback, fit_mean_to_demonstrations
+from sb3_genrl.markdown import markdown_table
+from sb3_genrl.provenance import provenance
+from sb3_genrl.run import train_policy
+from sb3_genrl.run.stages import STAGE_FILE, SettingsConflictError, read_settings, refuse_conflicts, settings_conflicts
+from sb3_genrl.utils import atomic_write_json, atomic_write_text
+
+RESULTS = Path(__file__).resolve().parent / "results"
+HORIZON = metaworld.DEMONSTRATION_HORIZON
+METHODS = ("fit", "genrl", "sac")  # the per-seed units, in the order they run
+
+
+def _task_name(name: str, _: str = "") -> str:
+    metaworld.check_task_name(name)
+    return name
+
+
+def arguments(argv: list[str] | None = None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "--tasks",
+        nargs="+",
+        type=option(_task_name),
+        default=list(metaworld.MT10_TASK_NAMES),
+        help="Meta-World v3 tasks (default: MT10)",
+    )
+    parser.add_argument("--seeds", nargs="+", type=SEED, default=[0, 1, 2], help="seeds of GenRL and SAC (default 0 1 2)")
+    parser.add_argument("--demos", type=COUNT, default=500, help="demonstrations per task (default 500, the quickstart's)")
+    parser.add_argument("--epochs", type=COUNT, default=300, help="generator epochs (default 300)")
+    parser.add_argument("--episodes", type=COUNT, default=3000, help="episodes of GenRL and of SAC per seed (default 3000)")
+    parser.add_argument(
+        "--batch-episodes",
+        type=option(check_int, int, minimum=2),
+        default=64,
+        help="GenRL's episodes per iteration (default 64)",
+    )
+    parser.add_argument("--held-out", type=COUNT, default=200, help="held-out seeded resets (default 200)")
+    parser.add_argument("--fit-steps", type=COUNT, default=4000, help="Adam steps of the fit at episode 0 (default 4000)")
+    parser.add_argument("--work", type=OUT_DIR, default="runs/metaworld", help="work folder (default runs/metaworld)")
+    parser.add_argument(
+        "--out", type=JSON_OUT, default=str(RESULTS / "metaworld.json"), help="result JSON (the table beside it, .md)"
+    )
+    args = parser.parse_args(argv)
+    if not metaworld.installed():
+        parser.error(metaworld.INSTALL_HINT)
+    try:  # a result or a work folder of other settings: refused before any work
+        refuse_conflicts(args.out if Path(args.out).is_file() else args.work, _conflicts(args))
+    except SettingsConflictError as error:
+        parser.error(str(error))
+    return args
+
+
+def _conflicts(args: argparse.Namespace) -> list[str]:
+    """Where the result JSON or a task's work folder (``stage.json``) records other settings than this run's."""
+    wanted = settings(args)
+    out = Path(args.out)
+    recorded = read_settings(out) if out.is_file() else None
+    lines = settings_conflicts(
+        out, None if recorded is None else recorded.get("settings"), wanted, output_exists=bool(recorded)
+    )
+    for task in args.tasks:
+        work = Path(args.work) / task
+        lines += settings_conflicts(work, read_settings(work / STAGE_FILE), wanted, output_exists=work.is_dir())
+    return lines
+
+
+def settings(args: argparse.Namespace) -> dict[str, Any]:
+    """What every result of the run depends on (a rerun with other settings is refused)."""
+    return {
+        "horizon": HORIZON,
+        "demos": args.demos,
+        "epochs": args.epochs,
+        "preset": metaworld.GENERATOR_PRESET,
+        "episodes": args.episodes,
+        "batch_episodes": args.batch_episodes,
+        "held_out": args.held_out,
+        "held_out_seed": HELD_OUT_SEED,
+        "fit_steps": args.fit_steps,
+        "genrl": "GenRL's defaults",
+        "sac": "SB3's defaults, learning_starts 0, the demonstrations in the buffer",
+    }
+
+
+def closed_loop(env: Any, policy: Any, reset_seed: int) -> tuple[bool, np.ndarray]:
+    """One episode of ``policy`` (observation -> action) from ``reset(seed=reset_seed)``: its success at the last step
+    and the actions it played."""
+    observation, _ = env.reset(seed=reset_seed)
+    actions, info = [], {}
+    for _ in range(HORIZON):
+        action = np.clip(np.asarray(policy(observation), dtype=np.float32), -1.0, 1.0)
+        observation, _, terminated, truncated, info = env.step(action)
+        actions.append(action)
+        if terminated or truncated:
+            break
+    return bool(info.get("is_success", False)), np.array(actions)
+
+
+def open_loop(env: Any, actions: np.ndarray, reset_seed: int) -> bool:
+    """``actions`` replayed from ``reset(seed=reset_seed)``: the success at the last step."""
+    env.reset(seed=reset_seed)
+    info = {}
+    for action in actions:
+        _, _, terminated, truncated, info = env.step(action)
+        if terminated or truncated:
+            break
+    return bool(info.get("is_success", False))
+
+
+def expert_row(task: str, held_out: int) -> dict[str, Any]:
+    """The expert closed loop from the held-out resets, and its actions replayed open loop from the same resets."""
+    env, expert = make_task_env(f"metaworld/{task}", horizon=HORIZON), metaworld.metaworld_expert(task)
+    began = time.process_time()
+    closed, opened = [], []
+    for i in range(held_out):
+        success, actions = closed_loop(env, expert, HELD_OUT_SEED + i)
+        closed.append(success)
+        opened.append(open_loop(env, actions, HELD_OUT_SEED + i))
+    env.close()
+    return {
+        "closed_loop": float(np.mean(closed)),
+        "open_loop": float(np.mean(opened)),
+        "cpu_seconds": round(time.process_time() - began, 1),
+    }
+
+
+def fit_row(task: str, generator_path: Path, dataset: Path, seed: int, args: argparse.Namespace) -> dict[str, Any]:
+    """GenRL's policy with its mean fitted to the demonstrations' latent codes, before any episode, on held-out resets."""
+    began = time.process_time()
+    generator = load(generator_path, device="cpu")
+    model = GenRL(LatentActionWrapper(make_task_env(f"metaworld/{task}", horizon=HORIZON), generator), seed=seed, device="cpu")
+    contexts, latents = DemonstrationCallback(dataset, fit_steps=args.fit_steps, keep=False).pulls(
+        generator, model.observation_space, model.latent_clip
+    )
+    fit = fit_mean_to_demonstrations(model.policy, contexts, latents, steps=args.fit_steps)
+    fitted = time.process_time() - began
+    score = evaluate_success(model, f"metaworld/{task}", resets=args.held_out, horizon=HORIZON)
+    return {"success": score["success_rate"], "cpu_seconds": round(fitted, 1), "last_loss": fit["last_loss"]}
+
+
+def genrl_row(task: str, generator_path: Path, work: Path, seed: int, args: argparse.Namespace) -> dict[str, Any]:
+    """GenRL with its defaults for ``--episodes`` episodes (resumed from its checkpoint), on held-out resets."""
+    began = time.process_time()
+    run = train_policy(
+        metaworld.metaworld_env_id(task),
+        str(generator_path),
+        episodes=args.episodes,
+        batch_episodes=args.batch_episodes,
+        n_envs=1,  # in this process, so that its CPU time is this process's
+        seed=seed,
+        out_dir=work / f"genrl_seed{seed}",
+        horizon=HORIZON,
+        device="cpu",
+    )
+    trained = time.process_time() - began
+    model = GenRL.load(run["model_path"], device="cpu")
+    score = evaluate_success(model, f"metaworld/{task}", resets=args.held_out, horizon=HORIZON)
+    return {
+        "success": score["success_rate"],
+        "cpu_seconds": round(trained, 1),
+        "episodes": run["episodes"],
+        **({"resumed_at_episodes": run["resumed_at_episodes"]} if "resumed_at_episodes" in run else {}),
+    }
+
+
+def sac_row(task: str, dataset: Path, seed: int, args: argparse.Namespace) -> dict[str, Any]:
+    """SAC with the demonstrations' transitions in its replay buffer, ``--episodes`` episodes, on held-out resets."""
+    transitions = load_transitions(dataset)
+    # Meta-World's episodes end by truncation only: a demonstration's last step is no terminal state, as SAC's own
+    # collected truncations are not (SB3's handle_timeout_termination)
+    transitions["dones"] = load_arrays(dataset, keys=("terminations",))["terminations"].reshape(-1)
+    env = make_task_env(f"metaworld/{task}", horizon=HORIZON)
+    steps = args.episodes * HORIZON
+    began = time.process_time()
+    model = SAC(
+        "MlpPolicy",
+        env,
+        buffer_size=len(transitions["observations"]) + steps,
+        learning_starts=0,
+        seed=seed,
+        device="cpu",
+        policy_kwargs=normalized_policy({}, transitions["observations"]),
+    )
+    prefill_replay_buffer(model, transitions)
+    model.learn(total_timesteps=steps)
+    trained = time.process_time() - began
+    successes = [
+        closed_loop(env, lambda observation: model.predict(observation, deterministic=True)[0], HELD_OUT_SEED + i)[0]
+        for i in range(args.held_out)
+    ]
+    env.close()
+    return {"success": float(np.mean(successes)), "cpu_seconds": round(trained, 1), "episodes": args.episodes}
+
+
+def run_task(task: str, args: argparse.Namespace, result: dict[str, Any], save: Any) -> None:
+    """Every unit of ``task`` not in ``result`` yet, each saved as it finishes."""
+    work = Path(args.work) / task
+    work.mkdir(parents=True, exist_ok=True)
+    atomic_write_json(work / STAGE_FILE, settings(args))  # the settings its files are made with (checked on a rerun)
+    row = result["tasks"].setdefault(task, {})
+    dataset, generator_path = work / "demonstrations", work / "vae.pt"
+    if "demonstrations" not in row:
+        began = time.process_time()
+        if not (dataset.is_dir() and any(dataset.iterdir())):  # a dataset is written whole or not at all
+            record_demonstrations(f"metaworld/{task}", None, args.demos, dataset, seed=0, horizon=HORIZON)
+        info = dataset_info(dataset)
+        row["demonstrations"] = {
+            key: info[key] for key in ("episodes", "tried", "kept_share", "failed_closed_loop", "failed_open_loop")
+        } | {"cpu_seconds": round(time.process_time() - began, 1)}
+        save()
+    if "generator" not in row:
+        began = time.process_time()
+        if not generator_path.is_file():  # written atomically once training ends
+            train_generator(dataset, preset=metaworld.GENERATOR_PRESET, epochs=args.epochs, seed=0, out=generator_path)
+        row["generator"] = {
+            "best_epoch": load(generator_path).best_epoch,
+            "cpu_seconds": round(time.process_time() - began, 1),
+        }
+        save()
+    if "expert" not in row:
+        row["expert"] = expert_row(task, args.held_out)
+        save()
+    for seed in args.seeds:
+        for method in METHODS:
+            done = row.setdefault(method, {})
+            if str(seed) in done:
+                continue
+            if method == "fit":
+                done[str(seed)] = fit_row(task, generator_path, dataset, seed, args)
+            elif method == "genrl":
+                done[str(seed)] = genrl_row(task, generator_path, work, seed, args)
+            else:
+                done[str(seed)] = sac_row(task, dataset, seed, args)
+            save()
+
+
+def table(result: dict[str, Any]) -> str:
+    """The Markdown table: per task, each method's held-out success (mean +- std over seeds) and CPU seconds per seed."""
+
+    def over_seeds(units: dict[str, dict[str, Any]], key: str) -> tuple[float, float]:
+        values = [unit[key] for unit in units.values()]
+        return (float(np.mean(values)), float(np.std(values))) if values else (float("nan"), float("nan"))
+
+    rows = []
+    for task, row in result["tasks"].items():
+        expert = row.get("expert", {})
+        cells: list[Any] = [task, expert.get("closed_loop", float("nan")), expert.get("open_loop", float("nan"))]
+        for method in METHODS:
+            mean, std = over_seeds(row.get(method, {}), "success")
+            cells.append(f"{mean:.3f} +- {std:.3f} ({len(row.get(method, {}))})")
+        cells += [over_seeds(row.get(method, {}), "cpu_seconds")[0] for method in METHODS]
+        rows.append(cells)
+    header = [
+        "task",
+        "expert closed loop",
+        "expert open loop",
+        "fit at episode 0 (seeds)",
+        "GenRL (seeds)",
+        "SAC + demonstrations (seeds)",
+        "fit CPU s",
+        "GenRL CPU s",
+        "SAC CPU s",
+    ]
+    return markdown_table(header, rows, digits=3, align="lrrrrrrrr")
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = arguments(argv)
+    torch.set_num_threads(1)
+    out = Path(args.out)
+    result = read_settings(out) if out.is_file() else None
+    result = result or {"benchmark": "metaworld", "settings": settings(args), "tasks": {}}
+
+    def save() -> None:
+        result["provenance"] = provenance()
+        result["complete"] = all(
+            all(key in result["tasks"].get(task, {}) for key in ("demonstrations", "generator", "expert"))
+            and all(str(seed) in result["tasks"][task].get(method, {}) for seed in (0, 1, 2) for method in METHODS)
+            for task in metaworld.MT10_TASK_NAMES
+        )
+        atomic_write_json(out, result)
+        atomic_write_text(out.with_suffix(".md"), table(result) + "\n")
+
+    for task in args.tasks:
+        run_task(task, args, result, save)
+        print(f"{task}: done", flush=True)
+    save()
+    print(table(result))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

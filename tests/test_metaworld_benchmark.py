@@ -1,0 +1,50 @@
+"""benchmarks/metaworld.py at tiny sizes: every unit of a task written to its JSON and table, a rerun resumes without
+work, and a rerun with other settings is refused before any."""
+
+import json
+
+import pytest
+from sb3_genrl.envs import metaworld
+
+pytestmark = pytest.mark.skipif(not metaworld.installed(), reason=metaworld.INSTALL_HINT)
+
+TINY = ["--tasks", "reach-v3", "--seeds", "0", "--demos", "4", "--epochs", "2", "--episodes", "4", "--batch-episodes", "4"]
+TINY += ["--held-out", "4", "--fit-steps", "10"]
+
+
+def test_the_metaworld_benchmark_writes_every_unit_resumes_and_refuses_other_settings(tmp_path, capsys):
+    from sb3_genrl.benchmarks.metaworld import main
+
+    out, work = tmp_path / "metaworld.json", tmp_path / "work"
+    argv = [*TINY, "--work", str(work), "--out", str(out)]
+    assert main(argv) == 0
+    result = json.loads(out.read_text())
+    row = result["tasks"]["reach-v3"]
+    assert result["settings"]["held_out"] == 4 and result["settings"]["held_out_seed"] == 2**31
+    assert "git_commit" in result["provenance"] and result["complete"] is False  # one task and one seed of MT10 x 3
+    assert row["demonstrations"]["episodes"] == 4 and row["expert"]["closed_loop"] == row["expert"]["open_loop"] == 1.0
+    for method in ("fit", "genrl", "sac"):
+        unit = row[method]["0"]
+        assert 0.0 <= unit["success"] <= 1.0 and unit["cpu_seconds"] >= 0.0, method
+    assert row["genrl"]["0"]["episodes"] == 4 and row["sac"]["0"]["episodes"] == 4
+    assert "| reach-v3 | 1.000 | 1.000 |" in out.with_suffix(".md").read_text()
+    # the same command again: nothing redone
+    stamps = {path: path.stat().st_mtime_ns for path in (work / "reach-v3").rglob("*") if path.is_file()}
+    assert main(argv) == 0
+    assert json.loads(out.read_text())["tasks"] == result["tasks"]
+    assert all(path.stat().st_mtime_ns == stamp for path, stamp in stamps.items() if path.name != "stage.json")
+    # other settings: refused before any work, naming the setting
+    before = out.read_text()
+    with pytest.raises(SystemExit) as exit_:
+        main([*argv, "--demos", "5"])
+    assert exit_.value.code == 2 and "demos 4 (recorded) vs 5 (this run)" in capsys.readouterr().err
+    assert out.read_text() == before
+
+
+def test_the_metaworld_benchmark_refuses_an_unknown_task_before_any_work(tmp_path, capsys):
+    from sb3_genrl.benchmarks.metaworld import main
+
+    with pytest.raises(SystemExit) as exit_:
+        main(["--tasks", "push", "--work", str(tmp_path / "work"), "--out", str(tmp_path / "r.json")])
+    assert exit_.value.code == 2 and "unknown Meta-World task 'push'" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
