@@ -47,9 +47,8 @@ MAX_EPISODE_STEPS = 500  # Meta-World's max_path_length of every task
 DEMONSTRATION_HORIZON = 150
 # The generator preset genrl quickstart trains for a Meta-World task (ExternalTask.generator_preset): the Fetch tasks'
 # recipe (10 latent dimensions, beta = 0.001, the hand's path weighed in the loss: a Meta-World action moves the hand as
-# a Fetch action moves the gripper). Trained as the quickstart trains it (500 demonstrations of 150 steps, 300 epochs),
-# each preset encoded and decoded 100 tuning demonstrations (recorder seed 777) that, replayed open loop from their
-# reset seeds, succeeded in this share: push-v3 VAE1 0.22, VAE9 0.58, VAE-FETCH 0.86; pick-place-v3 0.02, 0.56, 0.72.
+# a Fetch action moves the gripper), chosen by how often its reconstructions of tuning demonstrations, replayed open
+# loop, still succeed (docs/guide/your_task.md).
 GENERATOR_PRESET = "VAE-FETCH"
 # Meta-World's 50 v3 tasks (metaworld.env_dict.ALL_V3_ENVIRONMENTS, in its order; a test checks this copy)
 TASK_NAMES = (
