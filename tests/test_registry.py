@@ -193,7 +193,9 @@ def test_toy_task_through_the_cli(reach_task, tmp_path, capsys):
 
 def test_task_names_only_in_the_task_modules_and_the_registry():
     root = Path(__file__).resolve().parents[1]
-    allowed = {Path("envs/__init__.py")} | {Path(f"envs/{name}.py") for name in ("hockey", "basketball", "fetch", "fetch_tasks")}
+    allowed = {Path("envs/__init__.py")} | {
+        Path(f"envs/{name}.py") for name in ("hockey", "basketball", "fetch", "fetch_tasks")
+    }
     pattern = re.compile(r'"(?:{})"'.format("|".join(TASKS)))
     found = [
         str(path.relative_to(root))
