@@ -160,7 +160,8 @@ def _outside_env_maker(task: str, data: str | Path) -> Callable[[], Any]:
 
 
 def train_policy_command(args: argparse.Namespace) -> int:
-    if args.task not in TASKS:  # metaworld/<name>, module:Id: the Gymnasium id
+    outside = args.task not in TASKS
+    if outside:  # metaworld/<name>, module:Id: the Gymnasium id
         args.task = resolve_task(args.task).env_id
     result = train_policy(
         args.task,
@@ -181,20 +182,27 @@ def train_policy_command(args: argparse.Namespace) -> int:
         f"GenRL on {args.task}: {result['episodes']} episodes, {result['iterations']} iterations, mean reward "
         f"final {result['final_mean_reward']:.4g}, best {result['best_mean_reward']:.4g} -> {result['model_path']}"
     )
-    print(_success_line(result["log_dir"]))
+    line = _success_line(result["log_dir"], outside)
+    if line is not None:
+        print(line)
     return 0
 
 
-def _success_line(log_dir: str) -> str:
+def _success_line(log_dir: str, outside: bool) -> str | None:
     """What a run logged of the task's success: the last ``rollout/success_rate`` in SB3's log (its share over the last
-    episodes played, up to 100), or that the env reported none."""
+    episodes played, up to 100), or, for a task from outside the package, that the env reported none (None for the
+    package's tasks that report none: their score is a distance)."""
     with open(Path(log_dir) / "progress.csv", newline="", encoding="utf-8") as file:
         rates = [row.get("rollout/success_rate") for row in csv.DictReader(file)]
     rates = [float(rate) for rate in rates if rate]
     if not rates:
         return (
-            "success: the env reports no info['is_success'] at an episode's last step, so none is logged; the run "
-            "learns from the rewards alone"
+            None
+            if not outside
+            else (
+                "success: the env reports no info['is_success'] at an episode's last step, so none is logged; the run "
+                "learns from the rewards alone"
+            )
         )
     return (
         f"success: {rates[-1]:.3f} of the last episodes played (info['is_success'] at their last step; SB3's "
