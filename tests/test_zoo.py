@@ -175,6 +175,7 @@ def test_the_zoo_and_train_policy_build_the_same_genrl_from_the_file(trained, ho
 
 
 @pytest.mark.slow  # about 15 s: two trials, each policy evaluated twice
+@pytest.mark.filterwarnings("error:no generator found:UserWarning")  # enjoy finds the generator beside the copy
 def test_a_small_study_tries_the_entry_first(hockey_generator, tmp_path):
     import optuna
 

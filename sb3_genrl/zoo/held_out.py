@@ -96,6 +96,7 @@ def enjoy_rewards(model_path: str, env_id: str, goals: int) -> np.ndarray:
         run = pathlib.Path(folder) / "genrl" / f"{EnvironmentName(env_id)}_1"
         (run / EnvironmentName(env_id)).mkdir(parents=True)
         shutil.copy(model_path, run / "best_model.zip")
+        shutil.copy(generator, run / "best_model.generator.pt")  # the copy's generator beside it, as GenRL.save puts it
         (run / EnvironmentName(env_id) / "config.yml").write_text(yaml.dump({"env_wrapper": [wrapper]}))
         (run / EnvironmentName(env_id) / "args.yml").write_text(yaml.dump({"env_kwargs": None}))
         zoo(
