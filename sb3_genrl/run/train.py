@@ -383,7 +383,7 @@ MAIN_GUARD = (
 def _check_arguments(
     episodes: int,
     batch_episodes: int,
-    n_envs: int,
+    n_envs: int | None,
     seed: int,
     device: str,
     checkpoint_every: int | None,
@@ -396,17 +396,12 @@ def _check_arguments(
     if n_threads is not None:
         check_positive_int(n_threads, "n_threads")
     check_int(batch_episodes, "batch_episodes", minimum=2)
-    if n_envs is None:
-        return _check_settings(seed, device, genrl_kwargs)
-    check_positive_int(n_envs, "n_envs")
-    if n_envs > 1 and getattr(multiprocessing.current_process(), "_inheriting", False):  # Python's own test
-        raise RuntimeError(MAIN_GUARD)  # in an env process that re-imports the script: its stderr shows why
-    if batch_episodes % n_envs:
-        raise ValueError(f"batch_episodes ({batch_episodes}) must be a multiple of n_envs ({n_envs})")
-    _check_settings(seed, device, genrl_kwargs)
-
-
-def _check_settings(seed: int, device: str, genrl_kwargs: dict[str, Any]) -> None:
+    if n_envs is not None:  # None: the task's default (default_n_envs), a divisor of batch_episodes in this process
+        check_positive_int(n_envs, "n_envs")
+        if n_envs > 1 and getattr(multiprocessing.current_process(), "_inheriting", False):  # Python's own test
+            raise RuntimeError(MAIN_GUARD)  # in an env process that re-imports the script: its stderr shows why
+        if batch_episodes % n_envs:
+            raise ValueError(f"batch_episodes ({batch_episodes}) must be a multiple of n_envs ({n_envs})")
     check_seed(seed)
     check_device(device)
     if "n_steps" in genrl_kwargs:  # the learning curve's window and the summary's iterations follow batch_episodes
