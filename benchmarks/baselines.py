@@ -23,13 +23,13 @@ another generator or another version. ``--merge`` keeps the other methods of an 
 replaces) the methods run now, so that methods run at different times share one table; it refuses a result of
 another task, budget, seed list, demonstration dataset, generator or package version.
 
-    python benchmarks/baselines.py                          # hockey, 3 seeds x 3000 episodes, every method
-    python benchmarks/baselines.py --jobs 2                 # two runs at a time
-    python benchmarks/baselines.py --task basketball --jobs 2   # basketball (benchmarks/results/baselines_basketball.json)
-    python benchmarks/baselines.py --episodes 40 --seeds 0 --out /tmp/tiny.json --work /tmp/tiny   # end-to-end check
-    python benchmarks/baselines.py --methods ppo --episodes 1000 --baseline-kwargs '{"ppo": {"target_kl": 0.02}}' \
+    python -m benchmarks.baselines                          # hockey, 3 seeds x 3000 episodes, every method
+    python -m benchmarks.baselines --jobs 2                 # two runs at a time
+    python -m benchmarks.baselines --task basketball --jobs 2   # basketball (benchmarks/results/baselines_basketball.json)
+    python -m benchmarks.baselines --episodes 40 --seeds 0 --out /tmp/tiny.json --work /tmp/tiny   # end-to-end check
+    python -m benchmarks.baselines --methods ppo --episodes 1000 --baseline-kwargs '{"ppo": {"target_kl": 0.02}}' \
         --work benchmarks/runs/ppo_target_kl --out /tmp/ppo_target_kl.json      # a change to the zoo's settings
-    python benchmarks/baselines.py --task basketball --methods sac-her --merge   # add one method to the committed table
+    python -m benchmarks.baselines --task basketball --methods sac-her --merge   # add one method to the committed table
 """
 
 from __future__ import annotations
@@ -50,10 +50,10 @@ import torch
 from sb3_genrl.baselines.evaluation import EVAL_GOALS, evaluate_trained, load_trained
 from sb3_genrl.baselines.hyperparameters import baseline_kwargs_argument, settings_record
 from sb3_genrl.baselines.train import train_baseline
-from sb3_genrl.benchmarks.baselines_results import METHODS, WINDOW, core_hours, merge_results, method_result, write_outputs
 from sb3_genrl.envs import arm_tasks, get_task
 from sb3_genrl.envs.demonstrations import make_demonstrations
 
+from benchmarks.baselines_results import METHODS, WINDOW, core_hours, merge_results, method_result, write_outputs
 from sb3_genrl import __version__
 from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, OUT_DIR, SEED, json_object_argument
 from sb3_genrl.curves import MONITOR_FILE, read_monitor

@@ -1,4 +1,4 @@
-"""The baselines benchmark's results (:mod:`sb3_genrl.benchmarks.baselines`): each method's distances, table contacts
+"""The baselines benchmark's results (:mod:`benchmarks.baselines`): each method's distances, table contacts
 and timings over its seeds, the merge of results made at different times, the JSON, Markdown table and plots, and
 the cost of the whole benchmark."""
 

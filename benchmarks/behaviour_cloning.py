@@ -11,8 +11,8 @@ For each seed's cloned policy, played deterministically:
 
 Usage::
 
-    python benchmarks/behaviour_cloning.py --task hockey
-    python benchmarks/behaviour_cloning.py --task basketball   # benchmarks/results/behaviour_cloning_basketball.json
+    python -m benchmarks.behaviour_cloning --task hockey
+    python -m benchmarks.behaviour_cloning --task basketball   # benchmarks/results/behaviour_cloning_basketball.json
 """
 
 from __future__ import annotations
@@ -92,7 +92,7 @@ def main(argv: list[str] | None = None) -> int:
     runs = [work / "ppo" / f"seed{seed}" for seed in args.seeds]
     missing = [str(run) for run in runs if not (run / "bc_policy.zip").exists() or not (run / "summary.json").exists()]
     if missing:
-        parser.error(f"no finished PPO (BC) run in {missing}; run benchmarks/baselines.py --methods ppo first")
+        parser.error(f"no finished PPO (BC) run in {missing}; run python -m benchmarks.baselines --methods ppo first")
     transitions = add_time_feature(load_transitions(work / "demonstrations", task=spec.name), spec.horizon)
     still = evaluate_feedback_policy(HoldStill(), spec.name, goals=EVAL_GOALS, seed=EVAL_GOAL_SEED)
     result = {

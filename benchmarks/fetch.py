@@ -29,8 +29,8 @@ after a stop resumes where it stopped (a run's settings are recorded and checked
 The JSON (default ``benchmarks/results/fetch_TASK.json``) says ``"complete": false`` and how far each seed got until
 every stage is done and seeds 0, 1 and 2 have finished (a run of other ``--seeds`` stays partial).
 
-    python benchmarks/fetch.py --task fetch-push                   # 3 seeds x 3000 episodes, 500 held-out states
-    python benchmarks/fetch.py --task fetch-reach --seeds 0 --eval-states 100
+    python -m benchmarks.fetch --task fetch-push                   # 3 seeds x 3000 episodes, 500 held-out states
+    python -m benchmarks.fetch --task fetch-reach --seeds 0 --eval-states 100
 """
 
 from __future__ import annotations
@@ -43,9 +43,6 @@ import shutil
 import time
 
 import torch
-from sb3_genrl.benchmarks.fetch_results import BENCHMARK_SEEDS, all_seeds_finished, seed_row, write_result
-from sb3_genrl.benchmarks.fetch_seed import fitted_mean_success, recorded_genrl_settings, train_seed
-from sb3_genrl.benchmarks.genrl import make_benchmark_demonstrations
 from sb3_genrl.envs import TASKS, get_task
 from sb3_genrl.envs.fetch_demonstrations import (
     policy_neighbourhood_success,
@@ -53,6 +50,9 @@ from sb3_genrl.envs.fetch_demonstrations import (
     reconstruction_success,
 )
 
+from benchmarks.fetch_results import BENCHMARK_SEEDS, all_seeds_finished, seed_row, write_result
+from benchmarks.fetch_seed import fitted_mean_success, recorded_genrl_settings, train_seed
+from benchmarks.genrl import make_benchmark_demonstrations
 from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, SEED
 from sb3_genrl.data import dataset_info
 from sb3_genrl.generative import load, train_generator

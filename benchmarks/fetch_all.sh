@@ -11,7 +11,7 @@ tasks=("$@")
 [ ${#tasks[@]} -gt 0 ] || tasks=(fetch-push fetch-reach fetch-pick-and-place fetch-slide)
 for task in "${tasks[@]}"; do
   echo "=== $task $(date -u)"
-  .venv/bin/python benchmarks/fetch.py --task "$task" --out "runs/fetch/fetch_$task.json" --new-runs \
+  .venv/bin/python -m benchmarks.fetch --task "$task" --out "runs/fetch/fetch_$task.json" --new-runs \
     || echo "=== $task failed (exit $?)"
 done
 echo "=== done $(date -u)"

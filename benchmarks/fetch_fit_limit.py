@@ -23,8 +23,8 @@ The collection is kept beside the output (``OUT_collection.npz``) and reused by 
 A gap between 3 and 4 on the states the mean was fitted to says that the mean cannot represent the solving latent
 actions, whatever search finds them. The held-out evaluation states are never used.
 
-    python benchmarks/fetch_fit_limit.py --task fetch-push --generator GEN.pt --data DEMOS
-    python benchmarks/fetch_fit_limit.py --task fetch-slide --generator GEN.pt --data DEMOS --policy RUN/genrl_policy.zip
+    python -m benchmarks.fetch_fit_limit --task fetch-push --generator GEN.pt --data DEMOS
+    python -m benchmarks.fetch_fit_limit --task fetch-slide --generator GEN.pt --data DEMOS --policy RUN/genrl_policy.zip
 """
 
 from __future__ import annotations
@@ -39,10 +39,10 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import torch as th
-from sb3_genrl.benchmarks.fetch_seed import fitted_policy
 from sb3_genrl.envs import get_task
 from sb3_genrl.envs.fetch_demonstrations import evaluate_success, replay_success
 
+from benchmarks.fetch_seed import fitted_policy
 from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, SEED
 from sb3_genrl.data.fingerprints import file_fingerprint
 from sb3_genrl.genrl import GenRL
@@ -166,7 +166,7 @@ def main(argv: list[str] | None = None) -> dict:
     rows += fitted_means(found, pulls, fit, args, own_mean(model, found, args))
     result = {
         "benchmark": f"fetch_fit_limit_{args.task}",
-        "command": "python " + " ".join(["benchmarks/fetch_fit_limit.py", *(argv if argv is not None else sys.argv[1:])]),
+        "command": "python -m " + " ".join(["benchmarks.fetch_fit_limit", *(argv if argv is not None else sys.argv[1:])]),
         **provenance(),
         "task": args.task,
         "generator": os.path.abspath(args.generator),

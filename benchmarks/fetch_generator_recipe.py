@@ -5,7 +5,7 @@ generator measures: its reconstructions of 200 new demonstrations (seed 1) that 
 DemonstrationCallback fit, policy seed 0). Each row is appended to ``--out`` as it finishes; rows already there are
 kept and not measured again.
 
-    python benchmarks/fetch_generator_recipe.py --task fetch-push --weights 0 1 4 16 --seeds 3
+    python -m benchmarks.fetch_generator_recipe --task fetch-push --weights 0 1 4 16 --seeds 3
 """
 
 from __future__ import annotations
@@ -17,9 +17,9 @@ import tempfile
 import time
 
 import torch
-from sb3_genrl.benchmarks.fetch_seed import fitted_mean_success
 from sb3_genrl.envs.fetch_demonstrations import reconstruction_success
 
+from benchmarks.fetch_seed import fitted_mean_success
 from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, SEED
 from sb3_genrl.data import load_actions
 from sb3_genrl.generative.presets import resolve_generator_spec

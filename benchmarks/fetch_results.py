@@ -8,8 +8,8 @@ rl-zoo3's published TQC+HER results are the anchor rows (its ``benchmark.md``: m
 away from the goal, 50 steps per episode). With ``--tqc``, TQC+HER's progress read from ``benchmarks/tqc_fetch.sh``'s
 logs is kept in ``fetch_tqc_progress.json`` beside the JSON files, each run as far as it got in any logs read.
 
-    python benchmarks/fetch_results.py                      # benchmarks/results/fetch_*.json
-    python benchmarks/fetch_results.py --results runs/fetch --out runs/fetch
+    python -m benchmarks.fetch_results                      # benchmarks/results/fetch_*.json
+    python -m benchmarks.fetch_results --results runs/fetch --out runs/fetch
 """
 
 from __future__ import annotations
@@ -21,8 +21,8 @@ import json
 import os
 
 import numpy as np
-from sb3_genrl.benchmarks.fetch_seed import recorded_genrl_settings
 
+from benchmarks.fetch_seed import recorded_genrl_settings
 from sb3_genrl.generative.presets import resolve_generator_spec
 from sb3_genrl.markdown import markdown_table
 from sb3_genrl.provenance import provenance

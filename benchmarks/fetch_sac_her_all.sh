@@ -18,7 +18,7 @@ lane() {  # lane K runs every LANES-th (task, variant), starting at the K-th
   for ((i = k; i < ${#runs[@]}; i += lanes)); do
     local task=${runs[i]%%:*} variant=${runs[i]##*:}
     echo "=== $task $variant $(date -u)"
-    .venv/bin/python benchmarks/fetch_sac_her.py --task "$task" --variant "$variant" --seeds 0 1 2 \
+    .venv/bin/python -m benchmarks.fetch_sac_her --task "$task" --variant "$variant" --seeds 0 1 2 \
       || echo "=== $task $variant failed (exit $?)"
   done
   echo "=== lane $k done $(date -u)"

@@ -19,7 +19,7 @@ Then each measure's Pearson R and Spearman rho against the final success over th
 intervals (:func:`sb3_genrl.metrics.correlation_table`). Each generator's row is written to ``--out`` as it finishes
 and the same command resumes (a row of other settings is refused); its Markdown table beside it.
 
-    python benchmarks/fetch_scorecard.py --task fetch-push --data runs/fetch/fetch-push/demonstrations
+    python -m benchmarks.fetch_scorecard --task fetch-push --data runs/fetch/fetch-push/demonstrations
 """
 
 from __future__ import annotations
@@ -33,10 +33,10 @@ import time
 
 import numpy as np
 import torch
-from sb3_genrl.benchmarks.fetch_seed import fitted_mean_success
 from sb3_genrl.envs import get_task
 from sb3_genrl.envs.fetch_demonstrations import evaluate_success
 
+from benchmarks.fetch_seed import fitted_mean_success
 from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, check_output_dir
 from sb3_genrl.data import load_actions
 from sb3_genrl.generative import load
@@ -229,7 +229,7 @@ def main(argv: list[str] | None = None) -> None:
         "benchmark": f"fetch_scorecard_{args.task}",
         "settings": settings,
         "rows": [],
-        "command": "python benchmarks/fetch_scorecard.py " + " ".join(argv if argv is not None else sys.argv[1:]),
+        "command": "python -m benchmarks.fetch_scorecard " + " ".join(argv if argv is not None else sys.argv[1:]),
         **provenance(),
     }
     if os.path.exists(args.out):

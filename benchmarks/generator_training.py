@@ -3,8 +3,8 @@
 Paper section 6.1.2 / appendix B: about 40K demonstrations of 69 time steps x 7 joints (hockey), batch size 256.
 The data are the synthetic two-factor family (the speed does not depend on the values).
 
-    python benchmarks/generator_training.py                   # 40000 trajectories, 3 epochs per model
-    python benchmarks/generator_training.py --n 4000 --epochs 5 --threads 1 --out /tmp/generator_training.json
+    python -m benchmarks.generator_training                   # 40000 trajectories, 3 epochs per model
+    python -m benchmarks.generator_training --n 4000 --epochs 5 --threads 1 --out /tmp/generator_training.json
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 Makes demonstrations (or reads ``--data``), trains a beta-VAE on them (or reads ``--generator``), measures the
 generator's own limit (the best reachable distance to each held-out goal over a dense grid of its latent actions,
-see :mod:`sb3_genrl.benchmarks.reachable`), then trains GenRL with the task's settings (its entry in
+see :mod:`benchmarks.reachable`), then trains GenRL with the task's settings (its entry in
 ``hyperparams/genrl.yml``) and several seeds. Every ``--eval-every`` episodes the deterministic policy is evaluated
 on ``--eval-goals`` goals (SB3's ``EvalCallback`` on the latent-action env: one episode = one trajectory, reward =
 minus the final distance). At the end each seed's deterministic policy plays the ``--final-goals`` held-out goals
@@ -10,10 +10,10 @@ minus the final distance). At the end each seed's deterministic policy plays the
 mean on the same goals. Prints a table, writes JSON (after every seed) and a plot of distance vs episodes
 (default: ``benchmarks/results/genrl_TASK.json`` and ``.png``).
 
-    python benchmarks/genrl.py --task hockey        # 4000 demos, VAE1 300 epochs, 3 seeds x the task's 3000 episodes
-    python benchmarks/genrl.py --task basketball    # 3 seeds x the task's 20000 episodes
-    python benchmarks/genrl.py --task hockey --generator quickstart/vae.pt --seeds 0 1 2 3 4 --episodes 6000
-    python -m sb3_genrl.benchmarks.genrl --task basketball --generator quickstart/vae.pt
+    python -m benchmarks.genrl --task hockey        # 4000 demos, VAE1 300 epochs, 3 seeds x the task's 3000 episodes
+    python -m benchmarks.genrl --task basketball    # 3 seeds x the task's 20000 episodes
+    python -m benchmarks.genrl --task hockey --generator quickstart/vae.pt --seeds 0 1 2 3 4 --episodes 6000
+    python -m benchmarks.genrl --task basketball --generator quickstart/vae.pt
 """
 
 from __future__ import annotations
@@ -28,12 +28,12 @@ from dataclasses import dataclass
 import gymnasium as gym
 import numpy as np
 import torch
-from sb3_genrl.benchmarks.reachable import generator_limit, held_out_goals, summary
 from sb3_genrl.envs import get_task
 from sb3_genrl.envs.demonstrations import make_demonstrations
 from stable_baselines3.common.callbacks import EvalCallback
 from stable_baselines3.common.monitor import Monitor
 
+from benchmarks.reachable import generator_limit, held_out_goals, summary
 from sb3_genrl import LatentActionWrapper
 from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, SEED, check_int, json_object_argument, option
 from sb3_genrl.generative import load, train_generator

@@ -13,7 +13,7 @@ the row "the CLI's default command": ``genrl train-policy --task TASK --generato
 nothing else, timed as a whole process (start-up, set-up and outputs included) against the scripted open-loop bound.
 Writes JSON with the load average.
 
-    python benchmarks/genrl_throughput.py --generator hockey=quickstart/vae.pt --generator basketball=qs_b/vae.pt
+    python -m benchmarks.genrl_throughput --generator hockey=quickstart/vae.pt --generator basketball=qs_b/vae.pt
 
 With ``--update``, the runs measured replace those of the same task and ``n_envs`` in ``--out`` and the others are
 kept, each run with the command and the load average of its own invocation: a benchmark too long for one quiet
@@ -36,9 +36,9 @@ from typing import Any
 
 import numpy as np
 import torch
-from sb3_genrl.benchmarks.sim_throughput import open_loop_rate, scripted_episodes
 from sb3_genrl.envs import get_task
 
+from benchmarks.sim_throughput import open_loop_rate, scripted_episodes
 from sb3_genrl.checks import COUNT, JSON_OUT, check_input_path
 from sb3_genrl.generative import load
 from sb3_genrl.genrl import GenRL
@@ -238,7 +238,7 @@ def main() -> None:
         check_input_path(path, "--generator")
     torch.set_num_threads(1)  # as the quickstart: the models are small, one thread is as fast
     command = (
-        "python benchmarks/genrl_throughput.py "
+        "python -m benchmarks.genrl_throughput "
         + " ".join(f"--generator {task}=..." for task in generators)
         + (f" --n-envs {' '.join(args.n_envs)} --update" if args.update else "")
         + (" --cli" if args.cli else "")

@@ -25,8 +25,8 @@ method's CPU seconds per seed are recorded (process time; every env plays in thi
 ``benchmarks/results/metaworld.json``, with :func:`sb3_genrl.provenance.provenance`) says ``"complete": false`` until
 every unit of every task asked for is done; the Markdown table is written beside it (``.md``).
 
-    python benchmarks/metaworld.py                                   # MT10 x seeds 0 1 2 (hours on a CPU)
-    python benchmarks/metaworld.py --tasks push-v3 --seeds 0 --out push.json
+    python -m benchmarks.metaworld                                   # MT10 x seeds 0 1 2 (hours on a CPU)
+    python -m benchmarks.metaworld --tasks push-v3 --seeds 0 --out push.json
 """
 
 from __future__ import annotations

@@ -15,7 +15,7 @@ Methods:
 ratio ``ours / matmul`` is recorded, and the summary gives their minimum and median. The JSON records the command,
 the package versions and the git commit (:func:`sb3_genrl.provenance.provenance`) and the load average.
 
-Usage: ``python benchmarks/precision_recall.py [--sizes 5000 15000] [--repeats 3] [--threads N] [--skip-50k] [--out PATH]``.
+Usage: ``python -m benchmarks.precision_recall [--sizes 5000 15000] [--repeats 3] [--threads N] [--skip-50k] [--out PATH]``.
 """
 
 from __future__ import annotations
@@ -186,7 +186,7 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as error:
         parser.error(f"argument --out: {error}")
 
-    command = "python benchmarks/precision_recall.py " + " ".join(sys.argv[1:] if argv is None else argv)
+    command = "python -m benchmarks.precision_recall " + " ".join(sys.argv[1:] if argv is None else argv)
     load_before = os.getloadavg()
     runs = []
     for size in args.sizes:

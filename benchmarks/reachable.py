@@ -1,6 +1,6 @@
 """What a generator allows on a task: a dense set of its latent actions decoded and played, and each goal's best.
 
-Used by the GenRL benchmark (:mod:`sb3_genrl.benchmarks.genrl`) for the generator's limit; run alone, it writes
+Used by the GenRL benchmark (:mod:`benchmarks.genrl`) for the generator's limit; run alone, it writes
 one generator's limit on the held-out goals.
 
 A played trajectory's reward for a goal is minus the distance from the goal to the best of the trajectory's

@@ -30,7 +30,7 @@ the option it motivates (``latent_critic_kwargs={}``, :mod:`sb3_genrl.genrl.late
 fit (``n_critic_updates=200``), 3 seeds each with no other setting, is measured on held-out goals
 (:data:`~sb3_genrl.hyperparams.EVAL_GOAL_SEED`) that chose nothing.
 
-    python benchmarks/search_diagnosis.py
+    python -m benchmarks.search_diagnosis
 """
 
 from __future__ import annotations
@@ -438,7 +438,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     )
     result = {
         "benchmark": "search_diagnosis",
-        "command": "python " + " ".join(["benchmarks/search_diagnosis.py", *(argv if argv is not None else sys.argv[1:])]),
+        "command": "python -m " + " ".join(["benchmarks.search_diagnosis", *(argv if argv is not None else sys.argv[1:])]),
         **provenance(),
         "machine": platform.machine(),
         "generator": BentGenerator().config,

@@ -1,7 +1,7 @@
 """Simulation throughput of the tasks: the fast open-loop path (1 and 2 threads), the step-by-step Gymnasium path,
 and the bound (raw ``mj_step`` over the same number of physics steps per episode).
 
-    python benchmarks/sim_throughput.py [--episodes 256] [--out benchmarks/results/sim_throughput.json]
+    python -m benchmarks.sim_throughput [--episodes 256] [--out benchmarks/results/sim_throughput.json]
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ one evaluation (precision/recall on 2000, DwPR 1000 x 5), 256 GenRL episodes wit
 trained 500 and 1500 epochs and evaluated (precision after 150 epochs was 0.014 on basketball). One torch thread,
 one simulation thread. Each entry is written as it completes and a rerun skips the entries already there.
 
-    python benchmarks/study_stage_times.py basketball runs/stage_times   # then copy runs/stage_times/basketball/times.json
+    python -m benchmarks.study_stage_times basketball runs/stage_times   # then copy runs/stage_times/basketball/times.json
 """
 
 from __future__ import annotations

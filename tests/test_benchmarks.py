@@ -3,14 +3,31 @@
 from __future__ import annotations
 
 import json
+import os
+import shutil
 import subprocess
 import sys
+import zipfile
 from pathlib import Path
 
 import pytest
 from conftest import HANG_S
 
-BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+ROOT = Path(__file__).resolve().parents[1]
+BENCHMARKS = ROOT / "benchmarks"
+
+
+def _run_benchmark(script: str, argv: list[str], cwd: Path) -> subprocess.CompletedProcess:
+    """``python -m benchmarks.<name> ARGV`` as run from the repository root, in ``cwd`` (the root on PYTHONPATH)."""
+    environment = os.environ | {"PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
+    return subprocess.run(
+        [sys.executable, "-m", f"benchmarks.{Path(script).stem}", *argv],
+        cwd=cwd,
+        env=environment,
+        capture_output=True,
+        text=True,
+        timeout=HANG_S,
+    )
 
 
 @pytest.mark.parametrize(
@@ -59,19 +76,20 @@ BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 def test_benchmarks_refuse_bad_arguments_before_any_work(tmp_path, script, argv, message):
     (tmp_path / "FILE").write_text("")
     (tmp_path / "FOLDER").mkdir()
-    done = subprocess.run(
-        [sys.executable, str(BENCHMARKS / script), *argv], cwd=tmp_path, capture_output=True, text=True, timeout=HANG_S
-    )
+    done = _run_benchmark(script, argv, tmp_path)
     assert done.returncode == 2 and message in done.stderr, done.stderr
-    assert done.stderr.splitlines()[-1].startswith(f"{script}: error: ")
+    # argparse names the script by its file (Python 3.14: by its -m command)
+    assert done.stderr.splitlines()[-1].split(": error: ")[0] in (script, f"python -m benchmarks.{Path(script).stem}")
     assert sorted(path.name for path in tmp_path.iterdir()) == ["FILE", "FOLDER"]  # nothing was written
 
 
 def test_the_benchmarks_are_a_package_without_path_edits():
     for path in sorted(BENCHMARKS.glob("*.py")):
         assert "sys.path" not in path.read_text() and "noqa: E402" not in path.read_text(), path.name
-    done = subprocess.run(
-        [sys.executable, "-m", "sb3_genrl.benchmarks.genrl", "--task", "hockey", "--episodes", "0"],
+    done = subprocess.run(  # as the docs run it: from the repository root, nothing on PYTHONPATH
+        [sys.executable, "-m", "benchmarks.genrl", "--task", "hockey", "--episodes", "0"],
+        cwd=ROOT,
+        env={name: value for name, value in os.environ.items() if name != "PYTHONPATH"},
         capture_output=True,
         text=True,
         timeout=HANG_S,
@@ -79,9 +97,37 @@ def test_the_benchmarks_are_a_package_without_path_edits():
     assert done.returncode == 2 and "argument --episodes: must be an integer >= 1, got 0" in done.stderr
 
 
-def test_the_genrl_benchmark_takes_the_tasks_entry_and_writes_its_default_output():
-    from sb3_genrl.benchmarks.genrl import RESULTS, arguments
+@pytest.mark.slow
+def test_the_wheel_ships_the_library_and_not_the_benchmark_scripts(tmp_path):
+    # the wheel built from a copy of the source tree (the build writes its build/ and egg-info beside the sources)
+    source = tmp_path / "source"
+    for folder in ("sb3_genrl", "envs", "baselines", "hyperparams", "benchmarks"):
+        shutil.copytree(ROOT / folder, source / folder, ignore=shutil.ignore_patterns("__pycache__", "results"))
+    for name in ("pyproject.toml", "README.md"):
+        shutil.copy(ROOT / name, source / name)
+    done = subprocess.run(
+        [sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "--no-index", "-w", "wheel", "./source"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=HANG_S,
+    )
+    assert done.returncode == 0, done.stderr
+    (wheel,) = (tmp_path / "wheel").glob("sb3_genrl-*.whl")
+    shipped = set(zipfile.ZipFile(wheel).namelist())
+    assert not {name for name in shipped if name.startswith(("benchmarks/", "sb3_genrl/benchmarks/"))}
+    # every module of the library, its tasks and its baselines, installed under sb3_genrl (pyproject's package-dir)
+    library = {
+        (installed + "/" + path.relative_to(ROOT / folder).as_posix())
+        for folder, installed in (("sb3_genrl", "sb3_genrl"), ("envs", "sb3_genrl/envs"), ("baselines", "sb3_genrl/baselines"))
+        for path in (ROOT / folder).rglob("*.py")
+    }
+    assert {"sb3_genrl/envs/__init__.py", "sb3_genrl/baselines/__init__.py"} <= library
+    assert sorted(library - shipped) == []
 
+
+def test_the_genrl_benchmark_takes_the_tasks_entry_and_writes_its_default_output():
+    from benchmarks.genrl import RESULTS, arguments
     from sb3_genrl.hyperparams import load_genrl_settings
 
     for task, env_id in (("hockey", "GenRL/Hockey-v0"), ("basketball", "GenRL/Basketball-v0")):
@@ -113,7 +159,7 @@ def _result(methods, **changes):
 
 
 def test_baselines_merge_keeps_the_other_methods_in_order_and_refuses_other_settings():
-    from sb3_genrl.benchmarks.baselines_results import merge_results as merge
+    from benchmarks.baselines_results import merge_results as merge
 
     previous = _result(["genrl", "ppo", "sac", "latent-trpo"], generator_sha256="abc")
     current = _result(["sac", "sac-her"], demo_dataset={"task": "basketball", "seed": 0, "episodes": 4000}, jobs=2)
@@ -143,10 +189,9 @@ def test_baselines_merge_keeps_the_other_methods_in_order_and_refuses_other_sett
 def test_baselines_merge_refuses_a_result_of_other_settings_before_any_work(tmp_path):
     out = tmp_path / "result.json"
     out.write_text(json.dumps(_result(["sac"])))  # basketball, 3000 episodes, seeds 0 1 2
-    done = subprocess.run(
+    done = _run_benchmark(
+        "baselines.py",
         [
-            sys.executable,
-            str(BENCHMARKS / "baselines.py"),
             "--task",
             "basketball",
             "--episodes",
@@ -159,10 +204,7 @@ def test_baselines_merge_refuses_a_result_of_other_settings_before_any_work(tmp_
             "--work",
             str(tmp_path / "work"),
         ],
-        cwd=tmp_path,
-        capture_output=True,
-        text=True,
-        timeout=HANG_S,
+        tmp_path,
     )
     assert done.returncode != 0 and "--merge: cannot merge into" in done.stderr, done.stderr
     assert "episodes: 3000 there, 40 now" in done.stderr
@@ -171,9 +213,9 @@ def test_baselines_merge_refuses_a_result_of_other_settings_before_any_work(tmp_
 
 def test_baselines_reuses_an_archived_runs_evaluation_and_refuses_a_stale_one(tmp_path):
     from sb3_genrl.baselines.evaluation import EVAL_GOALS
-    from sb3_genrl.benchmarks import baselines as module
 
     import sb3_genrl
+    from benchmarks import baselines as module
     from sb3_genrl.hyperparams import EVAL_GOAL_SEED
 
     run = tmp_path / "sac" / "seed0"

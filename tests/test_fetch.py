@@ -206,7 +206,7 @@ def test_the_generators_limit_counts_the_draws_that_solve_each_state():
 
 
 def test_the_results_table_labels_a_partial_run_with_the_episodes_reached(tmp_path):
-    from sb3_genrl.benchmarks.fetch_results import main
+    from benchmarks.fetch_results import main
 
     run = {
         "seed": 0,
@@ -245,7 +245,7 @@ def test_the_results_table_labels_a_partial_run_with_the_episodes_reached(tmp_pa
 
 
 def test_tqc_progress_read_from_the_logs_is_kept_for_a_machine_without_them(tmp_path):
-    from sb3_genrl.benchmarks.fetch_results import main
+    from benchmarks.fetch_results import main
 
     result = {"settings": {"episodes": 3000}, "complete": False, "runs": [], "reconstruction": {"success_rate": 0.6}}
     (tmp_path / "fetch_fetch-push.json").write_text(json.dumps(result))
@@ -275,7 +275,7 @@ def test_tqc_progress_read_from_the_logs_is_kept_for_a_machine_without_them(tmp_
 
 
 def test_new_runs_keep_the_generator_stages_and_drop_what_the_old_runs_measured(tmp_path):
-    from sb3_genrl.benchmarks.fetch import arguments, settings_of, start
+    from benchmarks.fetch import arguments, settings_of, start
 
     out, work = tmp_path / "fetch_fetch-push.json", tmp_path / "work"
     args = arguments(["--task", "fetch-push", "--out", str(out), "--work", str(work)])
@@ -314,7 +314,7 @@ def test_new_runs_keep_the_generator_stages_and_drop_what_the_old_runs_measured(
 
 
 def test_the_benchmark_keeps_the_generator_whose_fitted_mean_solves_the_most_tuning_states(tmp_path, monkeypatch):
-    from sb3_genrl.benchmarks import fetch
+    from benchmarks import fetch
 
     scores = {"vae_seed0.pt": 0.25, "vae_seed1.pt": 0.75, "vae_seed2.pt": 0.5}
     scored = []
@@ -358,8 +358,7 @@ def test_the_benchmark_keeps_the_generator_whose_fitted_mean_solves_the_most_tun
 
 
 def test_the_results_table_says_which_runs_used_former_settings():
-    from sb3_genrl.benchmarks.fetch_results import status
-
+    from benchmarks.fetch_results import status
     from sb3_genrl.run.train import genrl_settings
     from sb3_genrl.study.quickstart import task_settings
 
@@ -383,8 +382,9 @@ def test_the_results_table_says_which_runs_used_former_settings():
 
 
 def test_sac_her_resumes_only_a_run_of_the_same_settings(tmp_path):
-    from sb3_genrl.benchmarks import fetch_sac_her
     from sb3_genrl.envs.demonstrations import make_demonstrations
+
+    from benchmarks import fetch_sac_her
 
     data = make_demonstrations("fetch-reach", 4, tmp_path / "demos", seed=3, n_threads=1, progress_bar=False)
     out = tmp_path / "sac.json"
@@ -408,9 +408,9 @@ def test_sac_her_resumes_only_a_run_of_the_same_settings(tmp_path):
 
 
 def test_sac_her_checkpoints_between_evaluations_and_a_stopped_seed_resumes_from_there(tmp_path, monkeypatch):
-    from sb3_genrl.benchmarks import fetch_sac_her
     from sb3_genrl.envs.demonstrations import make_demonstrations
 
+    from benchmarks import fetch_sac_her
     from sb3_genrl.utils import read_checkpoint
 
     data = make_demonstrations("fetch-reach", 2, tmp_path / "demos", seed=3, n_threads=1, progress_bar=False)
@@ -452,7 +452,7 @@ def test_sac_her_checkpoints_between_evaluations_and_a_stopped_seed_resumes_from
     assert loaded == [state["paths"]["model"]]
     assert row["finished"] and row["curve_episodes"] == [3] and row["env_steps"] == 150
     # one seed of the benchmark's three: the JSON stays partial, and the table says how far each seed got
-    from sb3_genrl.benchmarks.fetch_results import all_seeds_finished, status
+    from benchmarks.fetch_results import all_seeds_finished, status
 
     assert result["complete"] is False and status(result) == "partial: seed 0: 3"
     others = [dict(row, seed=seed) for seed in (1, 2)]
@@ -461,10 +461,10 @@ def test_sac_her_checkpoints_between_evaluations_and_a_stopped_seed_resumes_from
 
 
 def test_the_scorecard_benchmark_scores_each_generator_then_trains_genrl_on_it_and_resumes(tmp_path, monkeypatch):
-    from sb3_genrl.benchmarks import fetch_scorecard
     from sb3_genrl.envs.demonstrations import make_demonstrations
     from scipy import stats
 
+    from benchmarks import fetch_scorecard
     from sb3_genrl.generative import load
     from sb3_genrl.metrics.prior_rollout import prior_rollout
 
@@ -536,9 +536,9 @@ def test_the_scorecard_benchmark_scores_each_generator_then_trains_genrl_on_it_a
 
 def test_the_fit_limit_benchmark_picks_each_states_nearest_solving_draw_and_replays_as_the_step_path_plays():
     import gymnasium as gym
-    from sb3_genrl.benchmarks.fetch_fit_limit import anchored_targets, solving_targets
     from sb3_genrl.envs.fetch_demonstrations import replay_success
 
+    from benchmarks.fetch_fit_limit import anchored_targets, solving_targets
     from sb3_genrl.generative import make_generator
     from sb3_genrl.wrappers import LatentActionWrapper
 
@@ -589,7 +589,7 @@ def test_the_fit_limit_benchmark_picks_each_states_nearest_solving_draw_and_repl
 def test_the_fit_limit_benchmark_checks_its_fit_variants_before_any_work():
     import argparse
 
-    from sb3_genrl.benchmarks.fetch_fit_limit import variants
+    from benchmarks.fetch_fit_limit import variants
 
     assert variants('[{"steps": 8000}, {"net_arch": [128, 128], "learning_rate": 1}]') == [
         {"steps": 8000},

@@ -13,7 +13,7 @@ TINY += ["--held-out", "4", "--fit-steps", "10"]
 
 
 def test_the_metaworld_benchmark_writes_every_unit_resumes_and_refuses_other_settings(tmp_path, capsys):
-    from sb3_genrl.benchmarks.metaworld import main
+    from benchmarks.metaworld import main
 
     out, work = tmp_path / "metaworld.json", tmp_path / "work"
     argv = [*TINY, "--work", str(work), "--out", str(out)]
@@ -42,7 +42,7 @@ def test_the_metaworld_benchmark_writes_every_unit_resumes_and_refuses_other_set
 
 
 def test_the_metaworld_benchmark_refuses_an_unknown_task_before_any_work(tmp_path, capsys):
-    from sb3_genrl.benchmarks.metaworld import main
+    from benchmarks.metaworld import main
 
     with pytest.raises(SystemExit) as exit_:
         main(["--tasks", "push", "--work", str(tmp_path / "work"), "--out", str(tmp_path / "r.json")])

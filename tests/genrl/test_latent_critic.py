@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import torch as th
 from conftest import FastReachEnv, LinearGenerator
-from sb3_genrl.benchmarks.search_diagnosis import TARGET, BentGenerator, PointMassBandit, goals, mean_distances, prior_best
 
+from benchmarks.search_diagnosis import TARGET, BentGenerator, PointMassBandit, goals, mean_distances, prior_best
 from sb3_genrl import GenRL
 from sb3_genrl.genrl.latent_critic import LatentCritic
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED
