@@ -27,7 +27,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 import yaml
-from sb3_genrl.baselines.checkpoint import ReplayBufferCheckpoint, resume_off_policy
+from sb3_genrl.baselines.checkpoint import CHECKPOINT_DIR, EpisodeCheckpoint, continue_clocks, resume_state
 from sb3_genrl.baselines.her import add_goal_demonstrations, fetch_goal_episodes, goal_statistics
 from sb3_genrl.baselines.normalization import NormalizedCombined
 from sb3_genrl.baselines.train import CHECKPOINT_EVERY
@@ -45,7 +45,6 @@ from sb3_genrl.curves import episode_info
 from sb3_genrl.data import load_arrays
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED, parse_kwargs
 from sb3_genrl.provenance import provenance
-from sb3_genrl.run.checkpoint import resume_state
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 SETTINGS = os.path.join(HERE, "sac_her_fetch.yml")
@@ -140,12 +139,16 @@ def run_seed(args: argparse.Namespace, episodes_data: dict, seed: int, row: dict
         if args.variant == "demos":
             add_goal_demonstrations(model, episodes_data)
             model.learning_starts = 0  # the demonstrations are the warm-up data
+        start = {"episodes": 0, "steps": 0, "learn_seconds": 0.0}
     else:
-        model = resume_off_policy(state, env, device="cpu")
+        model = SAC.load(state["paths"]["model"], env=env, device="cpu")
+        model.load_replay_buffer(state["paths"]["buffer"])
+        continue_clocks(env, state)
         kept = sum(e <= state["episodes"] for e in row["curve_episodes"])
         row.update({key: row[key][:kept] for key in ("curve_episodes", "curve_env_steps", "curve_success")})
+        start = state
     curve = Curve(env_id, args.eval_every, args.eval_states, row, write)
-    checkpoint = ReplayBufferCheckpoint(folder, args.checkpoint_every, identity, state, {})
+    checkpoint = EpisodeCheckpoint(folder / CHECKPOINT_DIR, args.checkpoint_every, identity, start, {})
     begin = time.perf_counter()
     model.learn(steps - model.num_timesteps, callback=CallbackList([curve, checkpoint]), reset_num_timesteps=state is None)
     row["seconds"] = row.get("seconds", 0.0) + time.perf_counter() - begin
