@@ -42,14 +42,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from sb3_genrl.baselines import BASELINES, LATENT_BASELINES, OFF_POLICY_BASELINES
-from sb3_genrl.baselines.checkpoint import (
-    CHECKPOINT_DIR,
-    EpisodeCheckpoint,
-    continue_clocks,
-    prepare_resume,
-    remove_checkpoint,
-    resume_state,
-)
+from sb3_genrl.baselines.checkpoint import ReplayBufferCheckpoint, resume_off_policy
 from sb3_genrl.baselines.evaluation import EVAL_GOALS, evaluate_trained, training_health
 from sb3_genrl.baselines.feedback import (
     add_time_feature,
@@ -82,7 +75,8 @@ from sb3_genrl.data import load_transitions
 from sb3_genrl.generative import load
 from sb3_genrl.genrl.generator_files import generator_digest
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED
-from sb3_genrl.run.folder import open_run
+from sb3_genrl.run.checkpoint import resume_state
+from sb3_genrl.run.folder import keep_episodes, open_run, remove_checkpoint
 from sb3_genrl.utils import atomic_path, atomic_write_json, folder_lock
 from sb3_genrl.wrappers import LatentActionWrapper
 
@@ -255,7 +249,7 @@ def _learn(
     callback = (
         None
         if checkpoint_every is None
-        else EpisodeCheckpoint(out / CHECKPOINT_DIR, checkpoint_every, _identity(summary), start, {"summary": summary})
+        else ReplayBufferCheckpoint(out, checkpoint_every, _identity(summary), state, {"summary": summary})
     )
     model.set_logger(training_logger(out, verbose))
     began = time.perf_counter()
@@ -307,12 +301,8 @@ def _resumed_model(
 ) -> tuple[SAC, dict[str, Any]]:
     """The off-policy baseline as its checkpoint left it, on a new monitored env that appends to the Monitor file, and
     the run's summary so far (the setup's record, and the episodes at which it was resumed)."""
-    prepare_resume(out, state)
-    monitor = _monitored_env(algorithm, task, out, append=True)
-    continue_clocks(monitor, state)
-    model = SAC.load(state["paths"]["model"], env=monitor, device=device)
-    model.load_replay_buffer(state["paths"]["buffer"])
-    model._last_obs = None  # the new env starts with a reset (the saved observation belongs to the old one)
+    keep_episodes(out, int(state["episodes"]))
+    model = resume_off_policy(state, _monitored_env(algorithm, task, out, append=True), device=device)
     model.set_random_seed(sub_seed(state["identity"]["seed"], state["episodes"]))  # a resumed run is reproducible
     resumed = [*state["summary"].get("resumed_at_episodes", []), state["episodes"]]
     return model, state["summary"] | {"resumed_at_episodes": resumed}

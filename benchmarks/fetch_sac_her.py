@@ -11,8 +11,8 @@ at the end, the deterministic policy plays ``--eval-states`` initial states (res
 ``--checkpoint-every`` episodes in ``--work`` and resumes from it; the JSON is written after every evaluation and says
 ``"complete": true`` once seeds 0, 1 and 2 have finished, whichever runs wrote them.
 
-    python -m benchmarks.fetch_sac_her --task fetch-reach --variant demos
-    python -m benchmarks.fetch_sac_her --task fetch-push --variant none --seeds 0
+    python benchmarks/fetch_sac_her.py --task fetch-reach --variant demos
+    python benchmarks/fetch_sac_her.py --task fetch-push --variant none --seeds 0
 """
 
 from __future__ import annotations
@@ -27,10 +27,11 @@ import gymnasium as gym
 import numpy as np
 import torch
 import yaml
-from sb3_genrl.baselines.checkpoint import CHECKPOINT_DIR, EpisodeCheckpoint, continue_clocks, resume_state
+from sb3_genrl.baselines.checkpoint import ReplayBufferCheckpoint, resume_off_policy
 from sb3_genrl.baselines.her import add_goal_demonstrations, fetch_goal_episodes, goal_statistics
 from sb3_genrl.baselines.normalization import NormalizedCombined
 from sb3_genrl.baselines.train import CHECKPOINT_EVERY
+from sb3_genrl.benchmarks.fetch_results import BENCHMARK_SEEDS, all_seeds_finished, seed_row, write_result
 from sb3_genrl.envs import get_task
 from sb3_genrl.envs.fetch import FETCH_HORIZON
 from sb3_genrl.envs.fetch_mujoco import fix_joint_helpers
@@ -39,12 +40,12 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.her import HerReplayBuffer
 
-from benchmarks.fetch_results import BENCHMARK_SEEDS, all_seeds_finished, seed_row, write_result
 from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, SEED
 from sb3_genrl.curves import episode_info
 from sb3_genrl.data import load_arrays
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED, parse_kwargs
 from sb3_genrl.provenance import provenance
+from sb3_genrl.run.checkpoint import resume_state
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 SETTINGS = os.path.join(HERE, "sac_her_fetch.yml")
@@ -139,16 +140,12 @@ def run_seed(args: argparse.Namespace, episodes_data: dict, seed: int, row: dict
         if args.variant == "demos":
             add_goal_demonstrations(model, episodes_data)
             model.learning_starts = 0  # the demonstrations are the warm-up data
-        start = {"episodes": 0, "steps": 0, "learn_seconds": 0.0}
     else:
-        model = SAC.load(state["paths"]["model"], env=env, device="cpu")
-        model.load_replay_buffer(state["paths"]["buffer"])
-        continue_clocks(env, state)
+        model = resume_off_policy(state, env, device="cpu")
         kept = sum(e <= state["episodes"] for e in row["curve_episodes"])
         row.update({key: row[key][:kept] for key in ("curve_episodes", "curve_env_steps", "curve_success")})
-        start = state
     curve = Curve(env_id, args.eval_every, args.eval_states, row, write)
-    checkpoint = EpisodeCheckpoint(folder / CHECKPOINT_DIR, args.checkpoint_every, identity, start, {})
+    checkpoint = ReplayBufferCheckpoint(folder, args.checkpoint_every, identity, state, {})
     begin = time.perf_counter()
     model.learn(steps - model.num_timesteps, callback=CallbackList([curve, checkpoint]), reset_num_timesteps=state is None)
     row["seconds"] = row.get("seconds", 0.0) + time.perf_counter() - begin
@@ -183,7 +180,7 @@ def main(argv: list[str] | None = None) -> None:
     root = os.path.join(os.path.dirname(HERE), "runs")
     data = args.data or os.path.join(root, "fetch", args.task, "demonstrations")
     if not os.path.isdir(data):
-        parser.error(f"no demonstrations at {data}: run python -m benchmarks.fetch --task {args.task} first, or give --data")
+        parser.error(f"no demonstrations at {data}: run benchmarks/fetch.py --task {args.task} first, or give --data")
     args.work = args.work or os.path.join(root, "fetch_sac_her", args.task)
     args.out = args.out or os.path.join(root, "fetch_sac_her", f"fetch_sac_her_{args.task}_{args.variant}.json")
     episodes = (args.steps or int(entry(get_task(args.task).env_id)["n_timesteps"])) // FETCH_HORIZON

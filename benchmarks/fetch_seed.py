@@ -31,6 +31,7 @@ from sb3_genrl.genrl.demonstrations import DemonstrationCallback, build_callback
 from sb3_genrl.genrl.generator_files import generator_digest
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED
 from sb3_genrl.run.checkpoint import GenRLCheckpoint, RandomStateRecorder, resume_genrl, resume_state
+from sb3_genrl.run.folder import RunFolderError
 from sb3_genrl.run.train import genrl_settings, make_genrl, run_settings
 from sb3_genrl.study.quickstart import task_settings
 from sb3_genrl.wrappers import LatentActionWrapper
@@ -167,7 +168,10 @@ def train_seed(
         "demonstration_callback": callback,
         "demonstrations": [dataset_fingerprint(item.dataset) for item in demonstrations],
     }
-    state = resume_state(folder / "checkpoint", identity)
+    try:
+        state = resume_state(folder, identity)
+    except RunFolderError:  # an earlier try's checkpoint, of other settings: started afresh below
+        state = None
     if state is None:  # from the start: what an earlier unfinished try left is dropped
         shutil.rmtree(folder, ignore_errors=True)
         row.update({key: [] for key in CURVE}, seconds=0.0, evaluation_seconds=0.0)
@@ -186,7 +190,7 @@ def train_seed(
         model.set_logger(logger)
     else:
         model = resume_genrl(state, env, generator, "cpu", logger)
-    checkpoint = GenRLCheckpoint(folder / "checkpoint", args.eval_every, identity, state)
+    checkpoint = GenRLCheckpoint(folder, args.eval_every, identity, state)
     callbacks = [*demonstrations, curve, checkpoint]  # the fit before the curve's first point, the kept pulls saved
     begin = time.perf_counter()
     model.learn(int(args.episodes) - model.num_timesteps, callback=CallbackList(callbacks), reset_num_timesteps=state is None)

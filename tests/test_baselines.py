@@ -280,7 +280,7 @@ class _Killed(Exception):
 
 def _killed_in_episode(monkeypatch, episode: int) -> None:
     """Make a SAC run on hockey stop (raise :class:`_Killed`) 10 steps into its ``episode``-th episode (69 steps each)."""
-    from sb3_genrl.baselines import checkpoint
+    from sb3_genrl.run import checkpoint
 
     watch = checkpoint.EpisodeCheckpoint._on_rollout_start
 

@@ -1,8 +1,17 @@
-"""Checkpoints of a GenRL run, so that a stopped ``genrl train-policy`` resumes where it stopped and ends as if it
-had not stopped.
+"""Checkpoints of a training run, so that a stopped run resumes where it stopped: one mechanism for GenRL
+(``genrl train-policy``) and the off-policy baselines (``genrl baseline``, :mod:`sb3_genrl.baselines.checkpoint`).
 
-Every ``checkpoint_every`` episodes, at the start of an iteration (after the last EM update, before the next batch is
-played), :class:`GenRLCheckpoint` writes into ``OUT/checkpoint/``, as one unit (:func:`sb3_genrl.utils.write_checkpoint`):
+Every ``every`` episodes, at the start of a rollout that follows an episode's end (after the last update, before the
+next episode is played), an :class:`EpisodeCheckpoint` writes into ``OUT/checkpoint/`` its files and then
+``state.json``, as one unit (:func:`sb3_genrl.utils.write_checkpoint`: the files under new names, ``state.json``,
+naming them, last, so a run killed at any moment leaves the previous checkpoint whole). ``state.json`` holds the run's
+identity, the episodes done (the Monitor file's rows) and the Monitor's clocks, with what each kind of run adds. A rerun
+of the same run resumes from it: :func:`resume_state` reads it (a checkpoint of another run is refused, naming what
+differs), :func:`~sb3_genrl.run.folder.keep_episodes` keeps the Monitor file's rows up to it (``logs/progress.csv``
+starts again there, the earlier one kept as ``progress.until_episode_K.csv``), and :func:`continue_clocks` makes the
+Monitor's ``t`` and ``cpu_seconds`` columns go on from its clocks.
+
+GenRL's checkpoint (:class:`GenRLCheckpoint`) adds, at the start of an iteration:
 
 - ``model.zip``: SB3's save of the model: the weights, the value function's and the regression's Adam, the policy
   average, and SB3's counters (``num_timesteps``, ``_n_updates``, ``_last_obs``, ``_last_episode_starts``, the
@@ -11,22 +20,24 @@ played), :class:`GenRLCheckpoint` writes into ``OUT/checkpoint/``, as one unit (
   relabelling's pulls of the last batches, the pulls kept for the whole run (the demonstrations), the solving pulls and
   initial weights of the refits, the random states (torch, NumPy, Python, and every env's: its own, its goal sampler's
   and its spaces', as they were before the env drew its current context), and the logger's values not yet written;
-- ``state.json``: the run's identity, the episodes done (the Monitor file's rows) and its clocks.
+- in ``state.json``, the episodes at which the run was resumed before.
 
 :func:`resume_genrl` rebuilds the model from it on a new env, which draws the same context again from the restored
 states, so a resumed run plays the same episodes and ends with the same parameters, bit for bit, as one that was not
-stopped (the Monitor file keeps its rows up to the checkpoint; ``logs/progress.csv`` starts again at the checkpoint,
-the earlier one kept as ``progress.until_episode_K.csv``).
+stopped.
 """
 
 from __future__ import annotations
 
+import json
+import os
 import pathlib
 import pickle
 import random
 import time
 import warnings
 import zipfile
+from collections.abc import Callable
 from typing import Any
 
 import gymnasium as gym
@@ -34,14 +45,127 @@ import numpy as np
 import torch as th
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.logger import Logger
+from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
+from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper, VecMonitor
 
+from sb3_genrl.curves import _EpisodeInfo
 from sb3_genrl.generative.base import TrajectoryGenerator
 from sb3_genrl.genrl.genrl import GenRL
+from sb3_genrl.run.folder import CHECKPOINT_DIR, RunFolderError, differing
 from sb3_genrl.utils import read_checkpoint, write_checkpoint
 
 CHECKPOINT_EVERY = 640  # episodes between checkpoints of genrl train-policy (ten of GenRL's default iterations)
 MODEL, MEMORIES = "model.zip", "memories.pt"
+
+
+class EpisodeCheckpoint(BaseCallback):
+    """Write a checkpoint of the run into ``out/checkpoint`` every ``every`` episodes, at the start of a rollout that
+    follows an episode's end (see the module doc): the files of :meth:`_files`, then ``state.json`` with the run's
+    identity, the episodes done, the Monitor's clocks and the entries of :meth:`_state`. The run's env is a
+    ``VecMonitor`` or one SB3 ``Monitor`` (in a one-env VecEnv) over :func:`sb3_genrl.curves.episode_info`'s wrapper.
+
+    :param out: the run folder (the checkpoint goes into ``out/checkpoint``)
+    :param every: episodes between checkpoints
+    :param identity: what the run is (JSON values), checked on resume (:func:`resume_state`)
+    :param start: the state the run was resumed from (its ``"episodes"``; ``None``: a new run)
+    """
+
+    def __init__(
+        self, out: str | os.PathLike[str], every: int, identity: dict[str, Any], start: dict[str, Any] | None
+    ) -> None:
+        super().__init__()
+        self.out, self.every, self.identity = pathlib.Path(out), int(every), identity
+        self.start_episodes = 0 if start is None else int(start["episodes"])
+        self._last = self.start_episodes
+        self._seen = 0  # episodes this process has seen end
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _on_rollout_start(self) -> None:
+        # Called before each rollout, after the last update: GenRL's iteration, an off-policy algorithm's step.
+        ended = _episodes_ended(_monitor(self.model.get_env()))
+        if ended == self._seen:  # no episode ended since the last call: not at an episode's end
+            return
+        self._seen = ended
+        episodes = self.start_episodes + ended
+        if episodes - self._last >= self.every:
+            self.save(episodes)
+            self._last = episodes
+
+    def save(self, episodes: int) -> None:
+        """Write the checkpoint's files and then the state naming them, as one unit (see the module doc).
+
+        :param episodes: the episodes the run has played
+        """
+        venv = self.model.get_env()
+        write_checkpoint(
+            self.out / CHECKPOINT_DIR,
+            self._files(),
+            {
+                "identity": self.identity,
+                "episodes": int(episodes),
+                "monitor_seconds": time.time() - _monitor(venv).t_start,
+                "cpu_seconds": self._cpu_seconds(),
+                **self._state(),
+            },
+        )
+
+    def _files(self) -> dict[str, tuple[str, Callable[[pathlib.Path], None]]]:
+        """The checkpoint's files: entry -> (file name, a writer that writes the file at the path it is given)."""
+        raise NotImplementedError
+
+    def _state(self) -> dict[str, Any]:
+        """The entries of ``state.json`` that this kind of run adds (JSON values)."""
+        return {}
+
+    def _cpu_seconds(self) -> list[float] | float:
+        """The CPU seconds of each env's process so far, as :func:`continue_clocks` reads them back."""
+        return [float(seconds) for seconds in self.model.get_env().env_method("cpu_seconds")]
+
+
+def resume_state(out: str | os.PathLike[str], identity: dict[str, Any]) -> dict[str, Any] | None:
+    """The state of the checkpoint in ``out/checkpoint`` (:func:`sb3_genrl.utils.read_checkpoint`; its ``"paths"``
+    entry names the checkpoint's files), or ``None`` when there is none.
+
+    :param out: the run folder
+    :param identity: what the run is (JSON values); a checkpoint of another run (another algorithm, other settings) is
+        refused with a :class:`~sb3_genrl.run.folder.RunFolderError` naming what differs
+    """
+    out = pathlib.Path(out)
+    state = read_checkpoint(out / CHECKPOINT_DIR)
+    if state is None:
+        return None
+    recorded = state.get("identity")
+    recorded = recorded if isinstance(recorded, dict) else {}
+    identity = json.loads(json.dumps(identity))  # as state.json holds it: tuples as lists, keys as strings
+    if recorded != identity:
+        raise RunFolderError(
+            f"{out} holds a checkpoint of another run (it differs in {', '.join(differing(recorded, identity))}); use "
+            f"another out_dir, or delete {out / CHECKPOINT_DIR} to start this run afresh"
+        )
+    return state
+
+
+def continue_clocks(env: Monitor | VecEnv, state: dict[str, Any]) -> None:
+    """Make the resumed run's Monitor ``t`` and ``cpu_seconds`` columns go on from the checkpoint's.
+
+    :param env: the resumed run's env: its ``Monitor``, or its VecEnv (a ``VecMonitor``, or one ``Monitor`` in a
+        one-env VecEnv), each env under :func:`sb3_genrl.curves.episode_info`'s wrapper
+    :param state: the checkpoint's state (:func:`resume_state`); its ``cpu_seconds`` are one per env, or one number (a
+        run of one ``Monitor``)
+    """
+    monitor = env if isinstance(env, Monitor) else _monitor(env)
+    monitor.t_start = time.time() - float(state["monitor_seconds"])
+    seconds = state["cpu_seconds"]
+    seconds = [seconds] if isinstance(seconds, int | float) else seconds
+    if isinstance(env, Monitor):
+        (only,) = seconds
+        _episode_info(env).continue_from(float(only))
+        return
+    for index, value in enumerate(seconds):
+        env.env_method("continue_from", float(value), indices=[index])
 
 
 class RandomStateRecorder(gym.Wrapper):
@@ -63,32 +187,23 @@ class RandomStateRecorder(gym.Wrapper):
         set_random_states(self.env, states)
 
 
-class GenRLCheckpoint(BaseCallback):
-    """Write a checkpoint every ``every`` episodes, at the start of an iteration (see the module doc).
+class GenRLCheckpoint(EpisodeCheckpoint):
+    """GenRL's checkpoint: every ``every`` episodes, at the start of an iteration, the model, its memories and random
+    states, and the logger's values not yet written (see the module doc).
 
-    :param folder: the checkpoint folder (``OUT/checkpoint``)
+    :param out: the run folder (the checkpoint goes into ``out/checkpoint``)
     :param every: episodes between checkpoints
     :param identity: what the run is, checked on resume
     :param start: the state the run was resumed from (``None``: a new run)
     """
 
-    def __init__(self, folder: pathlib.Path, every: int, identity: dict[str, Any], start: dict[str, Any] | None) -> None:
-        super().__init__()
-        self.folder, self.every, self.identity = folder, int(every), identity
-        self._last = 0 if start is None else int(start["episodes"])
-        self._resumed = [] if start is None else [*start.get("resumed_at_episodes", []), self._last]
+    def __init__(
+        self, out: str | os.PathLike[str], every: int, identity: dict[str, Any], start: dict[str, Any] | None
+    ) -> None:
+        super().__init__(out, every, identity, start)
+        self._resumed = [] if start is None else [*start.get("resumed_at_episodes", []), self.start_episodes]
 
-    def _on_step(self) -> bool:
-        return True
-
-    def _on_rollout_start(self) -> None:
-        episodes = int(self.model.num_timesteps)  # one step, one episode
-        if episodes - self._last >= self.every:
-            self.save()
-            self._last = episodes
-
-    def save(self) -> None:
-        """Write the model, its memories and random states, and the state naming them, as one unit."""
+    def _files(self) -> dict[str, tuple[str, Callable[[pathlib.Path], None]]]:
         model, env = self.model, self.model.get_env()
         memories = {
             "value_memory": list(model._value_memory),
@@ -100,26 +215,13 @@ class GenRLCheckpoint(BaseCallback):
             "env_random_states": env.env_method("random_states_before_reset"),
             "logger": _pending_logs(model.logger),
         }
-        write_checkpoint(
-            self.folder,
-            {
-                "model": (MODEL, lambda path: OnPolicyAlgorithm.save(model, path)),
-                "memories": (MEMORIES, lambda path: th.save(memories, path)),
-            },
-            {
-                "identity": self.identity,
-                "episodes": int(model.num_timesteps),
-                "monitor_seconds": time.time() - _monitor_start(env),
-                "cpu_seconds": env.env_method("cpu_seconds"),
-                "resumed_at_episodes": self._resumed,
-            },
-        )
+        return {
+            "model": (MODEL, lambda path: OnPolicyAlgorithm.save(model, path)),  # without the generator file beside it
+            "memories": (MEMORIES, lambda path: th.save(memories, path)),
+        }
 
-
-def resume_state(folder: pathlib.Path, identity: dict[str, Any]) -> dict[str, Any] | None:
-    """The state of the checkpoint in ``folder`` if it is one of the run ``identity``, else ``None``."""
-    state = read_checkpoint(folder)
-    return state if state is not None and state["identity"] == identity else None
+    def _state(self) -> dict[str, Any]:
+        return {"resumed_at_episodes": self._resumed}
 
 
 def resume_genrl(state: dict[str, Any], env: Any, generator: TrajectoryGenerator | str, device: Any, logger: Logger) -> GenRL:
@@ -152,7 +254,7 @@ def resume_genrl(state: dict[str, Any], env: Any, generator: TrajectoryGenerator
     _set_global_random_states(model, memories["random_states"])
     model.set_logger(logger)
     _restore_pending_logs(memories["logger"], logger)
-    _continue_clocks(venv, state)
+    continue_clocks(venv, state)
     return model
 
 
@@ -251,20 +353,31 @@ def _restore_pending_logs(logs: dict[str, Any], logger: Logger) -> None:
     )
 
 
-def _monitor_start(venv: Any) -> float:
-    """The ``t_start`` of the run's Monitor (a VecMonitor, or the Monitor of a one-env DummyVecEnv)."""
-    return float(venv.t_start) if hasattr(venv, "t_start") else float(venv.envs[0].t_start)
+def _monitor(venv: VecEnv) -> Monitor | VecMonitor:
+    """The run's Monitor: its ``VecMonitor`` (under any VecEnv wrappers), or the ``Monitor`` of its one env."""
+    layer = venv
+    while isinstance(layer, VecEnvWrapper) and not isinstance(layer, VecMonitor):
+        layer = layer.venv
+    if isinstance(layer, VecMonitor):
+        return layer
+    envs = getattr(layer, "envs", [])
+    if len(envs) != 1 or not isinstance(envs[0], Monitor):
+        raise TypeError(
+            f"the checkpointed run's env must be a VecMonitor or one Monitor, got {type(layer).__name__} of "
+            f"{', '.join(type(env).__name__ for env in envs) or 'envs in other processes'}"
+        )
+    return envs[0]
 
 
-def _continue_clocks(venv: Any, state: dict[str, Any]) -> None:
-    """Make the Monitor's ``t`` and ``cpu_seconds`` columns go on from the checkpoint's."""
-    start = time.time() - float(state["monitor_seconds"])
-    if hasattr(venv, "t_start"):
-        venv.t_start = start
-    else:
-        venv.envs[0].t_start = start
-    for index, seconds in enumerate(state["cpu_seconds"]):
-        venv.env_method("continue_from", float(seconds), indices=[index])
+def _episodes_ended(monitor: Monitor | VecMonitor) -> int:
+    """The episodes that ended under ``monitor`` in this process."""
+    return monitor.episode_count if isinstance(monitor, VecMonitor) else len(monitor.get_episode_lengths())
+
+
+def _episode_info(monitor: Monitor) -> _EpisodeInfo:
+    if not isinstance(monitor.env, _EpisodeInfo):
+        raise TypeError("the checkpointed run's Monitor must wrap sb3_genrl.curves.episode_info's wrapper")
+    return monitor.env
 
 
 def _to_device(value: Any, device: th.device) -> Any:

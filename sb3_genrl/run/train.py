@@ -49,7 +49,7 @@ from sb3_genrl.genrl.genrl import EStep, GenRL
 from sb3_genrl.genrl.policies import MlpPolicy
 from sb3_genrl.genrl.settings import NOT_SETTINGS, SETTINGS, check_genrl_settings
 from sb3_genrl.run.checkpoint import CHECKPOINT_EVERY, GenRLCheckpoint, RandomStateRecorder, resume_genrl, resume_state
-from sb3_genrl.run.folder import CHECKPOINT_DIR, SUMMARY, keep_episodes, open_run, remove_checkpoint
+from sb3_genrl.run.folder import SUMMARY, keep_episodes, open_run, remove_checkpoint
 from sb3_genrl.utils import atomic_write_json, folder_lock
 from sb3_genrl.vec_env import BatchedLatentVecEnv
 from sb3_genrl.wrappers import LatentActionWrapper
@@ -271,7 +271,7 @@ def _run(
 ) -> dict[str, Any]:
     """Train the run ``identity`` in ``out`` (from its checkpoint when it has one) with ``callbacks``; its summary,
     written last."""
-    state = resume_state(out / CHECKPOINT_DIR, identity)  # this unfinished run's checkpoint, if any
+    state = resume_state(out, identity)  # this unfinished run's checkpoint, if any
     if state is not None:
         keep_episodes(out, state["episodes"])
     checkpointing = None if checkpoint_every is None else (int(checkpoint_every), identity)
@@ -333,7 +333,7 @@ def _train(
         else:
             model = resume_genrl(state, env, generator, genrl_kwargs["device"], logger)
         if checkpointing is not None:  # after the others: a checkpoint saves what they set at the same call
-            callbacks = [*callbacks, GenRLCheckpoint(out / CHECKPOINT_DIR, *checkpointing, state)]
+            callbacks = [*callbacks, GenRLCheckpoint(out, *checkpointing, state)]
         model.learn(
             total_timesteps=episodes - model.num_timesteps,
             progress_bar=progress_bar,

@@ -1,19 +1,25 @@
-"""GenRL's checkpoints (sb3_genrl/genrl/checkpoint.py): a stopped train-policy run resumed with the same command ends
-as the run that was not stopped, bit for bit."""
+"""Checkpoints (sb3_genrl/run/checkpoint.py): a stopped train-policy run resumed with the same command ends as the run
+that was not stopped, bit for bit; GenRL's and the off-policy baselines' checkpoints are one mechanism."""
 
 from __future__ import annotations
 
 import json
+import shutil
 
 import numpy as np
 import pytest
 from conftest import LinearGenerator
 from genrl_test_helpers import SuccessReachEnv
+from sb3_genrl.baselines.checkpoint import ReplayBufferCheckpoint
+from sb3_genrl.baselines.train import train_baseline
+from test_baselines import demo_transitions
 from test_train_policy import fast_reach_task  # noqa: F401 (the fixture)
 
 from sb3_genrl import GenRL
 from sb3_genrl.curves import MONITOR_FILE, read_monitor
 from sb3_genrl.run import train_policy
+from sb3_genrl.run.checkpoint import EpisodeCheckpoint, GenRLCheckpoint
+from sb3_genrl.run.folder import RunFolderError
 
 
 class _Killed(Exception):
@@ -123,3 +129,58 @@ def test_a_truncated_memories_file_is_refused_naming_it_and_the_checkpoint_is_ke
         train_policy("fast-reach", LinearGenerator(), out_dir=tmp_path, **settings)
     assert str(memories) in str(error.value) and f"delete {folder}" in str(error.value)
     assert sorted(path.name for path in folder.iterdir()) == sorted(["state.json", *state["files"].values()])  # kept
+
+
+def test_a_genrl_run_and_a_sac_run_stop_and_resume_through_one_checkpoint_mechanism(fast_reach_task, tmp_path, monkeypatch):  # noqa: F811
+    genrl_run = {"episodes": 96, "seed": 3, "batch_episodes": 32, "checkpoint_every": 32, "out_dir": tmp_path / "genrl"}
+    sac_run = {
+        "episodes": 3,
+        "demos": demo_transitions(2),
+        "checkpoint_every": 1,
+        "device": "cpu",
+        "seed": 1,
+        "window": 3,
+        "eval_goals": 2,
+        "out_dir": tmp_path / "sac",
+    }
+    saved = []
+    save = EpisodeCheckpoint.save
+
+    def save_and_stop(callback, episodes):  # the shared base's save: both runs stop right after their first checkpoint
+        save(callback, episodes)
+        saved.append((type(callback), episodes))
+        raise _Killed
+
+    monkeypatch.setattr(EpisodeCheckpoint, "save", save_and_stop)
+    with pytest.raises(_Killed):
+        train_policy("fast-reach", LinearGenerator(), **genrl_run)
+    with pytest.raises(_Killed):
+        train_baseline("sac", "hockey", **sac_run)
+    monkeypatch.undo()
+    assert saved == [(GenRLCheckpoint, 32), (ReplayBufferCheckpoint, 1)]
+    assert issubclass(GenRLCheckpoint, EpisodeCheckpoint) and issubclass(ReplayBufferCheckpoint, EpisodeCheckpoint)
+
+    kept = {name: tmp_path / "kept" / name for name in ("genrl", "sac")}
+    for name, folder in kept.items():
+        shutil.move(tmp_path / name / "checkpoint", folder)
+
+    # One kind's checkpoint in the other kind's run folder is refused on resume, naming what differs, and left whole.
+    shutil.copytree(kept["sac"], genrl_run["out_dir"] / "checkpoint")
+    with pytest.raises(RunFolderError, match=r"holds a checkpoint of another run \(it differs in algorithm, "):
+        train_policy("fast-reach", LinearGenerator(), **genrl_run)
+    shutil.copytree(kept["genrl"], sac_run["out_dir"] / "checkpoint")
+    with pytest.raises(RunFolderError, match=r"holds a checkpoint of another run \(it differs in algorithm, "):
+        train_baseline("sac", "hockey", **sac_run)
+    for name, other in (("genrl", "sac"), ("sac", "genrl")):
+        assert sorted(path.name for path in (tmp_path / name / "checkpoint").iterdir()) == sorted(
+            path.name for path in kept[other].iterdir()
+        )
+
+    # Each run's own checkpoint back in place: both resume from it and meet their budgets.
+    for name, folder in kept.items():
+        shutil.rmtree(tmp_path / name / "checkpoint")
+        shutil.copytree(folder, tmp_path / name / "checkpoint")
+    genrl = train_policy("fast-reach", LinearGenerator(), **genrl_run)
+    sac = train_baseline("sac", "hockey", **sac_run)
+    assert genrl["resumed_at_episodes"] == [32] and genrl["episodes"] == 96
+    assert sac["resumed_at_episodes"] == [1] and sac["episodes_played"] == 3
