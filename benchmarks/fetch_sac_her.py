@@ -11,8 +11,8 @@ at the end, the deterministic policy plays ``--eval-states`` initial states (res
 ``--checkpoint-every`` episodes in ``--work`` and resumes from it; the JSON is written after every evaluation and says
 ``"complete": true`` once seeds 0, 1 and 2 have finished, whichever runs wrote them.
 
-    python benchmarks/fetch_sac_her.py --task fetch-reach --variant demos
-    python benchmarks/fetch_sac_her.py --task fetch-push --variant none --seeds 0
+    python -m benchmarks.fetch_sac_her --task fetch-reach --variant demos
+    python -m benchmarks.fetch_sac_her --task fetch-push --variant none --seeds 0
 """
 
 from __future__ import annotations
@@ -31,7 +31,6 @@ from sb3_genrl.baselines.checkpoint import ReplayBufferCheckpoint, resume_off_po
 from sb3_genrl.baselines.her import add_goal_demonstrations, fetch_goal_episodes, goal_statistics
 from sb3_genrl.baselines.normalization import NormalizedCombined
 from sb3_genrl.baselines.train import CHECKPOINT_EVERY
-from sb3_genrl.benchmarks.fetch_results import BENCHMARK_SEEDS, all_seeds_finished, seed_row, write_result
 from sb3_genrl.envs import get_task
 from sb3_genrl.envs.fetch import FETCH_HORIZON
 from sb3_genrl.envs.fetch_mujoco import fix_joint_helpers
@@ -40,6 +39,7 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.her import HerReplayBuffer
 
+from benchmarks.fetch_results import BENCHMARK_SEEDS, all_seeds_finished, seed_row, write_result
 from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, SEED
 from sb3_genrl.curves import episode_info
 from sb3_genrl.data import load_arrays
@@ -180,7 +180,7 @@ def main(argv: list[str] | None = None) -> None:
     root = os.path.join(os.path.dirname(HERE), "runs")
     data = args.data or os.path.join(root, "fetch", args.task, "demonstrations")
     if not os.path.isdir(data):
-        parser.error(f"no demonstrations at {data}: run benchmarks/fetch.py --task {args.task} first, or give --data")
+        parser.error(f"no demonstrations at {data}: run python -m benchmarks.fetch --task {args.task} first, or give --data")
     args.work = args.work or os.path.join(root, "fetch_sac_her", args.task)
     args.out = args.out or os.path.join(root, "fetch_sac_her", f"fetch_sac_her_{args.task}_{args.variant}.json")
     episodes = (args.steps or int(entry(get_task(args.task).env_id)["n_timesteps"])) // FETCH_HORIZON
