@@ -143,7 +143,7 @@ def write_learning_curve(
 
     :param monitor_csv: the run's ``episodes.monitor.csv``
     :param out_dir: the run folder
-    :param window: episodes per point (GenRL: one EM iteration's N episodes)
+    :param window: episodes per point (GenRL: one EM iteration's ``batch_episodes``)
     :param title: the plot's title
     :return: the curve's columns
     """

@@ -101,9 +101,9 @@ def load_genrl_settings(env_id: str) -> tuple[int, int, dict[str, Any]]:
     """A task's GenRL settings from ``genrl.yml``: the budget of episodes, the episodes per EM iteration and the
     further GenRL arguments, checked by :func:`sb3_genrl.genrl.check_genrl_settings`.
 
-    One GenRL step is one episode: ``n_timesteps`` is the budget of episodes and ``n_envs`` (default 1) x
-    ``n_steps`` the episodes of an iteration, ``N``; a run in another number of env processes keeps ``N``. The
-    entry's ``env_wrapper`` is rl-zoo3's (:mod:`sb3_genrl.zoo`), not a GenRL setting. Its ``callback`` (rl-zoo3's
+    One GenRL step is one episode: ``n_timesteps`` is the budget of episodes and ``n_steps`` x ``n_envs`` (default 1) is
+    ``batch_episodes``, the episodes of an iteration; a run in another number of env processes keeps ``batch_episodes``.
+    The entry's ``env_wrapper`` is rl-zoo3's (:mod:`sb3_genrl.zoo`), not a GenRL setting. Its ``callback`` (rl-zoo3's
     key, e.g. the Fetch tasks' :class:`~sb3_genrl.genrl.demonstrations.DemonstrationCallback`) is kept among the
     settings as ``callback``, a list of ``{class path: {arguments}}``, which :func:`sb3_genrl.run.train_policy` builds
     (and refuses without the demonstrations it needs).
@@ -140,7 +140,10 @@ def check_genrl_entry(entry: dict[str, Any], name: str) -> tuple[int, int, dict[
         if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
             raise ValueError(f"{name}: {key} must be an integer of at least {minimum}, got {value!r}")
     if n_envs * n_steps < 2:
-        raise ValueError(f"{name}: n_envs x n_steps, the episodes per iteration, must be at least 2")
+        raise ValueError(
+            f"{name}: batch_episodes = n_steps x n_envs, the episodes per iteration, must be at least 2, "
+            f"got {n_steps} x {n_envs}"
+        )
     return episodes, n_envs * n_steps, check_genrl_settings(entry, name) | ({"callback": callback} if callback else {})
 
 
@@ -151,11 +154,11 @@ _POLICY_DEFAULTS = {"net_arch": {"pi": [64, 64], "vf": [64, 64]}, "log_std_init"
 def changed_settings(env_id: str) -> list[str]:
     """The GenRL settings of ``env_id``'s entry in ``genrl.yml`` that differ from GenRL's defaults, by name.
 
-    Counted: the episodes per iteration (``n_steps``), each :class:`~sb3_genrl.GenRL` argument, each key of
-    ``policy_kwargs`` (against SB3's networks and GenRL's spread for a normal prior), ``hindsight_kwargs`` (switched on)
-    and each of its keys that differs from :class:`~sb3_genrl.genrl.hindsight.HindsightRelabelling`'s defaults, and
-    each callback (``callback: DemonstrationCallback``) with each argument that differs from its defaults. Not
-    counted: the budget (``n_timesteps``) and rl-zoo3's ``env_wrapper``.
+    Counted: the episodes per iteration (``batch_episodes``, as ``n_steps``), each :class:`~sb3_genrl.GenRL` argument,
+    each key of ``policy_kwargs`` (against SB3's networks and GenRL's spread for a normal prior), ``hindsight_kwargs``
+    (switched on) and each of its keys that differs from :class:`~sb3_genrl.genrl.hindsight.HindsightRelabelling`'s
+    defaults, and each callback (``callback: DemonstrationCallback``) with each argument that differs from its defaults.
+    Not counted: the budget (``n_timesteps``) and rl-zoo3's ``env_wrapper``.
     """
 
     _, batch_episodes, settings = load_genrl_settings(env_id)

@@ -80,3 +80,26 @@ def test_every_result_records_the_package_version_and_the_commit():
         ):
             unrecorded.append(path.name)
     assert unrecorded == []
+
+
+# N beside an iteration's or episodes' words; not an option's or keyword's placeholder (--episodes N, goals=N), an
+# array's leading dimension ((N, T, M)) or the paper's notation named once ("the paper's N")
+N_NEAR_AN_ITERATION = re.compile(r"episode|iteration|n_steps|per update")
+
+
+def test_docs_call_the_episodes_of_an_iteration_batch_episodes():
+    """The README and the docs name the episodes of one EM iteration ``batch_episodes``, never N."""
+    pages = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md")), *sorted((ROOT / "docs").rglob("*.rst"))]
+    found = []
+    for page in pages:
+        text = " ".join(page.read_text(encoding="utf-8").split())
+        for match in re.finditer(r"\bN\b", text):
+            before, after = text[: match.start()], text[match.end() :]
+            placeholder = re.search(r"-[\w-]+ $", before) or before.endswith("=")
+            shape = before.endswith("(") and after.startswith(",")
+            if placeholder or shape or before.endswith("the paper's "):
+                continue
+            near = text[max(0, match.start() - 80) : match.end() + 80]
+            if N_NEAR_AN_ITERATION.search(near):
+                found.append(f"{page.relative_to(ROOT)}: ...{near}...")
+    assert found == [], "\n".join(found)

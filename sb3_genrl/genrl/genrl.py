@@ -53,8 +53,9 @@ class GenRL(OnPolicyAlgorithm):
 
     Paper: Ghadirzadeh et al., "Training and Evaluation of Deep Policies using Reinforcement Learning and Generative
     Models" (JMLR 23(174), 2022), section 4 and Algorithm 1 (eq. 4: the E-step's objective, eq. 5: its TRPO form,
-    eq. 6: the M-step). Each iteration plays ``N = n_steps * n_envs`` one-step episodes, each one bandit pull
-    (context ``s0``, latent action ``alpha ~ pi``, reward ``r`` of the decoded trajectory), so ``A = r - V(s0)``.
+    eq. 6: the M-step). Each iteration plays ``batch_episodes = n_steps * n_envs`` one-step episodes (the paper's N;
+    :attr:`batch_episodes`), each one bandit pull (context ``s0``, latent action ``alpha ~ pi``, reward ``r`` of the
+    decoded trajectory), so ``A = r - V(s0)``.
 
     ``GenRL(env, generator)`` and ``GenRL("MlpPolicy", env, generator=...)`` both work. A raw env or Gymnasium id is
     wrapped in :class:`~sb3_genrl.LatentActionWrapper`; a wrapped env (or a VecEnv of them) is used as it is and
@@ -71,7 +72,8 @@ class GenRL(OnPolicyAlgorithm):
     :param e_step: ``"trpo"`` (default: a natural-gradient step on eq. 5 within ``KL(q || pi) < target_kl``, with a
         backtracking line search) or ``"kl_penalty"`` (eq. 5 as written, maximised by Adam)
     :param learning_rate: Adam learning rate of the value function (default 3e-3), or a schedule
-    :param n_steps: episodes per env per iteration (default 64)
+    :param n_steps: SB3's rollout length per env, here episodes per env per iteration (default 64): an iteration plays
+        ``batch_episodes = n_steps x n_envs`` episodes
     :param batch_size: minibatch size of the value-function fit and of the KL-penalty E-step (default 64)
     :param n_critic_updates: epochs of the value-function fit per iteration (default 50)
     :param cg_max_steps: conjugate-gradient iterations of the TRPO E-step (default 15)
@@ -181,7 +183,9 @@ class GenRL(OnPolicyAlgorithm):
             supported_action_spaces=(spaces.Box,),
         )
         if normalize_advantage and self.env is not None and self.n_steps * self.env.num_envs < 2:
-            raise SettingError(f"normalize_advantage needs n_steps * n_envs >= 2 episodes, got {self.n_steps * self.n_envs}")
+            raise SettingError(
+                f"normalize_advantage needs batch_episodes = n_steps * n_envs >= 2 episodes, got {self.n_steps * self.n_envs}"
+            )
         self.e_step, self.n_em_iterations, self.normalize_advantage = e_step, int(n_em_iterations), normalize_advantage
         self.target_kl, self.cg_max_steps, self.cg_damping = target_kl, cg_max_steps, cg_damping
         self.line_search_shrinking_factor, self.line_search_max_iter = line_search_shrinking_factor, line_search_max_iter
@@ -191,6 +195,14 @@ class GenRL(OnPolicyAlgorithm):
         self.latent_critic_kwargs = None if latent_critic_kwargs is None else dict(latent_critic_kwargs)
         if _init_setup_model:
             self._setup_model()
+
+    @property
+    def batch_episodes(self) -> int:
+        """The episodes of one EM iteration, ``n_steps * n_envs`` (the paper's N): each env plays ``n_steps`` one-step
+        episodes per rollout. Read-only: set ``n_steps`` and the env instead."""
+        if getattr(self, "n_envs", None) is None:
+            raise AttributeError("batch_episodes is n_steps * n_envs: this model has no env yet (see set_env)")
+        return self.n_steps * self.n_envs
 
     def _setup_model(self) -> None:
         # SB3's rollout buffer, refusing a non-finite reward where it enters GenRL (after every wrapper of the env); with
@@ -224,14 +236,14 @@ class GenRL(OnPolicyAlgorithm):
         )
 
     def train(self) -> None:
-        """One EM iteration (Algorithm 1) on the N episodes in the rollout buffer."""
+        """One EM iteration (Algorithm 1) on the ``batch_episodes`` episodes in the rollout buffer."""
         # The E-step evaluates pi and q in evaluation mode, the mode that collected the batch (dropout off, batch-norm
         # running statistics): q/pi = 1 and KL(q || pi) = 0 at phi = theta. Only the value function trains in
         # training mode.
         self.policy.set_training_mode(False)
         self._update_learning_rate(self.policy.optimizer)
 
-        # One episode per bandit pull (section 4): the buffer holds {s_i, alpha_i, r_i}, i = 1..N, with
+        # One episode per bandit pull (section 4): the buffer holds {s_i, alpha_i, r_i}, i = 1..batch_episodes, with
         # alpha_i ~ pi_theta(.|s_i). Each episode ends after one step, so returns = r_i and A_i = r_i - V(s_i).
         data = next(self.rollout_buffer.get(batch_size=None))
         observations, actions, log_prob_pi = data.observations, data.actions, data.old_log_prob

@@ -2,13 +2,14 @@
 E-step's advantage ``A = r - E_{alpha' ~ pi(.|s0)}[Q(s0, alpha')]`` in place of the paper's ``A = r - V(s0)``.
 
 The paper's value function ``V(s0)`` is the expected reward of the *current* policy, so it is fitted to the current
-batch alone: one pull per context, ``n_steps * n_envs`` pulls. Its error at a context is a bias shared by that context's
-pull, and where it exceeds the reward differences within the policy's spread (a policy near its goal) the E-step's
-step follows the baseline's error, not the reward (``docs/guide/search.md`` measures this on a small bandit). In a
-one-step bandit the reward of a pull does not depend on the policy that drew it, so a critic over (context, latent
-action) can learn from the pulls of many batches; averaged over draws from the policy's own spread at each context it
-is a baseline for the current policy. The direction of DSRL (Wagenmaker et al., 2025), which learns a critic over a
-diffusion policy's noise; here the critic only replaces the baseline, the E-step and its KL bound stay the paper's.
+batch alone: one pull per context, ``batch_episodes`` (``n_steps * n_envs``) pulls. Its error at a context is a bias
+shared by that context's pull, and where it exceeds the reward differences within the policy's spread (a policy near
+its goal) the E-step's step follows the baseline's error, not the reward (``docs/guide/search.md`` measures this on a
+small bandit). In a one-step bandit the reward of a pull does not depend on the policy that drew it, so a critic over
+(context, latent action) can learn from the pulls of many batches; averaged over draws from the policy's own spread at
+each context it is a baseline for the current policy. The direction of DSRL (Wagenmaker et al., 2025), which learns a
+critic over a diffusion policy's noise; here the critic only replaces the baseline, the E-step and its KL bound stay
+the paper's.
 
 Switched on by GenRL's ``latent_critic_kwargs`` (``{}``: the defaults of :data:`DEFAULTS`). The critic and its pulls are
 not saved with the model: a loaded model's critic starts afresh.

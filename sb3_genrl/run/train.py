@@ -124,7 +124,7 @@ def train_policy(
         returns the finished run's summary, or resumes the unfinished one; another run's folder is refused (see
         :mod:`sb3_genrl.run.folder`)
     :param e_step: ``"trpo"`` or ``"kl_penalty"`` (see :class:`~sb3_genrl.GenRL`)
-    :param batch_episodes: episodes per EM iteration, ``N``
+    :param batch_episodes: the episodes of one EM iteration (GenRL's ``n_steps * n_envs``)
     :param n_envs: envs played at a time; a divisor of ``batch_episodes``. Above 1, a task with a fast path (the arm
         tasks) plays each step's trajectories in one threaded call in this process on ``n_threads`` cores
         (:class:`~sb3_genrl.vec_env.BatchedLatentVecEnv`), any other task each env in its own process (SB3's

@@ -103,6 +103,19 @@ def test_works_with_step_by_step_env_and_n_envs():
     assert model.num_timesteps == 64 and model.rollout_buffer.buffer_size * model.n_envs == 32
 
 
+@pytest.mark.parametrize("n_envs", [1, 2])
+def test_batch_episodes_is_n_steps_times_n_envs(n_envs, tmp_path):
+    generator = LinearGenerator()
+    model = GenRL(DummyVecEnv([lambda: LatentActionWrapper(FastReachEnv(), generator)] * n_envs), n_steps=8, seed=0)
+    assert model.batch_episodes == 8 * n_envs
+    model.learn(model.batch_episodes)  # one iteration plays batch_episodes episodes
+    assert model.num_timesteps == model.batch_episodes and model._n_updates == 1
+    with pytest.raises(AttributeError):
+        model.batch_episodes = 3  # read-only: n_steps and the env set it
+    model.save(tmp_path / "model.zip")
+    assert GenRL.load(tmp_path / "model.zip", generator=generator).batch_episodes == 8 * n_envs
+
+
 def test_same_seed_same_run():
     runs = []
     for _ in range(2):
