@@ -24,7 +24,8 @@ after a stop resumes where it stopped (a run's settings are recorded and checked
    (:mod:`sb3_genrl.run.checkpoint`) and resumes from it.
 5. the generator's limit near the first seed's final policy: on the same ``--limit-states`` held-out states, the share
    its deterministic action solves and the share that one of ``--near-draws`` draws from the policy's own spread
-   solves (``fetch_demonstrations.policy_neighbourhood_success``): a gap says the search, not the generator, limits.
+   solves (``sb3_genrl.envs.demonstrations.fetch.policy_neighbourhood_success``): a gap says the search, not the
+   generator, limits.
 
 The JSON (default ``benchmarks/results/fetch_TASK.json``) says ``"complete": false`` and how far each seed got until
 every stage is done and seeds 0, 1 and 2 have finished (a run of other ``--seeds`` stays partial).
@@ -44,7 +45,7 @@ import time
 
 import torch
 from sb3_genrl.envs import TASKS, get_task
-from sb3_genrl.envs.fetch_demonstrations import (
+from sb3_genrl.envs.demonstrations.fetch import (
     policy_neighbourhood_success,
     prior_best_success,
     reconstruction_success,

@@ -40,7 +40,7 @@ import gymnasium as gym
 import numpy as np
 import torch as th
 from sb3_genrl.envs import get_task
-from sb3_genrl.envs.fetch_demonstrations import evaluate_success, replay_success
+from sb3_genrl.envs.demonstrations.fetch import evaluate_success, replay_success
 
 from benchmarks.fetch_seed import fitted_policy
 from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, SEED

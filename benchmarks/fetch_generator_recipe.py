@@ -17,7 +17,7 @@ import tempfile
 import time
 
 import torch
-from sb3_genrl.envs.fetch_demonstrations import reconstruction_success
+from sb3_genrl.envs.demonstrations.fetch import reconstruction_success
 
 from benchmarks.fetch_seed import fitted_mean_success
 from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, SEED

@@ -34,7 +34,7 @@ import time
 import numpy as np
 import torch
 from sb3_genrl.envs import get_task
-from sb3_genrl.envs.fetch_demonstrations import evaluate_success
+from sb3_genrl.envs.demonstrations.fetch import evaluate_success
 
 from benchmarks.fetch_seed import fitted_mean_success
 from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, check_output_dir

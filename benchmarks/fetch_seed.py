@@ -19,8 +19,8 @@ from typing import Any
 import gymnasium as gym
 import torch as th
 from sb3_genrl.envs import get_task
+from sb3_genrl.envs.demonstrations.fetch import evaluate_success
 from sb3_genrl.envs.fetch import FETCH_HORIZON
-from sb3_genrl.envs.fetch_demonstrations import evaluate_success
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
 from sb3_genrl.curves import monitor_episodes, training_logger

@@ -5,7 +5,7 @@ in the JSON as it finishes, so that the same command after a stop resumes where 
 and a rerun with others is refused before any work):
 
 1. ``--demos`` demonstrations of Meta-World's scripted expert, perturbed, 150 steps each
-   (:func:`~sb3_genrl.envs.external.record_demonstrations`, seed 0), kept when their open-loop replay succeeds;
+   (:func:`~sb3_genrl.envs.demonstrations.record_demonstrations`, seed 0), kept when their open-loop replay succeeds;
 2. a generator of the quickstart's Meta-World preset (:data:`sb3_genrl.envs.metaworld.GENERATOR_PRESET`), ``--epochs``,
    seed 0;
 3. the expert closed loop, unperturbed, from the held-out resets, and its actions replayed open loop from the same
@@ -42,7 +42,8 @@ import torch
 from sb3_genrl.baselines.models import normalized_policy
 from sb3_genrl.baselines.prefill import prefill_replay_buffer
 from sb3_genrl.envs import metaworld
-from sb3_genrl.envs.external import HELD_OUT_SEED, evaluate_success, make_task_env, record_demonstrations
+from sb3_genrl.envs.demonstrations import record_demonstrations
+from sb3_genrl.envs.external import HELD_OUT_SEED, evaluate_success, make_task_env
 from stable_baselines3 import SAC
 
 from sb3_genrl import GenRL, LatentActionWrapper

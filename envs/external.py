@@ -1,14 +1,12 @@
-"""Tasks from outside the package: any episodic Gymnasium env with an expert becomes a demonstration dataset.
+"""Tasks from outside the package: any episodic Gymnasium env, as GenRL and the demonstration recorder play it.
 
 The path a user's own task takes, with nothing added to the package for it (see the guide's "Your own task"):
 
-1. :func:`record_demonstrations` plays an expert (a callable, observation -> action) closed loop from seeded resets,
-   with the perturbation of the paper's demonstrations (smooth random changes of the actions, :func:`smooth_noise`),
-   and keeps an episode only when it succeeds and its actions, replayed open loop from the same seeded reset, still
-   succeed: GenRL plays a generator's trajectories open loop, so only such trajectories can teach it. The share kept
-   and the reasons for the others are recorded in the dataset's metadata.
+1. :func:`sb3_genrl.envs.demonstrations.record_demonstrations` plays an expert closed loop from seeded resets of the
+   task's env (:func:`make_task_env`) and keeps the episodes whose actions, replayed open loop, still succeed.
 2. :func:`sb3_genrl.generative.train_generator` trains a generator on the dataset's actions.
-3. ``GenRL(LatentActionWrapper(make_task_env(task), generator))`` trains the policy (or ``genrl train-policy``).
+3. ``GenRL(LatentActionWrapper(make_task_env(task), generator))`` trains the policy (or ``genrl train-policy``), and
+   :func:`evaluate_success` scores it on held-out seeded resets.
 
 A task is a Gymnasium id (``gymnasium.register``-ed, or ``"module:Id"`` whose module registers it on import), a
 callable that makes the env, a task the package registers (:data:`sb3_genrl.envs.TASKS`), or ``metaworld/<name>`` for
@@ -21,38 +19,24 @@ from __future__ import annotations
 
 import functools
 import importlib
-import os
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from gymnasium import spaces
 from gymnasium.wrappers import TimeLimit
 from sb3_genrl.envs import metaworld
-from sb3_genrl.envs.demonstrations import refuse_existing_output
-from sb3_genrl.envs.motions import bump
 from sb3_genrl.envs.registry import TASKS
-from tqdm.auto import tqdm
 
-import sb3_genrl
 from sb3_genrl import LatentActionWrapper
-from sb3_genrl.checks import check_non_negative_float, check_output_dir, check_positive_int, check_seed
-from sb3_genrl.data import write_dataset
-from sb3_genrl.provenance import package_versions
-from sb3_genrl.utils import folder_lock
+from sb3_genrl.checks import check_positive_int
 
-DEFAULT_NOISE = 0.3  # largest height of one bump, as a share of each action dimension's half-range
-BUMP_DURATIONS = (6, 30)  # smallest and largest bump width (steps), as the arm's and Fetch's perturbations
 SUCCESS_KEYS = ("is_success", "success")  # read in this order when the default key is asked for
 METAWORLD_PREFIX = "metaworld/"
-FIRST_TRIES = 200  # episodes tried without any kept before the recorder gives up
 # The held-out resets of an outside task: reset seeds 2**31, 2**31 + 1, ... The recorder draws every reset seed below
-# 2**31 (_reset_seed) and GenRL's training resets follow the env's own random stream, so these resets are never used
-# to record, train or choose anything.
+# 2**31 (sb3_genrl.envs.demonstrations.recorder) and GenRL's training resets follow the env's own random stream, so
+# these resets are never used to record, train or choose anything.
 HELD_OUT_SEED = 2**31
 HELD_OUT_RESETS = 200
 
@@ -202,15 +186,15 @@ def make_task_env(
     :param horizon: control steps of an episode (None: the env's ``max_episode_steps``)
     :param success_key: the info key of the env's success
     """
-    return _make_env(task, horizon, success_key)[0]
+    return task_env_and_horizon(task, horizon, success_key)[0]
 
 
-def _make_env(task: str | Callable[[], gym.Env], horizon: int | None, success_key: str) -> tuple[gym.Env, int]:
-    """:func:`make_task_env`'s env and its horizon."""
+def task_env_and_horizon(task: str | Callable[[], gym.Env], horizon: int | None, success_key: str) -> tuple[gym.Env, int]:
+    """:func:`make_task_env`'s env and its horizon (the control steps of an episode, :func:`task_horizon`)."""
     env = task() if callable(task) else gym.make(resolve_task(task).env_id)
     if not isinstance(env, gym.Env):
-        raise ValueError(f"the env maker {_task_name(task)!r} returned a {type(env).__name__}, not a gymnasium.Env")
-    steps = task_horizon(env, horizon, _task_name(task))
+        raise ValueError(f"the env maker {task_name(task)!r} returned a {type(env).__name__}, not a gymnasium.Env")
+    steps = task_horizon(env, horizon, task_name(task))
     if steps != declared_horizon(env):
         env = TimeLimit(env, max_episode_steps=steps)
     return SuccessInfo(env, success_key), steps
@@ -261,7 +245,7 @@ def check_reproducible_reset(env: gym.Env, seed: int, name: str = "the env") -> 
     """
     first, _ = env.reset(seed=int(seed))
     second, _ = env.reset(seed=int(seed))
-    if not _same(first, second):
+    if not same_observation(first, second):
         raise ValueError(
             f"{name}'s reset(seed={seed}) gave two different observations: its resets are not reproducible from the "
             "seed, so an open-loop trajectory cannot be replayed from its reset (fix the env's seeding: draw every "
@@ -270,313 +254,21 @@ def check_reproducible_reset(env: gym.Env, seed: int, name: str = "the env") -> 
     return second
 
 
-def smooth_noise(
-    horizon: int,
-    rng: np.random.Generator,
-    heights: np.ndarray,
-    *,
-    max_bumps: int = 4,
-    durations: tuple[int, int] = BUMP_DURATIONS,
-) -> np.ndarray:
-    """Random smooth changes of the actions: the paper's perturbation (random changes of different strengths and
-    directions) for any action space, as :func:`sb3_genrl.envs.demonstrations.perturbation` makes for the arm.
-
-    :param horizon: control steps T
-    :param rng: the random generator
-    :param heights: ``(M,)`` the largest height of one bump per action dimension (action units)
-    :param max_bumps: bumps per trajectory, uniformly in ``1..max_bumps``
-    :param durations: smallest and largest bump width (steps; cut to the horizon)
-    :return: ``(T, M)`` additions to the actions: each bump a raised cosine on a random dimension, at a random step,
-        of random width and of height uniform in ``[-level, level] * heights[dimension]``, with one ``level ~ U(0, 1)``
-        per trajectory
-    """
-    out = np.zeros((horizon, len(heights)))
-    level = rng.uniform(0.0, 1.0)
-    shortest = min(durations[0], horizon)
-    for _ in range(int(rng.integers(1, max_bumps + 1))):
-        dimension = int(rng.integers(len(heights)))
-        duration = int(rng.integers(shortest, max(shortest, min(durations[1], horizon)) + 1))
-        start = int(rng.integers(0, horizon - shortest + 1))
-        height = level * heights[dimension] * rng.uniform(-1.0, 1.0)
-        out[:, dimension] += bump(horizon, start, duration, height * duration / 2.0)  # a raised cosine peaks at 2x its mean
-    return out
-
-
-def record_demonstrations(
-    task: str | Callable[[], gym.Env],
-    expert: Callable[[Any], np.ndarray] | None,
-    episodes: int,
-    out_dir: str | os.PathLike[str],
-    *,
-    seed: int = 0,
-    noise: float | np.ndarray = DEFAULT_NOISE,
-    horizon: int | None = None,
-    success_key: str = "is_success",
-    progress_bar: bool = False,
-) -> Path:
-    """Record ``episodes`` demonstrations of an expert on any episodic Gymnasium env as a Minari dataset in ``out_dir``.
-
-    Episode ``k`` draws its reset seed and its perturbation from ``np.random.default_rng([seed, k])``: the env is reset
-    with that seed and the expert plays closed loop, each of its actions changed by :func:`smooth_noise` and clipped to
-    the action space, for ``horizon`` steps (or until the episode ends; the rest of the trajectory is the hold action,
-    zeros, as :class:`~sb3_genrl.LatentActionWrapper` plays after a trajectory). The episode is kept when its last step
-    succeeds and its actions, replayed open loop from a reset with the same seed, succeed too. Episodes are tried in
-    order until ``episodes`` are kept, so the dataset depends on ``seed`` only, and a smaller set is a prefix of a
-    larger one.
-
-    Checked before any work and before ``out_dir`` is claimed: the arguments, the horizon (the env's
-    ``max_episode_steps`` unless ``horizon`` is given; an env without one needs it), that ``reset(seed=s)`` twice gives
-    the same observation, that the expert's action fits the action space, and that the env reports a success.
-
-    The dataset (:func:`sb3_genrl.data.write_dataset`, written atomically) holds the kept episodes' actions ``(N, T,
-    M)``, observations ``(N, T + 1, D)`` (a ``Dict`` observation flattened by ``gymnasium.spaces.flatten``), rewards
-    and end flags; ``reached`` and ``sampled_goals`` are the last achieved and the first desired goal of a
-    goal-conditioned env (``(N, 0)`` otherwise). Its metadata (``sb3_genrl.data.dataset_info``) records the reset seed
-    of each kept episode (``reset_seeds``), the episodes ``tried``, ``kept_share``, and why the others were dropped:
-    ``failed_closed_loop`` (the expert did not succeed), ``failed_open_loop`` (its replay did not succeed).
-
-    :param task: a task name (:func:`resolve_task`: a Gymnasium id, ``metaworld/<name>``, ...) or a callable that
-        makes the env
-    :param expert: observation -> action (the raw observation of the env: an array, or a dict for a ``Dict`` space);
-        None: the task's own expert (``metaworld/<name>``)
-    :param episodes: demonstrations to keep
-    :param out_dir: the dataset directory to create (must not exist or be empty)
-    :param seed: seed of every random draw (reset seeds and perturbations)
-    :param noise: the largest height of one bump, as a share of each action dimension's half-range (default 0.3; 0:
-        the expert unperturbed), or an ``(M,)`` array of heights in action units (needed for an unbounded action space)
-    :param horizon: control steps of a demonstration; None: the env's ``max_episode_steps``
-    :param success_key: the info key of the env's success (default ``"is_success"``, falling back to ``"success"``)
-    :param progress_bar: show a tqdm progress bar
-    :return: the dataset directory
-    """
-    name = _task_name(task)
-    if expert is None:
-        make_expert = None if callable(task) else resolve_task(task).make_expert
-        if make_expert is None:
-            raise ValueError(f"task {name!r} has no expert of the package's: give expert= (observation -> action)")
-        expert = make_expert()
-    if not callable(expert):
-        raise ValueError(f"expert must be a callable observation -> action, got {type(expert).__name__}")
-    check_positive_int(episodes, "episodes")
-    check_seed(seed)
-    if not isinstance(success_key, str) or not success_key:
-        raise ValueError(f"success_key must be a non-empty string, got {success_key!r}")
-    env, steps = _make_env(task, horizon, success_key)
-    heights = _noise_heights(env.action_space, noise)
-    first_seed = _reset_seed(np.random.default_rng([seed, 0]))
-    _probe(env, expert, first_seed, success_key, name)
-    out_dir = check_output_dir(out_dir, "out_dir").absolute()
-    with folder_lock(out_dir, lock_file=out_dir.parent / f".{out_dir.name}.lock"):
-        refuse_existing_output(out_dir)
-        began = time.perf_counter()
-        kept, counts = _record(env, expert, episodes, steps, seed, heights, progress_bar, name)
-        arrays = _dataset_arrays(env, kept, steps)
-        genrl = {
-            "task": name,
-            "env_id": None if callable(task) else resolve_task(task).env_id,
-            "horizon": steps,
-            "seed": int(seed),
-            "version": sb3_genrl.__version__,
-            "mujoco": package_versions().get("mujoco"),
-            "episodes": int(episodes),
-            "tried": counts["tried"],
-            "drawn": counts["tried"],
-            "kept_share": episodes / counts["tried"],
-            "failed_closed_loop": counts["failed_closed_loop"],
-            "failed_open_loop": counts["failed_open_loop"],
-            "noise": np.asarray(noise, dtype=np.float64).tolist(),
-            "success_key": success_key,
-            "expert": expert_name(expert),
-            "reset_seeds": [episode["reset_seed"] for episode in kept],
-            "observation": "the env's observation"
-            + (", flattened by gymnasium.spaces.flatten" if not isinstance(env.observation_space, spaces.Box) else ""),
-            "goal": "the env's own (no relabelling)",
-            "seconds": round(time.perf_counter() - began, 1),
-        }
-        path = write_dataset(
-            out_dir,
-            arrays,
-            dataset_id=f"genrl/{_dataset_name(name)}-v0",
-            observation_space=spaces.Box(-np.inf, np.inf, shape=arrays["observations"].shape[2:], dtype=np.float32),
-            action_space=env.action_space,
-            genrl=genrl,
-            description=f"{episodes} perturbed expert demonstrations of {name} whose open-loop replay succeeds (sb3-genrl)",
-        )
-    env.close()
-    return path
-
-
-def _task_name(task: str | Callable[[], gym.Env]) -> str:
+def task_name(task: str | Callable[[], gym.Env]) -> str:
+    """How messages and metadata name a task: the name as given, or the qualified name of the callable that makes it."""
     if not callable(task):
         return str(task)
     return getattr(task, "__qualname__", None) or type(task).__name__
 
 
-def expert_name(expert: Callable[[Any], np.ndarray]) -> str:
-    """How a dataset's metadata names an expert: ``module:qualified name`` of the function (or of a callable's class)."""
-    name = getattr(expert, "__qualname__", None) or type(expert).__qualname__
-    return f"{getattr(expert, '__module__', None) or type(expert).__module__}:{name}"
-
-
-def _dataset_name(name: str) -> str:
-    """A Minari dataset name made of the task's name: letters, digits and single dashes."""
-    parts = "".join(c.lower() if c.isalnum() else " " for c in name).split()
-    return "-".join(parts) or "task"
-
-
-def _reset_seed(rng: np.random.Generator) -> int:
-    return int(rng.integers(2**31))
-
-
-def _noise_heights(action_space: spaces.Space, noise: float | np.ndarray) -> np.ndarray:
-    """The bumps' largest heights in action units (see :func:`record_demonstrations`'s ``noise``)."""
-    if not isinstance(action_space, spaces.Box) or len(action_space.shape) != 1:
-        raise ValueError(f"the env's actions must be a Box of shape (M,) (per-step vectors), got {action_space}")
-    if np.ndim(noise) == 0:
-        share = check_non_negative_float(noise, "noise")
-        half_range = (action_space.high.astype(np.float64) - action_space.low.astype(np.float64)) / 2.0
-        if share > 0 and not np.all(np.isfinite(half_range)):
-            raise ValueError(
-                f"noise {share} is a share of the action space's half-range, but {action_space} is unbounded: give "
-                f"noise as an array of {action_space.shape[0]} heights in action units"
-            )
-        return share * np.nan_to_num(half_range)
-    heights = np.asarray(noise, dtype=np.float64)
-    if heights.shape != action_space.shape or not np.all(np.isfinite(heights)) or np.any(heights < 0):
-        raise ValueError(
-            f"noise as heights must be {action_space.shape[0]} finite non-negative numbers (one per action dimension), "
-            f"got {noise!r}"
-        )
-    return heights
-
-
-def _expert_action(expert: Callable[[Any], np.ndarray], observation: Any, action_space: spaces.Box) -> np.ndarray:
-    action = np.asarray(expert(observation), dtype=np.float64)
-    if action.shape != action_space.shape or not np.all(np.isfinite(action)):
-        raise ValueError(
-            f"the expert returned {action.tolist()!r} (shape {action.shape}); expected {action_space.shape[0]} finite "
-            "numbers, an action of the env's action space"
-        )
-    return action
-
-
-def _probe(env: gym.Env, expert: Callable[[Any], np.ndarray], reset_seed: int, success_key: str, name: str) -> None:
-    """Before any work: reproducible resets, the expert's action, a success in the step's info."""
-    observation = check_reproducible_reset(env, reset_seed, name)
-    action = _expert_action(expert, observation, env.action_space)
-    _, _, _, _, info = env.step(np.clip(action, env.action_space.low, env.action_space.high).astype(env.action_space.dtype))
-    if success_key_of(info, success_key) is None:
-        wanted = " or ".join(repr(key) for key in (SUCCESS_KEYS if success_key == SUCCESS_KEYS[0] else (success_key,)))
-        raise ValueError(
-            f"{name} reports no success: its step's info has no {wanted} (it has {sorted(info)}); give the key that "
-            "holds it as success_key (--success-key)"
-        )
-
-
-def _play(
-    env: gym.Env, reset_seed: int, steps: int, expert: Callable[[Any], np.ndarray] | None, actions: np.ndarray | None
-) -> dict[str, Any]:
-    """One episode from ``reset(seed=reset_seed)``: the expert closed loop (``actions`` adds to its actions) or
-    ``actions`` open loop; stops when the episode ends. Returns what was played and whether its last step succeeded."""
-    space = env.action_space
-    observation, _ = env.reset(seed=int(reset_seed))
-    observations, played, rewards, info = [observation], [], [], {}
-    terminated = truncated = False
-    for t in range(steps):
-        if expert is None:
-            action = actions[t]
-        else:
-            action = _expert_action(expert, observation, space) + actions[t]
-        action = np.clip(action, space.low, space.high).astype(space.dtype)
-        observation, reward, terminated, truncated, info = env.step(action)
-        observations.append(observation)
-        played.append(action)
-        rewards.append(float(reward))
-        if terminated or truncated:
-            break
-    return {
-        "observations": observations,
-        "actions": np.array(played),
-        "rewards": rewards,
-        "terminated": bool(terminated),
-        "truncated": bool(truncated),
-        "success": bool(info.get("is_success", False)),
-    }
-
-
-def _record(
-    env: gym.Env,
-    expert: Callable[[Any], np.ndarray],
-    episodes: int,
-    steps: int,
-    seed: int,
-    heights: np.ndarray,
-    progress_bar: bool,
-    name: str,
-) -> tuple[list[dict[str, Any]], dict[str, int]]:
-    kept: list[dict[str, Any]] = []
-    counts = {"tried": 0, "failed_closed_loop": 0, "failed_open_loop": 0}
-    with tqdm(total=episodes, disable=not progress_bar, unit="episode", desc=f"{name} demonstrations") as bar:
-        while len(kept) < episodes:
-            if counts["tried"] >= FIRST_TRIES and not kept:
-                raise RuntimeError(
-                    f"none of the first {counts['tried']} demonstrations of {name} was kept ({counts['failed_closed_loop']}"
-                    f" failed closed loop, {counts['failed_open_loop']} failed when replayed open loop): check the "
-                    "expert, the noise and the success key"
-                )
-            rng = np.random.default_rng([seed, counts["tried"]])
-            reset_seed = _reset_seed(rng)
-            counts["tried"] += 1
-            played = _play(env, reset_seed, steps, expert, smooth_noise(steps, rng, heights))
-            if not played["success"]:
-                counts["failed_closed_loop"] += 1
-                continue
-            actions = np.concatenate([played["actions"], np.zeros((steps - len(played["actions"]), *env.action_space.shape))])
-            actions = actions.astype(env.action_space.dtype)
-            replayed = _play(env, reset_seed, steps, None, actions)
-            if not (replayed["success"] and _same(replayed["observations"][0], played["observations"][0])):
-                counts["failed_open_loop"] += 1
-                continue
-            kept.append(played | {"actions": actions, "reset_seed": reset_seed})
-            bar.update(1)
-    return kept, counts
-
-
-def _dataset_arrays(env: gym.Env, kept: list[dict[str, Any]], steps: int) -> dict[str, np.ndarray]:
-    """The stored arrays (:mod:`sb3_genrl.data.minari_io`): an episode that ended early is padded with its last
-    observation, zero rewards and no further end flags."""
-    space = env.observation_space
-    goal_env = isinstance(space, spaces.Dict) and {"achieved_goal", "desired_goal"} <= set(space.spaces)
-    n = len(kept)
-    observations, rewards = [], np.zeros((n, steps))
-    terminations, truncations = np.zeros((n, steps), dtype=bool), np.zeros((n, steps), dtype=bool)
-    reached, sampled = [], []
-    for i, episode in enumerate(kept):
-        flat = [np.asarray(spaces.flatten(space, o), dtype=np.float32) for o in episode["observations"]]
-        observations.append(np.stack(flat + [flat[-1]] * (steps + 1 - len(flat))))
-        played = len(episode["rewards"])
-        rewards[i, :played] = episode["rewards"]
-        terminations[i, played - 1] = episode["terminated"]
-        truncations[i, played - 1] = episode["truncated"] or not episode["terminated"]
-        if goal_env:
-            reached.append(episode["observations"][-1]["achieved_goal"])
-            sampled.append(episode["observations"][0]["desired_goal"])
-    goal_shape = (n, 0) if not goal_env else (n, -1)
-    return {
-        "observations": np.stack(observations),
-        "actions": np.stack([episode["actions"] for episode in kept]).astype(np.float32),
-        "rewards": rewards,
-        "terminations": terminations,
-        "truncations": truncations,
-        "reached": np.asarray(reached, dtype=np.float64).reshape(goal_shape),
-        "sampled_goals": np.asarray(sampled, dtype=np.float64).reshape(goal_shape),
-    }
-
-
-def _same(first: Any, second: Any) -> bool:
+def same_observation(first: Any, second: Any) -> bool:
     """Whether two observations (arrays, or dicts and tuples of them) are equal, element for element."""
     if isinstance(first, dict):
-        return isinstance(second, dict) and first.keys() == second.keys() and all(_same(first[k], second[k]) for k in first)
+        return (
+            isinstance(second, dict)
+            and first.keys() == second.keys()
+            and all(same_observation(first[k], second[k]) for k in first)
+        )
     if isinstance(first, tuple | list):
-        return isinstance(second, tuple | list) and len(first) == len(second) and all(map(_same, first, second))
+        return isinstance(second, tuple | list) and len(first) == len(second) and all(map(same_observation, first, second))
     return np.array_equal(np.asarray(first), np.asarray(second))

@@ -194,5 +194,5 @@ def make_fetch_pick_and_place(**kwargs: Any) -> Any:
 
 def is_valid(info: dict[str, Any]) -> bool:
     """A played trajectory may be a demonstration when what it moves ended within 5 cm of its aim and the object (if
-    any) is still on the table (``info`` from :func:`sb3_genrl.envs.fetch_demonstrations.play_expert`)."""
+    any) is still on the table (``info`` from :func:`sb3_genrl.envs.demonstrations.fetch.play_expert`)."""
     return bool(info["aim_distance"] < SUCCESS_DISTANCE and info.get("on_table", True))

@@ -1,6 +1,6 @@
 """Gymnasium-Robotics' four Fetch tasks as tasks of the package (:class:`~sb3_genrl.envs.spec.TaskSpec`): the envs
 and experts of :mod:`sb3_genrl.envs.fetch` with the demonstrations and the evaluation of
-:mod:`sb3_genrl.envs.fetch_demonstrations`."""
+:mod:`sb3_genrl.envs.demonstrations.fetch`."""
 
 from __future__ import annotations
 
@@ -8,6 +8,7 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+from sb3_genrl.envs.demonstrations.fetch import evaluate_success, make_arrays
 from sb3_genrl.envs.fetch import (
     FAMILIES,
     FETCH_ACTION_DIM,
@@ -20,7 +21,6 @@ from sb3_genrl.envs.fetch import (
     make_fetch_reach,
     make_fetch_slide,
 )
-from sb3_genrl.envs.fetch_demonstrations import evaluate_success, make_arrays
 from sb3_genrl.envs.spec import TaskSpec
 
 

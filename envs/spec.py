@@ -44,7 +44,7 @@ class TaskSpec:
     :param goal_env_class: that variant's class
     :param action_dim: the per-step action's size (the arm's 7 joints by default)
     :param demonstrations: the task's own demonstration maker, ``(spec, episodes, seed, n_threads, progress_bar) ->
-        (arrays, drawn, spaces)`` (see :func:`sb3_genrl.envs.fetch_demonstrations.make_arrays`), for a task that is
+        (arrays, drawn, spaces)`` (see :func:`sb3_genrl.envs.demonstrations.fetch.make_arrays`), for a task that is
         not an ``ArmTaskEnv``; None: the arm tasks' (perturbed ``sample_expert`` motions through the fast path)
     :param evaluate: ``(model, task, episodes, seed) -> dict`` with the ``success_rate`` of a GenRL policy, for a task
         whose score is a success (``info["is_success"]``); None: the arm tasks' distance to the goal

@@ -18,7 +18,8 @@ import gymnasium as gym
 import numpy as np
 import torch as th
 from gymnasium import spaces
-from sb3_genrl.envs.external import make_task_env, record_demonstrations
+from sb3_genrl.envs.demonstrations import record_demonstrations
+from sb3_genrl.envs.external import make_task_env
 
 from sb3_genrl import GenRL, LatentActionWrapper
 from sb3_genrl.data import dataset_info

@@ -1,16 +1,18 @@
-"""The demonstration generator (envs/demonstrations.py), the coverage report (envs/coverage.py) and ``genrl demos``."""
+"""The demonstration generator (envs/demonstrations/), the coverage report (envs/coverage.py) and ``genrl demos``."""
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import math
 from pathlib import Path
 
 import numpy as np
 import pytest
-from sb3_genrl.envs import TASKS
+from sb3_genrl.envs import TASKS, external
+from sb3_genrl.envs import demonstrations as demonstrations_package
 from sb3_genrl.envs.coverage import coverage_fraction, coverage_report, covered_cells, region_cells
-from sb3_genrl.envs.demonstrations import make_demonstrations, sample_trajectories, within_limits
+from sb3_genrl.envs.demonstrations import arm, fetch, make_demonstrations, recorder, sample_trajectories, within_limits
 
 from sb3_genrl.data import dataset_info, load_arrays
 
@@ -196,3 +198,17 @@ def test_basketball_throws_all_swing_at_the_same_steps():
     strengths, yaws = throws[:, :, 1].sum(axis=1), throws[:, :, 0].sum(axis=1)
     assert BASKETBALL_STRENGTH[0] <= strengths.min() and strengths.max() <= BASKETBALL_STRENGTH[1]
     assert np.abs(yaws).max() <= BASKETBALL_YAW and yaws.min() < -1.5 and yaws.max() > 1.5
+
+
+def test_every_maker_of_demonstrations_lives_in_the_demonstrations_package() -> None:
+    # the arm tasks', the Fetch tasks' and any env's recorder are its modules, their public names re-exported by it
+    for module in (arm, fetch, recorder):
+        assert module.__name__.startswith("sb3_genrl.envs.demonstrations.")
+    for name in demonstrations_package.__all__:
+        assert any(getattr(module, name, None) is getattr(demonstrations_package, name) for module in (arm, fetch, recorder))
+    assert demonstrations_package.perturbation is arm.perturbation and fetch.perturbation is arm.perturbation
+    assert demonstrations_package.make_arrays is fetch.make_arrays
+    assert demonstrations_package.record_demonstrations is recorder.record_demonstrations
+    # the task side holds no recorder, and the former module is gone
+    assert not {"record_demonstrations", "smooth_noise", "DEFAULT_NOISE", "expert_name"} & set(vars(external))
+    assert importlib.util.find_spec("sb3_genrl.envs.fetch_demonstrations") is None

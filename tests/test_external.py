@@ -1,6 +1,6 @@
 """A task from outside the package (sb3_genrl.envs.external): an expert's demonstrations recorded on an env the
-package does not ship, kept only when their open-loop replay succeeds, a generator trained on them and a GenRL
-policy trained through the public path."""
+package does not ship (sb3_genrl.envs.demonstrations.recorder), kept only when their open-loop replay succeeds, a
+generator trained on them and a GenRL policy trained through the public path."""
 
 import json
 import re
@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from gymnasium import spaces
 from sb3_genrl.envs import metaworld
+from sb3_genrl.envs.demonstrations import record_demonstrations, smooth_noise
 from sb3_genrl.envs.external import (
     HELD_OUT_RESETS,
     HELD_OUT_SEED,
@@ -17,9 +18,7 @@ from sb3_genrl.envs.external import (
     evaluate_success,
     load_expert,
     make_task_env,
-    record_demonstrations,
     resolve_task,
-    smooth_noise,
 )
 
 from sb3_genrl import GenRL, LatentActionWrapper

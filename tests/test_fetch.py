@@ -14,8 +14,8 @@ from conftest import HANG_S
 pytest.importorskip("gymnasium_robotics")
 
 from sb3_genrl.envs import TASKS, get_task  # noqa: E402
+from sb3_genrl.envs.demonstrations.fetch import expert_success  # noqa: E402
 from sb3_genrl.envs.fetch import FETCH_IDS, GOAL_BOXES  # noqa: E402
-from sb3_genrl.envs.fetch_demonstrations import expert_success  # noqa: E402
 from sb3_genrl.envs.fetch_mujoco import fix_joint_helpers, import_robotics, upstream_test_fails  # noqa: E402
 
 FETCH_TASKS = ("fetch-reach", "fetch-push", "fetch-slide", "fetch-pick-and-place")
@@ -172,7 +172,7 @@ def test_demonstrations_generator_and_genrl_on_fetch_push(tmp_path, cli):
     assert evaluation["success_rate"] == np.mean(evaluation["successes"]) and len(evaluation["distances"]) == 3
     assert all((d < 0.05) == s for d, s in zip(evaluation["distances"], evaluation["successes"], strict=True))
     # near the policy: its deterministic actions replayed open-loop solve what the wrapper's step path solved
-    from sb3_genrl.envs.fetch_demonstrations import policy_neighbourhood_success
+    from sb3_genrl.envs.demonstrations.fetch import policy_neighbourhood_success
 
     near = policy_neighbourhood_success(model, "fetch-push", 3, 2, 5)
     assert near["deterministic_solved"] == evaluation["successes"] and len(near["solving_draws"]) == 3
@@ -180,8 +180,8 @@ def test_demonstrations_generator_and_genrl_on_fetch_push(tmp_path, cli):
 
 
 def test_the_generators_limit_counts_the_draws_that_solve_each_state():
+    from sb3_genrl.envs.demonstrations.fetch import prior_best_success
     from sb3_genrl.envs.fetch import reach_expert
-    from sb3_genrl.envs.fetch_demonstrations import prior_best_success
 
     import_robotics()  # the fix, whatever imported Gymnasium-Robotics first
     states, draws, seed = 2, 4, 123
@@ -536,7 +536,7 @@ def test_the_scorecard_benchmark_scores_each_generator_then_trains_genrl_on_it_a
 
 def test_the_fit_limit_benchmark_picks_each_states_nearest_solving_draw_and_replays_as_the_step_path_plays():
     import gymnasium as gym
-    from sb3_genrl.envs.fetch_demonstrations import replay_success
+    from sb3_genrl.envs.demonstrations.fetch import replay_success
 
     from benchmarks.fetch_fit_limit import anchored_targets, solving_targets
     from sb3_genrl.generative import make_generator
@@ -566,7 +566,7 @@ def test_the_fit_limit_benchmark_picks_each_states_nearest_solving_draw_and_repl
     assert kept.tolist() == [True, True, False, True]
     np.testing.assert_allclose(targets, nearest, rtol=1e-6)
     # replay_success plays what the wrapper's step path plays from the same reset seeds: the same end, the same success
-    from sb3_genrl.envs.fetch_demonstrations import _replay
+    from sb3_genrl.envs.demonstrations.fetch import _replay
 
     generator = make_generator("VAE-FETCH", horizon=50, action_dim=4, device="cpu")
     env = LatentActionWrapper(gym.make("FetchReach-v4"), generator)

@@ -16,8 +16,8 @@ from sb3_genrl.baselines.compare import compare_runs
 from sb3_genrl.baselines.train import train_baseline
 from sb3_genrl.data import dataset_info, load_trajectories
 from sb3_genrl.envs import TASKS, get_task
-from sb3_genrl.envs.demonstrations import make_demonstrations
-from sb3_genrl.envs.external import DEFAULT_NOISE, make_task_env, record_demonstrations, resolve_task
+from sb3_genrl.envs.demonstrations import DEFAULT_NOISE, make_demonstrations, record_demonstrations
+from sb3_genrl.envs.external import make_task_env, resolve_task
 from sb3_genrl.generative import train_generator
 from sb3_genrl.genrl import check_genrl_settings
 from sb3_genrl.genrl.demonstrations import callback_entries
@@ -61,7 +61,7 @@ def demos_command(args: argparse.Namespace) -> int:
 
 
 def _expert_demos(args: argparse.Namespace) -> int:
-    """``genrl demos`` of a task from an expert (:func:`sb3_genrl.envs.external.record_demonstrations`)."""
+    """``genrl demos`` of a task from an expert (:func:`sb3_genrl.envs.demonstrations.record_demonstrations`)."""
 
     if args.threads is not None:
         raise ValueError("--threads applies to the package's own tasks; demonstrations from an expert play in one process")

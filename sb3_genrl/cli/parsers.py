@@ -27,8 +27,8 @@ from sb3_genrl.checks import (
 )
 from sb3_genrl.cli import commands
 from sb3_genrl.envs import DEFAULT_TASK, TASKS, arm_tasks
-from sb3_genrl.envs.demonstrations import refuse_existing_output
-from sb3_genrl.envs.external import DEFAULT_NOISE, load_expert, resolve_task
+from sb3_genrl.envs.demonstrations import DEFAULT_NOISE, refuse_existing_output
+from sb3_genrl.envs.external import load_expert, resolve_task
 from sb3_genrl.generative import PRESETS
 from sb3_genrl.hyperparams import known_env_ids, load_hyperparams
 from sb3_genrl.metrics.scorecard import NOT_CONVERGED_PRECISION, RANK_MEASURES

@@ -3,7 +3,7 @@
 A task of the package's makes its demonstrations with its own generator
 (:func:`sb3_genrl.envs.demonstrations.make_demonstrations`); any other episodic Gymnasium task with an expert
 (``metaworld/<name>``, a Gymnasium id, ``module:Id``; see :mod:`sb3_genrl.envs.external`) records them with
-:func:`~sb3_genrl.envs.external.record_demonstrations`, and its policy is scored on the held-out seeded resets of
+:func:`~sb3_genrl.envs.demonstrations.record_demonstrations`, and its policy is scored on the held-out seeded resets of
 :func:`~sb3_genrl.envs.external.evaluate_success`. The stages, their records and the resume are the same for both.
 """
 
@@ -34,17 +34,8 @@ from sb3_genrl.checks import (
 from sb3_genrl.data import dataset_info
 from sb3_genrl.data.fingerprints import dataset_fingerprint, file_fingerprint
 from sb3_genrl.envs import TASKS, get_task
-from sb3_genrl.envs.demonstrations import make_demonstrations
-from sb3_genrl.envs.external import (
-    DEFAULT_NOISE,
-    HELD_OUT_RESETS,
-    ExternalTask,
-    evaluate_success,
-    expert_name,
-    record_demonstrations,
-    resolve_task,
-    task_horizon,
-)
+from sb3_genrl.envs.demonstrations import DEFAULT_NOISE, expert_name, make_demonstrations, record_demonstrations
+from sb3_genrl.envs.external import HELD_OUT_RESETS, ExternalTask, evaluate_success, resolve_task, task_horizon
 from sb3_genrl.generative import load, train_generator
 from sb3_genrl.genrl import GenRL
 from sb3_genrl.genrl.demonstrations import uses_demonstrations
@@ -103,7 +94,7 @@ def quickstart(
     reports.
 
     A task from outside the package (``metaworld/<name>``, a Gymnasium id or ``module:Id`` with an ``expert``) records
-    its demonstrations from the expert (:func:`~sb3_genrl.envs.external.record_demonstrations`, with ``horizon``), takes
+    its demonstrations from the expert (:func:`~sb3_genrl.envs.demonstrations.record_demonstrations`, with ``horizon``), takes
     GenRL's defaults (or its entry in ``hyperparams/genrl.yml``), and its report and ``summary.json`` give the saved
     policy's success on :data:`~sb3_genrl.envs.external.HELD_OUT_RESETS` held-out seeded resets
     (:func:`~sb3_genrl.envs.external.evaluate_success`: reset seeds from ``2**31`` on, which nothing else uses).

@@ -18,7 +18,7 @@ import gymnasium as gym
 import numpy as np
 import torch as th
 from gymnasium import spaces
-from sb3_genrl.envs.demonstrations import perturbation
+from sb3_genrl.envs.demonstrations.arm import perturbation
 from sb3_genrl.envs.fetch import FAMILIES, FETCH_HORIZON, GRIPPER_GAIN, PERTURBATION, STEP_METRES, is_valid
 from sb3_genrl.envs.fetch_mujoco import fix_joint_helpers
 from sb3_genrl.envs.registry import get_task

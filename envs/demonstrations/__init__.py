@@ -1,0 +1,48 @@
+"""The making of demonstrations, for every kind of task (learning from them is the algorithm's:
+:class:`sb3_genrl.genrl.demonstrations.DemonstrationCallback`).
+
+- :mod:`sb3_genrl.envs.demonstrations.arm`: the arm tasks' (hockey, basketball) perturbed expert motions, simulated in
+  batches and kept when valid (:func:`make_demonstrations`, :func:`perturbation`); a task with its own maker (a
+  :class:`~sb3_genrl.envs.spec.TaskSpec` with ``demonstrations``) is written through it too.
+- :mod:`sb3_genrl.envs.demonstrations.fetch`: the Fetch tasks' scripted expert with perturbations, played through
+  Gymnasium-Robotics' envs (:func:`make_arrays`, what ``make_demonstrations("fetch-push", ...)`` writes), and the
+  open-loop success of the expert, of a generator's reconstructions and of a policy.
+- :mod:`sb3_genrl.envs.demonstrations.recorder`: any episodic Gymnasium env with an expert callable, recorded closed
+  loop with smooth perturbations and kept when its open-loop replay succeeds (:func:`record_demonstrations`).
+
+Each writes a Minari dataset (:func:`sb3_genrl.data.write_dataset`) whose episodes depend on the seed only.
+"""
+
+from sb3_genrl.envs.demonstrations.arm import (
+    is_valid,
+    make_demonstrations,
+    perturbation,
+    refuse_existing_output,
+    sample_trajectories,
+    within_limits,
+)
+from sb3_genrl.envs.demonstrations.fetch import expert_success, make_arrays, play_expert
+from sb3_genrl.envs.demonstrations.recorder import (
+    BUMP_DURATIONS,
+    DEFAULT_NOISE,
+    expert_name,
+    record_demonstrations,
+    smooth_noise,
+)
+
+__all__ = [
+    "BUMP_DURATIONS",
+    "DEFAULT_NOISE",
+    "expert_name",
+    "expert_success",
+    "is_valid",
+    "make_arrays",
+    "make_demonstrations",
+    "perturbation",
+    "play_expert",
+    "record_demonstrations",
+    "refuse_existing_output",
+    "sample_trajectories",
+    "smooth_noise",
+    "within_limits",
+]
