@@ -260,7 +260,8 @@ def add_train_policy(sub: argparse._SubParsersAction) -> None:
         "--batch-episodes",
         type=option(check_int, int, minimum=2),
         default=None,
-        help="episodes per EM iteration N, at least 2 (default: the task's, or 64 with --library-defaults)",
+        help="batch_episodes, the episodes of one EM iteration, at least 2 (default: the task's, or 64 with "
+        "--library-defaults)",
     )
     policy.add_argument(
         "--n-envs",
