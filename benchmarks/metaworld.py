@@ -13,7 +13,8 @@ and a rerun with others is refused before any work):
 4. per seed, the fit to the demonstrations at episode 0: GenRL's policy mean fitted to the demonstrations' latent codes
    (:class:`~sb3_genrl.genrl.demonstrations.DemonstrationCallback`'s fit, ``--fit-steps`` Adam steps), before any
    episode is played;
-5. per seed, GenRL with its defaults (``GenRL(env, generator)``: the one configuration of every task, ``--batch-episodes``
+5. per seed, GenRL with the settings of a task without an entry in ``hyperparams/genrl.yml``
+   (:data:`~sb3_genrl.study.quickstart.OUTSIDE_TASK_KWARGS`: the fit of step 4, then GenRL's defaults, ``--batch-episodes``
    a batch), ``--episodes`` episodes (checkpointed; a stopped run resumes);
 6. per seed, SB3's SAC (its defaults, learning from the first step, observations normalised with the demonstrations'
    statistics) with the demonstrations' transitions in its replay buffer, for the same ``--episodes`` episodes of 150
@@ -32,6 +33,7 @@ every unit of every task asked for is done; the Markdown table is written beside
 from __future__ import annotations
 
 import argparse
+import copy
 import sys
 import time
 from pathlib import Path
@@ -55,6 +57,7 @@ from sb3_genrl.markdown import markdown_table
 from sb3_genrl.provenance import provenance
 from sb3_genrl.run import train_policy
 from sb3_genrl.run.stages import STAGE_FILE, SettingsConflictError, read_settings, refuse_conflicts, settings_conflicts
+from sb3_genrl.study.quickstart import OUTSIDE_TASK_KWARGS
 from sb3_genrl.utils import atomic_write_json, atomic_write_text
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -189,8 +192,12 @@ def fit_row(task: str, generator_path: Path, dataset: Path, seed: int, args: arg
     return {"success": score["success_rate"], "cpu_seconds": round(fitted, 1), "last_loss": fit["last_loss"]}
 
 
-def genrl_row(task: str, generator_path: Path, work: Path, seed: int, args: argparse.Namespace) -> dict[str, Any]:
-    """GenRL with its defaults for ``--episodes`` episodes (resumed from its checkpoint), on held-out resets."""
+def genrl_row(
+    task: str, generator_path: Path, dataset: Path, work: Path, seed: int, args: argparse.Namespace
+) -> dict[str, Any]:
+    """GenRL with the settings of a task without an entry (:data:`~sb3_genrl.study.quickstart.OUTSIDE_TASK_KWARGS`:
+    started from the demonstrations, then its defaults) for ``--episodes`` episodes (resumed from its checkpoint), on
+    held-out resets."""
     began = time.process_time()
     run = train_policy(
         metaworld.metaworld_env_id(task),
@@ -202,6 +209,8 @@ def genrl_row(task: str, generator_path: Path, work: Path, seed: int, args: argp
         out_dir=work / f"genrl_seed{seed}",
         horizon=HORIZON,
         device="cpu",
+        demonstrations=dataset,
+        **outside_settings(args.fit_steps),
     )
     trained = time.process_time() - began
     model = GenRL.load(run["model_path"], device="cpu")
@@ -212,6 +221,15 @@ def genrl_row(task: str, generator_path: Path, work: Path, seed: int, args: argp
         "episodes": run["episodes"],
         **({"resumed_at_episodes": run["resumed_at_episodes"]} if "resumed_at_episodes" in run else {}),
     }
+
+
+def outside_settings(fit_steps: int) -> dict[str, Any]:
+    """:data:`~sb3_genrl.study.quickstart.OUTSIDE_TASK_KWARGS` with the fit's ``--fit-steps``."""
+    settings = copy.deepcopy(OUTSIDE_TASK_KWARGS)
+    for entry in settings["callback"]:
+        for arguments in entry.values():
+            arguments["fit_steps"] = fit_steps
+    return settings
 
 
 def sac_row(task: str, dataset: Path, seed: int, args: argparse.Namespace) -> dict[str, Any]:
@@ -279,7 +297,7 @@ def run_task(task: str, args: argparse.Namespace, result: dict[str, Any], save: 
             if method == "fit":
                 done[str(seed)] = fit_row(task, generator_path, dataset, seed, args)
             elif method == "genrl":
-                done[str(seed)] = genrl_row(task, generator_path, work, seed, args)
+                done[str(seed)] = genrl_row(task, generator_path, dataset, work, seed, args)
             else:
                 done[str(seed)] = sac_row(task, dataset, seed, args)
             save()

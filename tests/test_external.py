@@ -25,6 +25,7 @@ from sb3_genrl import GenRL, LatentActionWrapper
 from sb3_genrl.cli.commands import _outside_env_maker
 from sb3_genrl.data import dataset_info, load_actions, load_arrays
 from sb3_genrl.generative import load, train_generator
+from sb3_genrl.genrl.demonstrations import DemonstrationCallback
 from sb3_genrl.run.train import _make_env
 
 HORIZON = 20
@@ -237,15 +238,16 @@ def test_genrl_demos_and_train_policy_take_a_task_the_package_does_not_register(
     assert code == 0, err
     code, out, err = cli(
         "train-policy", "--task", "test_external:TestExternal/PointGoal-v0", "--generator", tmp_path / "vae.pt",
-        "--episodes", 32, "--batch-episodes", 16, "--checkpoint-every", 0, "--out", tmp_path / "policy", "--no-progress-bar",
+        "--data", demos, "--episodes", 32, "--batch-episodes", 16, "--checkpoint-every", 0, "--out", tmp_path / "policy",
+        "--no-progress-bar",
     )  # fmt: skip
     assert code == 0, err
     summary = json.loads((tmp_path / "policy" / "summary.json").read_text())
     assert summary["task"] == "TestExternal/PointGoal-v0" and summary["episodes"] == 32
     assert re.search(r"success: [0-9.]+ of the last episodes played \(info\['is_success'\]", out), out
     code, out, err = cli(
-        "train-policy", "--task", "TestExternal/Silent-v0", "--generator", tmp_path / "vae.pt", "--episodes", 16,
-        "--batch-episodes", 16, "--checkpoint-every", 0, "--out", tmp_path / "silent", "--no-progress-bar",
+        "train-policy", "--task", "TestExternal/Silent-v0", "--generator", tmp_path / "vae.pt", "--data", demos,
+        "--episodes", 16, "--batch-episodes", 16, "--checkpoint-every", 0, "--out", tmp_path / "silent", "--no-progress-bar",
     )  # fmt: skip
     assert code == 0, err
     assert "success: the env reports no info['is_success']" in out
@@ -290,6 +292,8 @@ def test_train_policy_truncates_the_env_to_the_demonstrations_horizon(cli, tmp_p
     arguments = (
         "--generator",
         tmp_path / "vae.pt",
+        "--data",
+        demos,
         "--episodes",
         16,
         "--batch-episodes",
@@ -403,3 +407,27 @@ def test_genrl_evaluate_takes_an_outside_task_and_plays_its_prior_rollout_as_lon
     env.reset(seed=0)
     _, _, _, _, info = env.step(np.zeros(env.generator.latent_dim, dtype=np.float32))
     assert (info["steps_played"], info["hold_steps"]) == (12, 0)
+
+
+def test_train_policy_of_an_outside_task_starts_from_its_demonstrations(cli, tmp_path):
+    demos = record_demonstrations("TestExternal/PointGoal-v0", point_expert, 24, tmp_path / "demos", seed=1)
+    generator = train_generator(demos, preset="VAE1", epochs=60, batch_size=8, eval_every=60, out=tmp_path / "vae.pt")
+    arguments = ("--generator", tmp_path / "vae.pt", "--episodes", 16, "--batch-episodes", 16, "--checkpoint-every", 0)
+    code, _, err = cli("train-policy", "--task", "TestExternal/PointGoal-v0", *arguments, "--out", tmp_path / "none")
+    assert code == 2 and "genrl train-policy --data DIR" in err and not (tmp_path / "none").exists()
+    errors = {}
+    for name, extra in (("fitted", ("--data", demos)), ("defaults", ("--library-defaults",))):
+        code, _, err = cli(
+            "train-policy", "--task", "TestExternal/PointGoal-v0", *arguments, *extra, "--out", tmp_path / name,
+            "--no-progress-bar",
+        )  # fmt: skip
+        assert code == 0, err
+        model = GenRL.load(tmp_path / name / "genrl_policy.zip", device="cpu")
+        contexts, latents = DemonstrationCallback(demos, keep=False).pulls(
+            generator, model.observation_space, model.latent_clip
+        )
+        means = model.predict(contexts.numpy(), deterministic=True)[0]
+        errors[name] = float(np.abs(means - latents.numpy()).mean())
+    # the entry-less task's settings fit the policy's mean to the demonstrations' latent codes before the first
+    # iteration; GenRL's defaults alone start from a mean near 0
+    assert errors["fitted"] < 0.5 * errors["defaults"], errors

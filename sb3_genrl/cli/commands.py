@@ -27,7 +27,7 @@ from sb3_genrl.metrics.scorecard import scorecard_markdown
 from sb3_genrl.run import train_policy
 from sb3_genrl.showcase import play_scripted
 from sb3_genrl.study import MODELS, run_study
-from sb3_genrl.study.quickstart import DEFAULT_BATCH_EPISODES, quickstart, task_settings
+from sb3_genrl.study.quickstart import outside_task_settings, quickstart, task_settings
 from sb3_genrl.video import record_video
 
 
@@ -219,8 +219,8 @@ def policy_arguments(args: argparse.Namespace) -> dict:
         batch_episodes, genrl_kwargs = None, {}
     elif args.task in TASKS or args.task in {spec.env_id for spec in TASKS.values()}:
         _, batch_episodes, genrl_kwargs = task_settings(args.task)
-    else:  # a task of the user's own has no entry: GenRL's defaults, as task_settings gives a task without one
-        batch_episodes, genrl_kwargs = DEFAULT_BATCH_EPISODES, {}
+    else:  # a task of the user's own: its entry if it has one, else GenRL's defaults started from the demonstrations
+        _, batch_episodes, genrl_kwargs = outside_task_settings(resolve_task(args.task))
     genrl_kwargs = lay_over({**genrl_kwargs, "e_step": args.e_step}, args.genrl_kwargs)
     source = "GenRL's defaults" if args.library_defaults else f"{args.task}'s entry in hyperparams/genrl.yml"
     name = f"argument --e-step/--genrl-kwargs: {source}, --e-step {args.e_step}" + (

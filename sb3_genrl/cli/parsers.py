@@ -241,9 +241,10 @@ def add_train_policy(sub: argparse._SubParsersAction) -> None:
         "--data",
         type=EXISTING,
         default=None,
-        help="the demonstration dataset, for a task whose settings learn from demonstrations (the "
-        "Fetch tasks': their callback sb3_genrl.genrl.demonstrations.DemonstrationCallback); the "
-        "generator's own dataset, as genrl demos wrote it",
+        help="the demonstration dataset, for a task whose settings learn from demonstrations (their callback "
+        "sb3_genrl.genrl.demonstrations.DemonstrationCallback: the Fetch tasks, and every task without an entry in "
+        "hyperparams/genrl.yml, which starts from its demonstrations); the generator's own dataset, as genrl demos "
+        "wrote it",
     )
     policy.add_argument("--episodes", type=EPISODES, required=True, help="episodes (trajectories played) in total")
     policy.add_argument(

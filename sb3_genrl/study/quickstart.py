@@ -9,6 +9,7 @@ A task of the package's makes its demonstrations with its own generator
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 import os
@@ -38,7 +39,7 @@ from sb3_genrl.envs.demonstrations import DEFAULT_NOISE, expert_name, make_demon
 from sb3_genrl.envs.external import HELD_OUT_RESETS, ExternalTask, evaluate_success, resolve_task, task_horizon
 from sb3_genrl.generative import load, train_generator
 from sb3_genrl.genrl import GenRL
-from sb3_genrl.genrl.demonstrations import uses_demonstrations
+from sb3_genrl.genrl.demonstrations import DEMONSTRATION_CALLBACK, uses_demonstrations
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED, known_env_ids, load_genrl_settings
 from sb3_genrl.metrics import MEASURES, evaluate_generators
 from sb3_genrl.run import evaluate_on_goals, train_policy
@@ -53,6 +54,9 @@ from sb3_genrl.video import record_video
 QUICKSTART_PRESET = "VAE1"
 # A task without an entry in hyperparams/genrl.yml: the paper's 3000 episodes, GenRL's default 64 per iteration.
 DEFAULT_POLICY_EPISODES, DEFAULT_BATCH_EPISODES = 3000, 64
+# A task from outside the package starts from its demonstrations: the policy's mean fitted to their latent codes by
+# DemonstrationCallback (4000 Adam steps), then GenRL's defaults (docs/guide/your_task.md, "The policy").
+OUTSIDE_TASK_KWARGS: dict[str, Any] = {"callback": [{DEMONSTRATION_CALLBACK: {"fit_steps": 4000, "keep": False}}]}
 # The generator stage's defaults (also the generator of the rl-zoo3 runs, sb3_genrl.zoo.generators)
 DEMO_EPISODES, GENERATOR_EPOCHS, GENERATOR_EVAL_EVERY = 4000, 300, 10
 # A task from outside the package records its demonstrations through its env's step path, closed loop and replayed
@@ -202,14 +206,14 @@ def _outside_horizon(task: ExternalTask, horizon: int | None) -> int:
 
 def outside_task_settings(task: ExternalTask) -> tuple[int, int, dict[str, Any]]:
     """The GenRL settings of a task from outside the package, as :func:`task_settings` gives a registered task's: its
-    env id's entry in ``hyperparams/genrl.yml`` if it has one, else GenRL's defaults with
-    :data:`DEFAULT_POLICY_EPISODES` and :data:`DEFAULT_BATCH_EPISODES`.
+    env id's entry in ``hyperparams/genrl.yml`` if it has one, else :data:`OUTSIDE_TASK_KWARGS` (GenRL's defaults,
+    started from the demonstrations) with :data:`DEFAULT_POLICY_EPISODES` and :data:`DEFAULT_BATCH_EPISODES`.
 
     :param task: the resolved task (:func:`~sb3_genrl.envs.external.resolve_task`)
     :return: ``(episodes, batch_episodes, genrl_kwargs)``
     """
     if task.env_id not in known_env_ids("genrl"):
-        return DEFAULT_POLICY_EPISODES, DEFAULT_BATCH_EPISODES, {}
+        return DEFAULT_POLICY_EPISODES, DEFAULT_BATCH_EPISODES, copy.deepcopy(OUTSIDE_TASK_KWARGS)
     return load_genrl_settings(task.env_id)
 
 
