@@ -128,6 +128,8 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.action_space = spaces.Box(-bound, bound, shape=(generator.latent_dim,), dtype=np.float32)
         self._needs_reset = True
         self._prepared: tuple[np.ndarray, dict[str, Any]] | None = None  # see prepare_step
+        self._reset_seeds: Callable[[int], int] | None = None  # see set_reset_seeds
+        self._episode = 0  # the episodes reset since set_reset_seeds (the first one: its `first`)
 
     def _checked_hold_action(self, hold_action: np.ndarray | None) -> np.ndarray:
         """Check that the env's per-step actions are the generator's rows; return the hold action in the env's dtype."""
@@ -190,8 +192,21 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
             context = np.array(context, dtype=self.observation_space.dtype).reshape(self.observation_space.shape)
         return context
 
+    def set_reset_seeds(self, seeds: Callable[[int], int] | None, first: int = 0) -> None:
+        """Reset the task with ``seeds(k)`` at its ``k``-th reset from now on (``k = first, first + 1, ...``), whatever
+        seed the reset is given: GenRL's groups of pulls from one context
+        (:class:`~sb3_genrl.genrl.grouped_pulls.ContextSeeds`). ``None``: the resets' own seeds again.
+
+        :param seeds: the reset seed of each episode, or None
+        :param first: the index of the next reset's episode
+        """
+        self._reset_seeds, self._episode = seeds, int(first)
+
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
-        """Reset the wrapped task (``options``, e.g. ``{"goal": xy}``, are passed on when given) and observe its context."""
+        """Reset the wrapped task (``options``, e.g. ``{"goal": xy}``, are passed on when given) and observe its context;
+        with :meth:`set_reset_seeds`, the task resets with the episode's seed instead of ``seed``."""
+        if self._reset_seeds is not None:
+            seed, self._episode = self._reset_seeds(self._episode), self._episode + 1
         obs, info = self.env.reset(seed=seed) if options is None else self.env.reset(seed=seed, options=options)
         self._context = self._observe(obs)
         self._start_achieved = copy.deepcopy(obs["achieved_goal"]) if self._context_source == "goal" else None

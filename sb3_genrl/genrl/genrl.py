@@ -25,6 +25,7 @@ from sb3_genrl.genrl import generator_files
 from sb3_genrl.genrl.averaging import averaged_copy, update_average
 from sb3_genrl.genrl.buffers import FiniteRewardDictRolloutBuffer, FiniteRewardRolloutBuffer
 from sb3_genrl.genrl.e_step import kl_penalty_e_step, trpo_e_step, variational_copy
+from sb3_genrl.genrl.grouped_pulls import SEED_BOUND, ContextSeeds, leave_one_out_advantages
 from sb3_genrl.genrl.hindsight import DEFAULTS as HINDSIGHT_DEFAULTS
 from sb3_genrl.genrl.hindsight import HindsightRelabelling
 from sb3_genrl.genrl.hindsight_buffer import HindsightRolloutBuffer, PullInfosCallback
@@ -101,6 +102,10 @@ class GenRL(OnPolicyAlgorithm):
     :param latent_critic_kwargs: take the E-step's baseline from a critic over latent actions fitted to the pulls of
         the last batches, ``A = r - E_{alpha ~ pi}[Q(s0, alpha)]``, instead of ``A = r - V(s0)`` (default None: the
         paper's ``V``): the arguments of :class:`~sb3_genrl.genrl.latent_critic.LatentCritic` (``{}``: its defaults)
+    :param pulls_per_context: play each context this many times, from one reset seed, and take each pull's advantage
+        against the mean reward of the others of its context, ``A_i = r_i - mean_{j != i} r_j``, instead of ``r - V(s0)``
+        (default 1: one pull per context and the paper's ``V``); ``batch_episodes`` must be a multiple of it, and the
+        env's ``reset(seed=...)`` must reproduce its context (see :mod:`sb3_genrl.genrl.grouped_pulls`)
     :param latent_clip: half-width of the latent action box, in prior standard deviations, for a normal-prior
         generator (default 3): a raw env is wrapped with it, an env already wrapped must have it
     :param stats_window_size: episodes averaged in the ``rollout/`` logs (default 100)
@@ -143,6 +148,7 @@ class GenRL(OnPolicyAlgorithm):
         policy_averaging: float | None = None,
         hindsight_kwargs: dict[str, Any] | None = None,
         latent_critic_kwargs: dict[str, Any] | None = None,
+        pulls_per_context: int = 1,
         latent_clip: float = 3.0,
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,
@@ -186,6 +192,9 @@ class GenRL(OnPolicyAlgorithm):
             raise SettingError(
                 f"normalize_advantage needs batch_episodes = n_steps * n_envs >= 2 episodes, got {self.n_steps * self.n_envs}"
             )
+        self.pulls_per_context = int(pulls_per_context)
+        self._check_pulls_per_context(self.env)
+        self._context_root: int | None = None  # the root of the groups' reset seeds (see _setup_learn)
         self.e_step, self.n_em_iterations, self.normalize_advantage = e_step, int(n_em_iterations), normalize_advantage
         self.target_kl, self.cg_max_steps, self.cg_damping = target_kl, cg_max_steps, cg_damping
         self.line_search_shrinking_factor, self.line_search_max_iter = line_search_shrinking_factor, line_search_max_iter
@@ -203,6 +212,49 @@ class GenRL(OnPolicyAlgorithm):
         if getattr(self, "n_envs", None) is None:
             raise AttributeError("batch_episodes is n_steps * n_envs: this model has no env yet (see set_env)")
         return self.n_steps * self.n_envs
+
+    def _check_pulls_per_context(self, env: Any) -> None:
+        """Refuse groups of pulls that an iteration's episodes cannot hold whole."""
+        pulls = self.pulls_per_context
+        if pulls > 1 and env is not None and (self.n_steps * env.num_envs) % pulls:
+            raise SettingError(
+                f"pulls_per_context={pulls} needs batch_episodes = n_steps * n_envs to be a multiple of it, so that an "
+                f"iteration holds whole groups; got {self.n_steps} * {env.num_envs}"
+            )
+
+    def _setup_learn(
+        self,
+        total_timesteps: int,
+        callback: MaybeCallback = None,
+        reset_num_timesteps: bool = True,
+        tb_log_name: str = "run",
+        progress_bar: bool = False,
+    ) -> tuple[int, BaseCallback]:
+        """SB3's ``_setup_learn``; with ``pulls_per_context`` above 1, each env's resets first get their group's seeds
+        (:class:`~sb3_genrl.genrl.grouped_pulls.ContextSeeds`) when the env is about to be reset: a new root seed for a
+        run that counts its episodes from 0, the recorded one for a run that goes on."""
+        self._check_pulls_per_context(self.env)
+        if self.pulls_per_context > 1 and (reset_num_timesteps or self._last_obs is None):
+            if reset_num_timesteps:
+                self._context_root = None  # a new run: new groups
+            self.seed_contexts(0 if reset_num_timesteps else None)
+        return super()._setup_learn(total_timesteps, callback, reset_num_timesteps, tb_log_name, progress_bar)
+
+    def seed_contexts(self, first_episode: int | None = None) -> None:
+        """With ``pulls_per_context`` above 1, give each env's resets their group's seeds
+        (:class:`~sb3_genrl.genrl.grouped_pulls.ContextSeeds`, through the env's ``set_reset_seeds``) from its episode
+        ``first_episode`` on; ``learn`` does it before it resets the env, and a resumed run before its first reset.
+
+        :param first_episode: each env's next episode (default None: the run's, ``num_timesteps // n_envs``)
+        """
+        if self.pulls_per_context == 1:
+            return
+        if self._context_root is None:  # drawn from torch's generator, which seed= seeds
+            self._context_root = int(th.randint(SEED_BOUND, (1,)).item())
+        first = self.num_timesteps // self.n_envs if first_episode is None else int(first_episode)
+        for index in range(self.n_envs):
+            seeds = ContextSeeds(self._context_root, self.pulls_per_context, index, self.n_envs)
+            self.env.env_method("set_reset_seeds", seeds, first, indices=[index])
 
     def _setup_model(self) -> None:
         # SB3's rollout buffer, refusing a non-finite reward where it enters GenRL (after every wrapper of the env); with
@@ -245,6 +297,8 @@ class GenRL(OnPolicyAlgorithm):
 
         # One episode per bandit pull (section 4): the buffer holds {s_i, alpha_i, r_i}, i = 1..batch_episodes, with
         # alpha_i ~ pi_theta(.|s_i). Each episode ends after one step, so returns = r_i and A_i = r_i - V(s_i).
+        if self.pulls_per_context > 1:  # each pull against the other pulls of its context (grouped_pulls)
+            self.rollout_buffer.advantages = leave_one_out_advantages(self.rollout_buffer.rewards, self.pulls_per_context)
         data = next(self.rollout_buffer.get(batch_size=None))
         observations, actions, log_prob_pi = data.observations, data.actions, data.old_log_prob
         advantages, stats = data.advantages, {}

@@ -112,6 +112,7 @@ SETTINGS: dict[str, Setting] = {
     "policy_averaging": Setting(None, "between 0 and 1 (exclusive) or None", _or_none(_FRACTION)),
     "hindsight_kwargs": Setting(None, "a dict or None", lambda value: value is None or isinstance(value, Mapping)),
     "latent_critic_kwargs": Setting(None, "a dict or None", lambda value: value is None or isinstance(value, Mapping)),
+    "pulls_per_context": Setting(1, "a positive integer", _integer(1)),
     "latent_clip": Setting(3.0, "a finite number > 0", _POSITIVE),
     "policy_kwargs": Setting(None, "a dict or None", lambda value: value is None or isinstance(value, Mapping)),
 }
@@ -162,6 +163,8 @@ def _check_values(values: dict[str, Any]) -> dict[str, Any] | None:
     _check_policy_kwargs(values["policy_kwargs"], POLICY_ALIASES.get(policy, policy))
     if values["latent_critic_kwargs"] is not None:
         check_latent_critic_kwargs(values["latent_critic_kwargs"])
+        if values["pulls_per_context"] > 1:
+            raise ValueError("latent_critic_kwargs and pulls_per_context > 1 both give the E-step its baseline: choose one")
     hindsight_kwargs = values["hindsight_kwargs"]
     if hindsight_kwargs is None:
         return None

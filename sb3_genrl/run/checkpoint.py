@@ -243,6 +243,7 @@ def resume_genrl(state: dict[str, Any], env: Any, generator: TrajectoryGenerator
     for index, states in enumerate(memories["env_random_states"]):
         venv.env_method("set_random_states", states, indices=[index])
     venv.unwrapped._reset_seeds()  # no seed at this reset (loading seeded the env): the restored states draw
+    model.seed_contexts()  # with pulls_per_context: the groups' seeds, from the checkpoint's episode on
     observations = venv.reset()
     if not _equal(observations, model._last_obs):
         warnings.warn(

@@ -43,15 +43,16 @@ def _parameters(path) -> dict[str, np.ndarray]:
     return {key: value.cpu().numpy() for key, value in tensors.items()}
 
 
-@pytest.mark.parametrize("n_envs", [1, 2])
+@pytest.mark.parametrize(("n_envs", "pulls_per_context"), [(1, 1), (2, 1), (2, 2)])
 def test_a_stopped_run_resumed_with_the_same_command_ends_as_the_run_not_stopped(
-    hindsight_task, tmp_path, monkeypatch, n_envs
+    hindsight_task, tmp_path, monkeypatch, n_envs, pulls_per_context
 ):
     settings = {
         "episodes": 192,
         "seed": 3,
         "batch_episodes": 32,
         "n_envs": n_envs,
+        "pulls_per_context": pulls_per_context,
         "value_history": 2,
         "policy_averaging": 0.9,
         "hindsight_kwargs": {"history": 2, "regression_steps": 4, "refit_every": 64, "refit_start": 32, "refit_steps": 20},
