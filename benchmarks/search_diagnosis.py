@@ -315,6 +315,7 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "default": {},
     "latent_critic_kwargs={}": {"latent_critic_kwargs": {}},
     "n_critic_updates=200": {"n_critic_updates": 200},
+    "pulls_per_context=2": {"pulls_per_context": 2},
 }
 PHASES = ((1, 10), (11, 30), (31, 60), (61, 100))  # iterations summarised together
 
@@ -388,6 +389,10 @@ def arguments(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--episodes", type=COUNT, default=6400, help="episodes of each compared run")
     parser.add_argument("--every", type=COUNT, default=1600, help="episodes between evaluations of the compared runs")
     parser.add_argument("--seeds", type=COUNT, default=3, help="seeds of each compared variant")
+    parser.add_argument("--variants", nargs="+", choices=list(VARIANTS), default=list(VARIANTS), help="variants compared")
+    parser.add_argument(
+        "--diagnosis", action=argparse.BooleanOptionalAction, default=True, help="the per-iteration diagnosis runs"
+    )
     parser.add_argument("--held-out", type=COUNT, default=256, help="held-out goals")
     parser.add_argument("--success-distance", type=float, default=0.05, help="success of the sparse variant")
     parser.add_argument("--out", type=JSON_OUT, default="benchmarks/results/search_diagnosis.json")
@@ -403,17 +408,17 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     begin = time.perf_counter()
     diagnosis = {
         name: diagnose(0, args.iterations, args.success_distance, sparse)
-        for name, sparse in (("dense", False), ("sparse", True))
+        for name, sparse in ((("dense", False), ("sparse", True)) if args.diagnosis else ())
     }
     held_out = goals(args.held_out, EVAL_GOAL_SEED)
     best = prior_best(BentGenerator(), held_out)
-    runs = [compare(v, seed, args.episodes, args.every, held_out, best) for v in VARIANTS for seed in range(args.seeds)]
+    runs = [compare(v, seed, args.episodes, args.every, held_out, best) for v in args.variants for seed in range(args.seeds)]
     summary = {
         variant: {
             key: float(np.mean([run["points"][-1][key] for run in runs if run["variant"] == variant]))
             for key in ("ratio", "median_goal_ratio", "within_target", "cpu_seconds")
         }
-        for variant in VARIANTS
+        for variant in args.variants
     }
     shown = ("ratio", "z_solving_median", "spread_hits", "mean_hits", "mean_step", "step_cosine", "std", "explained_variance")
     for name, records in diagnosis.items():
@@ -450,7 +455,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         "held_out_best_mean": float(best.mean()),
         "settings": vars(args) | {"out": None},
         "diagnosis": {name: {"phases": phase_summary(r), "iterations": r} for name, r in diagnosis.items()},
-        "variants": VARIANTS,
+        "variants": {variant: VARIANTS[variant] for variant in args.variants},
         "runs": runs,
         "summary": summary,
         "seconds": time.perf_counter() - begin,
