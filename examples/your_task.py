@@ -24,6 +24,7 @@ from sb3_genrl.envs.external import make_task_env
 from sb3_genrl import GenRL, LatentActionWrapper
 from sb3_genrl.data import dataset_info
 from sb3_genrl.generative import train_generator
+from sb3_genrl.genrl.demonstrations import DemonstrationCallback
 
 TASK = "YourTask/PointGoal-v0"
 STEP = 0.1  # metres moved per unit of action and step
@@ -97,11 +98,12 @@ def main() -> None:
     generator = train_generator(demos, preset="VAE1", epochs=args.epochs, seed=0, out=args.out / "vae.pt")
     print(f"generator: T={generator.horizon}, M={generator.action_dim}, N_alpha={generator.latent_dim} -> {args.out}/vae.pt")
 
-    # 4. GenRL: the context is the reset observation (the goal and the start); one episode is one latent action.
+    # 4. GenRL: the context is the reset observation (the goal and the start); one episode is one latent action. It
+    #    starts from the demonstrations: the policy's mean fitted to their latent codes before the first iteration.
     env = LatentActionWrapper(make_task_env(TASK), generator)
     model = GenRL(env, seed=0)
     print(f"success before training: {success_rate(model, env):.2f} of 100 held-out resets")
-    model.learn(total_timesteps=args.episodes)
+    model.learn(total_timesteps=args.episodes, callback=DemonstrationCallback(demos, keep=False))
     print(f"success after {model.num_timesteps} episodes: {success_rate(model, env):.2f} of 100 held-out resets")
     model.save(args.out / "genrl_policy.zip")
     print(f"policy -> {args.out}/genrl_policy.zip")
