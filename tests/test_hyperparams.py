@@ -214,3 +214,16 @@ def test_the_readme_counts_the_settings_each_task_changes():
         ids, count = re.findall(r"`([^`]+)`", line.split("|")[2]), int(re.search(r"\| (\d+): ", line).group(1))
         counted |= dict.fromkeys(ids, count)
     assert counted == {env_id: len(hyperparams.changed_settings(env_id)) for env_id in hyperparams.known_env_ids("genrl")}
+
+
+@pytest.mark.parametrize("path", sorted((ROOT / "hyperparams").glob("*.yml")), ids=lambda path: path.name)
+def test_settings_files_keep_one_line_comments_and_leave_the_reasons_to_the_docs(path):
+    lines = path.read_text().splitlines()
+    header = 0
+    while header < len(lines) and lines[header].startswith("#"):
+        header += 1
+    assert header <= 3, f"{path.name}: a header of {header} comment lines (at most 3; the reasons go to the docs)"
+    comment_only = [i for i, line in enumerate(lines[header:], start=header) if line.lstrip().startswith("#")]
+    runs = [i for i in comment_only if i - 1 in comment_only]
+    assert not runs, f"{path.name}: comments of several lines at line {runs[0]} (one line per setting)"
+    assert all(len(line) <= 127 for line in lines), path.name
