@@ -3,11 +3,17 @@ package does not ship (sb3_genrl.envs.demonstrations.recorder), kept only when t
 generator trained on them and a GenRL policy trained through the public path."""
 
 import json
+import os
 import re
+import subprocess
+import sys
+import threading
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import HANG_S
 from gymnasium import spaces
 from sb3_genrl.envs import metaworld
 from sb3_genrl.envs.demonstrations import record_demonstrations, smooth_noise
@@ -23,7 +29,7 @@ from sb3_genrl.envs.external import (
 
 from sb3_genrl import GenRL, LatentActionWrapper
 from sb3_genrl.cli.commands import _outside_env_maker
-from sb3_genrl.data import dataset_info, load_actions, load_arrays
+from sb3_genrl.data import dataset_info, load_actions, load_arrays, read_metadata
 from sb3_genrl.generative import load, train_generator
 from sb3_genrl.genrl.demonstrations import DemonstrationCallback
 from sb3_genrl.run.train import _make_env
@@ -102,6 +108,24 @@ def point_expert(observation: np.ndarray) -> np.ndarray:
     return np.clip(0.5 * (observation[:2] - observation[2:]) / STEP, -1.0, 1.0)
 
 
+class LockedExpert:
+    """:func:`point_expert` holding a lock: an expert that cannot be pickled."""
+
+    def __init__(self) -> None:
+        self.lock = threading.Lock()
+
+    def __call__(self, observation: np.ndarray) -> np.ndarray:
+        with self.lock:
+            return point_expert(observation)
+
+
+def far_goal_refusing_expert(observation: np.ndarray) -> np.ndarray:
+    """:func:`point_expert`, but raising on a goal far right of the start (x > 0.6)."""
+    if observation[0] > 0.6:
+        raise ValueError(f"goal x {observation[0]:.3f} is out of this expert's reach")
+    return point_expert(observation)
+
+
 def goal_of(reset_seed: int) -> np.ndarray:
     env = PointGoalEnv()
     env.reset(seed=reset_seed)
@@ -137,6 +161,70 @@ def test_record_demonstrations_keeps_those_whose_open_loop_replay_succeeds(tmp_p
             observation, _, _, _, step_info = env.step(action)
         np.testing.assert_array_equal(observation, observations[-1])
         assert step_info["is_success"]
+
+
+def test_record_demonstrations_is_the_same_whatever_the_number_of_worker_processes(tmp_path):
+    paths = {
+        n_threads: record_demonstrations(
+            "TestExternal/PointGoalShove-v0",
+            point_expert,
+            12,
+            tmp_path / f"{n_threads}",
+            seed=3,
+            noise=0.6,
+            n_threads=n_threads,
+        )
+        for n_threads in (1, 2)
+    }
+    one = load_arrays(paths[1])
+    metadata = read_metadata(paths[1])
+    del metadata["genrl"]["seconds"]
+    # Episodes fail both ways, so the kept ones are not a simple prefix of the episodes the workers played.
+    assert metadata["genrl"]["failed_open_loop"] > 0 and metadata["genrl"]["failed_closed_loop"] > 0
+    two = load_arrays(paths[2])
+    assert two.keys() == one.keys()
+    for key, array in one.items():
+        np.testing.assert_array_equal(two[key], array, err_msg=key)
+    other = read_metadata(paths[2])
+    del other["genrl"]["seconds"]
+    assert other == metadata
+
+
+def test_an_expert_that_cannot_be_pickled_plays_in_this_process(tmp_path):
+    expert = LockedExpert()
+    path = record_demonstrations("TestExternal/PointGoal-v0", expert, 6, tmp_path / "locked", seed=2, n_threads=2)
+    reference = record_demonstrations("TestExternal/PointGoal-v0", point_expert, 6, tmp_path / "plain", seed=2, n_threads=1)
+    np.testing.assert_array_equal(load_actions(path), load_actions(reference))
+    assert dataset_info(path)["reset_seeds"] == dataset_info(reference)["reset_seeds"]
+
+
+def test_an_error_in_a_worker_process_names_its_episode(tmp_path):
+    seeds = [int(np.random.default_rng([0, k]).integers(2**31)) for k in range(40)]
+    first = next(k for k, reset_seed in enumerate(seeds) if goal_of(reset_seed)[0] > 0.6)
+    assert first > 0  # the check before any work (episode 0's first step) passes
+    with pytest.raises(RuntimeError, match=rf"episode {first} of TestExternal/PointGoal-v0 .*out of this expert's reach"):
+        record_demonstrations("TestExternal/PointGoal-v0", far_goal_refusing_expert, 30, tmp_path / "out", n_threads=2)
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_script_without_a_main_guard_is_told_to_add_one(tmp_path):
+    script, out = tmp_path / "unguarded.py", tmp_path / "out"
+    script.write_text(
+        f"import sys\nsys.path.insert(0, {str(Path(__file__).parent)!r})\nfrom test_external import point_expert\n"
+        "from sb3_genrl.envs.demonstrations import record_demonstrations\n"
+        f"record_demonstrations('TestExternal/PointGoal-v0', point_expert, 2, {str(out)!r}, n_threads=2)\n"
+    )
+    done = subprocess.run(
+        [sys.executable, script], capture_output=True, text=True, env=os.environ | {"MUJOCO_GL": "egl"}, timeout=HANG_S
+    )
+    assert (
+        done.returncode != 0 and 'a script must call record_demonstrations under `if __name__ == "__main__":`' in done.stderr
+    )
+    # The worker says why it stopped (before it claims the folder the script holds), and the script names the episodes.
+    assert "RuntimeError: the worker processes that play the episodes (n_threads > 1" in done.stderr
+    assert "is in use by another process" not in done.stderr
+    assert "a worker process ended abruptly while it played episodes 0 to 0 of TestExternal/PointGoal-v0" in done.stderr
+    assert not out.exists()
 
 
 def test_record_demonstrations_is_a_prefix_of_a_larger_set(tmp_path):
@@ -190,6 +278,9 @@ def test_bad_expert_and_noise_are_refused_before_any_work(tmp_path):
         record_demonstrations("TestExternal/PointGoal-v0", point_expert, 2, tmp_path / "out", noise=-0.1)
     with pytest.raises(ValueError, match="has no expert of the package's"):
         record_demonstrations("TestExternal/PointGoal-v0", None, 2, tmp_path / "out")
+    for n_threads in (0, 1.5, True):
+        with pytest.raises(ValueError, match=rf"n_threads must be an integer >= 1, got {n_threads!r}"):
+            record_demonstrations("TestExternal/PointGoal-v0", point_expert, 2, tmp_path / "out", n_threads=n_threads)
     assert not (tmp_path / "out").exists()
 
 
@@ -261,11 +352,26 @@ def test_genrl_demos_refuses_bad_tasks_and_experts_before_any_work(cli, tmp_path
         (("--task", "TestExternal/PointGoal-v0", "--expert", "no_such_module:f"), "cannot import the module"),
         (("--task", "TestExternal/PointGoal-v0"), "give its expert as --expert MODULE:FUNCTION"),
         (("--task", "hockey", "--horizon", "10"), "--horizon apply to demonstrations from an expert"),
-        (("--task", "TestExternal/PointGoal-v0", "--expert", "test_external:point_expert", "--threads", "2"), "--threads"),
+        (("--task", "TestExternal/PointGoal-v0", "--expert", "test_external:point_expert", "--threads", "0"), "--threads"),
     ):
         code, _, err = cli("demos", *arguments, "--episodes", 2, "--out", out, "--no-progress-bar")
         assert code == 2 and message in err, (arguments, err)
         assert not out.exists()
+
+
+def test_genrl_demos_plays_an_experts_episodes_in_the_worker_processes_asked_for(cli, tmp_path):
+    code, out, err = cli(
+        "demos", "--task", "TestExternal/PointGoalShove-v0", "--expert", "test_external:point_expert", "--noise", 0.6,
+        "--episodes", 8, "--seed", 3, "--threads", 2, "--out", tmp_path / "demos", "--no-progress-bar",
+    )  # fmt: skip
+    assert code == 0, err
+    reference = record_demonstrations(
+        "TestExternal/PointGoalShove-v0", point_expert, 8, tmp_path / "reference", seed=3, noise=0.6, n_threads=1
+    )
+    np.testing.assert_array_equal(load_actions(tmp_path / "demos"), load_actions(reference))
+    info = dataset_info(tmp_path / "demos")
+    assert info["tried"] == dataset_info(reference)["tried"] and info["failed_open_loop"] > 0
+    assert f"8 demonstrations of TestExternal/PointGoalShove-v0 (20 steps) kept of {info['tried']} tried" in out
 
 
 @pytest.mark.skipif(not metaworld.installed(), reason=metaworld.INSTALL_HINT)

@@ -5,19 +5,29 @@
 changes of the actions, :func:`smooth_noise`), and keeps an episode only when it succeeds and its actions, replayed open
 loop from the same seeded reset, still succeed: GenRL plays a generator's trajectories open loop, so only such
 trajectories can teach it. The share kept and the reasons for the others are recorded in the dataset's metadata.
+The episodes are played in worker processes on all available cores by default, each on its own env; the dataset is the
+same whatever their number.
 """
 
 from __future__ import annotations
 
+import concurrent.futures
+import itertools
+import multiprocessing
 import os
+import pickle
 import time
-from collections.abc import Callable
+from collections import deque
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
+import cloudpickle
 import gymnasium as gym
 import numpy as np
+import torch as th
 from gymnasium import spaces
+from sb3_genrl.envs.control import default_threads
 from sb3_genrl.envs.demonstrations.arm import refuse_existing_output
 from sb3_genrl.envs.external import (
     SUCCESS_KEYS,
@@ -40,6 +50,15 @@ from sb3_genrl.utils import folder_lock
 DEFAULT_NOISE = 0.3  # largest height of one bump, as a share of each action dimension's half-range
 BUMP_DURATIONS = (6, 30)  # smallest and largest bump width (steps), as the arm's and Fetch's perturbations
 FIRST_TRIES = 200  # episodes tried without any kept before the recorder gives up
+CHUNK = 8  # most episodes a worker process plays in one go (fewer when there are few to keep)
+
+MAIN_GUARD = (
+    "the worker processes that play the episodes (n_threads > 1, the default on more than one core) import the script "
+    'that started them: a script must call record_demonstrations under `if __name__ == "__main__":`, as any script with '
+    "SB3's SubprocVecEnv, or pass n_threads=1"
+)
+
+_WORKER: dict[str, Any] = {}  # in each worker process: what it plays (its job) and its env, made at its first chunk
 
 
 def smooth_noise(
@@ -84,6 +103,7 @@ def record_demonstrations(
     noise: float | np.ndarray = DEFAULT_NOISE,
     horizon: int | None = None,
     success_key: str = "is_success",
+    n_threads: int | None = None,
     progress_bar: bool = False,
 ) -> Path:
     """Record ``episodes`` demonstrations of an expert on any episodic Gymnasium env as a Minari dataset in ``out_dir``.
@@ -95,6 +115,18 @@ def record_demonstrations(
     succeeds and its actions, replayed open loop from a reset with the same seed, succeed too. Episodes are tried in
     order until ``episodes`` are kept, so the dataset depends on ``seed`` only, and a smaller set is a prefix of a
     larger one.
+
+    With ``n_threads`` above 1 the episodes are played in that many worker processes (multiprocessing's
+    ``forkserver`` context, ``spawn`` where there is none, as SB3's ``SubprocVecEnv``), each on its own env made as
+    this process makes it, the episodes handed out in order in small chunks; this process keeps the first ``episodes``
+    successes in episode order and counts the episodes as one process would (those played after the last one kept
+    are dropped uncounted), so the dataset is the same, bit for bit, for any ``n_threads``. The task and the expert are
+    sent to the workers with cloudpickle: an expert must therefore be a function of the observation alone (as it is in
+    one process: an expert that keeps state from one episode to the next is not supported), and a task or an expert
+    that cannot be pickled (one holding a lock, an open file or a simulator handle) is played in this process instead,
+    with the same result. An error in a worker is raised here as a ``RuntimeError`` naming the episode and the error.
+    The workers import the script that started them: a script must call this under ``if __name__ == "__main__":``, as
+    any script with SB3's ``SubprocVecEnv`` (the workers refuse to start otherwise, saying so).
 
     Checked before any work and before ``out_dir`` is claimed: the arguments, the horizon (the env's
     ``max_episode_steps`` unless ``horizon`` is given; an env without one needs it), that ``reset(seed=s)`` twice gives
@@ -118,7 +150,9 @@ def record_demonstrations(
         the expert unperturbed), or an ``(M,)`` array of heights in action units (needed for an unbounded action space)
     :param horizon: control steps of a demonstration; None: the env's ``max_episode_steps``
     :param success_key: the info key of the env's success (default ``"is_success"``, falling back to ``"success"``)
-    :param progress_bar: show a tqdm progress bar
+    :param n_threads: worker processes that play the episodes (default: the available cores; 1: in this process);
+        the dataset does not depend on it
+    :param progress_bar: show a tqdm progress bar (of the episodes kept)
     :return: the dataset directory
     """
     name = task_name(task)
@@ -133,15 +167,24 @@ def record_demonstrations(
     check_seed(seed)
     if not isinstance(success_key, str) or not success_key:
         raise ValueError(f"success_key must be a non-empty string, got {success_key!r}")
+    if n_threads is not None:
+        check_positive_int(n_threads, "n_threads")
+    workers = default_threads() if n_threads is None else int(n_threads)
+    if workers > 1 and getattr(multiprocessing.current_process(), "_inheriting", False):  # Python's own test
+        raise RuntimeError(MAIN_GUARD)  # in a worker process that re-imports the script: its stderr shows why
     env, steps = task_env_and_horizon(task, horizon, success_key)
     heights = _noise_heights(env.action_space, noise)
     first_seed = _reset_seed(np.random.default_rng([seed, 0]))
     _probe(env, expert, first_seed, success_key, name)
+    job = _worker_job(task, expert, steps, success_key, seed, heights) if workers > 1 else None
     out_dir = check_output_dir(out_dir, "out_dir").absolute()
     with folder_lock(out_dir, lock_file=out_dir.parent / f".{out_dir.name}.lock"):
         refuse_existing_output(out_dir)
         began = time.perf_counter()
-        kept, counts = _record(env, expert, episodes, steps, seed, heights, progress_bar, name)
+        if job is None:
+            kept, counts = _record(env, expert, episodes, steps, seed, heights, progress_bar, name)
+        else:
+            kept, counts = _record_in_workers(job, workers, episodes, progress_bar, name)
         arrays = _dataset_arrays(env, kept, steps)
         genrl = {
             "task": name,
@@ -270,6 +313,25 @@ def _play(
     }
 
 
+def _episode(
+    env: gym.Env, expert: Callable[[Any], np.ndarray], steps: int, seed: int, k: int, heights: np.ndarray
+) -> dict[str, Any]:
+    """Episode ``k`` (see :func:`record_demonstrations`): its closed-loop play and, when that succeeds, its open-loop
+    replay. Returns the kept episode (the played one with its padded ``actions`` and its ``reset_seed``), or
+    ``{"failed": reason}`` with the reason the metadata counts (``failed_closed_loop``, ``failed_open_loop``)."""
+    rng = np.random.default_rng([seed, k])
+    reset_seed = _reset_seed(rng)
+    played = _play(env, reset_seed, steps, expert, smooth_noise(steps, rng, heights))
+    if not played["success"]:
+        return {"failed": "failed_closed_loop"}
+    actions = np.concatenate([played["actions"], np.zeros((steps - len(played["actions"]), *env.action_space.shape))])
+    actions = actions.astype(env.action_space.dtype)
+    replayed = _play(env, reset_seed, steps, None, actions)
+    if not (replayed["success"] and same_observation(replayed["observations"][0], played["observations"][0])):
+        return {"failed": "failed_open_loop"}
+    return played | {"actions": actions, "reset_seed": reset_seed}
+
+
 def _record(
     env: gym.Env,
     expert: Callable[[Any], np.ndarray],
@@ -280,6 +342,29 @@ def _record(
     progress_bar: bool,
     name: str,
 ) -> tuple[list[dict[str, Any]], dict[str, int]]:
+    """The episodes played one after the other in this process (``n_threads=1``)."""
+    outcomes = (_episode(env, expert, steps, seed, k, heights) for k in itertools.count())
+    return _keep(outcomes, episodes, progress_bar, name)
+
+
+def _record_in_workers(
+    job: bytes, workers: int, episodes: int, progress_bar: bool, name: str
+) -> tuple[list[dict[str, Any]], dict[str, int]]:
+    """The episodes played in ``workers`` worker processes (:func:`_play_chunk`), read here in episode order."""
+    context = multiprocessing.get_context("forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn")
+    chunk = max(1, min(CHUNK, episodes // (2 * workers)))
+    pool = concurrent.futures.ProcessPoolExecutor(workers, mp_context=context, initializer=_start_worker, initargs=(job, name))
+    try:
+        return _keep(_chunk_outcomes(pool, workers, chunk, name), episodes, progress_bar, name)
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)  # the chunks not begun are dropped
+
+
+def _keep(
+    outcomes: Iterator[dict[str, Any]], episodes: int, progress_bar: bool, name: str
+) -> tuple[list[dict[str, Any]], dict[str, int]]:
+    """The first ``episodes`` kept of the outcomes of episodes 0, 1, 2, ... (:func:`_episode`), and the counts of
+    those tried up to the last one kept; gives up after :data:`FIRST_TRIES` episodes without one kept."""
     kept: list[dict[str, Any]] = []
     counts = {"tried": 0, "failed_closed_loop": 0, "failed_open_loop": 0}
     with tqdm(total=episodes, disable=not progress_bar, unit="episode", desc=f"{name} demonstrations") as bar:
@@ -290,22 +375,93 @@ def _record(
                     f" failed closed loop, {counts['failed_open_loop']} failed when replayed open loop): check the "
                     "expert, the noise and the success key"
                 )
-            rng = np.random.default_rng([seed, counts["tried"]])
-            reset_seed = _reset_seed(rng)
+            outcome = next(outcomes)
             counts["tried"] += 1
-            played = _play(env, reset_seed, steps, expert, smooth_noise(steps, rng, heights))
-            if not played["success"]:
-                counts["failed_closed_loop"] += 1
+            if "failed" in outcome:
+                counts[outcome["failed"]] += 1
                 continue
-            actions = np.concatenate([played["actions"], np.zeros((steps - len(played["actions"]), *env.action_space.shape))])
-            actions = actions.astype(env.action_space.dtype)
-            replayed = _play(env, reset_seed, steps, None, actions)
-            if not (replayed["success"] and same_observation(replayed["observations"][0], played["observations"][0])):
-                counts["failed_open_loop"] += 1
-                continue
-            kept.append(played | {"actions": actions, "reset_seed": reset_seed})
+            kept.append(outcome)
             bar.update(1)
     return kept, counts
+
+
+def _worker_job(
+    task: str | Callable[[], gym.Env],
+    expert: Callable[[Any], np.ndarray],
+    steps: int,
+    success_key: str,
+    seed: int,
+    heights: np.ndarray,
+) -> bytes | None:
+    """What a worker process needs to play episodes, cloudpickled (as SB3's ``SubprocVecEnv`` sends its env makers);
+    None when the task or the expert cannot be pickled. A task's Gymnasium registration goes with it, so that a worker
+    makes the same env where the id is registered only in this process (by a notebook, say)."""
+    spec = None if callable(task) else gym.spec(resolve_task(task).env_id)
+    job = {
+        "task": task,
+        "spec": spec,
+        "expert": expert,
+        "steps": steps,
+        "success_key": success_key,
+        "seed": seed,
+        "heights": heights,
+    }
+    try:
+        return cloudpickle.dumps(job)
+    except Exception:  # a lock, an open file, a simulator handle: played in this process instead, with the same result
+        return None
+
+
+def _start_worker(job: bytes, name: str) -> None:
+    """A worker process's start: one torch thread (an expert may be a network), its job kept for its first chunk."""
+    th.set_num_threads(1)
+    _WORKER.update(pickled=job, name=name)
+
+
+def _play_chunk(start: int, stop: int) -> list[dict[str, Any]]:
+    """Episodes ``start`` to ``stop - 1`` (:func:`_episode`), in a worker process."""
+    name = _WORKER["name"]
+    if "env" not in _WORKER:
+        try:
+            job = pickle.loads(_WORKER["pickled"])
+            if job["spec"] is not None:
+                gym.registry.setdefault(job["spec"].id, job["spec"])
+            env, _ = task_env_and_horizon(job["task"], job["steps"], job["success_key"])
+        except Exception as error:
+            raise RuntimeError(
+                f"a worker process could not make the env of {name} for episodes {start} to {stop - 1}: "
+                f"{type(error).__name__}: {error}"
+            ) from error
+        _WORKER.update(env=env, job=job)
+    env, job = _WORKER["env"], _WORKER["job"]
+    outcomes = []
+    for k in range(start, stop):
+        try:
+            outcomes.append(_episode(env, job["expert"], job["steps"], job["seed"], k, job["heights"]))
+        except Exception as error:
+            raise RuntimeError(
+                f"episode {k} of {name} (seed {job['seed']}) failed in a worker process: {type(error).__name__}: {error}"
+            ) from error
+    return outcomes
+
+
+def _chunk_outcomes(pool: concurrent.futures.Executor, workers: int, chunk: int, name: str) -> Iterator[dict[str, Any]]:
+    """The outcomes of episodes 0, 1, 2, ..., played ``chunk`` at a time by the pool's workers (two chunks a worker
+    handed out ahead), in episode order."""
+    pending: deque[tuple[int, concurrent.futures.Future]] = deque()
+    for start in itertools.count(0, chunk):
+        pending.append((start, pool.submit(_play_chunk, start, start + chunk)))
+        if len(pending) < 2 * workers:
+            continue
+        first, future = pending.popleft()
+        try:
+            outcomes = future.result()
+        except concurrent.futures.process.BrokenProcessPool as error:  # killed (out of memory), crashed, or never started
+            raise RuntimeError(
+                f"a worker process ended abruptly while it played episodes {first} to {first + chunk - 1} of {name} (its "
+                f"error, if it had one, is above). Where it could not start: {MAIN_GUARD}"
+            ) from error
+        yield from outcomes
 
 
 def _dataset_arrays(env: gym.Env, kept: list[dict[str, Any]], steps: int) -> dict[str, np.ndarray]:

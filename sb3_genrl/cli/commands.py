@@ -62,9 +62,6 @@ def demos_command(args: argparse.Namespace) -> int:
 
 def _expert_demos(args: argparse.Namespace) -> int:
     """``genrl demos`` of a task from an expert (:func:`sb3_genrl.envs.demonstrations.record_demonstrations`)."""
-
-    if args.threads is not None:
-        raise ValueError("--threads applies to the package's own tasks; demonstrations from an expert play in one process")
     if args.expert is None and resolve_task(args.task).make_expert is None:
         raise ValueError(f"task {args.task!r} is not one of the package's: give its expert as --expert MODULE:FUNCTION")
     began = time.perf_counter()
@@ -77,6 +74,7 @@ def _expert_demos(args: argparse.Namespace) -> int:
         noise=DEFAULT_NOISE if args.noise is None else args.noise,
         horizon=args.horizon,
         success_key=args.success_key or "is_success",
+        n_threads=args.threads,
         progress_bar=not args.no_progress_bar,
     )
     info = dataset_info(path)

@@ -147,7 +147,11 @@ def add_demos(sub: argparse._SubParsersAction) -> None:
     )
     _seed_option(demos)
     demos.add_argument(
-        "--threads", type=COUNT, default=None, help="simulation threads of a package's own task (default: available cores)"
+        "--threads",
+        type=COUNT,
+        default=None,
+        help="simulation threads of a package's own task, or worker processes that play an expert's episodes "
+        "(default: available cores; the dataset does not depend on it)",
     )
     _progress_option(demos)
     demos.set_defaults(func=commands.demos_command)
