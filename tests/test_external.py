@@ -126,6 +126,11 @@ def far_goal_refusing_expert(observation: np.ndarray) -> np.ndarray:
     return point_expert(observation)
 
 
+def fleeing_expert(observation: np.ndarray) -> np.ndarray:
+    """Moves away from the goal: never succeeds."""
+    return -point_expert(observation)
+
+
 def goal_of(reset_seed: int) -> np.ndarray:
     env = PointGoalEnv()
     env.reset(seed=reset_seed)
@@ -225,6 +230,13 @@ def test_a_script_without_a_main_guard_is_told_to_add_one(tmp_path):
     assert "is in use by another process" not in done.stderr
     assert "a worker process ended abruptly while it played episodes 0 to 0 of TestExternal/PointGoal-v0" in done.stderr
     assert not out.exists()
+
+
+def test_record_demonstrations_gives_up_after_the_same_first_tries_in_worker_processes(tmp_path):
+    for n_threads in (1, 2):
+        with pytest.raises(RuntimeError, match=r"none of the first 200 demonstrations .* \(200 failed closed loop, 0 failed"):
+            record_demonstrations("TestExternal/PointGoal-v0", fleeing_expert, 2, tmp_path / "out", n_threads=n_threads)
+        assert not (tmp_path / "out").exists()
 
 
 def test_record_demonstrations_is_a_prefix_of_a_larger_set(tmp_path):
