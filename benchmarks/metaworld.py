@@ -271,7 +271,9 @@ def run_task(task: str, args: argparse.Namespace, result: dict[str, Any], save: 
     if "demonstrations" not in row:
         began = time.process_time()
         if not (dataset.is_dir() and any(dataset.iterdir())):  # a dataset is written whole or not at all
-            record_demonstrations(f"metaworld/{task}", None, args.demos, dataset, seed=0, horizon=HORIZON)
+            record_demonstrations(  # in this process, so that its CPU time is this process's
+                f"metaworld/{task}", None, args.demos, dataset, seed=0, horizon=HORIZON, n_threads=1
+            )
         info = dataset_info(dataset)
         row["demonstrations"] = {
             key: info[key] for key in ("episodes", "tried", "kept_share", "failed_closed_loop", "failed_open_loop")

@@ -30,11 +30,10 @@ from gymnasium import spaces
 from sb3_genrl.envs.control import default_threads
 from sb3_genrl.envs.demonstrations.arm import refuse_existing_output
 from sb3_genrl.envs.external import (
-    SUCCESS_KEYS,
+    check_reports_success,
     check_reproducible_reset,
     resolve_task,
     same_observation,
-    success_key_of,
     task_env_and_horizon,
     task_name,
 )
@@ -51,6 +50,9 @@ DEFAULT_NOISE = 0.3  # largest height of one bump, as a share of each action dim
 BUMP_DURATIONS = (6, 30)  # smallest and largest bump width (steps), as the arm's and Fetch's perturbations
 FIRST_TRIES = 200  # episodes tried without any kept before the recorder gives up
 CHUNK = 8  # most episodes a worker process plays in one go (fewer when there are few to keep)
+# Below this many demonstrations, the default plays them in this process: a pool of worker processes takes seconds to
+# start (each imports the package), more than so short a run gains. The dataset is the same either way.
+SMALL_RUN = 100
 
 MAIN_GUARD = (
     "the worker processes that play the episodes (n_threads > 1, the default on more than one core) import the script "
@@ -150,8 +152,8 @@ def record_demonstrations(
         the expert unperturbed), or an ``(M,)`` array of heights in action units (needed for an unbounded action space)
     :param horizon: control steps of a demonstration; None: the env's ``max_episode_steps``
     :param success_key: the info key of the env's success (default ``"is_success"``, falling back to ``"success"``)
-    :param n_threads: worker processes that play the episodes (default: the available cores; 1: in this process);
-        the dataset does not depend on it
+    :param n_threads: worker processes that play the episodes (default: the available cores, or this process alone
+        below :data:`SMALL_RUN` demonstrations; 1: in this process); the dataset does not depend on it
     :param progress_bar: show a tqdm progress bar (of the episodes kept)
     :return: the dataset directory
     """
@@ -169,7 +171,7 @@ def record_demonstrations(
         raise ValueError(f"success_key must be a non-empty string, got {success_key!r}")
     if n_threads is not None:
         check_positive_int(n_threads, "n_threads")
-    workers = default_threads() if n_threads is None else int(n_threads)
+    workers = (default_threads() if episodes >= SMALL_RUN else 1) if n_threads is None else int(n_threads)
     if workers > 1 and getattr(multiprocessing.current_process(), "_inheriting", False):  # Python's own test
         raise RuntimeError(MAIN_GUARD)  # in a worker process that re-imports the script: its stderr shows why
     env, steps = task_env_and_horizon(task, horizon, success_key)
@@ -185,40 +187,81 @@ def record_demonstrations(
             kept, counts = _record(env, expert, episodes, steps, seed, heights, progress_bar, name)
         else:
             kept, counts = _record_in_workers(job, workers, episodes, progress_bar, name)
-        arrays = _dataset_arrays(env, kept, steps)
-        genrl = {
-            "task": name,
-            "env_id": None if callable(task) else resolve_task(task).env_id,
-            "horizon": steps,
-            "seed": int(seed),
-            "version": sb3_genrl.__version__,
-            "mujoco": package_versions().get("mujoco"),
-            "episodes": int(episodes),
-            "tried": counts["tried"],
-            "drawn": counts["tried"],
-            "kept_share": episodes / counts["tried"],
-            "failed_closed_loop": counts["failed_closed_loop"],
-            "failed_open_loop": counts["failed_open_loop"],
-            "noise": np.asarray(noise, dtype=np.float64).tolist(),
-            "success_key": success_key,
-            "expert": expert_name(expert),
-            "reset_seeds": [episode["reset_seed"] for episode in kept],
-            "observation": "the env's observation"
-            + (", flattened by gymnasium.spaces.flatten" if not isinstance(env.observation_space, spaces.Box) else ""),
-            "goal": "the env's own (no relabelling)",
-            "seconds": round(time.perf_counter() - began, 1),
-        }
-        path = write_dataset(
+        path = write_demonstrations(
             out_dir,
-            arrays,
-            dataset_id=f"genrl/{_dataset_name(name)}-v0",
-            observation_space=spaces.Box(-np.inf, np.inf, shape=arrays["observations"].shape[2:], dtype=np.float32),
-            action_space=env.action_space,
-            genrl=genrl,
+            env,
+            task,
+            kept,
+            steps,
+            counts=counts,
+            success_key=success_key,
             description=f"{episodes} perturbed expert demonstrations of {name} whose open-loop replay succeeds (sb3-genrl)",
+            seed=int(seed),
+            drawn=counts["tried"],
+            noise=np.asarray(noise, dtype=np.float64).tolist(),
+            expert=expert_name(expert),
+            seconds=round(time.perf_counter() - began, 1),
         )
     env.close()
     return path
+
+
+def write_demonstrations(
+    out_dir: Path,
+    env: gym.Env,
+    task: str | Callable[[], gym.Env],
+    kept: list[dict[str, Any]],
+    steps: int,
+    *,
+    counts: dict[str, int],
+    success_key: str,
+    description: str,
+    **extra: Any,
+) -> Path:
+    """Write kept episodes as the recorder's dataset (:func:`sb3_genrl.data.write_dataset`, atomically): the arrays
+    of :func:`record_demonstrations` and its metadata's entries that do not depend on how the episodes were made.
+
+    :param out_dir: the dataset directory to create
+    :param env: the task's env that played them (its spaces shape the arrays)
+    :param task: the task, as given (its name and Gymnasium id go to the metadata)
+    :param kept: the kept episodes, each as :func:`play_episode` returns it, with its ``actions`` padded to ``steps``
+        (:func:`pad_actions`) and its ``reset_seed``
+    :param steps: the horizon T
+    :param counts: ``tried``, ``failed_closed_loop`` and ``failed_open_loop`` episodes
+    :param success_key: the info key of the env's success
+    :param description: Minari's dataset description
+    :param extra: further metadata entries (how the episodes were made: ``seed``, ``expert``, ``source``, ...)
+    :return: the dataset directory
+    """
+    name = task_name(task)
+    arrays = _dataset_arrays(env, kept, steps)
+    genrl = {
+        "task": name,
+        "env_id": None if callable(task) else resolve_task(task).env_id,
+        "horizon": steps,
+        "version": sb3_genrl.__version__,
+        "mujoco": package_versions().get("mujoco"),
+        "episodes": len(kept),
+        "tried": counts["tried"],
+        "kept_share": len(kept) / counts["tried"],
+        "failed_closed_loop": counts["failed_closed_loop"],
+        "failed_open_loop": counts["failed_open_loop"],
+        "success_key": success_key,
+        "reset_seeds": [episode["reset_seed"] for episode in kept],
+        "observation": "the env's observation"
+        + (", flattened by gymnasium.spaces.flatten" if not isinstance(env.observation_space, spaces.Box) else ""),
+        "goal": "the env's own (no relabelling)",
+        **extra,
+    }
+    return write_dataset(
+        out_dir,
+        arrays,
+        dataset_id=f"genrl/{_dataset_name(name)}-v0",
+        observation_space=spaces.Box(-np.inf, np.inf, shape=arrays["observations"].shape[2:], dtype=np.float32),
+        action_space=env.action_space,
+        genrl=genrl,
+        description=description,
+    )
 
 
 def expert_name(expert: Callable[[Any], np.ndarray]) -> str:
@@ -274,19 +317,23 @@ def _probe(env: gym.Env, expert: Callable[[Any], np.ndarray], reset_seed: int, s
     observation = check_reproducible_reset(env, reset_seed, name)
     action = _expert_action(expert, observation, env.action_space)
     _, _, _, _, info = env.step(np.clip(action, env.action_space.low, env.action_space.high).astype(env.action_space.dtype))
-    if success_key_of(info, success_key) is None:
-        wanted = " or ".join(repr(key) for key in (SUCCESS_KEYS if success_key == SUCCESS_KEYS[0] else (success_key,)))
-        raise ValueError(
-            f"{name} reports no success: its step's info has no {wanted} (it has {sorted(info)}); give the key that "
-            "holds it as success_key (--success-key)"
-        )
+    check_reports_success(info, success_key, name)
 
 
-def _play(
+def play_episode(
     env: gym.Env, reset_seed: int, steps: int, expert: Callable[[Any], np.ndarray] | None, actions: np.ndarray | None
 ) -> dict[str, Any]:
     """One episode from ``reset(seed=reset_seed)``: the expert closed loop (``actions`` adds to its actions) or
-    ``actions`` open loop; stops when the episode ends. Returns what was played and whether its last step succeeded."""
+    ``actions`` open loop, each action clipped to the action space; stops when the episode ends.
+
+    :param env: the task's env (:func:`~sb3_genrl.envs.external.make_task_env`)
+    :param reset_seed: the reset's seed
+    :param steps: the most steps to play
+    :param expert: observation -> action, or None (``actions`` alone)
+    :param actions: ``(steps, M)``: the actions (expert None), or the additions to the expert's
+    :return: the ``observations`` (the reset's first), the ``actions`` played, the ``rewards``, ``terminated``,
+        ``truncated`` and ``success`` (of the last step)
+    """
     space = env.action_space
     observation, _ = env.reset(seed=int(reset_seed))
     observations, played, rewards, info = [observation], [], [], {}
@@ -313,6 +360,12 @@ def _play(
     }
 
 
+def pad_actions(actions: np.ndarray, steps: int, action_space: spaces.Box) -> np.ndarray:
+    """``(T, M)`` actions, ``T <= steps``, followed by the hold action (zeros) up to ``steps``, in the space's dtype."""
+    actions = np.asarray(actions, dtype=np.float64).reshape(-1, *action_space.shape)
+    return np.concatenate([actions, np.zeros((steps - len(actions), *action_space.shape))]).astype(action_space.dtype)
+
+
 def _episode(
     env: gym.Env, expert: Callable[[Any], np.ndarray], steps: int, seed: int, k: int, heights: np.ndarray
 ) -> dict[str, Any]:
@@ -321,12 +374,11 @@ def _episode(
     ``{"failed": reason}`` with the reason the metadata counts (``failed_closed_loop``, ``failed_open_loop``)."""
     rng = np.random.default_rng([seed, k])
     reset_seed = _reset_seed(rng)
-    played = _play(env, reset_seed, steps, expert, smooth_noise(steps, rng, heights))
+    played = play_episode(env, reset_seed, steps, expert, smooth_noise(steps, rng, heights))
     if not played["success"]:
         return {"failed": "failed_closed_loop"}
-    actions = np.concatenate([played["actions"], np.zeros((steps - len(played["actions"]), *env.action_space.shape))])
-    actions = actions.astype(env.action_space.dtype)
-    replayed = _play(env, reset_seed, steps, None, actions)
+    actions = pad_actions(played["actions"], steps, env.action_space)
+    replayed = play_episode(env, reset_seed, steps, None, actions)
     if not (replayed["success"] and same_observation(replayed["observations"][0], played["observations"][0])):
         return {"failed": "failed_open_loop"}
     return played | {"actions": actions, "reset_seed": reset_seed}
