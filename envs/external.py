@@ -149,6 +149,16 @@ def success_key_of(info: dict[str, Any], success_key: str = "is_success") -> str
     return next((key for key in keys if key in info), None)
 
 
+def check_reports_success(info: dict[str, Any], success_key: str = "is_success", name: str = "the env") -> None:
+    """Raise unless a step's ``info`` holds the env's success (:func:`success_key_of`), naming the keys it has."""
+    if success_key_of(info, success_key) is None:
+        wanted = " or ".join(repr(key) for key in (SUCCESS_KEYS if success_key == SUCCESS_KEYS[0] else (success_key,)))
+        raise ValueError(
+            f"{name} reports no success: its step's info has no {wanted} (it has {sorted(info)}); give the key that "
+            "holds it as success_key (--success-key)"
+        )
+
+
 def declared_horizon(env: gym.Env) -> int | None:
     """The env's own episode length: its ``spec.max_episode_steps``, else an integer ``horizon`` of ``env.unwrapped``."""
     steps = getattr(env.spec, "max_episode_steps", None) if env.spec is not None else None

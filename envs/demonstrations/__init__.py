@@ -9,6 +9,8 @@
   open-loop success of the expert, of a generator's reconstructions and of a policy.
 - :mod:`sb3_genrl.envs.demonstrations.recorder`: any episodic Gymnasium env with an expert callable, recorded closed
   loop with smooth perturbations and kept when its open-loop replay succeeds (:func:`record_demonstrations`).
+- :mod:`sb3_genrl.envs.demonstrations.replay`: any episodic Gymnasium env with a dataset of actions and their reset
+  seeds (Minari, or arrays), each episode kept when its open-loop replay succeeds (:func:`replay_demonstrations`).
 
 Each writes a Minari dataset (:func:`sb3_genrl.data.write_dataset`) whose episodes depend on the seed only.
 """
@@ -26,9 +28,13 @@ from sb3_genrl.envs.demonstrations.recorder import (
     BUMP_DURATIONS,
     DEFAULT_NOISE,
     expert_name,
+    pad_actions,
+    play_episode,
     record_demonstrations,
     smooth_noise,
+    write_demonstrations,
 )
+from sb3_genrl.envs.demonstrations.replay import read_replay_source, replay_demonstrations
 
 __all__ = [
     "BUMP_DURATIONS",
@@ -38,11 +44,16 @@ __all__ = [
     "is_valid",
     "make_arrays",
     "make_demonstrations",
+    "pad_actions",
     "perturbation",
+    "play_episode",
     "play_expert",
+    "read_replay_source",
     "record_demonstrations",
     "refuse_existing_output",
+    "replay_demonstrations",
     "sample_trajectories",
     "smooth_noise",
     "within_limits",
+    "write_demonstrations",
 ]

@@ -16,7 +16,7 @@ from sb3_genrl.baselines.compare import compare_runs
 from sb3_genrl.baselines.train import train_baseline
 from sb3_genrl.data import dataset_info, load_trajectories
 from sb3_genrl.envs import TASKS, get_task
-from sb3_genrl.envs.demonstrations import DEFAULT_NOISE, make_demonstrations, record_demonstrations
+from sb3_genrl.envs.demonstrations import DEFAULT_NOISE, make_demonstrations, record_demonstrations, replay_demonstrations
 from sb3_genrl.envs.external import make_task_env, resolve_task
 from sb3_genrl.generative import train_generator
 from sb3_genrl.genrl import check_genrl_settings
@@ -37,6 +37,8 @@ def play_command(args: argparse.Namespace) -> int:
 
 
 def demos_command(args: argparse.Namespace) -> int:
+    if args.source is not None:
+        return _replayed_demos(args)
 
     if args.expert is not None or args.task not in TASKS:
         return _expert_demos(args)
@@ -82,6 +84,32 @@ def _expert_demos(args: argparse.Namespace) -> int:
         f"{info['episodes']} demonstrations of {info['task']} ({info['horizon']} steps) kept of {info['tried']} tried "
         f"({100 * info['kept_share']:.1f}%: {info['failed_closed_loop']} failed closed loop, {info['failed_open_loop']} "
         f"failed when replayed open loop) in {time.perf_counter() - began:.1f} s -> {path}"
+    )
+    return 0
+
+
+def _replayed_demos(args: argparse.Namespace) -> int:
+    """``genrl demos --from`` a dataset of actions (:func:`sb3_genrl.envs.demonstrations.replay_demonstrations`)."""
+    given = [option for option in ("expert", "noise", "threads") if getattr(args, option) is not None]
+    if given:
+        raise ValueError(
+            f"{', '.join(f'--{option}' for option in given)} cannot be used with --from, which replays a dataset's "
+            "actions: they apply to demonstrations from an expert"
+        )
+    began = time.perf_counter()
+    path = replay_demonstrations(
+        args.task,
+        args.source,
+        args.out,
+        horizon=args.horizon,
+        success_key=args.success_key or "is_success",
+        progress_bar=not args.no_progress_bar,
+    )
+    info = dataset_info(path)
+    print(
+        f"{info['episodes']} demonstrations of {info['task']} ({info['horizon']} steps) kept of {info['tried']} replayed "
+        f"from {info['source']} ({100 * info['kept_share']:.1f}%: {info['failed_open_loop']} failed when replayed open "
+        f"loop) in {time.perf_counter() - began:.1f} s -> {path}"
     )
     return 0
 

@@ -127,6 +127,16 @@ def add_demos(sub: argparse._SubParsersAction) -> None:
         "not register; metaworld/<name> comes with Meta-World's scripted expert)",
     )
     demos.add_argument(
+        "--from",
+        dest="source",
+        default=None,
+        metavar="PATH_OR_ID",
+        help="instead of an expert, a dataset of actions with their reset seeds: a Minari dataset folder, the id of a "
+        "Minari dataset stored locally (nothing is downloaded; its episodes must carry their reset seed, as Minari's "
+        "DataCollector records it), or an .npz file with actions (N, T, M) and reset_seeds (N,); each episode is kept "
+        "only when its actions replayed open loop from its seeded reset succeed (--episodes and --seed do not apply)",
+    )
+    demos.add_argument(
         "--noise",
         type=option(check_non_negative_float, float),
         default=None,
@@ -134,12 +144,15 @@ def add_demos(sub: argparse._SubParsersAction) -> None:
         f"(default {DEFAULT_NOISE}; 0: unperturbed)",
     )
     demos.add_argument(
-        "--horizon", type=COUNT, default=None, help="with an expert: control steps of a demonstration (default: the env's)"
+        "--horizon",
+        type=COUNT,
+        default=None,
+        help="with an expert or --from: control steps of a demonstration (default: the env's)",
     )
     demos.add_argument(
         "--success-key",
         default=None,
-        help="with an expert: the info key of the env's success (default is_success, falling back to success)",
+        help="with an expert or --from: the info key of the env's success (default is_success, falling back to success)",
     )
     demos.add_argument("--episodes", type=EPISODES, default=40000, help="valid demonstrations to keep (paper: 40000)")
     demos.add_argument(
