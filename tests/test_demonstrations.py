@@ -12,7 +12,7 @@ import pytest
 from sb3_genrl.envs import TASKS, external
 from sb3_genrl.envs import demonstrations as demonstrations_package
 from sb3_genrl.envs.coverage import coverage_fraction, coverage_report, covered_cells, region_cells
-from sb3_genrl.envs.demonstrations import arm, fetch, make_demonstrations, recorder, sample_trajectories, within_limits
+from sb3_genrl.envs.demonstrations import arm, fetch, make_demonstrations, recorder, replay, sample_trajectories, within_limits
 
 from sb3_genrl.data import dataset_info, load_arrays
 
@@ -201,11 +201,13 @@ def test_basketball_throws_all_swing_at_the_same_steps():
 
 
 def test_every_maker_of_demonstrations_lives_in_the_demonstrations_package() -> None:
-    # the arm tasks', the Fetch tasks' and any env's recorder are its modules, their public names re-exported by it
-    for module in (arm, fetch, recorder):
+    # the arm tasks', the Fetch tasks', any env's recorder and the replay of a dataset are its modules, their public
+    # names re-exported by it
+    makers = (arm, fetch, recorder, replay)
+    for module in makers:
         assert module.__name__.startswith("sb3_genrl.envs.demonstrations.")
     for name in demonstrations_package.__all__:
-        assert any(getattr(module, name, None) is getattr(demonstrations_package, name) for module in (arm, fetch, recorder))
+        assert any(getattr(module, name, None) is getattr(demonstrations_package, name) for module in makers), name
     assert demonstrations_package.perturbation is arm.perturbation and fetch.perturbation is arm.perturbation
     assert demonstrations_package.make_arrays is fetch.make_arrays
     assert demonstrations_package.record_demonstrations is recorder.record_demonstrations

@@ -5,7 +5,7 @@
   batches and kept when valid (:func:`make_demonstrations`, :func:`perturbation`); a task with its own maker (a
   :class:`~sb3_genrl.envs.spec.TaskSpec` with ``demonstrations``) is written through it too.
 - :mod:`sb3_genrl.envs.demonstrations.fetch`: the Fetch tasks' scripted expert with perturbations, played through
-  Gymnasium-Robotics' envs (:func:`make_arrays`, what ``make_demonstrations("fetch-push", ...)`` writes), and the
+  Gymnasium-Robotics' envs (:func:`make_arrays`, what ``make_demonstrations`` writes for them), and the
   open-loop success of the expert, of a generator's reconstructions and of a policy.
 - :mod:`sb3_genrl.envs.demonstrations.recorder`: any episodic Gymnasium env with an expert callable, recorded closed
   loop with smooth perturbations and kept when its open-loop replay succeeds (:func:`record_demonstrations`).
