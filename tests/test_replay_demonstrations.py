@@ -1,6 +1,8 @@
 """Demonstrations from a dataset of actions (sb3_genrl.envs.demonstrations.replay): each episode replayed open loop from
 its seeded reset on a task the package does not ship, kept only when it still succeeds, and the share kept recorded."""
 
+import json
+
 import gymnasium as gym
 import minari
 import numpy as np
@@ -108,6 +110,9 @@ def test_replayed_demonstrations_keep_those_whose_open_loop_replay_succeeds(tmp_
     assert info["kept_share"] == pytest.approx(4 / 7) and info["episodes"] == 4
     assert info["expert"] is None and info["source"] == "arrays given in memory"
     assert info["task"] == TASK and info["horizon"] == HORIZON and info["seed"] is None
+    # Minari's own record of what made the episodes says they were replayed, not played by an expert
+    minari_metadata = json.loads((path / "data" / "metadata.json").read_text())
+    assert minari_metadata["algorithm_name"] == "actions of arrays given in memory replayed open loop from their reset seeds"
     # The stored arrays are what the replay played: the actions clipped to the action space, the replay's observations.
     arrays = load_arrays(path)
     played = np.clip(actions[kept], -1.0, 1.0).astype(np.float32)

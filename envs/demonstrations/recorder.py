@@ -196,6 +196,7 @@ def record_demonstrations(
             counts=counts,
             success_key=success_key,
             description=f"{episodes} perturbed expert demonstrations of {name} whose open-loop replay succeeds (sb3-genrl)",
+            algorithm_name=f"expert {expert_name(expert)} closed loop with smooth perturbations, replayed open loop",
             seed=int(seed),
             drawn=counts["tried"],
             noise=np.asarray(noise, dtype=np.float64).tolist(),
@@ -216,6 +217,7 @@ def write_demonstrations(
     counts: dict[str, int],
     success_key: str,
     description: str,
+    algorithm_name: str,
     **extra: Any,
 ) -> Path:
     """Write kept episodes as the recorder's dataset (:func:`sb3_genrl.data.write_dataset`, atomically): the arrays
@@ -230,6 +232,7 @@ def write_demonstrations(
     :param counts: ``tried``, ``failed_closed_loop`` and ``failed_open_loop`` episodes
     :param success_key: the info key of the env's success
     :param description: Minari's dataset description
+    :param algorithm_name: Minari's ``algorithm_name``: what made the episodes
     :param extra: further metadata entries (how the episodes were made: ``seed``, ``expert``, ``source``, ...)
     :return: the dataset directory
     """
@@ -261,6 +264,7 @@ def write_demonstrations(
         action_space=env.action_space,
         genrl=genrl,
         description=description,
+        algorithm_name=algorithm_name,
     )
 
 

@@ -120,6 +120,7 @@ def replay_demonstrations(
                 success_key=success_key,
                 description=f"{len(kept)} demonstrations of {name} from {episodes.name} whose open-loop replay succeeds "
                 "(sb3-genrl)",
+                algorithm_name=f"actions of {episodes.name} replayed open loop from their reset seeds",
                 seed=None,
                 expert=None,
                 source=episodes.name,

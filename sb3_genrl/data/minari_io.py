@@ -226,6 +226,7 @@ def write_dataset(
     action_space: gym.spaces.Box,
     genrl: dict[str, Any],
     description: str = "",
+    algorithm_name: str = "scripted expert with joint-velocity perturbations",
     extra_files: Callable[[Path], Any] | None = None,
 ) -> Path:
     """Write a demonstration dataset atomically (temporary sibling directory, renamed at the end).
@@ -240,6 +241,8 @@ def write_dataset(
     :param action_space: the step env's action space
     :param genrl: the ``"genrl"`` metadata entry (at least ``task``, ``horizon``, ``seed``, ``version``)
     :param description: Minari's dataset description
+    :param algorithm_name: Minari's ``algorithm_name``, what made the episodes (default: the package's tasks' scripted
+        experts)
     :param extra_files: called with the temporary directory before it is renamed into place, to add files (such as
         a coverage report) that a complete dataset must never be without
     :return: the dataset directory
@@ -280,7 +283,7 @@ def write_dataset(
             total_steps=int(n * steps),
             minari_version=minari.__version__,
             description=description,
-            algorithm_name="scripted expert with joint-velocity perturbations",
+            algorithm_name=algorithm_name,
             genrl={**genrl, "episodes": int(n), "storage": ["npz"] + (["hdf5"] if has_hdf5 else [])},
         )
         (data_dir / METADATA_FILE).write_text(json.dumps(metadata, indent=1, default=_json_default))
