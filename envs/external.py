@@ -31,6 +31,7 @@ from sb3_genrl.envs.registry import TASKS
 
 from sb3_genrl import LatentActionWrapper
 from sb3_genrl.checks import check_positive_int
+from sb3_genrl.utils import same_observation
 
 SUCCESS_KEYS = ("is_success", "success")  # read in this order when the default key is asked for
 METAWORLD_PREFIX = "metaworld/"
@@ -269,16 +270,3 @@ def task_name(task: str | Callable[[], gym.Env]) -> str:
     if not callable(task):
         return str(task)
     return getattr(task, "__qualname__", None) or type(task).__name__
-
-
-def same_observation(first: Any, second: Any) -> bool:
-    """Whether two observations (arrays, or dicts and tuples of them) are equal, element for element."""
-    if isinstance(first, dict):
-        return (
-            isinstance(second, dict)
-            and first.keys() == second.keys()
-            and all(same_observation(first[k], second[k]) for k in first)
-        )
-    if isinstance(first, tuple | list):
-        return isinstance(second, tuple | list) and len(first) == len(second) and all(map(same_observation, first, second))
-    return np.array_equal(np.asarray(first), np.asarray(second))

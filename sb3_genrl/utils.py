@@ -17,6 +17,8 @@ from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 LOCK_FILE = ".lock"
 
 
@@ -255,3 +257,16 @@ def read_checkpoint(folder: str | os.PathLike[str]) -> dict[str, Any] | None:
                 f"{size} when it was written); delete {folder} to start afresh"
             )
     return state | {"paths": paths}
+
+
+def same_observation(first: Any, second: Any) -> bool:
+    """Whether two observations (arrays, or dicts and tuples of them) are equal, element for element."""
+    if isinstance(first, dict):
+        return (
+            isinstance(second, dict)
+            and first.keys() == second.keys()
+            and all(same_observation(first[k], second[k]) for k in first)
+        )
+    if isinstance(first, tuple | list):
+        return isinstance(second, tuple | list) and len(first) == len(second) and all(map(same_observation, first, second))
+    return np.array_equal(np.asarray(first), np.asarray(second))

@@ -33,7 +33,6 @@ from sb3_genrl.envs.external import (
     check_reports_success,
     check_reproducible_reset,
     resolve_task,
-    same_observation,
     task_env_and_horizon,
     task_name,
 )
@@ -44,7 +43,7 @@ import sb3_genrl
 from sb3_genrl.checks import check_non_negative_float, check_output_dir, check_positive_int, check_seed
 from sb3_genrl.data import write_dataset
 from sb3_genrl.provenance import package_versions
-from sb3_genrl.utils import folder_lock
+from sb3_genrl.utils import folder_lock, same_observation
 
 DEFAULT_NOISE = 0.3  # largest height of one bump, as a share of each action dimension's half-range
 BUMP_DURATIONS = (6, 30)  # smallest and largest bump width (steps), as the arm's and Fetch's perturbations

@@ -53,7 +53,7 @@ from sb3_genrl.curves import _EpisodeInfo
 from sb3_genrl.generative.base import TrajectoryGenerator
 from sb3_genrl.genrl.genrl import GenRL
 from sb3_genrl.run.folder import CHECKPOINT_DIR, RunFolderError, differing
-from sb3_genrl.utils import read_checkpoint, write_checkpoint
+from sb3_genrl.utils import read_checkpoint, same_observation, write_checkpoint
 
 CHECKPOINT_EVERY = 640  # episodes between checkpoints of genrl train-policy (ten of GenRL's default iterations)
 MODEL, MEMORIES = "model.zip", "memories.pt"
@@ -245,7 +245,7 @@ def resume_genrl(state: dict[str, Any], env: Any, generator: TrajectoryGenerator
     venv.unwrapped._reset_seeds()  # no seed at this reset (loading seeded the env): the restored states draw
     model.seed_contexts()  # with pulls_per_context: the groups' seeds, from the checkpoint's episode on
     observations = venv.reset()
-    if not _equal(observations, model._last_obs):
+    if not same_observation(observations, model._last_obs):
         warnings.warn(
             "the resumed env did not draw the checkpoint's contexts again: the resumed run is not the "
             "uninterrupted one bit for bit",
@@ -387,13 +387,3 @@ def _to_device(value: Any, device: th.device) -> Any:
     if isinstance(value, dict):
         return {key: _to_device(item, device) for key, item in value.items()}
     return type(value)(_to_device(item, device) for item in value)
-
-
-def _equal(first: Any, second: Any) -> bool:
-    if isinstance(first, dict):
-        return (
-            isinstance(second, dict)
-            and first.keys() == second.keys()
-            and all(_equal(first[key], second[key]) for key in first)
-        )
-    return second is not None and np.array_equal(first, second)
