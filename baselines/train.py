@@ -17,7 +17,7 @@ Feedback baselines (per-step actions on the task's observation plus the time fea
 Latent-space baselines (the same generator as GenRL, on :class:`~sb3_genrl.LatentActionWrapper`, one-step
 episodes): ``latent-ppo``, ``latent-sac``, ``latent-trpo`` - stock SB3 / sb3-contrib algorithms with their
 defaults except 64 episodes per update (GenRL's batch; ``hyperparams/latent_*.yml``), so they show what the EM update
-adds.
+adds. On a task with a fast path they play an update's episodes together on all cores (:func:`default_latent_envs`).
 
 Every run writes ``episodes.monitor.csv`` (SB3's Monitor: one row per episode with its return, length, table
 contacts, distance and the process' CPU seconds so far, written as training goes), ``learning_curve.csv`` /
@@ -75,6 +75,7 @@ from sb3_genrl.data import load_transitions
 from sb3_genrl.generative import load
 from sb3_genrl.genrl.generator_files import generator_digest
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED
+from sb3_genrl.run import training_env
 from sb3_genrl.run.checkpoint import resume_state
 from sb3_genrl.run.folder import keep_episodes, open_run, remove_checkpoint
 from sb3_genrl.utils import atomic_path, atomic_write_json, folder_lock
@@ -102,6 +103,8 @@ def train_baseline(
     verbose: int = 0,
     window: int = 64,
     overwrite: bool = False,
+    n_envs: int | None = None,
+    n_threads: int | None = None,
 ) -> dict[str, Any]:
     """Train one baseline for ``episodes`` episodes and write its outputs to ``out_dir``.
 
@@ -126,14 +129,20 @@ def train_baseline(
     :param overwrite: replace a run already in ``out_dir`` (its files only) instead of refusing or resuming it; without
         it, a rerun of the same run returns the finished run's summary or resumes the unfinished one, and another
         run's folder is refused (see :mod:`sb3_genrl.run.folder`); ``out_dir`` is locked while the run works in it
+    :param n_envs: latent-space baselines only: envs played at a time (default :func:`default_latent_envs`: an
+        update's episodes together where the task has a fast path, else 1). The run's result depends on it, never on
+        the number of cores; ``latent_vector_settings`` says how the settings follow it
+    :param n_threads: simulation threads of a fast path's batched envs (default: all cores); the result does not
+        depend on it
     """
     _check_arguments(algorithm, episodes, seed, demos, demo_episodes, generator, eval_goals, checkpoint_every, device)
+    _check_envs(algorithm, n_envs, n_threads)
     changes, spec, out = check_algorithm_kwargs(algorithm, algorithm_kwargs), get_task(task), check_output_dir(out_dir)
     began = time.perf_counter(), time.process_time()
     transitions, generator = _inputs(algorithm, spec.name, demos, demo_episodes, generator)
     steps = int(episodes) if transitions is None else int(episodes) * spec.horizon
     summary = {"algorithm": algorithm, "task": spec.name, "episodes": int(episodes), "seed": seed} | (
-        {"settings": baseline_settings(algorithm, spec.name)[0] | changes}
+        _latent_record(algorithm, spec.name, generator, changes, n_envs)
         if transitions is None
         else _demonstration_record(algorithm, spec.name, transitions, bc_kwargs, changes)
     )
@@ -158,6 +167,7 @@ def train_baseline(
             changes,
             began,
             {"seed": seed, "device": device, "verbose": verbose},
+            n_threads,
         )
         try:
             summary["learn_seconds"] = _learn(model, steps, out, state, checkpoint_every, summary, progress_bar, verbose)
@@ -193,12 +203,13 @@ def _model(
     changes: dict[str, Any],
     began: tuple[float, float],
     common: dict[str, Any],
+    n_threads: int | None = None,
 ) -> tuple[Any, dict[str, Any]]:
     """The model to train and the summary so far: resumed from ``state``, or new (its setup's seconds recorded)."""
     if state is not None:
         return _resumed_model(algorithm, task, out, state, common["device"])
     model = (
-        _latent_model(algorithm, task, generator, summary["settings"], common, out)
+        _latent_model(algorithm, task, generator, summary, common, out, n_threads)
         if transitions is None
         else _feedback_model(
             algorithm, task, transitions, steps, out, summary, eval_goals, bc_kwargs, common | {"settings": changes}
@@ -435,7 +446,65 @@ def _demonstrations(demos: Any, demo_episodes: int | None, task: str) -> dict[st
     return {key: np.asarray(value)[:n] for key, value in transitions.items()}
 
 
-def _latent_model(algorithm: str, task: str, generator: Any, settings: dict[str, Any], common: dict, out: pathlib.Path) -> Any:
-    """A latent-space baseline on the task's :class:`~sb3_genrl.LatentActionWrapper`, under the run's Monitor."""
-    env = monitor_episodes(LatentActionWrapper(gym.make(get_task(task).env_id), generator), out)
-    return algorithm_class(algorithm)(zoo_hyperparams(algorithm, task)["policy"], env, **settings, **common)
+def _latent_model(
+    algorithm: str,
+    task: str,
+    generator: Any,
+    summary: dict[str, Any],
+    common: dict,
+    out: pathlib.Path,
+    n_threads: int | None,
+) -> Any:
+    """A latent-space baseline on the task's :class:`~sb3_genrl.LatentActionWrapper` (``summary["n_envs"]`` of them
+    played together, :func:`sb3_genrl.run.training_env`), under the run's Monitor."""
+    env = LatentActionWrapper(gym.make(get_task(task).env_id), generator)
+    venv = training_env(env, summary["n_envs"], out, n_threads=n_threads)
+    policy = zoo_hyperparams(algorithm, task)["policy"]
+    return algorithm_class(algorithm)(policy, venv, **summary["settings"], **common)
+
+
+LATENT_SAC_ENVS = 16  # latent-sac's episodes played together on a fast path, each followed by one gradient step
+
+
+def default_latent_envs(algorithm: str, settings: dict[str, Any], fast_path: bool) -> int:
+    """The envs a latent-space baseline plays at a time when none is asked for, a fixed choice of the task and its
+    settings, never of the machine: where the task has a fast path, an update's episodes together (PPO's and TRPO's
+    ``n_steps``, the episodes between updates; :data:`LATENT_SAC_ENVS` for SAC), else 1."""
+    if not fast_path:
+        return 1
+    return LATENT_SAC_ENVS if algorithm == "latent-sac" else int(settings.get("n_steps", 2048))
+
+
+def latent_vector_settings(algorithm: str, settings: dict[str, Any], n_envs: int) -> dict[str, Any]:
+    """A latent-space baseline's settings for ``n_envs`` envs played at a time, so that an update sees as many
+    episodes as with one: PPO's and TRPO's ``n_steps`` per env (``n_steps / n_envs``, which must divide), SAC's
+    ``gradient_steps=-1`` (one gradient step per episode played, unless the settings name theirs)."""
+    if n_envs == 1:
+        return settings
+    if algorithm == "latent-sac":
+        return {"gradient_steps": -1} | settings
+    batch = int(settings.get("n_steps", 2048))
+    if batch % n_envs:
+        raise ValueError(f"n_envs ({n_envs}) must divide {algorithm}'s n_steps ({batch}), the episodes of one update")
+    return settings | {"n_steps": batch // n_envs}
+
+
+def _latent_record(algorithm: str, task: str, generator: Any, changes: dict[str, Any], n_envs: int | None) -> dict[str, Any]:
+    """A latent-space baseline's ``settings`` (its constructor's, for ``n_envs`` envs) and ``n_envs`` (the default's
+    where ``None``)."""
+    settings = baseline_settings(algorithm, task)[0] | changes
+    if n_envs is None:
+        probe = LatentActionWrapper(gym.make(get_task(task).env_id), generator)
+        n_envs = default_latent_envs(algorithm, settings, probe.use_fast_path)
+        probe.close()
+    return {"settings": latent_vector_settings(algorithm, settings, n_envs), "n_envs": n_envs}
+
+
+def _check_envs(algorithm: str, n_envs: int | None, n_threads: int | None) -> None:
+    """Refuse ``n_envs`` or ``n_threads`` that are not positive integers, or given to a feedback baseline."""
+    for name, value in (("n_envs", n_envs), ("n_threads", n_threads)):
+        if value is None:
+            continue
+        check_positive_int(value, name)
+        if algorithm not in LATENT_BASELINES:
+            raise ValueError(f"{name} is for the latent-space baselines ({', '.join(LATENT_BASELINES)}), not {algorithm}")

@@ -164,6 +164,7 @@ def run_one(method: str, settings: dict[str, Any], demos: str, generator: str, r
             generator=generator if latent else None,
             algorithm_kwargs=settings.get("algorithm_kwargs"),
             device="cpu",
+            n_envs=1 if latent else None,  # as the committed results were made; the methods' runs go side by side
         )
         timing = {key: summary[key] for key in ("setup_seconds", "setup_cpu_seconds", "learn_seconds")}
     atomic_write_json(

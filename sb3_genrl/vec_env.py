@@ -84,6 +84,15 @@ class BatchedLatentVecEnv(DummyVecEnv):
         return super().step_wait()
 
 
+def latent_vec_env(env_fns: Sequence[Callable[[], gym.Env]], **kwargs: Any) -> DummyVecEnv:
+    """A VecEnv for SB3's ``make_vec_env(vec_env_cls=...)``: :class:`BatchedLatentVecEnv` (on all cores) when there are
+    several envs and all play one task through its fast path, else SB3's ``DummyVecEnv``; the results are the same."""
+    venv = DummyVecEnv(list(env_fns), **kwargs)
+    if len(venv.envs) < 2 or not all(has_batched_fast_path(env) for env in venv.envs):
+        return venv
+    return BatchedLatentVecEnv([lambda env=env: env for env in venv.envs])
+
+
 def play_together(wrappers: Sequence[LatentActionWrapper], actions: np.ndarray, *, n_threads: int) -> None:
     """Play ``actions[i]`` for ``wrappers[i]``'s current episode, all in one fast-path call of the first wrapper's
     task, and leave each result with its wrapper, for its next ``step`` with that action

@@ -22,6 +22,12 @@ from sb3_genrl.generative.base import TrajectoryGenerator
 RewardMode = Literal["last", "sum"]
 
 
+def task_has_fast_path(task: gym.Env) -> bool:
+    """Whether a task (an env, unwrapped) has the fast open-loop path of the GenRL tasks: ``play_trajectories`` (one
+    MuJoCo rollout for a whole trajectory, many at once) and ``get_context``."""
+    return hasattr(task, "play_trajectories") and hasattr(task, "get_context")
+
+
 class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """Turn an episodic Gymnasium env with per-step actions into a one-step bandit over a generator's latent space.
 
@@ -156,8 +162,7 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
                 f"the generator's trajectories have horizon T = {generator.horizon} time steps, but "
                 f"{type(task).__name__} has horizon {task_horizon}; use a generator trained on this task"
             )
-        # The fast open-loop path of the GenRL tasks (one MuJoCo rollout for the whole trajectory).
-        has_fast_path = hasattr(task, "play_trajectories") and hasattr(task, "get_context")
+        has_fast_path = task_has_fast_path(task)
         if use_fast_path and not has_fast_path:
             raise ValueError(f"use_fast_path=True but {type(task).__name__} has no play_trajectories()/get_context()")
         return has_fast_path if use_fast_path is None else bool(use_fast_path)

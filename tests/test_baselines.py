@@ -671,3 +671,52 @@ def test_compare_refuses_a_named_run_of_another_task_naming_it(tmp_path):
         assert main(["compare", *task_option, "--runs", str(hockey), str(basketball), "--out", str(out)]) == 2
         assert not out.exists()
     assert compare_runs([hockey], out, task="hockey").read_text().count("| GenRL | 1 |") == 1
+
+
+@pytest.mark.parametrize(
+    "algorithm, episodes, n_envs, per_update",
+    [("latent-ppo", 64, 64, {"n_steps": 1}), ("latent-sac", 96, 16, {"gradient_steps": -1, "learning_starts": 64})],
+)
+def test_latent_baselines_play_an_updates_episodes_together_and_the_result_does_not_depend_on_the_cores(
+    algorithm, episodes, n_envs, per_update, hockey_generator, tmp_path
+):
+    """With no n_envs, a latent-space baseline on a task with a fast path plays an update's episodes in one threaded
+    call (PPO: its 64 steps as 64 envs of one step; SAC: 16 envs, one gradient step per episode); the saved policy is
+    the same, bit for bit, on 1 simulation thread and on 2."""
+    runs = [
+        train_baseline(
+            algorithm,
+            "hockey",
+            episodes=episodes,
+            out_dir=tmp_path / str(threads),
+            seed=3,
+            generator=hockey_generator,
+            eval_goals=4,
+            device="cpu",
+            n_threads=threads,
+        )
+        for threads in (1, 2)
+    ]
+    for run in runs:
+        assert run["n_envs"] == n_envs and per_update.items() <= run["settings"].items()
+        assert run["episodes_played"] == episodes
+    model_class = PPO if algorithm == "latent-ppo" else SAC
+    policies = [
+        model_class.load(tmp_path / str(threads) / f"{algorithm}_policy.zip").policy.state_dict() for threads in (1, 2)
+    ]
+    assert policies[0].keys() == policies[1].keys()
+    for name, tensor in policies[0].items():
+        assert th.equal(tensor, policies[1][name]), name
+    assert runs[0]["final_eval"] == runs[1]["final_eval"]
+
+
+def test_one_env_keeps_a_latent_baselines_own_settings_and_a_bad_n_envs_is_refused(hockey_generator, tmp_path):
+    run = {"episodes": 4, "generator": hockey_generator, "eval_goals": 2, "device": "cpu"}
+    single = train_baseline("latent-trpo", "hockey", out_dir=tmp_path / "one", n_envs=1, **run)
+    assert single["n_envs"] == 1 and single["settings"] == baseline_settings("latent-trpo", "hockey")[0]
+    assert single["episodes_played"] == 64  # one update of its 64 steps, one episode each
+    with pytest.raises(ValueError, match=r"n_envs \(3\) must divide latent-ppo's n_steps \(64\)"):
+        train_baseline("latent-ppo", "hockey", out_dir=tmp_path / "three", n_envs=3, **run)
+    with pytest.raises(ValueError, match="n_envs is for the latent-space baselines"):
+        train_baseline("sac", "hockey", episodes=1, out_dir=tmp_path / "sac", demos={}, n_envs=2)
+    assert not (tmp_path / "three").exists() and not (tmp_path / "sac").exists()

@@ -437,7 +437,9 @@ def test_baseline_and_compare(runs, tmp_path, cli, hockey_generator):
 
     generator = load(hockey_generator)
     latent_ppo = load_trained("latent-ppo", runs / "ppo" / "latent-ppo_policy.zip", "hockey")
-    assert latent_ppo.gamma == 0.9 and summary["settings"] == {"n_steps": 64, "batch_size": 64, "gamma": 0.9}
+    # the entry's 64 steps per update played as 64 envs of one step, together
+    assert latent_ppo.gamma == 0.9 and summary["settings"] == {"n_steps": 1, "batch_size": 64, "gamma": 0.9}
+    assert summary["n_envs"] == latent_ppo.n_envs == 64
     env = LatentActionWrapper(gym.make("GenRL/Hockey-v0"), generator)
     rewards = []
     for goal in held_out_goals("hockey", 100, EVAL_GOAL_SEED):

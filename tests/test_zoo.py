@@ -93,8 +93,11 @@ def test_train_saves_in_rl_zoo3s_layout_with_the_generator_it_used(trained, hock
             "generator_sha256": generator_digest(load_generator(Path(hockey_generator))),
         }
     }
-    # the Monitor above the one-step episodes: one row per episode played
-    assert len(np.loadtxt(run / "0.monitor.csv", delimiter=",", skiprows=2)) == 16
+    # the iteration's 16 episodes played together as 16 envs (rl-zoo3 writes a Monitor file per env), the Monitor
+    # above the one-step episodes: one row per episode played
+    assert config["n_envs"] == 16 and config["n_steps"] == 1
+    rows = [np.loadtxt(run / f"{rank}.monitor.csv", delimiter=",", skiprows=2, ndmin=2) for rank in range(16)]
+    assert [len(row) for row in rows] == [1] * 16
 
 
 def test_enjoy_plays_the_goals_of_the_packages_evaluation(trained, tmp_path):
@@ -138,8 +141,6 @@ def test_the_zoo_and_train_policy_build_the_same_genrl_from_the_file(trained, ho
         hockey_generator,
         "--episodes",
         16,
-        "--n-envs",
-        1,  # as the zoo's run plays
         "--seed",
         3,
         "--device",
@@ -165,6 +166,7 @@ def test_the_zoo_and_train_policy_build_the_same_genrl_from_the_file(trained, ho
         for model in models
     )
     assert zoo_run == package_run
+    assert [model.n_envs for model in models] == [16, 16]  # both play an iteration's episodes together by default
     entry = load_hyperparams("genrl", ENV_ID)
     assert zoo_run["hindsight_kwargs"] == entry["hindsight_kwargs"]
     assert zoo_run["episodes_per_iteration"] == entry["n_steps"]

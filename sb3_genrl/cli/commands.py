@@ -279,6 +279,7 @@ def baseline_command(args: argparse.Namespace) -> int:
         overwrite=args.overwrite,
         device=args.device,
         progress_bar=not args.no_progress_bar,
+        n_envs=args.n_envs,
     )
     if "bc" in summary:
         bc, first = summary["bc"], summary["first_batch"]

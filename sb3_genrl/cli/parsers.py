@@ -351,6 +351,14 @@ def add_baseline(sub: argparse._SubParsersAction) -> None:
         help="episodes between checkpoints of sac, sac-no-prefill and sac-her; a rerun into the same "
         "--out resumes from the last one (0: none; default 250)",
     )
+    baseline.add_argument(
+        "--n-envs",
+        type=COUNT,
+        default=None,
+        help="latent-ppo/-sac/-trpo: envs played at a time (default: an update's episodes together on a task with a "
+        "fast path, in one threaded simulation call on all cores: ppo's and trpo's n_steps, 16 for sac). The result "
+        "depends on it, never on the number of cores",
+    )
     _overwrite_option(baseline)
     _device_option(baseline)
     _progress_option(baseline)

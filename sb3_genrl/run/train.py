@@ -276,7 +276,7 @@ def _run(
         keep_episodes(out, state["episodes"])
     checkpointing = None if checkpoint_every is None else (int(checkpoint_every), identity)
     model = _train(
-        _training_env(env, identity["n_envs"], out, append=state is not None, n_threads=n_threads),
+        training_env(env, identity["n_envs"], out, append=state is not None, n_threads=n_threads),
         generator,
         identity["episodes"],
         out,
@@ -419,10 +419,11 @@ def default_n_envs(env: LatentActionWrapper, batch_episodes: int) -> int:
     return batch_episodes if env.use_fast_path else 1
 
 
-def _training_env(
+def training_env(
     env: LatentActionWrapper, n_envs: int, out: pathlib.Path, *, append: bool = False, n_threads: int | None = None
 ) -> Any:
-    """The monitored training env: ``env`` itself, or ``n_envs`` copies of it played together
+    """The monitored training env of a run in ``out`` (GenRL's, or a latent-space baseline's): ``env`` itself, or
+    ``n_envs`` copies of it played together
     (:class:`~sb3_genrl.vec_env.BatchedLatentVecEnv` on ``n_threads``, for a task with a fast path) or in their own
     processes, each under a :class:`~sb3_genrl.run.checkpoint.RandomStateRecorder` (``append``: a resumed run adds
     to the Monitor file)."""

@@ -231,5 +231,6 @@ def baseline_job(
             generator=generator if latent else None,
             eval_goals=bc_eval_goals,
             device=device,
+            n_envs=1 if latent else None,  # the study plays its jobs side by side, one core each
         )
     return run_dir

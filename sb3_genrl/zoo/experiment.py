@@ -1,6 +1,6 @@
 """rl-zoo3's ``ExperimentManager`` for GenRL: the generator named in the saved run, and evaluation on tuning goals.
 
-Four things differ from rl-zoo3's own manager, for ``--algo genrl`` only:
+Five things differ from rl-zoo3's own manager, for ``--algo genrl`` only:
 
 - the entry (``-conf``'s file or ``hyperparams/genrl.yml``, with ``-params`` laid over it) is checked before any
   work: every GenRL setting (:func:`sb3_genrl.hyperparams.check_genrl_entry`) and the env wrapper's arguments, so
@@ -15,7 +15,11 @@ Four things differ from rl-zoo3's own manager, for ``--algo genrl`` only:
   from :data:`~sb3_genrl.hyperparams.TUNING_GOAL_SEED` afresh at each evaluation, the same goals each time and never
   the held-out ones (:data:`~sb3_genrl.hyperparams.EVAL_GOAL_SEED`);
 - a study's first trial is the task entry's own settings (when they lie in the sampler's space), so that its best
-  trial is never worse on the tuning goals than the settings it would replace.
+  trial is never worse on the tuning goals than the settings it would replace;
+- a training run on a task with a fast path whose settings name no ``n_envs`` plays an iteration's episodes together
+  (``n_envs`` = the entry's ``n_steps``, one step each: the same batch), in one threaded simulation call on all cores
+  (:func:`~sb3_genrl.vec_env.latent_vec_env`); its result depends on the seed and the settings, never on the number of
+  cores. A study keeps the entry's one env, its trials running side by side (``--n-jobs``).
 """
 
 from __future__ import annotations
@@ -25,16 +29,19 @@ import inspect
 from collections.abc import Iterator
 from typing import Any
 
+import gymnasium as gym
 import optuna
 from rl_zoo3.exp_manager import ExperimentManager
 from stable_baselines3.common.save_util import load_from_zip_file
-from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
+from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecEnvWrapper
 
 from sb3_genrl.checks import check_positive_float
 from sb3_genrl.data.fingerprints import dataset_fingerprint
 from sb3_genrl.genrl.demonstrations import DEMONSTRATION_CALLBACK, callback_entries, with_dataset
 from sb3_genrl.genrl.generator_files import check_model_data, generator_digest, generator_file
 from sb3_genrl.hyperparams import TUNING_GOAL_SEED, ZOO_KEYS, check_genrl_entry
+from sb3_genrl.vec_env import latent_vec_env
+from sb3_genrl.wrappers import task_has_fast_path
 from sb3_genrl.zoo.generators import build_default_generator, default_demonstrations, default_generator
 from sb3_genrl.zoo.sampler import entry_params
 from sb3_genrl.zoo.wrapper import latent_action, load_generator, resolve_generator
@@ -80,9 +87,15 @@ class GenRLExperimentManager(ExperimentManager):
             if hyperparams.get("callback") is not None:
                 callback = resolved_callback(hyperparams["callback"], wrapper, self.env_name.gym_id)
                 hyperparams["callback"] = saved["callback"] = callback
+            if "n_envs" not in hyperparams and not self.optimize_hyperparameters and _fast_path(env_id):
+                # an iteration's episodes together, in one threaded simulation call (create_envs); the same batch
+                hyperparams["n_envs"] = saved["n_envs"] = hyperparams["n_steps"]
+                hyperparams["n_steps"] = saved["n_steps"] = 1
         return hyperparams, saved
 
     def create_envs(self, n_envs: int, eval_env: bool = False, no_log: bool = False) -> VecEnv:
+        if self.algo == "genrl" and self.vec_env_class is DummyVecEnv:
+            self.vec_env_class = latent_vec_env  # several envs of a task with a fast path: played together
         env = super().create_envs(n_envs, eval_env=eval_env, no_log=no_log)
         if self.algo != "genrl":
             return env
@@ -243,3 +256,12 @@ def resolved_callback(callback: Any, wrapper: list[Any], env_id: str) -> list[di
             f"{dataset.parent} to make both again"
         )
     return with_dataset(callback, str(dataset.resolve()), dataset_fingerprint(dataset))
+
+
+def _fast_path(env_id: str) -> bool:
+    """Whether the task ``env_id`` has the GenRL tasks' fast path (:func:`~sb3_genrl.wrappers.task_has_fast_path`)."""
+    env = gym.make(env_id)
+    try:
+        return task_has_fast_path(env.unwrapped)
+    finally:
+        env.close()
