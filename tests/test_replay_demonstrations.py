@@ -252,6 +252,15 @@ def test_genrl_demos_from_a_dataset_writes_demonstrations_that_train_a_generator
     assert "(85.7%: 1 failed when replayed open loop)" in out
     generator = train_generator(demos, preset="VAE1", epochs=2, batch_size=4, eval_every=2, seed=0)
     assert (generator.horizon, generator.action_dim) == (HORIZON, 2) and generator.best_epoch is not None
+    # --episodes N replays the first N of the dataset's episodes only
+    code, out, err = cli(
+        "demos", "--task", TASK, "--from", tmp_path / "actions.npz", "--episodes", 3, "--out", tmp_path / "first"
+    )
+    assert code == 0, err
+    first = dataset_info(tmp_path / "first")
+    assert first["tried"] == 3 and first["failed_open_loop"] == 1 and first["reset_seeds"] == SEEDS[:2]
+    code, _, err = cli("demos", "--task", TASK, "--from", tmp_path / "actions.npz", "--episodes", 8, "--out", tmp_path / "x")
+    assert code == 2 and "episodes (8) is more than the 7 episodes of the file" in err and not (tmp_path / "x").exists()
 
 
 def test_genrl_demos_from_refuses_expert_options_before_any_work(cli, tmp_path):
@@ -261,6 +270,7 @@ def test_genrl_demos_from_refuses_expert_options_before_any_work(cli, tmp_path):
         (("--expert", "test_external:point_expert"), "--expert cannot be used with --from"),
         (("--noise", "0.2"), "--noise cannot be used with --from"),
         (("--threads", "2"), "--threads cannot be used with --from"),
+        (("--seed", "3"), "--seed cannot be used with --from"),
         (("--horizon", "10"), "episode 0 of the file"),
     ):
         code, _, err = cli("demos", "--task", TASK, "--from", tmp_path / "actions.npz", *arguments, "--out", out)

@@ -26,7 +26,7 @@ from sb3_genrl.envs.demonstrations.recorder import pad_actions, play_episode, wr
 from sb3_genrl.envs.external import check_reports_success, check_reproducible_reset, task_env_and_horizon, task_name
 from tqdm.auto import tqdm
 
-from sb3_genrl.checks import check_output_dir
+from sb3_genrl.checks import check_output_dir, check_positive_int
 from sb3_genrl.data import read_metadata
 from sb3_genrl.utils import folder_lock
 
@@ -57,6 +57,7 @@ def replay_demonstrations(
     horizon: int | None = None,
     success_key: str = "is_success",
     progress_bar: bool = False,
+    episodes: int | None = None,
 ) -> Path:
     """Keep the episodes of a dataset of actions whose open-loop replay on a task succeeds, as a Minari dataset in
     ``out_dir``.
@@ -88,12 +89,20 @@ def replay_demonstrations(
     :param horizon: control steps of a demonstration; None: the env's ``max_episode_steps``
     :param success_key: the info key of the env's success (default ``"is_success"``, falling back to ``"success"``)
     :param progress_bar: show a tqdm progress bar (of the episodes replayed)
+    :param episodes: replay only the source's first ``episodes`` episodes (default: all of them)
     :return: the dataset directory
     """
     name = task_name(task)
     if not isinstance(success_key, str) or not success_key:
         raise ValueError(f"success_key must be a non-empty string, got {success_key!r}")
+    if episodes is not None:
+        check_positive_int(episodes, "episodes")
+    first = episodes
     episodes = read_replay_source(source)
+    if first is not None:
+        if first > len(episodes.actions):
+            raise ValueError(f"episodes ({first}) is more than the {len(episodes.actions)} episodes of {episodes.name}")
+        episodes = ReplaySource(episodes.actions[:first], episodes.reset_seeds[:first], episodes.labels[:first], episodes.name)
     env, steps = task_env_and_horizon(task, horizon, success_key)
     try:
         _check_episodes(env, episodes, steps, name)

@@ -36,9 +36,14 @@ def play_command(args: argparse.Namespace) -> int:
     return 0
 
 
+DEMONSTRATIONS = 40000  # genrl demos' default count, the paper's
+
+
 def demos_command(args: argparse.Namespace) -> int:
     if args.source is not None:
         return _replayed_demos(args)
+    args.episodes = DEMONSTRATIONS if args.episodes is None else args.episodes
+    args.seed = 0 if args.seed is None else args.seed
 
     if args.expert is not None or args.task not in TASKS:
         return _expert_demos(args)
@@ -96,6 +101,8 @@ def _replayed_demos(args: argparse.Namespace) -> int:
             f"{', '.join(f'--{option}' for option in given)} cannot be used with --from, which replays a dataset's "
             "actions: they apply to demonstrations from an expert"
         )
+    if args.seed is not None:
+        raise ValueError("--seed cannot be used with --from: each replayed episode starts from the dataset's reset seed")
     began = time.perf_counter()
     path = replay_demonstrations(
         args.task,
@@ -104,6 +111,7 @@ def _replayed_demos(args: argparse.Namespace) -> int:
         horizon=args.horizon,
         success_key=args.success_key or "is_success",
         progress_bar=not args.no_progress_bar,
+        episodes=args.episodes,
     )
     info = dataset_info(path)
     print(

@@ -154,11 +154,22 @@ def add_demos(sub: argparse._SubParsersAction) -> None:
         default=None,
         help="with an expert or --from: the info key of the env's success (default is_success, falling back to success)",
     )
-    demos.add_argument("--episodes", type=EPISODES, default=40000, help="valid demonstrations to keep (paper: 40000)")
+    demos.add_argument(
+        "--episodes",
+        type=EPISODES,
+        default=None,
+        help=f"valid demonstrations to keep (default {commands.DEMONSTRATIONS}, the paper's); with --from: replay only the "
+        "dataset's first N episodes (default: all)",
+    )
     demos.add_argument(
         "--out", required=True, type=option(_check_dataset_out), help="dataset folder to create (must not exist or be empty)"
     )
-    _seed_option(demos)
+    demos.add_argument(
+        "--seed",
+        type=SEED,
+        default=None,
+        help="seed of every random draw (default: 0); not with --from, whose episodes start from their own reset seeds",
+    )
     demos.add_argument(
         "--threads",
         type=COUNT,
