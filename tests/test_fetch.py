@@ -606,3 +606,16 @@ def test_the_fit_limit_benchmark_checks_its_fit_variants_before_any_work():
     ):
         with pytest.raises(argparse.ArgumentTypeError):
             variants(bad)
+
+
+def test_the_ranking_benchmark_plays_the_candidate_its_critic_ranks_first():
+    from benchmarks.fetch_ranking import ranked_first
+
+    rng = np.random.default_rng(1)
+    scores, solved = rng.random((50, 16)), rng.random((50, 16)) < 0.5
+    for k in (1, 4, 16):  # brute force: each state's highest-scoring candidate among its first k
+        expected = np.mean([solved[i, max(range(k), key=lambda j: scores[i, j])] for i in range(50)])
+        assert ranked_first(scores, solved, k) == pytest.approx(expected)
+    kept = np.mean([solved[i, 0] if scores[i, 0] >= 0.7 else solved[i, int(np.argmax(scores[i]))] for i in range(50)])
+    assert ranked_first(scores, solved, 16, keep_mean=0.7) == pytest.approx(kept)
+    assert ranked_first(scores, solved, 16, keep_mean=0.0) == pytest.approx(solved[:, 0].mean())  # always the mean
