@@ -3,11 +3,11 @@
 from importlib.metadata import entry_points
 
 from sb3_genrl.genrl import GenRL
-from sb3_genrl.vec_env import BatchedLatentVecEnv
+from sb3_genrl.vec_env import BatchedLatentVecEnv, make_latent_vec_env
 from sb3_genrl.version import __version__
 from sb3_genrl.wrappers import LatentActionWrapper
 
-__all__ = ["BatchedLatentVecEnv", "GenRL", "LatentActionWrapper", "__version__"]
+__all__ = ["BatchedLatentVecEnv", "GenRL", "LatentActionWrapper", "__version__", "make_latent_vec_env"]
 
 
 def _register_gymnasium_plugins() -> None:

@@ -23,14 +23,17 @@ gets what it asked for.
 
 from __future__ import annotations
 
+import functools
 import os
 from collections.abc import Callable, Sequence
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from stable_baselines3.common.vec_env import DummyVecEnv
+import torch
+from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv, VecMonitor
 
+from sb3_genrl.generative.base import TrajectoryGenerator
 from sb3_genrl.wrappers import LatentActionWrapper, find_latent_wrapper
 
 
@@ -91,6 +94,52 @@ def latent_vec_env(env_fns: Sequence[Callable[[], gym.Env]], **kwargs: Any) -> D
     if len(venv.envs) < 2 or not all(has_batched_fast_path(env) for env in venv.envs):
         return venv
     return BatchedLatentVecEnv([lambda env=env: env for env in venv.envs])
+
+
+def make_latent_vec_env(
+    env_id: str,
+    generator: TrajectoryGenerator,
+    n_envs: int,
+    *,
+    n_threads: int | None = None,
+    latent_clip: float = 3.0,
+    monitor_file: str | None = None,
+) -> VecEnv:
+    """``n_envs`` latent-action envs of a task (:class:`~sb3_genrl.LatentActionWrapper` over ``gym.make(env_id)``)
+    under SB3's ``VecMonitor``, for GenRL or any SB3 algorithm: played together in one threaded fast-path call
+    (:class:`BatchedLatentVecEnv`, ``n_threads``: default all cores) where the task has a fast path, else each in its
+    own process (SB3's ``SubprocVecEnv``: a script must then start its work under ``if __name__ == "__main__":``); one
+    env is SB3's ``DummyVecEnv``. The envs are seeded as SB3 seeds a VecEnv (``seed``, ``seed + 1``, ...), so a run's
+    result depends on ``n_envs`` and its seed, never on ``n_threads``.
+
+    :param env_id: a Gymnasium id (``"GenRL/Hockey-v0"``)
+    :param generator: the generator whose latent actions the envs take
+    :param n_envs: envs played at a time; GenRL's iteration is then ``n_steps x n_envs`` episodes
+    :param monitor_file: where ``VecMonitor`` writes its episodes (default: nowhere)
+    """
+    if isinstance(n_envs, bool) or not isinstance(n_envs, int | np.integer) or n_envs < 1:
+        raise ValueError(f"n_envs must be a positive integer, got {n_envs!r}")
+    make = functools.partial(_latent_env, env_id, generator, latent_clip, False)
+    probe = make()
+    fast = probe.use_fast_path
+    probe.close()
+    if n_envs == 1:
+        venv: VecEnv = DummyVecEnv([make])
+    elif fast:
+        venv = BatchedLatentVecEnv([make] * n_envs, n_threads)
+    else:  # the spec, not the id: the processes need not know the id
+        spec = gym.spec(env_id)
+        venv = SubprocVecEnv([functools.partial(_latent_env, spec, generator, latent_clip, True)] * n_envs)
+    return VecMonitor(venv, monitor_file)
+
+
+def _latent_env(
+    env_id: str | gym.envs.registration.EnvSpec, generator: TrajectoryGenerator, latent_clip: float, own_process: bool
+) -> gym.Env:
+    """One env of :func:`make_latent_vec_env` (an env process plays on one torch thread)."""
+    if own_process:
+        torch.set_num_threads(1)
+    return LatentActionWrapper(gym.make(env_id), generator, latent_clip=latent_clip)
 
 
 def play_together(wrappers: Sequence[LatentActionWrapper], actions: np.ndarray, *, n_threads: int) -> None:

@@ -150,3 +150,43 @@ def test_the_batched_env_takes_each_trajectory_from_the_wrappers_public_trajecto
         rewards = venv.step(actions)[1]
         reached = np.clip(LinearGenerator().decode(np.clip(actions, -3, 3)) + 0.1, -1, 1).sum(axis=1)  # the toy's play
         np.testing.assert_allclose(rewards, -np.sum((reached - goals) ** 2, axis=1), rtol=1e-6)
+
+
+def test_make_latent_vec_env_plays_a_fast_path_together_and_the_result_does_not_depend_on_the_cores():
+    """The README's recipe: a task with a fast path gets one BatchedLatentVecEnv under VecMonitor (one env: a
+    DummyVecEnv), and GenRL trained on it is the same, bit for bit, on 1 simulation thread and on 2."""
+    from sb3_genrl import make_latent_vec_env
+    from sb3_genrl.generative import make_generator
+
+    th.manual_seed(0)
+    generator = make_generator("VAE1", horizon=69, action_dim=7, device="cpu")
+    single = make_latent_vec_env("GenRL/Hockey-v0", generator, 1)
+    assert isinstance(single, VecMonitor) and type(single.venv) is DummyVecEnv
+    policies = []
+    for threads in (1, 2):
+        env = make_latent_vec_env("GenRL/Hockey-v0", generator, 8, n_threads=threads)
+        assert isinstance(env.venv, BatchedLatentVecEnv) and env.num_envs == 8 and env.venv.n_threads == threads
+        model = GenRL(env, n_steps=2, batch_size=16, seed=4)
+        model.learn(32)
+        policies.append(model.policy.state_dict())
+    for name, tensor in policies[0].items():
+        assert th.equal(tensor, policies[1][name]), name
+    with pytest.raises(ValueError, match="n_envs must be a positive integer, got 0"):
+        make_latent_vec_env("GenRL/Hockey-v0", generator, 0)
+
+
+def test_make_latent_vec_env_plays_a_task_without_a_fast_path_in_env_processes():
+    from stable_baselines3.common.vec_env import SubprocVecEnv
+
+    from sb3_genrl import make_latent_vec_env
+
+    gym.register("GenRLTest/VecStepReach-v0", entry_point=ReachEnv)
+    env = make_latent_vec_env("GenRLTest/VecStepReach-v0", LinearGenerator(), 2)
+    try:
+        assert isinstance(env.venv, SubprocVecEnv) and env.num_envs == 2
+        env.seed(3)
+        env.reset()
+        _, rewards, dones, _ = env.step(np.zeros((2, LinearGenerator().latent_dim), dtype=np.float32))
+        assert dones.all() and rewards.shape == (2,)
+    finally:
+        env.close()
