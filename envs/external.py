@@ -124,7 +124,7 @@ def load_expert(spec: str) -> Callable[[Any], np.ndarray]:
     return found
 
 
-class SuccessInfo(gym.Wrapper):
+class SuccessInfo(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """``info["is_success"]`` (a bool) copied from ``info[success_key]`` at every step, for SB3's success rate, GenRL's
     refits and the recorder; an env that reports neither key is left as it is.
 
@@ -133,7 +133,8 @@ class SuccessInfo(gym.Wrapper):
     """
 
     def __init__(self, env: gym.Env, success_key: str = "is_success") -> None:
-        super().__init__(env)
+        gym.utils.RecordConstructorArgs.__init__(self, success_key=success_key)  # env processes rebuild it from the spec
+        gym.Wrapper.__init__(self, env)
         self.success_key = success_key
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:

@@ -354,6 +354,14 @@ def test_genrl_demos_and_train_policy_take_a_task_the_package_does_not_register(
     )  # fmt: skip
     assert code == 0, err
     assert "success: the env reports no info['is_success']" in out
+    code, out, err = cli(
+        "train-policy", "--task", "TestExternal/Silent-v0", "--generator", tmp_path / "vae.pt", "--data", demos,
+        "--episodes", 16, "--batch-episodes", 16, "--checkpoint-every", 0, "--success-key", "solved",
+        "--out", tmp_path / "solved", "--no-progress-bar",
+    )  # fmt: skip
+    assert code == 0, err
+    assert re.search(r"success: [0-9.]+ of the last episodes played \(info\['is_success'\]", out), out
+    assert json.loads((tmp_path / "solved" / "summary.json").read_text())["success_key"] == "solved"
 
 
 def test_genrl_demos_refuses_bad_tasks_and_experts_before_any_work(cli, tmp_path):

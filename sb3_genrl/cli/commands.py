@@ -210,6 +210,7 @@ def train_policy_command(args: argparse.Namespace) -> int:
         overwrite=args.overwrite,
         demonstrations=args.data and str(args.data),
         horizon=args.horizon,
+        success_key=args.success_key,
         **policy_arguments(args),
     )
     print(

@@ -282,6 +282,12 @@ def add_train_policy(sub: argparse._SubParsersAction) -> None:
         help="the env's episodes truncated to this many steps: the --horizon its demonstrations were recorded with "
         "(default: the env's own length)",
     )
+    policy.add_argument(
+        "--success-key",
+        default=None,
+        help="the info key of the env's success, copied to is_success for the logs and the refits (default: a task "
+        "from outside the package reads is_success, falling back to success)",
+    )
     _seed_option(policy)
     policy.add_argument("--out", required=True, type=OUT_DIR, help="output folder (model, learning curve, logs)")
     policy.add_argument("--e-step", choices=("trpo", "kl_penalty"), default="trpo", help="E-step variant")

@@ -41,6 +41,7 @@ from sb3_genrl.curves import (
 )
 from sb3_genrl.data.fingerprints import dataset_fingerprint
 from sb3_genrl.envs import TASKS, get_task
+from sb3_genrl.envs.external import SuccessInfo
 from sb3_genrl.generative import load
 from sb3_genrl.generative.base import TrajectoryGenerator
 from sb3_genrl.genrl.demonstrations import DemonstrationCallback, build_callbacks, callback_entries
@@ -107,6 +108,7 @@ def train_policy(
     demonstrations: str | os.PathLike | None = None,
     callback: Any = None,
     horizon: int | None = None,
+    success_key: str | None = None,
     **genrl_kwargs: Any,
 ) -> dict[str, Any]:
     """Train a GenRL policy for ``episodes`` episodes on ``task`` and write everything to ``out_dir``.
@@ -149,6 +151,9 @@ def train_policy(
     :param horizon: the env's episodes truncated to this many steps (``max_episode_steps`` of ``gymnasium.make``): an
         outside task's demonstrations recorded with a ``horizon`` shorter than its own (see
         :func:`sb3_genrl.envs.external.record_demonstrations`); None: the env's own episode length
+    :param success_key: the info key of the env's success, copied to ``info["is_success"]`` for the Monitor's success
+        and the refits (:class:`~sb3_genrl.envs.external.SuccessInfo`); default: a task from outside the package
+        reads ``is_success``, falling back to ``success`` (the package's tasks report ``is_success`` themselves)
     :param genrl_kwargs: further :class:`~sb3_genrl.GenRL` arguments
     :return: paths of the outputs and a summary (``episodes``, ``iterations``, ``final_mean_reward``,
         ``best_mean_reward``, ``genrl_settings``: every GenRL hyperparameter in effect, see :func:`genrl_settings`)
@@ -162,7 +167,11 @@ def train_policy(
     # Built first: a generator that does not fit the task is refused before anything is written. The settings'
     # latent_clip is the wrapper's (GenRL refuses a wrapped env with another).
     latent_clip = genrl_kwargs.get("latent_clip", SETTINGS["latent_clip"].default)
-    env = LatentActionWrapper(_make_env(env_id, horizon), _as_generator(generator), latent_clip=latent_clip)
+    env = LatentActionWrapper(
+        _make_env(env_id, horizon, success_key, outside=task_name not in TASKS),
+        _as_generator(generator),
+        latent_clip=latent_clip,
+    )
     if n_envs is None:  # a fixed choice of the task, never of the machine: the result depends on n_envs
         n_envs = default_n_envs(env, batch_episodes)
     arguments = {
@@ -183,21 +192,30 @@ def train_policy(
         "genrl_settings": genrl_settings(arguments),
         **_callback_identity(callback, callbacks, env, arguments),
         **({} if horizon is None else {"horizon": int(horizon)}),
+        **({} if success_key is None else {"success_key": success_key}),
     }
     return _open_and_run(
         env, generator, out, identity, arguments, checkpoint_every, progress_bar, env_id, n_threads, callbacks, overwrite
     )
 
 
-def _make_env(env_id: str, horizon: int | None) -> gym.Env:
-    """``gymnasium.make(env_id)``, its episodes truncated to ``horizon`` steps when given (at most its own length)."""
+def _make_env(env_id: str, horizon: int | None, success_key: str | None = None, *, outside: bool = False) -> gym.Env:
+    """``gymnasium.make(env_id)``, its episodes truncated to ``horizon`` steps when given (at most its own length), its
+    success copied to ``info["is_success"]`` from ``success_key`` (default for a task from ``outside`` the package:
+    ``is_success``, falling back to ``success``)."""
+    if success_key is not None and (not isinstance(success_key, str) or not success_key):
+        raise ValueError(f"success_key must be a non-empty string, got {success_key!r}")
     if horizon is None:
-        return gym.make(env_id)
-    check_positive_int(horizon, "horizon")
-    own = gym.spec(env_id).max_episode_steps
-    if own is not None and horizon > own:
-        raise ValueError(f"horizon {horizon} is longer than {env_id}'s episodes ({own} steps); expected at most {own}")
-    return gym.make(env_id, max_episode_steps=int(horizon))
+        env = gym.make(env_id)
+    else:
+        check_positive_int(horizon, "horizon")
+        own = gym.spec(env_id).max_episode_steps
+        if own is not None and horizon > own:
+            raise ValueError(f"horizon {horizon} is longer than {env_id}'s episodes ({own} steps); expected at most {own}")
+        env = gym.make(env_id, max_episode_steps=int(horizon))
+    if success_key is None and not outside:
+        return env
+    return SuccessInfo(env, success_key or "is_success")
 
 
 def _open_and_run(
@@ -299,7 +317,7 @@ def _run(
             "best_mean_reward": float(np.max(curve["mean_reward"])),
             "genrl_settings": identity["genrl_settings"],
         }
-        | ({"horizon": identity["horizon"]} if "horizon" in identity else {})
+        | {key: identity[key] for key in ("horizon", "success_key") if key in identity}
     )
     if state is not None:
         result["resumed_at_episodes"] = [*state.get("resumed_at_episodes", []), state["episodes"]]
