@@ -31,7 +31,7 @@ from sb3_genrl.genrl.demonstrations import DemonstrationCallback, build_callback
 from sb3_genrl.genrl.generator_files import generator_digest
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED
 from sb3_genrl.run.checkpoint import GenRLCheckpoint, RandomStateRecorder, resume_genrl, resume_state
-from sb3_genrl.run.folder import RunFolderError
+from sb3_genrl.run.folder import RunFolderError, keep_episodes
 from sb3_genrl.run.train import genrl_settings, make_genrl, run_settings
 from sb3_genrl.study.quickstart import task_settings
 from sb3_genrl.wrappers import LatentActionWrapper
@@ -179,6 +179,7 @@ def train_seed(
         kept = sum(episodes <= state["episodes"] for episodes in row["curve_episodes"])
         row.update({key: row[key][:kept] for key in CURVE})
         row["resumed_at_episodes"] = [*row.get("resumed_at_episodes", []), int(state["episodes"])]
+        keep_episodes(folder, int(state["episodes"]))  # the Monitor's rows after the checkpoint are played again
     os.makedirs(folder, exist_ok=True)
     env = monitor_episodes(
         RandomStateRecorder(LatentActionWrapper(gym.make(get_task(task).env_id), generator)), folder, append=state is not None

@@ -619,3 +619,33 @@ def test_the_ranking_benchmark_plays_the_candidate_its_critic_ranks_first():
     kept = np.mean([solved[i, 0] if scores[i, 0] >= 0.7 else solved[i, int(np.argmax(scores[i]))] for i in range(50)])
     assert ranked_first(scores, solved, 16, keep_mean=0.7) == pytest.approx(kept)
     assert ranked_first(scores, solved, 16, keep_mean=0.0) == pytest.approx(solved[:, 0].mean())  # always the mean
+
+
+def test_a_resumed_benchmark_seed_keeps_the_monitors_rows_up_to_its_checkpoint(tmp_path, monkeypatch):
+    """A seed of benchmarks/fetch.py that resumes from its checkpoint plays the episodes after it again: the Monitor
+    file keeps one row per episode of the finished run, not the first try's rows too."""
+    import argparse
+
+    from sb3_genrl.envs.demonstrations import make_demonstrations
+
+    from benchmarks import fetch_seed
+    from benchmarks.fetch_seed import train_seed
+    from sb3_genrl.curves import MONITOR_FILE, read_monitor
+    from sb3_genrl.generative import make_generator
+
+    data = make_demonstrations("fetch-reach", 4, tmp_path / "demos", seed=3, n_threads=1, progress_bar=False)
+    generator = tmp_path / "vae.pt"
+    make_generator("VAE-FETCH", horizon=50, action_dim=4, device="cpu").save(str(generator))
+    args = argparse.Namespace(
+        episodes=64, eval_every=32, eval_states=2, no_demonstrations=False, dataset=str(data), work=str(tmp_path / "w")
+    )
+    row: dict = {"seed": 0}
+    monkeypatch.setattr(fetch_seed.shutil, "rmtree", lambda *args, **kwargs: None)  # as if stopped before the end
+    train_seed("fetch-reach", str(generator), 0, args, row, lambda: None)
+    monkeypatch.undo()
+    folder = tmp_path / "w" / "seed_0"
+    assert len(read_monitor(folder / MONITOR_FILE)["return"]) == 64 and (folder / "checkpoint").is_dir()
+    # the seed resumes from its checkpoint at episode 32 and plays the last 32 episodes again
+    train_seed("fetch-reach", str(generator), 0, args, row, lambda: None)
+    assert row["resumed_at_episodes"] == [32]
+    assert len(read_monitor(folder / MONITOR_FILE)["return"]) == 64
