@@ -289,9 +289,13 @@ def _run(
 ) -> dict[str, Any]:
     """Train the run ``identity`` in ``out`` (from its checkpoint when it has one) with ``callbacks``; its summary,
     written last."""
-    state = resume_state(out, identity)  # this unfinished run's checkpoint, if any
-    if state is not None:
-        keep_episodes(out, state["episodes"])
+    try:
+        state = resume_state(out, identity)  # this unfinished run's checkpoint, if any
+        if state is not None:
+            keep_episodes(out, state["episodes"])
+    except BaseException:  # another run's checkpoint, or a Monitor file shorter than it: refused
+        env.close()
+        raise
     checkpointing = None if checkpoint_every is None else (int(checkpoint_every), identity)
     model = _train(
         training_env(env, identity["n_envs"], out, append=state is not None, n_threads=n_threads),

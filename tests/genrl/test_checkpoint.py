@@ -15,7 +15,7 @@ from sb3_genrl.baselines.train import train_baseline
 from test_baselines import demo_transitions
 from test_train_policy import fast_reach_task  # noqa: F401 (the fixture)
 
-from sb3_genrl import GenRL
+from sb3_genrl import GenRL, LatentActionWrapper
 from sb3_genrl.curves import MONITOR_FILE, read_monitor
 from sb3_genrl.run import train_policy
 from sb3_genrl.run.checkpoint import EpisodeCheckpoint, GenRLCheckpoint
@@ -167,8 +167,13 @@ def test_a_genrl_run_and_a_sac_run_stop_and_resume_through_one_checkpoint_mechan
 
     # One kind's checkpoint in the other kind's run folder is refused on resume, naming what differs, and left whole.
     shutil.copytree(kept["sac"], genrl_run["out_dir"] / "checkpoint")
+    closed = []
+    close = LatentActionWrapper.close
+    monkeypatch.setattr(LatentActionWrapper, "close", lambda env: closed.append(env) or close(env))
     with pytest.raises(RunFolderError, match=r"holds a checkpoint of another run \(it differs in algorithm, "):
         train_policy("fast-reach", LinearGenerator(), **genrl_run)
+    monkeypatch.undo()
+    assert len(closed) == 1  # the env the refused run had made
     shutil.copytree(kept["genrl"], sac_run["out_dir"] / "checkpoint")
     with pytest.raises(RunFolderError, match=r"holds a checkpoint of another run \(it differs in algorithm, "):
         train_baseline("sac", "hockey", **sac_run)
