@@ -136,6 +136,8 @@ def check_genrl_entry(entry: dict[str, Any], name: str) -> tuple[int, int, dict[
     entry.pop("env_wrapper", None)  # rl-zoo3's latent-action wrapper (sb3_genrl.zoo): the package's runs build their own
     callback = [{path: kwargs} for path, kwargs in callback_entries(entry.pop("callback", None), f"{name}: callback")]
     episodes, n_envs, n_steps = entry.pop("n_timesteps"), entry.pop("n_envs", 1), entry.pop("n_steps")
+    if isinstance(episodes, float) and episodes.is_integer():  # rl-zoo3's files write budgets as `!!float 3e3`
+        episodes = int(episodes)
     for key, value, minimum in (("n_timesteps", episodes, 1), ("n_envs", n_envs, 1), ("n_steps", n_steps, 1)):
         if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
             raise ValueError(f"{name}: {key} must be an integer of at least {minimum}, got {value!r}")

@@ -7,6 +7,7 @@ import re
 from pathlib import Path
 
 import pytest
+import yaml
 from torch import nn
 
 from sb3_genrl import hyperparams
@@ -81,7 +82,8 @@ def test_genrl_settings_of_the_tasks():
         ({"n_timesteps": 100, "n_steps": 8, "e_step": "kl_penalty", "hindsight_kwargs": {}}, "needs e_step='trpo'"),
         ({"n_steps": 8}, "needs n_timesteps"),
         ({"n_timesteps": 100, "n_steps": 1}, "the episodes per iteration, must be at least 2"),
-        ({"n_timesteps": 100.0, "n_steps": 8}, "n_timesteps must be an integer of at least 1, got 100.0"),
+        ({"n_timesteps": 100.5, "n_steps": 8}, "n_timesteps must be an integer of at least 1, got 100.5"),
+        ({"n_timesteps": 100, "n_steps": 8.0}, "n_steps must be an integer of at least 1, got 8.0"),
         ({"n_timesteps": 100, "n_steps": 8, "n_envs": 0}, "n_envs must be an integer of at least 1, got 0"),
         (
             {"n_timesteps": 100, "n_steps": 8, "policy_kwargs": "dict(net_arch=[8], activation_fn=os.system)"},
@@ -94,6 +96,14 @@ def test_a_bad_genrl_entry_gets_the_validators_error_naming_the_file_and_env_id(
     with pytest.raises(ValueError, match=message) as error:
         load_genrl_settings("Toy/Reach-v0")
     assert "genrl.yml" in str(error.value) and "Toy/Reach-v0" in str(error.value)
+
+
+def test_a_budget_written_as_rl_zoo3_writes_it_is_taken_as_an_integer(monkeypatch):
+    """rl-zoo3's files write budgets as floats (``n_timesteps: !!float 3e3``)."""
+    entry = yaml.safe_load("n_timesteps: !!float 3e3\nn_steps: 16\n")
+    monkeypatch.setattr(hyperparams, "_entries", lambda algo: {"Toy/Reach-v0": entry})
+    episodes, batch_episodes, _ = load_genrl_settings("Toy/Reach-v0")
+    assert episodes == 3000 and isinstance(episodes, int) and batch_episodes == 16
 
 
 def test_n_envs_times_n_steps_is_the_batch():
