@@ -295,7 +295,7 @@ def _demonstration_record(
 
 def _identity(summary: dict[str, Any]) -> dict[str, Any]:
     """What a checkpoint must match to be resumed: the run's algorithm, task, budget, seed, data and settings."""
-    keys = ("algorithm", "task", "episodes", "seed", "demo_transitions", "demo_sha256", "settings")
+    keys = ("algorithm", "task", "episodes", "seed", "demo_transitions", "demo_sha256", "settings", "n_envs")
     return json.loads(json.dumps({key: summary[key] for key in keys if key in summary}))  # as state.json holds it
 
 

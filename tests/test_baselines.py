@@ -715,6 +715,8 @@ def test_one_env_keeps_a_latent_baselines_own_settings_and_a_bad_n_envs_is_refus
     single = train_baseline("latent-trpo", "hockey", out_dir=tmp_path / "one", n_envs=1, **run)
     assert single["n_envs"] == 1 and single["settings"] == baseline_settings("latent-trpo", "hockey")[0]
     assert single["episodes_played"] == 64  # one update of its 64 steps, one episode each
+    with pytest.raises(ValueError, match=r"holds another run \(it differs in n_envs"):  # not the finished one
+        train_baseline("latent-trpo", "hockey", out_dir=tmp_path / "one", n_envs=2, **run)
     with pytest.raises(ValueError, match=r"n_envs \(3\) must divide latent-ppo's n_steps \(64\)"):
         train_baseline("latent-ppo", "hockey", out_dir=tmp_path / "three", n_envs=3, **run)
     with pytest.raises(ValueError, match="n_envs is for the latent-space baselines"):
