@@ -335,7 +335,7 @@ def test_genrl_demos_and_train_policy_take_a_task_the_package_does_not_register(
     assert f"12 demonstrations of TestExternal/PointGoalShove-v0 (20 steps) kept of {info['tried']} tried" in out
     assert f"{info['failed_open_loop']} failed when replayed open loop" in out
     code, _, err = cli(
-        "train-generator", "--data", demos, "--preset", "VAE1", "--epochs", 3, "--batch-size", 8, "--eval-every", 3,
+        "train-generator", "--data", demos, "--preset", "vae-fetch", "--epochs", 3, "--batch-size", 8, "--eval-every", 3,
         "--out", tmp_path / "vae.pt", "--no-progress-bar",
     )  # fmt: skip
     assert code == 0, err
@@ -345,6 +345,7 @@ def test_genrl_demos_and_train_policy_take_a_task_the_package_does_not_register(
         "--no-progress-bar",
     )  # fmt: skip
     assert code == 0, err
+    assert load(tmp_path / "vae.pt", device="cpu").latent_dim == 10  # the quickstart's preset for such a task
     summary = json.loads((tmp_path / "policy" / "summary.json").read_text())
     assert summary["task"] == "TestExternal/PointGoal-v0" and summary["episodes"] == 32
     assert re.search(r"success: [0-9.]+ of the last episodes played \(info\['is_success'\]", out), out

@@ -30,6 +30,7 @@ from sb3_genrl.envs import DEFAULT_TASK, TASKS, arm_tasks
 from sb3_genrl.envs.demonstrations import DEFAULT_NOISE, refuse_existing_output
 from sb3_genrl.envs.external import load_expert, resolve_task
 from sb3_genrl.generative import PRESETS
+from sb3_genrl.generative.presets import TASK_PRESETS
 from sb3_genrl.hyperparams import known_env_ids, load_hyperparams
 from sb3_genrl.metrics.scorecard import NOT_CONVERGED_PRECISION, RANK_MEASURES
 from sb3_genrl.run.checkpoint import CHECKPOINT_EVERY
@@ -197,7 +198,12 @@ def add_train_generator(sub: argparse._SubParsersAction) -> None:
     gen.add_argument("--data", required=True, type=EXISTING, help="demonstration dataset or .npy/.npz (N, T, M) array")
     gen.add_argument("--model", choices=("vae", "gan"), default=None, help="model kind (default: vae)")
     gen.add_argument(
-        "--preset", type=str.upper, choices=tuple(PRESETS), default=None, help="paper table 1 model: VAE1..VAE9 or GAN1..GAN9"
+        "--preset",
+        type=str.upper,
+        choices=(*PRESETS, *TASK_PRESETS),
+        default=None,
+        help="paper table 1 model, VAE1..VAE9 or GAN1..GAN9, or VAE-FETCH (the Fetch and Meta-World quickstarts' "
+        "generator: 10 latent dimensions, beta 0.001)",
     )
     gen.add_argument("--latent-dim", type=COUNT, default=None, help="latent dimension N_alpha")
     gen.add_argument("--beta", type=option(check_non_negative_float, float), default=None, help="KL weight (beta-VAE)")
