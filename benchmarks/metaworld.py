@@ -14,8 +14,9 @@ and a rerun with others is refused before any work):
    (:class:`~sb3_genrl.genrl.demonstrations.DemonstrationCallback`'s fit, ``--fit-steps`` Adam steps), before any
    episode is played;
 5. per seed, GenRL with the settings of a task without an entry in ``hyperparams/genrl.yml``
-   (:data:`~sb3_genrl.study.quickstart.OUTSIDE_TASK_KWARGS`: the fit of step 4, then GenRL's defaults, ``--batch-episodes``
-   a batch), ``--episodes`` episodes (checkpointed; a stopped run resumes);
+   (:data:`~sb3_genrl.study.quickstart.OUTSIDE_TASK_KWARGS`: the fit of step 4, a spread fixed at 0.37 prior standard
+   deviations, then GenRL's defaults, ``--batch-episodes`` a batch), ``--episodes`` episodes (checkpointed; a stopped
+   run resumes);
 6. per seed, SB3's SAC (its defaults, learning from the first step, observations normalised with the demonstrations'
    statistics) with the demonstrations' transitions in its replay buffer, for the same ``--episodes`` episodes of 150
    steps.
@@ -131,7 +132,7 @@ def settings(args: argparse.Namespace) -> dict[str, Any]:
         "held_out": args.held_out,
         "held_out_seed": HELD_OUT_SEED,
         "fit_steps": args.fit_steps,
-        "genrl": "GenRL's defaults",
+        "genrl": "started from the demonstrations, a spread fixed at 0.37, else GenRL's defaults",
         "sac": "SB3's defaults, learning_starts 0, the demonstrations in the buffer",
     }
 
@@ -196,8 +197,8 @@ def genrl_row(
     task: str, generator_path: Path, dataset: Path, work: Path, seed: int, args: argparse.Namespace
 ) -> dict[str, Any]:
     """GenRL with the settings of a task without an entry (:data:`~sb3_genrl.study.quickstart.OUTSIDE_TASK_KWARGS`:
-    started from the demonstrations, then its defaults) for ``--episodes`` episodes (resumed from its checkpoint), on
-    held-out resets."""
+    started from the demonstrations, a fixed spread, then its defaults) for ``--episodes`` episodes (resumed from its
+    checkpoint), on held-out resets."""
     began = time.process_time()
     run = train_policy(
         metaworld.metaworld_env_id(task),

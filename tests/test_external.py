@@ -13,6 +13,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
+import torch
 from conftest import HANG_S
 from gymnasium import spaces
 from sb3_genrl.envs import metaworld
@@ -558,3 +559,7 @@ def test_train_policy_of_an_outside_task_starts_from_its_demonstrations(cli, tmp
     # the entry-less task's settings fit the policy's mean to the demonstrations' latent codes before the first
     # iteration; GenRL's defaults alone start from a mean near 0
     assert errors["fitted"] < 0.5 * errors["defaults"], errors
+    # and search around that fit with a spread kept at 0.37 prior standard deviations; GenRL's own starts at 1.0
+    spreads = {name: GenRL.load(tmp_path / name / "genrl_policy.zip", device="cpu").policy.log_std for name in errors}
+    assert torch.equal(spreads["fitted"], torch.full_like(spreads["fitted"], -1.0))
+    assert not torch.equal(spreads["defaults"], spreads["fitted"])

@@ -55,8 +55,13 @@ QUICKSTART_PRESET = "VAE1"
 # A task without an entry in hyperparams/genrl.yml: the paper's 3000 episodes, GenRL's default 64 per iteration.
 DEFAULT_POLICY_EPISODES, DEFAULT_BATCH_EPISODES = 3000, 64
 # A task from outside the package starts from its demonstrations: the policy's mean fitted to their latent codes by
-# DemonstrationCallback (4000 Adam steps), then GenRL's defaults (docs/guide/your_task.md, "The policy").
-OUTSIDE_TASK_KWARGS: dict[str, Any] = {"callback": [{DEMONSTRATION_CALLBACK: {"fit_steps": 4000, "keep": False}}]}
+# DemonstrationCallback (4000 Adam steps), then GenRL's defaults but the spread, fixed at 0.37 prior standard deviations
+# around that mean (GenRL's own 1.0 draws too far from the fit to find anything; docs/guide/your_task.md, "The policy").
+OUTSIDE_TASK_KWARGS: dict[str, Any] = {
+    "callback": [{DEMONSTRATION_CALLBACK: {"fit_steps": 4000, "keep": False}}],
+    "policy_kwargs": {"log_std_init": -1.0},
+    "max_log_std_change": 0.0,
+}
 # The generator stage's defaults (also the generator of the rl-zoo3 runs, sb3_genrl.zoo.generators)
 DEMO_EPISODES, GENERATOR_EPOCHS, GENERATOR_EVAL_EVERY = 4000, 300, 10
 # A task from outside the package records its demonstrations through its env's step path, closed loop and replayed
@@ -206,8 +211,9 @@ def _outside_horizon(task: ExternalTask, horizon: int | None) -> int:
 
 def outside_task_settings(task: ExternalTask) -> tuple[int, int, dict[str, Any]]:
     """The GenRL settings of a task from outside the package, as :func:`task_settings` gives a registered task's: its
-    env id's entry in ``hyperparams/genrl.yml`` if it has one, else :data:`OUTSIDE_TASK_KWARGS` (GenRL's defaults,
-    started from the demonstrations) with :data:`DEFAULT_POLICY_EPISODES` and :data:`DEFAULT_BATCH_EPISODES`.
+    env id's entry in ``hyperparams/genrl.yml`` if it has one, else :data:`OUTSIDE_TASK_KWARGS` (started from the
+    demonstrations, a fixed spread, else GenRL's defaults) with :data:`DEFAULT_POLICY_EPISODES` and
+    :data:`DEFAULT_BATCH_EPISODES`.
 
     :param task: the resolved task (:func:`~sb3_genrl.envs.external.resolve_task`)
     :return: ``(episodes, batch_episodes, genrl_kwargs)``
