@@ -685,6 +685,8 @@ def test_ctrl_c_of_a_run_with_env_processes_exits_130_in_one_line(tmp_path, hock
         stderr=subprocess.PIPE,
         text=True,
         start_new_session=True,
+        # Ctrl-C's disposition in a terminal: a suite started in the background of a script inherits SIGINT ignored
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     monitor = run / "episodes.monitor.csv"
     try:
