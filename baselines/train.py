@@ -79,7 +79,7 @@ from sb3_genrl.run import training_env
 from sb3_genrl.run.checkpoint import resume_state
 from sb3_genrl.run.folder import keep_episodes, open_run, remove_checkpoint
 from sb3_genrl.utils import atomic_path, atomic_write_json, folder_lock
-from sb3_genrl.wrappers import LatentActionWrapper
+from sb3_genrl.wrappers import LatentActionWrapper, env_id_has_fast_path
 
 CHECKPOINT_EVERY = 250  # episodes between checkpoints of an off-policy baseline (about 5 minutes of one core)
 
@@ -142,7 +142,7 @@ def train_baseline(
     transitions, generator = _inputs(algorithm, spec.name, demos, demo_episodes, generator)
     steps = int(episodes) if transitions is None else int(episodes) * spec.horizon
     summary = {"algorithm": algorithm, "task": spec.name, "episodes": int(episodes), "seed": seed} | (
-        _latent_record(algorithm, spec.name, generator, changes, n_envs)
+        _latent_record(algorithm, spec.name, changes, n_envs)
         if transitions is None
         else _demonstration_record(algorithm, spec.name, transitions, bc_kwargs, changes)
     )
@@ -489,14 +489,12 @@ def latent_vector_settings(algorithm: str, settings: dict[str, Any], n_envs: int
     return settings | {"n_steps": batch // n_envs}
 
 
-def _latent_record(algorithm: str, task: str, generator: Any, changes: dict[str, Any], n_envs: int | None) -> dict[str, Any]:
+def _latent_record(algorithm: str, task: str, changes: dict[str, Any], n_envs: int | None) -> dict[str, Any]:
     """A latent-space baseline's ``settings`` (its constructor's, for ``n_envs`` envs) and ``n_envs`` (the default's
     where ``None``)."""
     settings = baseline_settings(algorithm, task)[0] | changes
     if n_envs is None:
-        probe = LatentActionWrapper(gym.make(get_task(task).env_id), generator)
-        n_envs = default_latent_envs(algorithm, settings, probe.use_fast_path)
-        probe.close()
+        n_envs = default_latent_envs(algorithm, settings, env_id_has_fast_path(get_task(task).env_id))
     return {"settings": latent_vector_settings(algorithm, settings, n_envs), "n_envs": n_envs}
 
 

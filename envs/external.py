@@ -151,6 +151,12 @@ def success_key_of(info: dict[str, Any], success_key: str = "is_success") -> str
     return next((key for key in keys if key in info), None)
 
 
+def check_success_key(success_key: Any) -> None:
+    """Refuse a ``success_key`` that is not a non-empty string."""
+    if not isinstance(success_key, str) or not success_key:
+        raise ValueError(f"success_key must be a non-empty string, got {success_key!r}")
+
+
 def check_reports_success(info: dict[str, Any], success_key: str = "is_success", name: str = "the env") -> None:
     """Raise unless a step's ``info`` holds the env's success (:func:`success_key_of`), naming the keys it has."""
     if success_key_of(info, success_key) is None:

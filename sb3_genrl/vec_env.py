@@ -34,7 +34,7 @@ import torch
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv, VecMonitor
 
 from sb3_genrl.generative.base import TrajectoryGenerator
-from sb3_genrl.wrappers import LatentActionWrapper, find_latent_wrapper
+from sb3_genrl.wrappers import LatentActionWrapper, env_id_has_fast_path, find_latent_wrapper
 
 
 def default_threads() -> int:
@@ -120,12 +120,9 @@ def make_latent_vec_env(
     if isinstance(n_envs, bool) or not isinstance(n_envs, int | np.integer) or n_envs < 1:
         raise ValueError(f"n_envs must be a positive integer, got {n_envs!r}")
     make = functools.partial(_latent_env, env_id, generator, latent_clip, False)
-    probe = make()
-    fast = probe.use_fast_path
-    probe.close()
     if n_envs == 1:
         venv: VecEnv = DummyVecEnv([make])
-    elif fast:
+    elif env_id_has_fast_path(env_id):
         venv = BatchedLatentVecEnv([make] * n_envs, n_threads)
     else:  # the spec, not the id: the processes need not know the id
         spec = gym.spec(env_id)

@@ -28,6 +28,16 @@ def task_has_fast_path(task: gym.Env) -> bool:
     return hasattr(task, "play_trajectories") and hasattr(task, "get_context")
 
 
+def env_id_has_fast_path(env_id: str) -> bool:
+    """Whether the task registered as ``env_id`` has the fast path (:func:`task_has_fast_path`); the env is made to
+    tell, and closed."""
+    env = gym.make(env_id)
+    try:
+        return task_has_fast_path(env.unwrapped)
+    finally:
+        env.close()
+
+
 class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """Turn an episodic Gymnasium env with per-step actions into a one-step bandit over a generator's latent space.
 

@@ -32,6 +32,7 @@ from sb3_genrl.envs.demonstrations.arm import refuse_existing_output
 from sb3_genrl.envs.external import (
     check_reports_success,
     check_reproducible_reset,
+    check_success_key,
     resolve_task,
     task_env_and_horizon,
     task_name,
@@ -166,8 +167,7 @@ def record_demonstrations(
         raise ValueError(f"expert must be a callable observation -> action, got {type(expert).__name__}")
     check_positive_int(episodes, "episodes")
     check_seed(seed)
-    if not isinstance(success_key, str) or not success_key:
-        raise ValueError(f"success_key must be a non-empty string, got {success_key!r}")
+    check_success_key(success_key)
     if n_threads is not None:
         check_positive_int(n_threads, "n_threads")
     workers = (default_threads() if episodes >= SMALL_RUN else 1) if n_threads is None else int(n_threads)

@@ -23,7 +23,13 @@ import numpy as np
 from gymnasium import spaces
 from sb3_genrl.envs.demonstrations.arm import refuse_existing_output
 from sb3_genrl.envs.demonstrations.recorder import pad_actions, play_episode, write_demonstrations
-from sb3_genrl.envs.external import check_reports_success, check_reproducible_reset, task_env_and_horizon, task_name
+from sb3_genrl.envs.external import (
+    check_reports_success,
+    check_reproducible_reset,
+    check_success_key,
+    task_env_and_horizon,
+    task_name,
+)
 from tqdm.auto import tqdm
 
 from sb3_genrl.checks import check_output_dir, check_positive_int
@@ -93,8 +99,7 @@ def replay_demonstrations(
     :return: the dataset directory
     """
     name = task_name(task)
-    if not isinstance(success_key, str) or not success_key:
-        raise ValueError(f"success_key must be a non-empty string, got {success_key!r}")
+    check_success_key(success_key)
     if episodes is not None:
         check_positive_int(episodes, "episodes")
     first = episodes

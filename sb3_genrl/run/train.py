@@ -41,7 +41,7 @@ from sb3_genrl.curves import (
 )
 from sb3_genrl.data.fingerprints import dataset_fingerprint
 from sb3_genrl.envs import TASKS, get_task
-from sb3_genrl.envs.external import SuccessInfo
+from sb3_genrl.envs.external import SuccessInfo, check_success_key
 from sb3_genrl.generative import load
 from sb3_genrl.generative.base import TrajectoryGenerator
 from sb3_genrl.genrl.demonstrations import DemonstrationCallback, build_callbacks, callback_entries
@@ -203,8 +203,8 @@ def _make_env(env_id: str, horizon: int | None, success_key: str | None = None, 
     """``gymnasium.make(env_id)``, its episodes truncated to ``horizon`` steps when given (at most its own length), its
     success copied to ``info["is_success"]`` from ``success_key`` (default for a task from ``outside`` the package:
     ``is_success``, falling back to ``success``)."""
-    if success_key is not None and (not isinstance(success_key, str) or not success_key):
-        raise ValueError(f"success_key must be a non-empty string, got {success_key!r}")
+    if success_key is not None:
+        check_success_key(success_key)
     if horizon is None:
         env = gym.make(env_id)
     else:

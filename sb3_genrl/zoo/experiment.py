@@ -29,7 +29,6 @@ import inspect
 from collections.abc import Iterator
 from typing import Any
 
-import gymnasium as gym
 import optuna
 from rl_zoo3.exp_manager import ExperimentManager
 from stable_baselines3.common.save_util import load_from_zip_file
@@ -41,7 +40,7 @@ from sb3_genrl.genrl.demonstrations import DEMONSTRATION_CALLBACK, callback_entr
 from sb3_genrl.genrl.generator_files import check_model_data, generator_digest, generator_file
 from sb3_genrl.hyperparams import TUNING_GOAL_SEED, ZOO_KEYS, check_genrl_entry
 from sb3_genrl.vec_env import latent_vec_env
-from sb3_genrl.wrappers import task_has_fast_path
+from sb3_genrl.wrappers import env_id_has_fast_path
 from sb3_genrl.zoo.generators import build_default_generator, default_demonstrations, default_generator
 from sb3_genrl.zoo.sampler import entry_params
 from sb3_genrl.zoo.wrapper import latent_action, load_generator, resolve_generator
@@ -87,7 +86,7 @@ class GenRLExperimentManager(ExperimentManager):
             if hyperparams.get("callback") is not None:
                 callback = resolved_callback(hyperparams["callback"], wrapper, self.env_name.gym_id)
                 hyperparams["callback"] = saved["callback"] = callback
-            if "n_envs" not in hyperparams and not self.optimize_hyperparameters and _fast_path(env_id):
+            if "n_envs" not in hyperparams and not self.optimize_hyperparameters and env_id_has_fast_path(env_id):
                 # an iteration's episodes together, in one threaded simulation call (create_envs); the same batch
                 hyperparams["n_envs"] = saved["n_envs"] = hyperparams["n_steps"]
                 hyperparams["n_steps"] = saved["n_steps"] = 1
@@ -256,12 +255,3 @@ def resolved_callback(callback: Any, wrapper: list[Any], env_id: str) -> list[di
             f"{dataset.parent} to make both again"
         )
     return with_dataset(callback, str(dataset.resolve()), dataset_fingerprint(dataset))
-
-
-def _fast_path(env_id: str) -> bool:
-    """Whether the task ``env_id`` has the GenRL tasks' fast path (:func:`~sb3_genrl.wrappers.task_has_fast_path`)."""
-    env = gym.make(env_id)
-    try:
-        return task_has_fast_path(env.unwrapped)
-    finally:
-        env.close()
