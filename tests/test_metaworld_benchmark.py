@@ -33,6 +33,11 @@ def test_the_metaworld_benchmark_writes_every_unit_resumes_and_refuses_other_set
     assert main(argv) == 0
     assert json.loads(out.read_text())["tasks"] == result["tasks"]
     assert all(path.stat().st_mtime_ns == stamp for path, stamp in stamps.items() if path.name != "stage.json")
+    # a second seed of the fit and GenRL, SAC's seeds as they were: only the new units run
+    assert main([*argv, "--seeds", "0", "1", "--sac-seeds", "0"]) == 0
+    row = json.loads(out.read_text())["tasks"]["reach-v3"]
+    assert sorted(row["fit"]) == sorted(row["genrl"]) == ["0", "1"] and sorted(row["sac"]) == ["0"]
+    assert row["genrl"]["0"] == result["tasks"]["reach-v3"]["genrl"]["0"]
     # other settings: refused before any work, naming the setting
     before = out.read_text()
     with pytest.raises(SystemExit) as exit_:
