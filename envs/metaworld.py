@@ -312,7 +312,9 @@ class MetaWorldExpert:
         """The action (4 numbers in [-1, 1]) for a 39-D observation of the task's env."""
         with warnings.catch_warnings():
             warnings.filterwarnings("ignore", message=r"Constant\(s\) may be too high", category=UserWarning)
-            action = self.policy.get_action(np.asarray(observation, dtype=np.float64))
+            # a copy: the door-open-v3 policy shifts the handle's position in its observation in place (metaworld
+            # 3.1.1, metaworld/policies/sawyer_door_open_v3_policy.py), which would change the caller's observation
+            action = self.policy.get_action(np.array(observation, dtype=np.float64, copy=True))
         return np.clip(action, -1.0, 1.0).astype(np.float32)
 
 

@@ -169,6 +169,22 @@ def test_record_demonstrations_keeps_those_whose_open_loop_replay_succeeds(tmp_p
         assert step_info["is_success"]
 
 
+def shifting_expert(observation: np.ndarray) -> np.ndarray:
+    """:func:`point_expert` that first shifts the goal in its observation in place (as Meta-World's door-open-v3
+    policy shifts the handle's position)."""
+    observation[0] -= 0.05
+    return point_expert(observation + np.array([0.05, 0.0, 0.0, 0.0], dtype=np.float32))
+
+
+def test_an_expert_that_changes_its_observation_in_place_changes_no_recorded_observation(tmp_path):
+    demos = record_demonstrations("TestExternal/PointGoal-v0", shifting_expert, 6, tmp_path / "demos", seed=3)
+    info, arrays = dataset_info(demos), load_arrays(demos)
+    assert info["episodes"] == 6 and info["failed_open_loop"] == 0  # each replay starts where its play started
+    for reset_seed, observations in zip(info["reset_seeds"], arrays["observations"], strict=True):
+        env = gym.make("TestExternal/PointGoal-v0")
+        np.testing.assert_array_equal(env.reset(seed=reset_seed)[0], observations[0])
+
+
 def test_record_demonstrations_is_the_same_whatever_the_number_of_worker_processes(tmp_path):
     paths = {
         n_threads: record_demonstrations(
