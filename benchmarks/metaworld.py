@@ -30,14 +30,18 @@ every unit of every task asked for is done; the Markdown table is written beside
     python -m benchmarks.metaworld                                   # MT10 x seeds 0 1 2 (hours on a CPU)
     python -m benchmarks.metaworld --tasks push-v3 --seeds 0 --out push.json
     python -m benchmarks.metaworld --seeds --sac-seeds               # each task's stages 1-3 only (no seed)
+
+Runs with other ``--tasks`` can write one JSON at the same time (two cores, two runs): each keeps the other's rows.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import copy
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -60,7 +64,7 @@ from sb3_genrl.provenance import provenance
 from sb3_genrl.run import train_policy
 from sb3_genrl.run.stages import STAGE_FILE, SettingsConflictError, read_settings, refuse_conflicts, settings_conflicts
 from sb3_genrl.study.quickstart import OUTSIDE_TASK_KWARGS
-from sb3_genrl.utils import atomic_write_json, atomic_write_text
+from sb3_genrl.utils import FolderInUseError, atomic_write_json, atomic_write_text, folder_lock
 
 RESULTS = Path(__file__).resolve().parent / "results"
 HORIZON = metaworld.DEMONSTRATION_HORIZON
@@ -353,18 +357,13 @@ def main(argv: list[str] | None = None) -> int:
     result = result or {"benchmark": "metaworld", "settings": settings(args), "tasks": {}}
 
     def save() -> None:
-        result["provenance"] = provenance()
-        result["complete"] = all(
-            all(key in result["tasks"].get(task, {}) for key in ("demonstrations", "generator", "expert"))
-            and all(
-                str(seed) in result["tasks"][task].get(method, {})
-                for method in METHODS
-                for seed in (COMPLETE_SAC_SEEDS if method == "sac" else COMPLETE_SEEDS)
-            )
-            for task in metaworld.MT10_TASK_NAMES
-        )
-        atomic_write_json(out, result)
-        atomic_write_text(out.with_suffix(".md"), table(result) + "\n")
+        with _locked(out):  # another process running other --tasks into the same JSON: its rows are kept
+            on_disk = read_settings(out) if out.is_file() else None
+            for task, row in (on_disk or {}).get("tasks", {}).items():
+                if task not in args.tasks:
+                    result["tasks"][task] = row
+            result["tasks"] = dict(sorted(result["tasks"].items(), key=lambda item: _task_order(item[0])))
+            _write(out, result)
 
     for task in args.tasks:
         run_task(task, args, result, save)
@@ -372,6 +371,42 @@ def main(argv: list[str] | None = None) -> int:
     save()
     print(table(result))
     return 0
+
+
+def _task_order(task: str) -> tuple[int, str]:
+    """MT10's tasks in MT10's order, then any other by name."""
+    names = metaworld.MT10_TASK_NAMES
+    return (names.index(task), task) if task in names else (len(names), task)
+
+
+@contextlib.contextmanager
+def _locked(out: Path) -> Iterator[None]:
+    """Hold the result JSON's lock (a sibling file), waiting while another run of the benchmark writes it."""
+    while True:
+        held = contextlib.ExitStack()
+        try:
+            held.enter_context(folder_lock(out.parent, out.with_name(out.name + ".lock")))
+            break
+        except FolderInUseError:
+            time.sleep(0.2)
+    with held:
+        yield
+
+
+def _write(out: Path, result: dict[str, Any]) -> None:
+    """The result JSON (with its provenance and whether every unit of MT10 is done) and its table."""
+    result["provenance"] = provenance()
+    result["complete"] = all(
+        all(key in result["tasks"].get(task, {}) for key in ("demonstrations", "generator", "expert"))
+        and all(
+            str(seed) in result["tasks"][task].get(method, {})
+            for method in METHODS
+            for seed in (COMPLETE_SAC_SEEDS if method == "sac" else COMPLETE_SEEDS)
+        )
+        for task in metaworld.MT10_TASK_NAMES
+    )
+    atomic_write_json(out, result)
+    atomic_write_text(out.with_suffix(".md"), table(result) + "\n")
 
 
 if __name__ == "__main__":

@@ -53,3 +53,23 @@ def test_the_metaworld_benchmark_refuses_an_unknown_task_before_any_work(tmp_pat
         main(["--tasks", "push", "--work", str(tmp_path / "work"), "--out", str(tmp_path / "r.json")])
     assert exit_.value.code == 2 and "unknown Meta-World task 'push'" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_runs_of_other_tasks_into_one_json_keep_each_others_rows(tmp_path, monkeypatch):
+    """Two runs of the benchmark with other --tasks (as on two cores) write one JSON: each save keeps the other's rows."""
+    import benchmarks.metaworld as benchmark
+
+    out, work = tmp_path / "metaworld.json", tmp_path / "work"
+    run_task = benchmark.run_task
+
+    def other_run_writes_first(task, args, result, save):  # the other run saves its task after this one started
+        other = {"benchmark": "metaworld", "settings": benchmark.settings(args), "tasks": {"push-v3": {"expert": {}}}}
+        out.write_text(json.dumps(other))
+        run_task(task, args, result, save)
+
+    monkeypatch.setattr(benchmark, "run_task", other_run_writes_first)
+    assert benchmark.main([*TINY, "--sac-seeds", "--work", str(work), "--out", str(out)]) == 0
+    tasks = json.loads(out.read_text())["tasks"]
+    assert list(tasks) == ["reach-v3", "push-v3"]  # MT10's order
+    assert tasks["push-v3"] == {"expert": {}} and "0" in tasks["reach-v3"]["genrl"]
+    assert not out.with_name("metaworld.json.lock").exists()
