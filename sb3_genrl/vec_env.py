@@ -24,6 +24,7 @@ gets what it asked for.
 from __future__ import annotations
 
 import functools
+import multiprocessing
 import os
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -96,6 +97,12 @@ def latent_vec_env(env_fns: Sequence[Callable[[], gym.Env]], **kwargs: Any) -> D
     return BatchedLatentVecEnv([lambda env=env: env for env in venv.envs])
 
 
+MAIN_GUARD = (
+    "n_envs > 1 plays the envs in their own processes, which import the script that started them: a script "
+    'must run its work under `if __name__ == "__main__":`, as any script with SB3\'s SubprocVecEnv'
+)
+
+
 def make_latent_vec_env(
     env_id: str,
     generator: TrajectoryGenerator,
@@ -126,8 +133,19 @@ def make_latent_vec_env(
         venv = BatchedLatentVecEnv([make] * n_envs, n_threads)
     else:  # the spec, not the id: the processes need not know the id
         spec = gym.spec(env_id)
-        venv = SubprocVecEnv([functools.partial(_latent_env, spec, generator, latent_clip, True)] * n_envs)
+        venv = env_processes([functools.partial(_latent_env, spec, generator, latent_clip, True)] * n_envs)
     return VecMonitor(venv, monitor_file)
+
+
+def env_processes(env_fns: Sequence[Callable[[], gym.Env]]) -> SubprocVecEnv:
+    """SB3's ``SubprocVecEnv`` of ``env_fns``, with the reason when its processes do not start: a script that starts
+    them outside ``if __name__ == "__main__":`` (each process imports the script again, and would start its own)."""
+    if getattr(multiprocessing.current_process(), "_inheriting", False):  # Python's own test of that import
+        raise RuntimeError(MAIN_GUARD)  # in the env process: its stderr shows why
+    try:
+        return SubprocVecEnv(list(env_fns))
+    except (BrokenPipeError, EOFError, ConnectionResetError) as error:  # a process died while starting
+        raise RuntimeError(f"the {len(env_fns)} env processes did not start. {MAIN_GUARD}") from error
 
 
 def _latent_env(

@@ -18,7 +18,7 @@ import numpy as np
 import torch
 from stable_baselines3.common.callbacks import CallbackList
 from stable_baselines3.common.monitor import ResultsWriter
-from stable_baselines3.common.vec_env import SubprocVecEnv, VecMonitor
+from stable_baselines3.common.vec_env import VecMonitor
 
 from sb3_genrl.checks import (
     check_device,
@@ -52,7 +52,7 @@ from sb3_genrl.genrl.settings import NOT_SETTINGS, SETTINGS, check_genrl_setting
 from sb3_genrl.run.checkpoint import CHECKPOINT_EVERY, GenRLCheckpoint, RandomStateRecorder, resume_genrl, resume_state
 from sb3_genrl.run.folder import SUMMARY, keep_episodes, open_run, remove_checkpoint
 from sb3_genrl.utils import atomic_write_json, folder_lock
-from sb3_genrl.vec_env import BatchedLatentVecEnv
+from sb3_genrl.vec_env import MAIN_GUARD, BatchedLatentVecEnv, env_processes
 from sb3_genrl.wrappers import LatentActionWrapper
 
 
@@ -396,12 +396,6 @@ def make_genrl(env: Any, generator: TrajectoryGenerator | str | None = None, **g
     return GenRL(policy, env, generator, **genrl_kwargs)
 
 
-MAIN_GUARD = (
-    "n_envs > 1 plays the envs in their own processes, which import the script that started them: a script "
-    'must run its work under `if __name__ == "__main__":`, as any script with SB3\'s SubprocVecEnv'
-)
-
-
 def _check_arguments(
     episodes: int,
     batch_episodes: int,
@@ -460,10 +454,7 @@ def training_env(
             [partial(_episode_env, spec, generator, latent_clip, False) for _ in range(n_envs)], n_threads
         )
     else:
-        try:
-            venv = SubprocVecEnv([partial(_episode_env, spec, generator, latent_clip) for _ in range(n_envs)])
-        except (BrokenPipeError, EOFError, ConnectionResetError) as error:  # a process died while starting
-            raise RuntimeError(f"the {n_envs} env processes did not start. {MAIN_GUARD}") from error
+        venv = env_processes([partial(_episode_env, spec, generator, latent_clip) for _ in range(n_envs)])
     keys = (*EPISODE_INFO, "cpu_seconds")
     monitor = VecMonitor(venv, None if append else str(out / MONITOR_FILE), info_keywords=keys)
     if append:  # SB3's VecMonitor always starts a new file

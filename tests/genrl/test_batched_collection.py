@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+from pathlib import Path
+
 import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
-from conftest import FastReachEnv, LinearGenerator, ReachEnv
+from conftest import HANG_S, FastReachEnv, LinearGenerator, ReachEnv
 from genrl_test_helpers import HindsightReachEnv
 from stable_baselines3.common.callbacks import EvalCallback
 from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
@@ -190,3 +194,16 @@ def test_make_latent_vec_env_plays_a_task_without_a_fast_path_in_env_processes()
         assert dones.all() and rewards.shape == (2,)
     finally:
         env.close()
+
+
+def test_make_latent_vec_env_in_a_script_without_a_main_guard_is_told_to_add_one(tmp_path):
+    script = tmp_path / "unguarded.py"
+    script.write_text(
+        f"import sys\nsys.path.insert(0, {str(Path(__file__).parents[1])!r})\n"
+        "import gymnasium as gym\nfrom conftest import LinearGenerator, ReachEnv\nfrom sb3_genrl import make_latent_vec_env\n"
+        "gym.register('GenRLTest/Unguarded-v0', entry_point=ReachEnv)\n"
+        "make_latent_vec_env('GenRLTest/Unguarded-v0', LinearGenerator(), 2)\n"
+    )
+    done = subprocess.run([sys.executable, script], capture_output=True, text=True, timeout=HANG_S)
+    assert done.returncode != 0
+    assert "the 2 env processes did not start" in done.stderr and 'under `if __name__ == "__main__":`' in done.stderr
