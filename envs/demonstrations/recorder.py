@@ -12,6 +12,7 @@ same whatever their number.
 from __future__ import annotations
 
 import concurrent.futures
+import copy
 import itertools
 import multiprocessing
 import os
@@ -308,20 +309,13 @@ def _noise_heights(action_space: spaces.Space, noise: float | np.ndarray) -> np.
 def _expert_action(expert: Callable[[Any], np.ndarray], observation: Any, action_space: spaces.Box) -> np.ndarray:
     # the expert gets a copy: one that changes its observation in place (Meta-World's door-open-v3 policy shifts the
     # handle's position in it) would otherwise change the recorded episode's observations
-    action = np.asarray(expert(_copy(observation)), dtype=np.float64)
+    action = np.asarray(expert(copy.deepcopy(observation)), dtype=np.float64)
     if action.shape != action_space.shape or not np.all(np.isfinite(action)):
         raise ValueError(
             f"the expert returned {action.tolist()!r} (shape {action.shape}); expected {action_space.shape[0]} finite "
             "numbers, an action of the env's action space"
         )
     return action
-
-
-def _copy(observation: Any) -> Any:
-    """A copy of an observation: an array, or a dict of them (a Dict space's)."""
-    if isinstance(observation, dict):
-        return {key: _copy(value) for key, value in observation.items()}
-    return np.array(observation, copy=True)
 
 
 def _probe(env: gym.Env, expert: Callable[[Any], np.ndarray], reset_seed: int, success_key: str, name: str) -> None:
