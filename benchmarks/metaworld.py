@@ -4,7 +4,9 @@ Per task (``--tasks``, default the ten MT10 tasks), each unit is kept in ``--wor
 in the JSON as it finishes, so that the same command after a stop resumes where it stopped (the settings are recorded
 and a rerun with others is refused before any work):
 
-1. ``--demos`` demonstrations of Meta-World's scripted expert, perturbed, 150 steps each
+0. the horizon, as ``genrl quickstart`` finds it: the shortest at which the scripted expert's success settles on 100
+   seeded resets (:func:`~sb3_genrl.envs.demonstrations.expert_horizon`, seed 0; never the held-out resets);
+1. ``--demos`` demonstrations of Meta-World's scripted expert, perturbed, of that horizon
    (:func:`~sb3_genrl.envs.demonstrations.record_demonstrations`, seed 0), kept when their open-loop replay succeeds;
 2. a generator of the quickstart's Meta-World preset (:data:`sb3_genrl.envs.metaworld.GENERATOR_PRESET`), ``--epochs``,
    seed 0;
@@ -19,7 +21,7 @@ and a rerun with others is refused before any work):
    run resumes);
 6. per ``--sac-seeds`` seed (default one: SAC's runs take hours per task on a CPU), SB3's SAC (its defaults,
    learning from the first step, observations normalised with the demonstrations' statistics) with the
-   demonstrations' transitions in its replay buffer, for the same ``--episodes`` episodes of 150 steps.
+   demonstrations' transitions in its replay buffer, for the same ``--episodes`` episodes of the task's horizon.
 
 Every policy is scored deterministically on ``--held-out`` held-out seeded resets: reset seeds from ``2**31``
 (:func:`~sb3_genrl.envs.external.evaluate_success`), which the recorder never draws and which choose nothing. Each
@@ -50,7 +52,7 @@ import torch
 from sb3_genrl.baselines.models import normalized_policy
 from sb3_genrl.baselines.prefill import prefill_replay_buffer
 from sb3_genrl.envs import metaworld
-from sb3_genrl.envs.demonstrations import record_demonstrations
+from sb3_genrl.envs.demonstrations import expert_horizon, record_demonstrations
 from sb3_genrl.envs.external import HELD_OUT_SEED, evaluate_success, make_task_env
 from stable_baselines3 import SAC
 
@@ -67,7 +69,6 @@ from sb3_genrl.study.quickstart import OUTSIDE_TASK_KWARGS
 from sb3_genrl.utils import FolderInUseError, atomic_write_json, atomic_write_text, folder_lock
 
 RESULTS = Path(__file__).resolve().parent / "results"
-HORIZON = metaworld.DEMONSTRATION_HORIZON
 METHODS = ("fit", "genrl", "sac")  # the per-seed units, in the order they run
 COMPLETE_SEEDS, COMPLETE_SAC_SEEDS = (0, 1, 2), (0,)  # the seeds of a complete result (the defaults)
 
@@ -136,7 +137,7 @@ def _conflicts(args: argparse.Namespace) -> list[str]:
 def settings(args: argparse.Namespace) -> dict[str, Any]:
     """What every result of the run depends on (a rerun with other settings is refused)."""
     return {
-        "horizon": HORIZON,
+        "horizon": "the shortest at which the expert's success settles (expert_horizon, seed 0), per task",
         "demos": args.demos,
         "epochs": args.epochs,
         "preset": metaworld.GENERATOR_PRESET,
@@ -150,12 +151,12 @@ def settings(args: argparse.Namespace) -> dict[str, Any]:
     }
 
 
-def closed_loop(env: Any, policy: Any, reset_seed: int) -> tuple[bool, np.ndarray]:
+def closed_loop(env: Any, policy: Any, reset_seed: int, horizon: int) -> tuple[bool, np.ndarray]:
     """One episode of ``policy`` (observation -> action) from ``reset(seed=reset_seed)``: its success at the last step
     and the actions it played."""
     observation, _ = env.reset(seed=reset_seed)
     actions, info = [], {}
-    for _ in range(HORIZON):
+    for _ in range(horizon):
         action = np.clip(np.asarray(policy(observation), dtype=np.float32), -1.0, 1.0)
         observation, _, terminated, truncated, info = env.step(action)
         actions.append(action)
@@ -175,13 +176,13 @@ def open_loop(env: Any, actions: np.ndarray, reset_seed: int) -> bool:
     return bool(info.get("is_success", False))
 
 
-def expert_row(task: str, held_out: int) -> dict[str, Any]:
+def expert_row(task: str, held_out: int, horizon: int) -> dict[str, Any]:
     """The expert closed loop from the held-out resets, and its actions replayed open loop from the same resets."""
-    env, expert = make_task_env(f"metaworld/{task}", horizon=HORIZON), metaworld.metaworld_expert(task)
+    env, expert = make_task_env(f"metaworld/{task}", horizon=horizon), metaworld.metaworld_expert(task)
     began = time.process_time()
     closed, opened = [], []
     for i in range(held_out):
-        success, actions = closed_loop(env, expert, HELD_OUT_SEED + i)
+        success, actions = closed_loop(env, expert, HELD_OUT_SEED + i, horizon)
         closed.append(success)
         opened.append(open_loop(env, actions, HELD_OUT_SEED + i))
     env.close()
@@ -192,22 +193,24 @@ def expert_row(task: str, held_out: int) -> dict[str, Any]:
     }
 
 
-def fit_row(task: str, generator_path: Path, dataset: Path, seed: int, args: argparse.Namespace) -> dict[str, Any]:
+def fit_row(
+    task: str, generator_path: Path, dataset: Path, seed: int, horizon: int, args: argparse.Namespace
+) -> dict[str, Any]:
     """GenRL's policy with its mean fitted to the demonstrations' latent codes, before any episode, on held-out resets."""
     began = time.process_time()
     generator = load(generator_path, device="cpu")
-    model = GenRL(LatentActionWrapper(make_task_env(f"metaworld/{task}", horizon=HORIZON), generator), seed=seed, device="cpu")
+    model = GenRL(LatentActionWrapper(make_task_env(f"metaworld/{task}", horizon=horizon), generator), seed=seed, device="cpu")
     contexts, latents = DemonstrationCallback(dataset, fit_steps=args.fit_steps, keep=False).pulls(
         generator, model.observation_space, model.latent_clip
     )
     fit = fit_mean_to_demonstrations(model.policy, contexts, latents, steps=args.fit_steps)
     fitted = time.process_time() - began
-    score = evaluate_success(model, f"metaworld/{task}", resets=args.held_out, horizon=HORIZON)
+    score = evaluate_success(model, f"metaworld/{task}", resets=args.held_out, horizon=horizon)
     return {"success": score["success_rate"], "cpu_seconds": round(fitted, 1), "last_loss": fit["last_loss"]}
 
 
 def genrl_row(
-    task: str, generator_path: Path, dataset: Path, work: Path, seed: int, args: argparse.Namespace
+    task: str, generator_path: Path, dataset: Path, work: Path, seed: int, horizon: int, args: argparse.Namespace
 ) -> dict[str, Any]:
     """GenRL with the settings of a task without an entry (:data:`~sb3_genrl.study.quickstart.OUTSIDE_TASK_KWARGS`:
     started from the demonstrations, a fixed spread, then its defaults) for ``--episodes`` episodes (resumed from its
@@ -221,14 +224,14 @@ def genrl_row(
         n_envs=1,  # in this process, so that its CPU time is this process's
         seed=seed,
         out_dir=work / f"genrl_seed{seed}",
-        horizon=HORIZON,
+        horizon=horizon,
         device="cpu",
         demonstrations=dataset,
         **outside_settings(args.fit_steps),
     )
     trained = time.process_time() - began
     model = GenRL.load(run["model_path"], device="cpu")
-    score = evaluate_success(model, f"metaworld/{task}", resets=args.held_out, horizon=HORIZON)
+    score = evaluate_success(model, f"metaworld/{task}", resets=args.held_out, horizon=horizon)
     return {
         "success": score["success_rate"],
         "cpu_seconds": round(trained, 1),
@@ -246,14 +249,14 @@ def outside_settings(fit_steps: int) -> dict[str, Any]:
     return settings
 
 
-def sac_row(task: str, dataset: Path, seed: int, args: argparse.Namespace) -> dict[str, Any]:
+def sac_row(task: str, dataset: Path, seed: int, horizon: int, args: argparse.Namespace) -> dict[str, Any]:
     """SAC with the demonstrations' transitions in its replay buffer, ``--episodes`` episodes, on held-out resets."""
     transitions = load_transitions(dataset)
     # Meta-World's episodes end by truncation only: a demonstration's last step is no terminal state, as SAC's own
     # collected truncations are not (SB3's handle_timeout_termination)
     transitions["dones"] = load_arrays(dataset, keys=("terminations",))["terminations"].reshape(-1)
-    env = make_task_env(f"metaworld/{task}", horizon=HORIZON)
-    steps = args.episodes * HORIZON
+    env = make_task_env(f"metaworld/{task}", horizon=horizon)
+    steps = args.episodes * horizon
     began = time.process_time()
     model = SAC(
         "MlpPolicy",
@@ -268,7 +271,7 @@ def sac_row(task: str, dataset: Path, seed: int, args: argparse.Namespace) -> di
     model.learn(total_timesteps=steps)
     trained = time.process_time() - began
     successes = [
-        closed_loop(env, lambda observation: model.predict(observation, deterministic=True)[0], HELD_OUT_SEED + i)[0]
+        closed_loop(env, lambda observation: model.predict(observation, deterministic=True)[0], HELD_OUT_SEED + i, horizon)[0]
         for i in range(args.held_out)
     ]
     env.close()
@@ -282,11 +285,19 @@ def run_task(task: str, args: argparse.Namespace, result: dict[str, Any], save: 
     atomic_write_json(work / STAGE_FILE, settings(args))  # the settings its files are made with (checked on a rerun)
     row = result["tasks"].setdefault(task, {})
     dataset, generator_path = work / "demonstrations", work / "vae.pt"
+    if "horizon" not in row:  # the quickstart's: the expert's settled horizon from seed 0
+        began = time.process_time()
+        found = expert_horizon(f"metaworld/{task}", seed=0)
+        row["horizon"] = {key: value for key, value in found.items() if key != "success_by_step"} | {
+            "cpu_seconds": round(time.process_time() - began, 1)
+        }
+        save()
+    horizon = int(row["horizon"]["horizon"])
     if "demonstrations" not in row:
         began = time.process_time()
         if not (dataset.is_dir() and any(dataset.iterdir())):  # a dataset is written whole or not at all
             record_demonstrations(  # in this process, so that its CPU time is this process's
-                f"metaworld/{task}", None, args.demos, dataset, seed=0, horizon=HORIZON, n_threads=1
+                f"metaworld/{task}", None, args.demos, dataset, seed=0, horizon=horizon, n_threads=1
             )
         info = dataset_info(dataset)
         row["demonstrations"] = {
@@ -303,7 +314,7 @@ def run_task(task: str, args: argparse.Namespace, result: dict[str, Any], save: 
         }
         save()
     if "expert" not in row:
-        row["expert"] = expert_row(task, args.held_out)
+        row["expert"] = expert_row(task, args.held_out, horizon)
         save()
     for seed in sorted({*args.seeds, *args.sac_seeds}):
         for method in METHODS:
@@ -311,11 +322,11 @@ def run_task(task: str, args: argparse.Namespace, result: dict[str, Any], save: 
             if str(seed) in done or seed not in (args.sac_seeds if method == "sac" else args.seeds):
                 continue
             if method == "fit":
-                done[str(seed)] = fit_row(task, generator_path, dataset, seed, args)
+                done[str(seed)] = fit_row(task, generator_path, dataset, seed, horizon, args)
             elif method == "genrl":
-                done[str(seed)] = genrl_row(task, generator_path, dataset, work, seed, args)
+                done[str(seed)] = genrl_row(task, generator_path, dataset, work, seed, horizon, args)
             else:
-                done[str(seed)] = sac_row(task, dataset, seed, args)
+                done[str(seed)] = sac_row(task, dataset, seed, horizon, args)
             save()
 
 
@@ -329,7 +340,12 @@ def table(result: dict[str, Any]) -> str:
     rows = []
     for task, row in result["tasks"].items():
         expert = row.get("expert", {})
-        cells: list[Any] = [task, expert.get("closed_loop", float("nan")), expert.get("open_loop", float("nan"))]
+        cells: list[Any] = [
+            task,
+            row.get("horizon", {}).get("horizon", "-"),
+            expert.get("closed_loop", float("nan")),
+            expert.get("open_loop", float("nan")),
+        ]
         for method in METHODS:
             mean, std = over_seeds(row.get(method, {}), "success")
             cells.append(f"{mean:.3f} +- {std:.3f} ({len(row.get(method, {}))})")
@@ -337,6 +353,7 @@ def table(result: dict[str, Any]) -> str:
         rows.append(cells)
     header = [
         "task",
+        "horizon",
         "expert closed loop",
         "expert open loop",
         "fit at episode 0 (seeds)",
@@ -346,7 +363,7 @@ def table(result: dict[str, Any]) -> str:
         "GenRL CPU s",
         "SAC CPU s",
     ]
-    return markdown_table(header, rows, digits=3, align="lrrrrrrrr")
+    return markdown_table(header, rows, digits=3, align="lrrrrrrrrr")
 
 
 def main(argv: list[str] | None = None) -> int:

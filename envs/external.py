@@ -50,7 +50,7 @@ class ExternalTask:
     :param env_id: the registered Gymnasium id
     :param make_expert: makes the expert the package knows for the task (Meta-World's scripted policies); None: none
     :param horizon: the control steps of a demonstration that suit the task, which ``genrl quickstart`` records with
-        (:data:`sb3_genrl.envs.metaworld.DEMONSTRATION_HORIZON` for Meta-World); None: the env's own episode length
+        (None: the shortest at which its expert's success settles, :func:`sb3_genrl.envs.demonstrations.expert_horizon`)
     :param generator_preset: the generator preset that ``genrl quickstart`` trains for the task (None: its default)
     """
 
@@ -80,7 +80,6 @@ def resolve_task(task: str) -> ExternalTask:
             task,
             metaworld.metaworld_env_id(name),
             functools.partial(metaworld.metaworld_expert, name),
-            horizon=metaworld.DEMONSTRATION_HORIZON,
             generator_preset=metaworld.GENERATOR_PRESET,
         )
     if task in TASKS:

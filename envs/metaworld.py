@@ -40,12 +40,6 @@ from gymnasium.envs.registration import register, registry
 METAWORLD_VERSION = "3.1.1"  # the release the fixes below are written for
 INSTALL_HINT = f"Meta-World is an optional extra: pip install --no-deps metaworld=={METAWORLD_VERSION}"
 MAX_EPISODE_STEPS = 500  # Meta-World's max_path_length of every task
-# The control steps of a demonstration that genrl quickstart records (ExternalTask.horizon): most MT10 tasks' experts
-# first succeed between step 33 and 91 of their seeded resets (peg-insert-side's and door-open's as late as 176 and
-# 132), and some then drift away from the goal (push-v3's
-# expert succeeds at step 150 of every reset, at step 500 of a third of them); Meta-World judges the success at the
-# last step, so a trajectory that ends once the goal is held teaches GenRL what succeeds.
-DEMONSTRATION_HORIZON = 150
 # The generator preset genrl quickstart trains for a Meta-World task (ExternalTask.generator_preset): the Fetch tasks'
 # recipe (10 latent dimensions, beta = 0.001, the hand's path weighed in the loss: a Meta-World action moves the hand as
 # a Fetch action moves the gripper), chosen by how often its reconstructions of tuning demonstrations, replayed open

@@ -17,7 +17,7 @@ import torch
 from conftest import HANG_S
 from gymnasium import spaces
 from sb3_genrl.envs import metaworld
-from sb3_genrl.envs.demonstrations import record_demonstrations, smooth_noise
+from sb3_genrl.envs.demonstrations import expert_horizon, record_demonstrations, smooth_noise
 from sb3_genrl.envs.external import (
     HELD_OUT_RESETS,
     HELD_OUT_SEED,
@@ -340,6 +340,27 @@ def test_task_names_and_experts_resolve_or_are_refused():
             load_expert(spec)
 
 
+def test_genrl_demos_horizon_expert_records_as_long_as_the_experts_success_takes_to_settle(cli, tmp_path):
+    demos = tmp_path / "demos"
+    arguments = ("--expert", "test_external:point_expert", "--episodes", 4, "--no-progress-bar")
+    code, out, err = cli("demos", "--task", "TestExternal/PointGoal-v0", *arguments, "--horizon", "expert", "--out", demos)
+    assert code == 0, err
+    found = expert_horizon("TestExternal/PointGoal-v0", point_expert, seed=0)  # the command's seed, 0 by default
+    assert dataset_info(demos)["horizon"] == found["horizon"] < HORIZON
+    assert f"horizon: {found['horizon']} steps, where the expert's success settles" in out
+    assert f"4 demonstrations of TestExternal/PointGoal-v0 ({found['horizon']} steps)" in out
+    # refused before any work: a horizon read from an expert for replayed actions, a word other than "expert"
+    code, _, err = cli(
+        "demos", "--task", "TestExternal/PointGoal-v0", "--from", demos, "--horizon", "expert", "--out", tmp_path / "r"
+    )
+    assert code == 2 and "--horizon expert reads the horizon from an expert" in err, err
+    code, _, err = cli(
+        "demos", "--task", "TestExternal/PointGoal-v0", *arguments, "--horizon", "auto", "--out", tmp_path / "a"
+    )
+    assert code == 2 and "--horizon" in err and "auto" in err, err
+    assert not (tmp_path / "r").exists() and not (tmp_path / "a").exists()
+
+
 def test_genrl_demos_and_train_policy_take_a_task_the_package_does_not_register(cli, tmp_path):
     demos = tmp_path / "demos"
     code, out, err = cli(
@@ -471,26 +492,35 @@ def test_quickstart_of_an_outside_task_with_an_expert_reports_its_held_out_succe
     )  # fmt: skip
     code, printed, err = cli(*arguments)
     assert code == 0, err
+    # No horizon given: the shortest at which the expert's success settles, found before the demonstrations, recorded
+    # and used by every stage. The point expert needs at most 12 of the env's 20 steps (the horizon's own tests:
+    # test_horizon.py).
+    found = json.loads((out / "horizon.json").read_text())
+    horizon = found["horizon"]
+    assert found["settled"] and found["best"] == 1.0 and found["expert"] == "test_external:point_expert"
+    assert horizon == expert_horizon(task, point_expert)["horizon"] < HORIZON and f"horizon: {horizon} steps" in printed
     info = dataset_info(out / "demonstrations")
-    assert info["episodes"] == 8 and info["horizon"] == HORIZON and info["expert"] == "test_external:point_expert"
+    assert info["episodes"] == 8 and info["horizon"] == horizon and info["expert"] == "test_external:point_expert"
     policy = json.loads((out / "policy" / "summary.json").read_text())
-    assert policy["task"] == "TestExternal/PointGoal-v0" and policy["episodes"] == 64 and policy["horizon"] == HORIZON
+    assert policy["task"] == "TestExternal/PointGoal-v0" and policy["episodes"] == 64 and policy["horizon"] == horizon
     # The held-out success is the saved policy's, played again here on the documented reset seeds 2**31, 2**31 + 1, ...
     summary = json.loads((out / "summary.json").read_text())
     model = GenRL.load(out / "policy" / "genrl_policy.zip", device="cpu")
-    played = evaluate_success(model, task, resets=HELD_OUT_RESETS)
+    played = evaluate_success(model, task, resets=HELD_OUT_RESETS, horizon=horizon)
     assert summary["held_out_success"] == played["success_rate"] and summary["held_out_resets"] == HELD_OUT_RESETS == 200
     assert summary["held_out_seeds"] == [HELD_OUT_SEED, HELD_OUT_SEED + 200] and HELD_OUT_SEED == 2**31
     assert max(info["reset_seeds"]) < HELD_OUT_SEED  # no demonstration starts from a held-out reset
     report = (out / "report.md").read_text()
-    assert f"8 perturbed episodes of the expert `test_external:point_expert`, {HORIZON} steps each" in report
+    assert f"8 perturbed episodes of the expert `test_external:point_expert`, {horizon} steps each" in report
     assert f"200 held-out seeded resets (reset seeds {2**31} to {2**31 + 199}" in report
     assert f"deterministic: **{summary['held_out_success']:.1%}**" in report
-    # A rerun resumes without work; one with another horizon is refused before any, naming it.
+    # A rerun resumes without work (the horizon read back, not searched again); one with another horizon is refused
+    # before any, naming it.
     code, printed, err = cli(*arguments)
     assert code == 0 and all(f"{stage}: already there" in printed for stage in ("demonstrations", "generator", "policy"))
-    code, _, err = cli(*arguments, "--horizon", 12)
-    assert code == 2 and f"horizon {HORIZON} (recorded) vs 12 (this run)" in err, err
+    assert "horizon:" not in printed
+    code, _, err = cli(*arguments, "--horizon", horizon + 1)
+    assert code == 2 and f"horizon {horizon} (recorded) vs {horizon + 1} (this run)" in err, err
 
 
 def test_quickstart_refuses_an_expert_for_a_package_task_and_an_outside_task_without_one(cli, tmp_path):
@@ -510,16 +540,18 @@ def test_quickstart_refuses_an_expert_for_a_package_task_and_an_outside_task_wit
 @pytest.mark.skipif(not metaworld.installed(), reason=metaworld.INSTALL_HINT)
 def test_quickstart_of_a_metaworld_task_writes_its_report_and_a_policy_that_loads(cli, tmp_path, monkeypatch):
     out = tmp_path / "quick"
-    # 8 held-out resets instead of 200 (each a 150-step Meta-World episode): the count is the point env's test's
+    # 8 held-out resets instead of 200 (each a Meta-World episode of up to 500 steps): the count is the point env's test's
     monkeypatch.setattr("sb3_genrl.study.quickstart.HELD_OUT_RESETS", 8)
     code, printed, err = cli(
         "quickstart", "--task", "metaworld/reach-v3", "--out", out, "--demo-episodes", 4, "--epochs", 2,
         "--episodes", 64, "--no-progress-bar", "--device", "cpu",
     )  # fmt: skip
     assert code == 0, err
-    # Meta-World's defaults: 150-step demonstrations of its scripted expert, and its generator preset
+    # Meta-World's defaults: demonstrations of its scripted expert as long as its success takes to settle (reach-v3's
+    # within 100 of the env's 500 steps), and its generator preset
     info = dataset_info(out / "demonstrations")
-    assert info["horizon"] == metaworld.DEMONSTRATION_HORIZON == 150 and info["expert"].endswith(":MetaWorldExpert")
+    horizon = json.loads((out / "horizon.json").read_text())["horizon"]
+    assert info["horizon"] == horizon < 100 and info["expert"].endswith(":MetaWorldExpert")
     assert json.loads((out / "vae.stage.json").read_text())["preset"] == metaworld.GENERATOR_PRESET
     summary = json.loads((out / "summary.json").read_text())
     success = [key for key in summary if "success" in key]
@@ -527,10 +559,10 @@ def test_quickstart_of_a_metaworld_task_writes_its_report_and_a_policy_that_load
     assert f"**{summary['held_out_success']:.1%}**" in (out / "report.md").read_text()
     assert f"held-out seeded resets is {summary['held_out_success']:.1%}" in printed and summary["held_out_resets"] == 8
     model = GenRL.load(out / "policy" / "genrl_policy.zip", device="cpu")
-    env = make_task_env("metaworld/reach-v3", horizon=150)
+    env = make_task_env("metaworld/reach-v3", horizon=horizon)
     context, _ = env.reset(seed=0)
     action, _ = model.predict(context, deterministic=True)
-    assert action.shape == (model.generator.latent_dim,) and model.generator.horizon == 150
+    assert action.shape == (model.generator.latent_dim,) and model.generator.horizon == horizon
 
 
 def test_genrl_evaluate_takes_an_outside_task_and_plays_its_prior_rollout_as_long_as_the_data(cli, tmp_path):

@@ -9,6 +9,8 @@
   open-loop success of the expert, of a generator's reconstructions and of a policy.
 - :mod:`sb3_genrl.envs.demonstrations.recorder`: any episodic Gymnasium env with an expert callable, recorded closed
   loop with smooth perturbations and kept when its open-loop replay succeeds (:func:`record_demonstrations`).
+- :mod:`sb3_genrl.envs.demonstrations.horizon`: the horizon a task's demonstrations need, the shortest at which its
+  expert's success settles (:func:`expert_horizon`).
 - :mod:`sb3_genrl.envs.demonstrations.replay`: any episodic Gymnasium env with a dataset of actions and their reset
   seeds (Minari, or arrays), each episode kept when its open-loop replay succeeds (:func:`replay_demonstrations`).
 
@@ -24,6 +26,7 @@ from sb3_genrl.envs.demonstrations.arm import (
     within_limits,
 )
 from sb3_genrl.envs.demonstrations.fetch import expert_success, make_arrays, play_expert
+from sb3_genrl.envs.demonstrations.horizon import expert_horizon
 from sb3_genrl.envs.demonstrations.recorder import (
     BUMP_DURATIONS,
     DEFAULT_NOISE,
@@ -39,6 +42,7 @@ from sb3_genrl.envs.demonstrations.replay import read_replay_source, replay_demo
 __all__ = [
     "BUMP_DURATIONS",
     "DEFAULT_NOISE",
+    "expert_horizon",
     "expert_name",
     "expert_success",
     "is_valid",

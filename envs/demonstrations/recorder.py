@@ -159,13 +159,7 @@ def record_demonstrations(
     :return: the dataset directory
     """
     name = task_name(task)
-    if expert is None:
-        make_expert = None if callable(task) else resolve_task(task).make_expert
-        if make_expert is None:
-            raise ValueError(f"task {name!r} has no expert of the package's: give expert= (observation -> action)")
-        expert = make_expert()
-    if not callable(expert):
-        raise ValueError(f"expert must be a callable observation -> action, got {type(expert).__name__}")
+    expert = task_expert(task, expert)
     check_positive_int(episodes, "episodes")
     check_seed(seed)
     check_success_key(success_key)
@@ -205,6 +199,21 @@ def record_demonstrations(
         )
     env.close()
     return path
+
+
+def task_expert(task: str | Callable[[], gym.Env], expert: Callable[[Any], np.ndarray] | None) -> Callable[[Any], Any]:
+    """``expert``, or the task's own where it is None (``metaworld/<name>``'s scripted policy), checked callable.
+
+    :raises ValueError: naming the task when it has no expert of the package's, or the type of a non-callable expert
+    """
+    if expert is None:
+        make_expert = None if callable(task) else resolve_task(task).make_expert
+        if make_expert is None:
+            raise ValueError(f"task {task_name(task)!r} has no expert of the package's: give expert= (observation -> action)")
+        expert = make_expert()
+    if not callable(expert):
+        raise ValueError(f"expert must be a callable observation -> action, got {type(expert).__name__}")
+    return expert
 
 
 def write_demonstrations(

@@ -14,9 +14,17 @@ from typing import Any
 
 from sb3_genrl.baselines.compare import compare_runs
 from sb3_genrl.baselines.train import train_baseline
+from sb3_genrl.checks import check_output_dir
 from sb3_genrl.data import dataset_info, load_trajectories
 from sb3_genrl.envs import TASKS, get_task
-from sb3_genrl.envs.demonstrations import DEFAULT_NOISE, make_demonstrations, record_demonstrations, replay_demonstrations
+from sb3_genrl.envs.demonstrations import (
+    DEFAULT_NOISE,
+    expert_horizon,
+    make_demonstrations,
+    record_demonstrations,
+    refuse_existing_output,
+    replay_demonstrations,
+)
 from sb3_genrl.envs.external import make_task_env, resolve_task
 from sb3_genrl.generative import train_generator
 from sb3_genrl.genrl import check_genrl_settings
@@ -37,6 +45,7 @@ def play_command(args: argparse.Namespace) -> int:
 
 
 DEMONSTRATIONS = 40000  # genrl demos' default count, the paper's
+EXPERT_HORIZON = "expert"  # genrl demos --horizon expert: the shortest at which the expert's success settles
 
 
 def demos_command(args: argparse.Namespace) -> int:
@@ -72,6 +81,16 @@ def _expert_demos(args: argparse.Namespace) -> int:
     if args.expert is None and resolve_task(args.task).make_expert is None:
         raise ValueError(f"task {args.task!r} is not one of the package's: give its expert as --expert MODULE:FUNCTION")
     began = time.perf_counter()
+    if args.horizon == EXPERT_HORIZON:
+        check_output_dir(args.out, "out")
+        refuse_existing_output(Path(args.out))
+        found = expert_horizon(args.task, args.expert, seed=args.seed, success_key=args.success_key or "is_success")
+        args.horizon = found["horizon"]
+        print(
+            f"horizon: {found['horizon']} steps, where the expert's success settles ({found['success']:.2f} of "
+            f"{found['resets']} seeded resets{'' if found['settled'] else '; it never settles: the env own length'}; "
+            f"best {found['best']:.2f} at step {found['best_step']})"
+        )
     path = record_demonstrations(
         args.task,
         args.expert,
@@ -95,6 +114,8 @@ def _expert_demos(args: argparse.Namespace) -> int:
 
 def _replayed_demos(args: argparse.Namespace) -> int:
     """``genrl demos --from`` a dataset of actions (:func:`sb3_genrl.envs.demonstrations.replay_demonstrations`)."""
+    if args.horizon == EXPERT_HORIZON:
+        raise ValueError(f"--horizon {EXPERT_HORIZON} reads the horizon from an expert; --from replays a dataset's actions")
     given = [option for option in ("expert", "noise", "threads") if getattr(args, option) is not None]
     if given:
         raise ValueError(

@@ -146,9 +146,10 @@ def add_demos(sub: argparse._SubParsersAction) -> None:
     )
     demos.add_argument(
         "--horizon",
-        type=COUNT,
+        type=_horizon_or_expert,
         default=None,
-        help="with an expert or --from: control steps of a demonstration (default: the env's)",
+        help="with an expert or --from: control steps of a demonstration (default: the env's); with an expert, 'expert': "
+        "the shortest at which its success settles on 100 seeded resets",
     )
     demos.add_argument(
         "--success-key",
@@ -439,7 +440,7 @@ def add_quickstart(sub: argparse._SubParsersAction) -> None:
         type=COUNT,
         default=None,
         help="a task from outside the package: control steps of a demonstration and of GenRL's episodes (default: the "
-        "task's, 150 for Meta-World; else the env's own)",
+        "task's; else the shortest at which the expert's success settles, written to horizon.json)",
     )
     quick.add_argument(
         "--demo-episodes",
@@ -479,3 +480,8 @@ def add_study(sub: argparse._SubParsersAction) -> None:
     study.add_argument("--models", nargs="+", choices=MODELS, default=None, help="a subset of VAE1..GAN9 (default all)")
     _device_option(study)
     study.set_defaults(func=commands.study_command)
+
+
+def _horizon_or_expert(value: str) -> int | str:
+    """``genrl demos --horizon``: a positive count of steps, or ``expert`` (found from the expert's success)."""
+    return value if value == "expert" else COUNT(value)

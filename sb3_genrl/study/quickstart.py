@@ -35,7 +35,13 @@ from sb3_genrl.checks import (
 from sb3_genrl.data import dataset_info
 from sb3_genrl.data.fingerprints import dataset_fingerprint, file_fingerprint
 from sb3_genrl.envs import TASKS, get_task
-from sb3_genrl.envs.demonstrations import DEFAULT_NOISE, expert_name, make_demonstrations, record_demonstrations
+from sb3_genrl.envs.demonstrations import (
+    DEFAULT_NOISE,
+    expert_horizon,
+    expert_name,
+    make_demonstrations,
+    record_demonstrations,
+)
 from sb3_genrl.envs.external import HELD_OUT_RESETS, ExternalTask, evaluate_success, resolve_task, task_horizon
 from sb3_genrl.generative import load, train_generator
 from sb3_genrl.genrl import GenRL
@@ -65,7 +71,7 @@ OUTSIDE_TASK_KWARGS: dict[str, Any] = {
 # The generator stage's defaults (also the generator of the rl-zoo3 runs, sb3_genrl.zoo.generators)
 DEMO_EPISODES, GENERATOR_EPOCHS, GENERATOR_EVAL_EVERY = 4000, 300, 10
 # A task from outside the package records its demonstrations through its env's step path, closed loop and replayed
-# open loop (a Meta-World push-v3 episode of 150 steps: about 0.2 s of CPU each), so it records fewer by default. On
+# open loop (a Meta-World push-v3 episode of 89 steps: about 0.1 s of CPU each), so it records fewer by default. On
 # push-v3, 1000 against 500 lift the fitted start from 0.76 to 0.91 and the search from 0.94 to 0.96 (tuning resets),
 # for about 110 s more of recording (docs/guide/your_task.md).
 OUTSIDE_DEMO_EPISODES = 1000
@@ -76,6 +82,8 @@ QUICKSTART_ENVS = 2
 # Precision and recall with k = 3 neighbours need more than 3 samples in each set: the demonstrations, at least 4
 MIN_DEMO_EPISODES = 4
 VIDEO = {"goals": 4, "width": 320, "height": 240, "fps": 20}
+# An outside task's horizon, as the expert's success settles (expert_horizon), kept for a rerun
+HORIZON_FILE = "horizon.json"
 
 
 def quickstart(
@@ -129,8 +137,9 @@ def quickstart(
     :param expert: a task from outside the package: its expert, observation -> action (None: the task's own, such as
         Meta-World's scripted policies); a task of the package's takes none
     :param horizon: a task from outside the package: the control steps of a demonstration and of GenRL's episodes
-        (None: the task's, :attr:`~sb3_genrl.envs.external.ExternalTask.horizon`, 150 for Meta-World; else the env's
-        own episode length)
+        (None: the task's, :attr:`~sb3_genrl.envs.external.ExternalTask.horizon`, where it has one; else the shortest
+        at which the expert's success settles, :func:`~sb3_genrl.envs.demonstrations.expert_horizon`, written to
+        ``horizon.json``)
     :return: the report's path
     """
     outside = _outside_task(task, expert, horizon)
@@ -140,7 +149,7 @@ def quickstart(
     else:
         episodes, batch_episodes, genrl_kwargs = outside_task_settings(outside)
         expert = expert if expert is not None else outside.make_expert()
-        horizon = _outside_horizon(outside, horizon)
+        horizon, horizon_record = _outside_horizon(outside, horizon, expert, pathlib.Path(out_dir), seed, log)
         video = False  # the video renders the package's arm tasks
     policy_episodes = episodes if policy_episodes is None else policy_episodes
     if demo_episodes is None:
@@ -177,6 +186,8 @@ def quickstart(
                 for line in settings_conflicts(*_recorded(out, name), wanted, output_exists=_done(out, name))
             ],
         )
+        if outside is not None and horizon_record is not None:
+            atomic_write_json(out / HORIZON_FILE, horizon_record)
         log = log or (lambda _line: None)
         timings = _run_stages(out, settings, device, progress_bar, log, expert)
         return _write_report(out, task, seed, video, timings, log, horizon if outside is not None else None)
@@ -201,14 +212,42 @@ def _outside_task(task: str, expert: Callable[[Any], Any] | None, horizon: int |
     return outside
 
 
-def _outside_horizon(task: ExternalTask, horizon: int | None) -> int:
-    """The control steps of an outside task's demonstrations: ``horizon``, else the task's, else the env's own (checked
-    against the env by :func:`~sb3_genrl.envs.external.task_horizon`)."""
-    env = gym.make(task.env_id)
-    try:
-        return task_horizon(env, horizon if horizon is not None else task.horizon, task.name)
-    finally:
-        env.close()
+def _outside_horizon(
+    task: ExternalTask,
+    horizon: int | None,
+    expert: Callable[[Any], Any],
+    out: pathlib.Path,
+    seed: int,
+    log: Callable[[str], None] | None,
+) -> tuple[int, dict[str, Any] | None]:
+    """The control steps of an outside task's demonstrations: ``horizon``, else the task's, else the shortest at which
+    the expert's success settles (:func:`~sb3_genrl.envs.demonstrations.expert_horizon` from the quickstart's seed,
+    read from ``out/horizon.json`` on a rerun with the same expert and seed); a given horizon is checked against the
+    env (:func:`~sb3_genrl.envs.external.task_horizon`).
+
+    :return: the horizon, and the record to write to ``horizon.json`` once the folder is the run's (None: nothing new)
+    """
+    if horizon is not None or task.horizon is not None:
+        env = gym.make(task.env_id)
+        try:
+            return task_horizon(env, horizon if horizon is not None else task.horizon, task.name), None
+        finally:
+            env.close()
+    made_with = {"task": task.name, "expert": expert_name(expert), "seed": seed}
+    path = out / HORIZON_FILE
+    recorded = json.loads(path.read_text()) if path.is_file() else None
+    if recorded is not None and {key: recorded.get(key) for key in made_with} == made_with:
+        return int(recorded["horizon"]), None
+    began = time.perf_counter()
+    found = expert_horizon(task.name, expert, seed=seed)
+    seconds = time.perf_counter() - began
+    if log is not None:
+        log(
+            f"horizon: {found['horizon']} steps, where the expert's success settles ({found['success']:.2f} of "
+            f"{found['resets']} seeded resets; {seconds:.0f} s)"
+        )
+    record = made_with | {key: value for key, value in found.items() if key != "seed"} | {"seconds": seconds}
+    return int(found["horizon"]), record
 
 
 def outside_task_settings(task: ExternalTask) -> tuple[int, int, dict[str, Any]]:
@@ -441,6 +480,9 @@ def _write_report(
     """``report.md`` and ``summary.json`` (the held-out score as a number), with every number read from what the
     stages recorded (``horizon``: a task from outside the package, played for that many steps)."""
     dataset = out / "demonstrations"
+    found = json.loads((out / HORIZON_FILE).read_text()) if horizon is not None and (out / HORIZON_FILE).is_file() else None
+    if found is not None:  # an outside task's horizon, found from its expert before the demonstrations
+        timings = {"horizon": found["seconds"], **timings}
     summary = json.loads((out / "policy" / "summary.json").read_text())
     measures = json.loads((out / "evaluation" / "results.json").read_text())
     generator_settings = read_settings(out / _RECORDS["generator"])
@@ -452,7 +494,7 @@ def _write_report(
     lines = [
         f"# GenRL quickstart: {task}",
         "",
-        _demonstrations_line(dataset),
+        _demonstrations_line(dataset) + ("" if found is None else " " + _horizon_sentence(found)),
         f"2. **Generator**: beta-VAE (preset {generator_settings['preset']}: N_alpha = {generator.latent_dim}, "
         f"beta = {generator.beta}), {generator_settings['epochs']} epochs, "
         f"best checkpoint at epoch {generator.best_epoch}.",
@@ -486,6 +528,17 @@ def _write_report(
     )
     log(f"GenRL on {task}: {score_line}")
     return report
+
+
+def _horizon_sentence(found: dict[str, Any]) -> str:
+    """The report's words on an outside task's horizon found from its expert (``horizon.json``)."""
+    where = (
+        f"the shortest at which the expert's success settles ({found['success']:.2f} of {found['resets']} seeded resets"
+        if found["settled"]
+        else f"the env's own length: the expert's success never settles ({found['success']:.2f} of {found['resets']} "
+        "seeded resets at the last step"
+    )
+    return f"The horizon, {found['horizon']} steps, is {where}; its best {found['best']:.2f} at step {found['best_step']})."
 
 
 def _demonstrations_line(dataset: pathlib.Path) -> str:

@@ -1,0 +1,120 @@
+"""The horizon of a task's demonstrations, read from its expert: the fewest control steps after which the expert's
+success has settled.
+
+GenRL reads an episode's success at its last step, and an env's own episode length is rarely the length its task
+needs: a Meta-World episode lasts 500 steps, where its scripted expert has pushed the puck to the goal within 100, and
+an expert that keeps acting after its task is done can undo it (push-v3's expert pushes on past the goal: on 100
+tuning resets its success at the last step is 0.99 at step 100, 0.96 at step 150 and 0.57 at step 500). Every step
+past the need costs simulation in the recording, in GenRL's search and in the evaluation.
+
+:func:`expert_horizon` plays the expert unperturbed and closed loop from seeded resets (drawn below ``2**31``, as the
+recorder draws its own, so never one of the held-out resets), reads its success at every step, and returns the
+shortest horizon at which that success is within ``tolerance`` of its best and has stayed there for the last
+``settled_share`` of the horizon: a margin for perturbed or reconstructed trajectories that reach the goal a little
+later than the expert.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from sb3_genrl.envs.demonstrations.recorder import _expert_action, _probe, _reset_seed, task_expert
+from sb3_genrl.envs.external import task_env_and_horizon, task_name
+
+from sb3_genrl.checks import check_non_negative_float, check_positive_int, check_seed
+
+HORIZON_RESETS = 100  # seeded resets the expert plays to find the horizon
+HORIZON_TOLERANCE = 0.02  # about twice the standard error of a success near 0.99 over 100 resets
+SETTLED_SHARE = 0.2  # the success must have held for the last fifth of the horizon
+# The stream of random draws of the resets (np.random.default_rng([seed, HORIZON_STREAM, i])): apart from the
+# recorder's episodes (default_rng([seed, k])), so that the probe's resets are not the demonstrations' own
+HORIZON_STREAM = 2**32 - 1
+
+
+def expert_horizon(
+    task: str | Callable[[], gym.Env],
+    expert: Callable[[Any], np.ndarray] | None = None,
+    *,
+    resets: int = HORIZON_RESETS,
+    seed: int = 0,
+    max_steps: int | None = None,
+    success_key: str = "is_success",
+    tolerance: float = HORIZON_TOLERANCE,
+    settled_share: float = SETTLED_SHARE,
+) -> dict[str, Any]:
+    """The shortest horizon at which the expert's success has settled (see the module's description).
+
+    :param task: a task name (:func:`~sb3_genrl.envs.external.resolve_task`) or a callable that makes the env
+    :param expert: observation -> action; None: the task's own expert (``metaworld/<name>``)
+    :param resets: seeded resets the expert plays
+    :param seed: seed of the resets' draws
+    :param max_steps: the longest horizon considered (None: the env's ``max_episode_steps``)
+    :param success_key: the info key of the env's success
+    :param tolerance: how far below its best (a share of the resets) the success may be
+    :param settled_share: the share of the horizon, at its end, over which the success must have been within
+        ``tolerance`` of its best
+    :return: ``horizon`` (``max_steps`` where the success never settles, with ``settled`` False), ``success`` (the
+        expert's success at the last step of that horizon), ``best`` (its best
+        over the steps) and ``best_step`` (the first step where it is reached), ``max_steps``, ``resets``, ``seed`` and
+        ``success_by_step`` (the success at the end of each horizon ``1..max_steps``)
+    :raises ValueError: when the expert succeeds on none of the resets at any step
+    """
+    name = task_name(task)
+    expert = task_expert(task, expert)
+    check_positive_int(resets, "resets")
+    check_seed(seed)
+    tolerance = check_non_negative_float(tolerance, "tolerance")
+    settled_share = check_non_negative_float(settled_share, "settled_share")
+    if settled_share >= 1.0:
+        raise ValueError(f"settled_share must be below 1, got {settled_share}")
+    env, steps = task_env_and_horizon(task, max_steps, success_key)
+    seeds = [_reset_seed(np.random.default_rng([seed, HORIZON_STREAM, i])) for i in range(resets)]
+    _probe(env, expert, seeds[0], success_key, name)
+    successes = np.array([_successes(env, expert, reset_seed, steps) for reset_seed in seeds])
+    env.close()
+    by_step = successes.mean(axis=0)
+    best = float(by_step.max())
+    if best == 0.0:
+        raise ValueError(
+            f"{name}: the expert succeeded on none of {resets} seeded resets within {steps} steps, so no horizon suits "
+            "it: check the expert and the success key, or give a longer max_steps"
+        )
+    near = by_step >= best - tolerance - 1e-12
+    settled = [h for h in range(1, steps + 1) if near[_settled_from(h, settled_share) - 1 : h].all()]
+    horizon = settled[0] if settled else steps
+    return {
+        "horizon": horizon,
+        "settled": bool(settled),
+        "success": float(by_step[horizon - 1]),
+        "best": best,
+        "best_step": int(np.argmax(by_step)) + 1,
+        "max_steps": steps,
+        "resets": resets,
+        "seed": seed,
+        "success_by_step": by_step.tolist(),
+    }
+
+
+def _settled_from(horizon: int, settled_share: float) -> int:
+    """The first step of the window, at the end of ``horizon``, over which the success must have settled."""
+    return max(1, math.ceil((1.0 - settled_share) * horizon))
+
+
+def _successes(env: gym.Env, expert: Callable[[Any], np.ndarray], reset_seed: int, steps: int) -> np.ndarray:
+    """``(steps,)``: whether the expert, closed loop from ``reset(seed=reset_seed)``, succeeds at each step (an episode
+    that ends early keeps its last step's success for the steps after it)."""
+    space = env.action_space
+    observation, _ = env.reset(seed=int(reset_seed))
+    success = np.zeros(steps, dtype=bool)
+    for t in range(steps):
+        action = np.clip(_expert_action(expert, observation, space), space.low, space.high).astype(space.dtype)
+        observation, _, terminated, truncated, info = env.step(action)
+        success[t] = bool(info.get("is_success", False))
+        if terminated or truncated:
+            success[t + 1 :] = success[t]
+            break
+    return success
