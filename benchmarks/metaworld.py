@@ -11,7 +11,8 @@ and a rerun with others is refused before any work):
 2. a generator of the quickstart's Meta-World preset (:data:`sb3_genrl.envs.metaworld.GENERATOR_PRESET`), ``--epochs``,
    seed 0;
 3. the expert closed loop, unperturbed, from the held-out resets, and its actions replayed open loop from the same
-   resets;
+   resets; then what the generator can reproduce: the first 200 demonstrations encoded to their latent codes, decoded
+   and replayed open loop from their own resets (the share that succeeds);
 4. per seed, the fit to the demonstrations at episode 0: GenRL's policy mean fitted to the demonstrations' latent codes
    (:class:`~sb3_genrl.genrl.demonstrations.DemonstrationCallback`'s fit, ``--fit-steps`` Adam steps), before any
    episode is played;
@@ -70,6 +71,7 @@ from sb3_genrl.utils import FolderInUseError, atomic_write_json, atomic_write_te
 
 RESULTS = Path(__file__).resolve().parent / "results"
 METHODS = ("fit", "genrl", "sac")  # the per-seed units, in the order they run
+RECONSTRUCTIONS = 200  # demonstrations the generator's reconstructions are replayed from
 COMPLETE_SEEDS, COMPLETE_SAC_SEEDS = (0, 1, 2), (0,)  # the seeds of a complete result (the defaults)
 
 
@@ -189,6 +191,29 @@ def expert_row(task: str, held_out: int, horizon: int) -> dict[str, Any]:
     return {
         "closed_loop": float(np.mean(closed)),
         "open_loop": float(np.mean(opened)),
+        "cpu_seconds": round(time.process_time() - began, 1),
+    }
+
+
+def reconstruction_row(task: str, generator_path: Path, dataset: Path, horizon: int, count: int) -> dict[str, Any]:
+    """What the generator can reproduce: the first ``count`` demonstrations encoded to their latent codes (the
+    posterior means, clipped to GenRL's latent box, as the fit at episode 0 takes them), decoded and replayed open
+    loop from each one's own seeded reset; the share that succeeds."""
+    began = time.process_time()
+    generator = load(generator_path, device="cpu")
+    env = LatentActionWrapper(make_task_env(f"metaworld/{task}", horizon=horizon), generator)
+    demonstrations = DemonstrationCallback(dataset, fit_steps=1, keep=False)
+    _, latents = demonstrations.pulls(generator, env.observation_space, env.latent_clip)
+    seeds = dataset_info(dataset)["reset_seeds"]
+    successes = []
+    for latent, reset_seed in zip(latents[:count].numpy(), seeds[:count], strict=False):
+        env.reset(seed=int(reset_seed))
+        _, _, _, _, info = env.step(latent)
+        successes.append(bool(info.get("is_success", False)))
+    env.close()
+    return {
+        "success": float(np.mean(successes)),
+        "demonstrations": len(successes),
         "cpu_seconds": round(time.process_time() - began, 1),
     }
 
@@ -316,6 +341,9 @@ def run_task(task: str, args: argparse.Namespace, result: dict[str, Any], save: 
     if "expert" not in row:
         row["expert"] = expert_row(task, args.held_out, horizon)
         save()
+    if "reconstruction" not in row:
+        row["reconstruction"] = reconstruction_row(task, generator_path, dataset, horizon, RECONSTRUCTIONS)
+        save()
     for seed in sorted({*args.seeds, *args.sac_seeds}):
         for method in METHODS:
             done = row.setdefault(method, {})
@@ -345,6 +373,7 @@ def table(result: dict[str, Any]) -> str:
             row.get("horizon", {}).get("horizon", "-"),
             expert.get("closed_loop", float("nan")),
             expert.get("open_loop", float("nan")),
+            row.get("reconstruction", {}).get("success", float("nan")),
         ]
         for method in METHODS:
             mean, std = over_seeds(row.get(method, {}), "success")
@@ -356,6 +385,7 @@ def table(result: dict[str, Any]) -> str:
         "horizon",
         "expert closed loop",
         "expert open loop",
+        "generator's reconstructions",
         "fit at episode 0 (seeds)",
         "GenRL (seeds)",
         "SAC + demonstrations (seeds)",
@@ -363,7 +393,7 @@ def table(result: dict[str, Any]) -> str:
         "GenRL CPU s",
         "SAC CPU s",
     ]
-    return markdown_table(header, rows, digits=3, align="lrrrrrrrrr")
+    return markdown_table(header, rows, digits=3, align="lrrrrrrrrrr")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -414,7 +444,10 @@ def _write(out: Path, result: dict[str, Any]) -> None:
     """The result JSON (with its provenance and whether every unit of MT10 is done) and its table."""
     result["provenance"] = provenance()
     result["complete"] = all(
-        all(key in result["tasks"].get(task, {}) for key in ("demonstrations", "generator", "expert"))
+        all(
+            key in result["tasks"].get(task, {})
+            for key in ("horizon", "demonstrations", "generator", "expert", "reconstruction")
+        )
         and all(
             str(seed) in result["tasks"][task].get(method, {})
             for method in METHODS

@@ -29,6 +29,7 @@ def test_the_metaworld_benchmark_writes_every_unit_resumes_and_refuses_other_set
     assert row["genrl"]["0"]["episodes"] == 4 and row["sac"]["0"]["episodes"] == 4
     # the horizon found from the expert, as the quickstart finds it, and the expert scored at it
     assert row["horizon"]["settled"] and row["horizon"]["horizon"] < 100 and row["horizon"]["resets"] == 100
+    assert row["reconstruction"]["demonstrations"] == 4 and 0.0 <= row["reconstruction"]["success"] <= 1.0
     assert f"| reach-v3 | {row['horizon']['horizon']} | 1.000 | 1.000 |" in out.with_suffix(".md").read_text()
     # the same command again: nothing redone
     stamps = {path: path.stat().st_mtime_ns for path in (work / "reach-v3").rglob("*") if path.is_file()}
