@@ -2,6 +2,7 @@
 package does not ship (sb3_genrl.envs.demonstrations.recorder), kept only when their open-loop replay succeeds, a
 generator trained on them and a GenRL policy trained through the public path."""
 
+import functools
 import json
 import os
 import re
@@ -542,6 +543,8 @@ def test_quickstart_of_a_metaworld_task_writes_its_report_and_a_policy_that_load
     out = tmp_path / "quick"
     # 8 held-out resets instead of 200 (each a Meta-World episode of up to 500 steps): the count is the point env's test's
     monkeypatch.setattr("sb3_genrl.study.quickstart.HELD_OUT_RESETS", 8)
+    # and the horizon found from 8 of the expert's seeded resets instead of 100 (each an episode of 500 steps)
+    monkeypatch.setattr("sb3_genrl.study.quickstart.expert_horizon", functools.partial(expert_horizon, resets=8))
     code, printed, err = cli(
         "quickstart", "--task", "metaworld/reach-v3", "--out", out, "--demo-episodes", 4, "--epochs", 2,
         "--episodes", 64, "--no-progress-bar", "--device", "cpu",
@@ -550,8 +553,9 @@ def test_quickstart_of_a_metaworld_task_writes_its_report_and_a_policy_that_load
     # Meta-World's defaults: demonstrations of its scripted expert as long as its success takes to settle (reach-v3's
     # within 100 of the env's 500 steps), and its generator preset
     info = dataset_info(out / "demonstrations")
-    horizon = json.loads((out / "horizon.json").read_text())["horizon"]
-    assert info["horizon"] == horizon < 100 and info["expert"].endswith(":MetaWorldExpert")
+    found = json.loads((out / "horizon.json").read_text())
+    horizon = found["horizon"]
+    assert info["horizon"] == horizon < 100 and found["resets"] == 8 and info["expert"].endswith(":MetaWorldExpert")
     assert json.loads((out / "vae.stage.json").read_text())["preset"] == metaworld.GENERATOR_PRESET
     summary = json.loads((out / "summary.json").read_text())
     success = [key for key in summary if "success" in key]
