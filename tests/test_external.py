@@ -483,6 +483,12 @@ def test_train_policy_truncates_the_env_to_the_demonstrations_horizon(cli, tmp_p
     env.reset(seed=0)
     _, _, _, _, info = env.step(np.zeros(generator.latent_dim, dtype=np.float32))
     assert (info["steps_played"], info["hold_steps"], info["ended"]) == (12, 0, True)
+    # without --horizon, the demonstrations' own: the same run
+    code, _, err = cli("train-policy", "--task", "TestExternal/PointGoal-v0", *arguments, "--out", tmp_path / "d")
+    assert code == 0, err
+    assert json.loads((tmp_path / "d" / "summary.json").read_text())["horizon"] == 12
+    same, given = (GenRL.load(tmp_path / run / "genrl_policy.zip", device="cpu").policy for run in ("d", "p"))
+    assert all(torch.equal(a, b) for a, b in zip(same.state_dict().values(), given.state_dict().values(), strict=True))
 
 
 def test_quickstart_of_an_outside_task_with_an_expert_reports_its_held_out_success(cli, tmp_path):

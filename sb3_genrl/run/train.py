@@ -39,6 +39,7 @@ from sb3_genrl.curves import (
     training_logger,
     write_learning_curve,
 )
+from sb3_genrl.data import dataset_info
 from sb3_genrl.data.fingerprints import dataset_fingerprint
 from sb3_genrl.envs import TASKS, get_task
 from sb3_genrl.envs.external import SuccessInfo, check_success_key
@@ -150,7 +151,8 @@ def train_policy(
         :func:`~sb3_genrl.genrl.demonstrations.build_callbacks`), built and checked before any work
     :param horizon: the env's episodes truncated to this many steps (``max_episode_steps`` of ``gymnasium.make``): an
         outside task's demonstrations recorded with a ``horizon`` shorter than its own (see
-        :func:`sb3_genrl.envs.external.record_demonstrations`); None: the env's own episode length
+        :func:`sb3_genrl.envs.demonstrations.record_demonstrations`); None: for a task from outside the package given
+        ``demonstrations`` (a dataset folder), the horizon they were recorded with, else the env's own episode length
     :param success_key: the info key of the env's success, copied to ``info["is_success"]`` for the Monitor's success
         and the refits (:class:`~sb3_genrl.envs.external.SuccessInfo`); default: a task from outside the package
         reads ``is_success``, falling back to ``success`` (the package's tasks report ``is_success`` themselves)
@@ -159,6 +161,8 @@ def train_policy(
         ``best_mean_reward``, ``genrl_settings``: every GenRL hyperparameter in effect, see :func:`genrl_settings`)
     """
     env_id, task_name = _resolve_env_id(task)
+    if horizon is None and task_name not in TASKS and demonstrations is not None and pathlib.Path(demonstrations).is_dir():
+        horizon = dataset_info(demonstrations).get("horizon")  # the episodes end where the recorded ones did
     _check_arguments(
         episodes, batch_episodes, n_envs, seed, device, checkpoint_every, n_threads, {"e_step": e_step, **genrl_kwargs}
     )
