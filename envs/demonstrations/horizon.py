@@ -11,7 +11,8 @@ past the need costs simulation in the recording, in GenRL's search and in the ev
 recorder draws its own, so never one of the held-out resets), reads its success at every step, and returns the
 shortest horizon at which that success is within ``tolerance`` of its best and has stayed there for the last
 ``settled_share`` of the horizon: a margin for perturbed or reconstructed trajectories that reach the goal a little
-later than the expert.
+later than the expert. Where the success never settles (an expert that undoes its task more and more often as it
+goes on), the horizon is the one whose last fifth holds the highest mean success.
 """
 
 from __future__ import annotations
@@ -57,7 +58,8 @@ def expert_horizon(
     :param tolerance: how far below its best (a share of the resets) the success may be
     :param settled_share: the share of the horizon, at its end, over which the success must have been within
         ``tolerance`` of its best
-    :return: ``horizon`` (``max_steps`` where the success never settles, with ``settled`` False), ``success`` (the
+    :return: ``horizon`` (where the success never settles, ``settled`` False: the shortest whose last
+        ``settled_share`` has the highest mean success), ``success`` (the
         expert's success at the last step of that horizon), ``best`` (its best
         over the steps) and ``best_step`` (the first step where it is reached), ``max_steps``, ``resets``, ``seed`` and
         ``success_by_step`` (the success at the end of each horizon ``1..max_steps``)
@@ -84,8 +86,10 @@ def expert_horizon(
             "it: check the expert and the success key, or give a longer max_steps"
         )
     near = by_step >= best - tolerance - 1e-12
-    settled = [h for h in range(1, steps + 1) if near[_settled_from(h, settled_share) - 1 : h].all()]
-    horizon = settled[0] if settled else steps
+    windows = [slice(_settled_from(h, settled_share) - 1, h) for h in range(1, steps + 1)]
+    settled = [h for h, window in enumerate(windows, start=1) if near[window].all()]
+    # never settled (an expert that undoes its task, more and more often): where the success holds best over the window
+    horizon = settled[0] if settled else int(np.argmax([by_step[window].mean() for window in windows])) + 1
     return {
         "horizon": horizon,
         "settled": bool(settled),
