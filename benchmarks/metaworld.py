@@ -442,7 +442,8 @@ def _locked(out: Path) -> Iterator[None]:
 
 def _write(out: Path, result: dict[str, Any]) -> None:
     """The result JSON (with its provenance and whether every unit of MT10 is done) and its table."""
-    result["provenance"] = provenance()
+    result.pop("provenance", None)  # (where results made before kept it)
+    result |= provenance()
     result["complete"] = all(
         all(
             key in result["tasks"].get(task, {})

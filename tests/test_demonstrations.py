@@ -12,7 +12,16 @@ import pytest
 from sb3_genrl.envs import TASKS, external
 from sb3_genrl.envs import demonstrations as demonstrations_package
 from sb3_genrl.envs.coverage import coverage_fraction, coverage_report, covered_cells, region_cells
-from sb3_genrl.envs.demonstrations import arm, fetch, make_demonstrations, recorder, replay, sample_trajectories, within_limits
+from sb3_genrl.envs.demonstrations import (
+    arm,
+    fetch,
+    horizon,
+    make_demonstrations,
+    recorder,
+    replay,
+    sample_trajectories,
+    within_limits,
+)
 
 from sb3_genrl.data import dataset_info, load_arrays
 
@@ -201,9 +210,9 @@ def test_basketball_throws_all_swing_at_the_same_steps():
 
 
 def test_every_maker_of_demonstrations_lives_in_the_demonstrations_package() -> None:
-    # the arm tasks', the Fetch tasks', any env's recorder and the replay of a dataset are its modules, their public
-    # names re-exported by it
-    makers = (arm, fetch, recorder, replay)
+    # the arm tasks', the Fetch tasks', any env's recorder, its horizon and the replay of a dataset are its modules,
+    # their public names re-exported by it
+    makers = (arm, fetch, recorder, horizon, replay)
     for module in makers:
         assert module.__name__.startswith("sb3_genrl.envs.demonstrations.")
     for name in demonstrations_package.__all__:
