@@ -4,7 +4,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium import spaces
-from sb3_genrl.envs.demonstrations import expert_horizon
+from sb3_genrl.envs.demonstrations import describe_horizon, expert_horizon
 
 STEPS = 40
 
@@ -48,6 +48,7 @@ def test_the_horizon_is_the_first_at_which_the_success_has_held_for_the_last_fif
     found = expert_horizon(window(first=8, last=30), idle_expert, resets=10)
     assert (found["horizon"], found["settled"], found["success"], found["best"], found["best_step"]) == (9, True, 1.0, 1.0, 8)
     assert found["success_by_step"] == [0.0] * 7 + [1.0] * 23 + [0.0] * 10 and found["max_steps"] == STEPS
+    assert describe_horizon(found) == "where the expert's success settles (1.00 of 10 seeded resets; its best 1.00 at step 8)"
     # no window: the first step at which it succeeds; a longer one: ceil(0.5 h) >= 8 first at h = 15
     assert expert_horizon(window(), idle_expert, resets=10, settled_share=0.0)["horizon"] == 8
     assert expert_horizon(window(), idle_expert, resets=10, settled_share=0.5)["horizon"] == 15
@@ -70,6 +71,7 @@ def test_a_success_that_never_settles_gives_the_horizon_whose_last_fifth_succeed
     # 9 to 11) succeeds on 2 of its 3 steps, as h = 12's (10 to 12), and every other on fewer: the shorter, 11
     found = expert_horizon(window(first=10, last=11), idle_expert, resets=5)
     assert (found["horizon"], found["settled"], found["best"], found["success"]) == (11, False, 1.0, 1.0)
+    assert "success never settles, but holds best over the horizon's last fifth" in describe_horizon(found)
     assert expert_horizon(window(first=10, last=11), idle_expert, resets=5, max_steps=25)["horizon"] == 11
 
 

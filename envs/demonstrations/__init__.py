@@ -26,7 +26,7 @@ from sb3_genrl.envs.demonstrations.arm import (
     within_limits,
 )
 from sb3_genrl.envs.demonstrations.fetch import expert_success, make_arrays, play_expert
-from sb3_genrl.envs.demonstrations.horizon import expert_horizon
+from sb3_genrl.envs.demonstrations.horizon import describe_horizon, expert_horizon
 from sb3_genrl.envs.demonstrations.recorder import (
     BUMP_DURATIONS,
     DEFAULT_NOISE,
@@ -42,6 +42,7 @@ from sb3_genrl.envs.demonstrations.replay import read_replay_source, replay_demo
 __all__ = [
     "BUMP_DURATIONS",
     "DEFAULT_NOISE",
+    "describe_horizon",
     "expert_horizon",
     "expert_name",
     "expert_success",

@@ -103,6 +103,16 @@ def expert_horizon(
     }
 
 
+def describe_horizon(found: dict[str, Any]) -> str:
+    """Where a horizon of :func:`expert_horizon` lies, in words: ``"where the expert's success settles (0.97 of 100
+    seeded resets; its best 0.98 at step 73)"``, for the CLI, the quickstart's log and its report."""
+    where = "settles" if found["settled"] else "never settles, but holds best over the horizon's last fifth"
+    return (
+        f"where the expert's success {where} ({found['success']:.2f} of {found['resets']} seeded resets; its best "
+        f"{found['best']:.2f} at step {found['best_step']})"
+    )
+
+
 def _settled_from(horizon: int, settled_share: float) -> int:
     """The first step of the window, at the end of ``horizon``, over which the success must have settled."""
     return max(1, math.ceil((1.0 - settled_share) * horizon))

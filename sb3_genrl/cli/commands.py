@@ -19,6 +19,7 @@ from sb3_genrl.data import dataset_info, load_trajectories
 from sb3_genrl.envs import TASKS, get_task
 from sb3_genrl.envs.demonstrations import (
     DEFAULT_NOISE,
+    describe_horizon,
     expert_horizon,
     make_demonstrations,
     record_demonstrations,
@@ -86,11 +87,7 @@ def _expert_demos(args: argparse.Namespace) -> int:
         refuse_existing_output(Path(args.out))
         found = expert_horizon(args.task, args.expert, seed=args.seed, success_key=args.success_key or "is_success")
         args.horizon = found["horizon"]
-        print(
-            f"horizon: {found['horizon']} steps, where the expert's success settles ({found['success']:.2f} of "
-            f"{found['resets']} seeded resets{'' if found['settled'] else '; it never settles: the env own length'}; "
-            f"best {found['best']:.2f} at step {found['best_step']})"
-        )
+        print(f"horizon: {found['horizon']} steps, {describe_horizon(found)}")
     path = record_demonstrations(
         args.task,
         args.expert,

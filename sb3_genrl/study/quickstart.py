@@ -37,6 +37,7 @@ from sb3_genrl.data.fingerprints import dataset_fingerprint, file_fingerprint
 from sb3_genrl.envs import TASKS, get_task
 from sb3_genrl.envs.demonstrations import (
     DEFAULT_NOISE,
+    describe_horizon,
     expert_horizon,
     expert_name,
     make_demonstrations,
@@ -242,10 +243,7 @@ def _outside_horizon(
     found = expert_horizon(task.name, expert, seed=seed)
     seconds = time.perf_counter() - began
     if log is not None:
-        log(
-            f"horizon: {found['horizon']} steps, where the expert's success settles ({found['success']:.2f} of "
-            f"{found['resets']} seeded resets; {seconds:.0f} s)"
-        )
+        log(f"horizon: {found['horizon']} steps, {describe_horizon(found)} ({seconds:.0f} s)")
     record = made_with | {key: value for key, value in found.items() if key != "seed"} | {"seconds": seconds}
     return int(found["horizon"]), record
 
@@ -494,7 +492,8 @@ def _write_report(
     lines = [
         f"# GenRL quickstart: {task}",
         "",
-        _demonstrations_line(dataset) + ("" if found is None else " " + _horizon_sentence(found)),
+        _demonstrations_line(dataset)
+        + ("" if found is None else f" The horizon, {found['horizon']} steps, is {describe_horizon(found)}."),
         f"2. **Generator**: beta-VAE (preset {generator_settings['preset']}: N_alpha = {generator.latent_dim}, "
         f"beta = {generator.beta}), {generator_settings['epochs']} epochs, "
         f"best checkpoint at epoch {generator.best_epoch}.",
@@ -528,17 +527,6 @@ def _write_report(
     )
     log(f"GenRL on {task}: {score_line}")
     return report
-
-
-def _horizon_sentence(found: dict[str, Any]) -> str:
-    """The report's words on an outside task's horizon found from its expert (``horizon.json``)."""
-    where = (
-        f"the shortest at which the expert's success settles ({found['success']:.2f} of {found['resets']} seeded resets"
-        if found["settled"]
-        else f"the env's own length: the expert's success never settles ({found['success']:.2f} of {found['resets']} "
-        "seeded resets at the last step"
-    )
-    return f"The horizon, {found['horizon']} steps, is {where}; its best {found['best']:.2f} at step {found['best_step']})."
 
 
 def _demonstrations_line(dataset: pathlib.Path) -> str:
