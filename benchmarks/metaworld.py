@@ -42,37 +42,48 @@ from __future__ import annotations
 import argparse
 import contextlib
 import copy
+import functools
+import json
+import shutil
 import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 import torch
+from sb3_genrl.baselines.checkpoint import ReplayBufferCheckpoint, resume_off_policy
 from sb3_genrl.baselines.models import normalized_policy
 from sb3_genrl.baselines.prefill import prefill_replay_buffer
 from sb3_genrl.envs import metaworld
 from sb3_genrl.envs.demonstrations import expert_horizon, record_demonstrations
 from sb3_genrl.envs.external import HELD_OUT_SEED, evaluate_success, make_task_env
 from stable_baselines3 import SAC
+from stable_baselines3.common.monitor import Monitor
 
 from sb3_genrl import GenRL, LatentActionWrapper
 from sb3_genrl.checks import COUNT, JSON_OUT, OUT_DIR, SEED, check_int, option
-from sb3_genrl.data import dataset_info, load_arrays, load_transitions
+from sb3_genrl.curves import episode_info
+from sb3_genrl.data import dataset_info, load_transitions
 from sb3_genrl.generative import load, train_generator
 from sb3_genrl.genrl.demonstrations import DemonstrationCallback, fit_mean_to_demonstrations
 from sb3_genrl.markdown import markdown_table
 from sb3_genrl.provenance import provenance
 from sb3_genrl.run import train_policy
+from sb3_genrl.run.checkpoint import resume_state
+from sb3_genrl.run.folder import CHECKPOINT_DIR
 from sb3_genrl.run.stages import STAGE_FILE, SettingsConflictError, read_settings, refuse_conflicts, settings_conflicts
 from sb3_genrl.study.quickstart import OUTSIDE_TASK_KWARGS
-from sb3_genrl.utils import FolderInUseError, atomic_write_json, atomic_write_text, folder_lock
+from sb3_genrl.utils import FolderInUseError, atomic_path, atomic_write_json, atomic_write_text, folder_lock
 
 RESULTS = Path(__file__).resolve().parent / "results"
 METHODS = ("fit", "genrl", "sac")  # the per-seed units, in the order they run
 RECONSTRUCTIONS = 200  # demonstrations the generator's reconstructions are replayed from
 COMPLETE_SEEDS, COMPLETE_SAC_SEEDS = (0, 1, 2), (0,)  # the seeds of a complete result (the defaults)
+SAC_CHECKPOINT_EVERY = 250  # SAC's episodes between checkpoints (model and replay buffer)
+SAC_RECORD = "run.json"  # a finished SAC run's identity and CPU seconds, beside its model
 
 
 def _task_name(name: str, _: str = "") -> str:
@@ -149,7 +160,8 @@ def settings(args: argparse.Namespace) -> dict[str, Any]:
         "held_out_seed": HELD_OUT_SEED,
         "fit_steps": args.fit_steps,
         "genrl": "started from the demonstrations, a spread fixed at 0.37, else GenRL's defaults",
-        "sac": "SB3's defaults, learning_starts 0, the demonstrations in the buffer",
+        "success": "Meta-World's evaluation protocol: an episode ends at its first success",
+        "sac": "SB3's defaults, learning_starts 0, the demonstrations in the buffer, trained without an end at success",
     }
 
 
@@ -274,33 +286,58 @@ def outside_settings(fit_steps: int) -> dict[str, Any]:
     return settings
 
 
-def sac_row(task: str, dataset: Path, seed: int, horizon: int, args: argparse.Namespace) -> dict[str, Any]:
-    """SAC with the demonstrations' transitions in its replay buffer, ``--episodes`` episodes, on held-out resets."""
+def sac_row(task: str, dataset: Path, work: Path, seed: int, horizon: int, args: argparse.Namespace) -> dict[str, Any]:
+    """SAC with the demonstrations' transitions in its replay buffer, ``--episodes`` episodes, on held-out resets.
+
+    The run checkpoints its model and replay buffer in ``work/sac_seedN`` every :data:`SAC_CHECKPOINT_EVERY` episodes
+    (:class:`~sb3_genrl.baselines.checkpoint.ReplayBufferCheckpoint`, as ``genrl baseline`` does) and a rerun resumes
+    from it, since a run takes hours of CPU; a resumed run is not bitwise the uninterrupted one (SB3's random streams
+    restart), and the row names the episodes it resumed at. The trained model is kept as ``work/sac_seedN/model.zip``.
+    """
+    folder = work / f"sac_seed{seed}"
+    final = folder / "model.zip"
     transitions = load_transitions(dataset)
-    # Meta-World's episodes end by truncation only: a demonstration's last step is no terminal state, as SAC's own
-    # collected truncations are not (SB3's handle_timeout_termination)
-    transitions["dones"] = load_arrays(dataset, keys=("terminations",))["terminations"].reshape(-1)
-    env = make_task_env(f"metaworld/{task}", horizon=horizon)
+    # SAC learns in Meta-World's training env, which runs on after a success (and ends by truncation only): the last
+    # step of a demonstration (its first success, or the horizon) is no terminal state there
+    transitions["dones"] = np.zeros_like(transitions["dones"])
+    identity = {"task": task, "seed": seed, "horizon": horizon, "episodes": args.episodes, "sac": settings(args)["sac"]}
+    identity["demonstration_steps"] = len(transitions["observations"])
+    training_env = functools.partial(gym.make, metaworld.metaworld_env_id(task), terminate_on_success=False)
+    env = Monitor(episode_info(make_task_env(training_env, horizon=horizon)))
     steps = args.episodes * horizon
-    began = time.process_time()
-    model = SAC(
-        "MlpPolicy",
-        env,
-        buffer_size=len(transitions["observations"]) + steps,
-        learning_starts=0,
-        seed=seed,
-        device="cpu",
-        policy_kwargs=normalized_policy({}, transitions["observations"]),
-    )
-    prefill_replay_buffer(model, transitions)
-    model.learn(total_timesteps=steps)
-    trained = time.process_time() - began
+    record = json.loads((folder / SAC_RECORD).read_text()) if final.is_file() else None
+    if record is None or record.get("identity") != json.loads(json.dumps(identity)):
+        state = resume_state(folder, identity)
+        if state is None:
+            model = SAC(
+                "MlpPolicy",
+                env,
+                buffer_size=len(transitions["observations"]) + steps,
+                learning_starts=0,
+                seed=seed,
+                device="cpu",
+                policy_kwargs=normalized_policy({}, transitions["observations"]),
+            )
+            prefill_replay_buffer(model, transitions)
+        else:
+            model = resume_off_policy(state, env, device="cpu")
+        resumed = [] if state is None else [*state.get("resumed_at_episodes", []), int(state["episodes"])]
+        checkpoint = ReplayBufferCheckpoint(folder, SAC_CHECKPOINT_EVERY, identity, state, {"resumed_at_episodes": resumed})
+        model.learn(steps - model.num_timesteps, callback=checkpoint, reset_num_timesteps=state is None)
+        with atomic_path(final) as path:
+            model.save(path)
+        record = {"identity": identity, "cpu_seconds": env.get_wrapper_attr("cpu_seconds")(), "resumed": resumed}
+        atomic_write_json(folder / SAC_RECORD, record)
+        shutil.rmtree(folder / CHECKPOINT_DIR, ignore_errors=True)  # a finished run keeps its model, not its buffer
+    env.close()
+    model, env = SAC.load(final, device="cpu"), make_task_env(f"metaworld/{task}", horizon=horizon)
     successes = [
         closed_loop(env, lambda observation: model.predict(observation, deterministic=True)[0], HELD_OUT_SEED + i, horizon)[0]
         for i in range(args.held_out)
     ]
     env.close()
-    return {"success": float(np.mean(successes)), "cpu_seconds": round(trained, 1), "episodes": args.episodes}
+    row = {"success": float(np.mean(successes)), "cpu_seconds": round(record["cpu_seconds"], 1), "episodes": args.episodes}
+    return row | ({"resumed_at_episodes": record["resumed"]} if record["resumed"] else {})
 
 
 def run_task(task: str, args: argparse.Namespace, result: dict[str, Any], save: Any) -> None:
@@ -312,7 +349,7 @@ def run_task(task: str, args: argparse.Namespace, result: dict[str, Any], save: 
     dataset, generator_path = work / "demonstrations", work / "vae.pt"
     if "horizon" not in row:  # the quickstart's: the expert's settled horizon from seed 0
         began = time.process_time()
-        found = expert_horizon(f"metaworld/{task}", seed=0)
+        found = expert_horizon(f"metaworld/{task}", seed=0, n_threads=1)  # in this process: its CPU time is counted
         row["horizon"] = {key: value for key, value in found.items() if key != "success_by_step"} | {
             "cpu_seconds": round(time.process_time() - began, 1)
         }
@@ -354,32 +391,41 @@ def run_task(task: str, args: argparse.Namespace, result: dict[str, Any], save: 
             elif method == "genrl":
                 done[str(seed)] = genrl_row(task, generator_path, dataset, work, seed, horizon, args)
             else:
-                done[str(seed)] = sac_row(task, dataset, seed, horizon, args)
+                done[str(seed)] = sac_row(task, dataset, work, seed, horizon, args)
             save()
 
 
 def table(result: dict[str, Any]) -> str:
-    """The Markdown table: per task, each method's held-out success (mean +- std over seeds) and CPU seconds per seed."""
+    """The Markdown table: per task, each method's held-out success (mean +- std over seeds, "not run" where it has no
+    seed yet) and CPU seconds per seed; then the mean over the tasks of each column every task has."""
 
-    def over_seeds(units: dict[str, dict[str, Any]], key: str) -> tuple[float, float]:
+    def over_seeds(units: dict[str, dict[str, Any]], key: str) -> tuple[float, float] | None:
         values = [unit[key] for unit in units.values()]
-        return (float(np.mean(values)), float(np.std(values))) if values else (float("nan"), float("nan"))
+        return (float(np.mean(values)), float(np.std(values))) if values else None
 
-    rows = []
+    rows, means = [], {method: [] for method in METHODS}
     for task, row in result["tasks"].items():
         expert = row.get("expert", {})
         cells: list[Any] = [
             task,
             row.get("horizon", {}).get("horizon", "-"),
-            expert.get("closed_loop", float("nan")),
-            expert.get("open_loop", float("nan")),
-            row.get("reconstruction", {}).get("success", float("nan")),
+            expert.get("closed_loop", "-"),
+            expert.get("open_loop", "-"),
+            row.get("reconstruction", {}).get("success", "-"),
         ]
         for method in METHODS:
-            mean, std = over_seeds(row.get(method, {}), "success")
-            cells.append(f"{mean:.3f} +- {std:.3f} ({len(row.get(method, {}))})")
-        cells += [over_seeds(row.get(method, {}), "cpu_seconds")[0] for method in METHODS]
+            success = over_seeds(row.get(method, {}), "success")
+            means[method].append(None if success is None else success[0])
+            seeds = len(row.get(method, {}))
+            cells.append("not run" if success is None else f"{success[0]:.3f} +- {success[1]:.3f} ({seeds})")
+        for method in METHODS:
+            cpu = over_seeds(row.get(method, {}), "cpu_seconds")
+            cells.append("-" if cpu is None else f"{cpu[0]:.0f}")
         rows.append(cells)
+    if len(rows) > 1:
+        tasks = len(rows)
+        mean_cells = ["-" if None in values else f"{np.mean(values):.3f}" for values in (means[method] for method in METHODS)]
+        rows.append([f"mean over the {tasks} tasks", "", "", "", "", *mean_cells, "", "", ""])
     header = [
         "task",
         "horizon",

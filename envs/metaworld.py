@@ -20,8 +20,14 @@ Two things are fixed, in a subclass of each Meta-World env (Meta-World's own cla
   one task, every time, and an action sequence replayed from it gives the same episode.
 
 The goal is observed (the last 3 numbers of the 39-D observation, as in Meta-World's multi-task benchmarks), ``info``
-holds ``is_success`` (a copy of Meta-World's ``success``), and episodes end after 500 steps (Meta-World's
-``max_path_length``), by truncation.
+holds ``is_success`` (a copy of Meta-World's ``success``), and an episode ends at its first success (terminated) or
+after 500 steps (Meta-World's ``max_path_length``, truncated). Ending at the first success is Meta-World's own
+evaluation protocol (``metaworld.evaluation`` turns its ``AutoTerminateOnSuccessWrapper`` on): a task counts as solved
+when it is solved at some step, and reading the success at an episode's last step then reads exactly that. Several
+scripted experts solve their task only for a while (handle-press-v3's presses the handle down and lets it come back up),
+so a success read at a fixed last step would miss what Meta-World counts. ``terminate_on_success=False`` gives
+Meta-World's training env instead (no end at success), as step-based learners such as SAC are trained
+(Meta-World's note: an end at success during their training makes them unstable).
 """
 
 from __future__ import annotations
@@ -185,16 +191,22 @@ class SeededMetaWorldEnv:
     The object and goal positions drawn uniformly from the task's ``_random_reset_space`` by ``np_random``.
 
     ## Episode End
-    Never terminated; truncated after 500 steps (``max_episode_steps`` of the registered ids). ``info["success"]`` and
-    its copy ``info["is_success"]`` say, at every step, whether the task is solved then.
+    Terminated at the first step at which the task is solved (Meta-World's evaluation protocol; see the module
+    docstring), unless ``terminate_on_success=False``; truncated after 500 steps (``max_episode_steps`` of the
+    registered ids). ``info["success"]`` and its copy ``info["is_success"]`` say, at every step, whether the task is
+    solved then.
 
     ## Arguments
-    Meta-World's: ``render_mode``, ``camera_name``, ``camera_id``, ``reward_function_version`` (``"v2"``),
-    ``height`` and ``width`` (480) of rendered images.
+    ``terminate_on_success`` (default True: an episode ends at its first success); Meta-World's: ``render_mode``,
+    ``camera_name``, ``camera_id``, ``reward_function_version`` (``"v2"``), ``height`` and ``width`` (480) of rendered
+    images.
     """
 
-    def __init__(self, **kwargs: Any) -> None:
+    def __init__(self, terminate_on_success: bool = True, **kwargs: Any) -> None:
+        if not isinstance(terminate_on_success, bool | np.bool_):
+            raise ValueError(f"terminate_on_success must be True or False, got {terminate_on_success!r}")
         super().__init__(**kwargs)
+        self.terminate_on_success = bool(terminate_on_success)
         self._partially_observable = False  # the goal in the observation, as in Meta-World's MT benchmarks
         self.__dict__.pop("sawyer_observation_space", None)  # a cached property, computed with the goal hidden
         self.observation_space = self.sawyer_observation_space
@@ -213,9 +225,12 @@ class SeededMetaWorldEnv:
         return super().reset(options=options)
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
-        """Meta-World's step, with ``info["is_success"]`` copied from ``info["success"]``."""
+        """Meta-World's step, with ``info["is_success"]`` copied from ``info["success"]``, terminated at a success
+        unless ``terminate_on_success`` is off (as Meta-World's ``AutoTerminateOnSuccessWrapper``)."""
         observation, reward, terminated, truncated, info = super().step(action)
         info["is_success"] = info["success"]
+        if self.terminate_on_success:
+            terminated = bool(terminated or info["success"] == 1.0)
         return observation, reward, terminated, truncated, info
 
 
@@ -241,8 +256,8 @@ def seeded_env(name: str, **kwargs: Any) -> gym.Env:
     :func:`make_metaworld_env` or ``gymnasium.make`` for the 500-step limit).
 
     :param name: one of :data:`TASK_NAMES`
-    :param kwargs: arguments of Meta-World's env class (``render_mode``, ``camera_name``, ``camera_id``,
-        ``reward_function_version``, ``height``, ``width``)
+    :param kwargs: ``terminate_on_success`` and the arguments of Meta-World's env class (``render_mode``,
+        ``camera_name``, ``camera_id``, ``reward_function_version``, ``height``, ``width``)
     """
     return task_class(name)(**kwargs)
 
@@ -265,20 +280,22 @@ def register_metaworld_envs() -> tuple[str, ...]:
 
 
 def make_metaworld_env(name: str, **kwargs: Any) -> gym.Env:
-    """A Meta-World v3 task as a Gymnasium env: seeded resets, ``info["is_success"]``, 500 steps an episode.
+    """A Meta-World v3 task as a Gymnasium env: seeded resets, ``info["is_success"]``, an episode ending at its first
+    success or after 500 steps.
 
     The same as ``gymnasium.make(metaworld_env_id(name), **kwargs)``; see :class:`SeededMetaWorldEnv` for what the env
     is and the module docstring for what it fixes.
 
     :param name: the task, one of :data:`TASK_NAMES` (e.g. ``"push-v3"``)
-    :param kwargs: arguments of Meta-World's env class (``render_mode``, ``camera_name``, ``camera_id``,
+    :param kwargs: ``terminate_on_success`` (default True; False: Meta-World's training env, which runs on after a
+        success) and the arguments of Meta-World's env class (``render_mode``, ``camera_name``, ``camera_id``,
         ``reward_function_version``, ``height``, ``width``)
     :return: the env, in a ``TimeLimit`` of :data:`MAX_EPISODE_STEPS`
     """
     check_task_name(name)
     if not installed():
         raise ImportError(INSTALL_HINT)
-    accepted = _env_arguments(name)
+    accepted = ("terminate_on_success", *_env_arguments(name))
     unknown = sorted(set(kwargs) - set(accepted))
     if unknown:
         raise ValueError(f"unknown argument(s) {unknown} of Meta-World task {name!r}; expected some of {list(accepted)}")

@@ -75,6 +75,21 @@ def test_transitions(dataset: tuple[Path, dict[str, np.ndarray]]) -> None:
             assert transitions["dones"][row] == (t == T - 1)
 
 
+def test_transitions_leave_out_the_padding_after_an_episode_that_ended_early(tmp_path: Path) -> None:
+    arrays = _arrays(1)
+    ends = [T, 2, 4, 1, T]  # the steps each episode played before its end flag (a Meta-World success, say)
+    arrays["terminations"][:] = False
+    for i, played in enumerate(ends):
+        arrays["terminations"][i, played - 1] = True
+    transitions = load_transitions(_write(tmp_path / "early", arrays))
+    assert len(transitions["actions"]) == sum(ends)
+    rows = [(i, t) for i, played in enumerate(ends) for t in range(played)]  # the played steps, in order
+    for key, source, offset in (("observations", "observations", 0), ("next_observations", "observations", 1)):
+        np.testing.assert_array_equal(transitions[key], np.stack([arrays[source][i, t + offset] for i, t in rows]))
+    np.testing.assert_array_equal(transitions["actions"], np.stack([arrays["actions"][i, t] for i, t in rows]))
+    np.testing.assert_array_equal(transitions["dones"], [t == ends[i] - 1 for i, t in rows])
+
+
 def test_info_and_metadata(dataset: tuple[Path, dict[str, np.ndarray]]) -> None:
     path, _ = dataset
     info = dataset_info(path)

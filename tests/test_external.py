@@ -240,9 +240,8 @@ def test_a_script_without_a_main_guard_is_told_to_add_one(tmp_path):
     done = subprocess.run(
         [sys.executable, script], capture_output=True, text=True, env=os.environ | {"MUJOCO_GL": "egl"}, timeout=HANG_S
     )
-    assert (
-        done.returncode != 0 and 'a script must call record_demonstrations under `if __name__ == "__main__":`' in done.stderr
-    )
+    guard = 'a script must call record_demonstrations or expert_horizon under `if __name__ == "__main__":`'
+    assert done.returncode != 0 and guard in done.stderr
     # The worker says why it stopped (before it claims the folder the script holds), and the script names the episodes.
     assert "RuntimeError: the worker processes that play the episodes (n_threads > 1" in done.stderr
     assert "is in use by another process" not in done.stderr

@@ -37,6 +37,9 @@ def idle_expert(observation):
 
 
 gym.register("TestHorizon/Window-v0", entry_point=WindowEnv, max_episode_steps=STEPS)
+gym.register(
+    "TestHorizon/Late-v0", entry_point=WindowEnv, kwargs={"first": 5, "last": STEPS, "late": 12}, max_episode_steps=STEPS
+)
 
 
 def window(**kwargs):
@@ -84,3 +87,10 @@ def test_an_expert_that_never_succeeds_or_bad_settings_are_refused_naming_them()
         expert_horizon(window(), idle_expert, resets=0)
     with pytest.raises(ValueError, match="no expert of the package's"):
         expert_horizon(window())
+
+
+def test_worker_processes_find_the_same_horizon_as_one_process():
+    # the resets are played in two worker processes, in chunks, and read back in their order: the same success by step
+    one = expert_horizon("TestHorizon/Late-v0", idle_expert, resets=30, n_threads=1)
+    two = expert_horizon("TestHorizon/Late-v0", idle_expert, resets=30, n_threads=2)
+    assert two == one and one["horizon"] == 14 and 0.0 < one["success_by_step"][4] < 1.0  # both kinds of reset drawn

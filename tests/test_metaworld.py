@@ -159,32 +159,49 @@ def test_registered_ids_take_metaworlds_arguments_and_refuse_others():
         mw.make_metaworld_env("reach-v3", widht=32)
 
 
-def _episode(env: gym.Env, seed: int, policy) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """One whole episode from ``reset(seed=seed)``: the actions, the observations after them and ``is_success``."""
+def _episode(env: gym.Env, seed: int, policy) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+    """One whole episode from ``reset(seed=seed)``: the actions, the observations after them, ``is_success``, and
+    whether it ended terminated."""
     observation, _ = env.reset(seed=seed)
     actions, observations, successes = [], [], []
-    truncated = False
-    while not truncated:
+    terminated = truncated = False
+    while not (terminated or truncated):
         action = policy(observation, len(actions))
         observation, _, terminated, truncated, info = env.step(action)
-        assert not terminated
         actions.append(action)
         observations.append(observation)
         successes.append(info["is_success"])
-    return np.array(actions), np.array(observations), np.array(successes)
+    return np.array(actions), np.array(observations), np.array(successes), terminated
 
 
 @needs_metaworld
 @pytest.mark.parametrize("name", EXPERT_TASKS)
 def test_expert_solves_a_seeded_reset_and_its_actions_replayed_open_loop_give_the_same_episode(name):
     env, expert = mw.make_metaworld_env(name), mw.metaworld_expert(name)
-    actions, observations, successes = _episode(env, 0, lambda observation, step: expert(observation))
-    assert len(actions) == 500  # truncated by the time limit, never terminated
+    actions, observations, successes, terminated = _episode(env, 0, lambda observation, step: expert(observation))
+    # Meta-World's evaluation protocol: the episode ends (terminated) at its first success, within the 500 steps
+    assert terminated and len(actions) < 500 and successes[-1] == 1.0 and not successes[:-1].any()
     assert all(action in env.action_space for action in actions)
-    assert successes.max() == 1.0  # solved within the episode (Meta-World's measure)
-    replayed_actions, replayed, replayed_successes = _episode(env, 0, lambda observation, step: actions[step])
+    replayed_actions, replayed, replayed_successes, _ = _episode(env, 0, lambda observation, step: actions[step])
     np.testing.assert_array_equal(replayed, observations)  # the same episode, bit for bit
     np.testing.assert_array_equal(replayed_successes, successes)
+
+
+@needs_metaworld
+def test_without_termination_at_success_the_episode_runs_to_the_limit_as_metaworlds_training_env():
+    expert = mw.metaworld_expert("reach-v3")
+    actions, observations, successes, terminated = _episode(
+        mw.make_metaworld_env("reach-v3"), 0, lambda observation, step: expert(observation)
+    )
+    env = mw.make_metaworld_env("reach-v3", terminate_on_success=False)
+    all_actions, all_observations, all_successes, all_terminated = _episode(
+        env, 0, lambda observation, step: expert(observation)
+    )
+    assert not all_terminated and len(all_actions) == 500  # truncated by the time limit only
+    np.testing.assert_array_equal(all_observations[: len(observations)], observations)  # the same steps up to the end
+    assert all_successes[len(successes) - 1] == 1.0 and not all_successes[: len(successes) - 1].any()
+    with pytest.raises(ValueError, match="terminate_on_success must be True or False, got 'no'"):
+        mw.make_metaworld_env("reach-v3", terminate_on_success="no")
 
 
 @needs_metaworld

@@ -84,4 +84,37 @@ def test_runs_of_other_tasks_into_one_json_keep_each_others_rows(tmp_path, monke
     tasks = json.loads(out.read_text())["tasks"]
     assert list(tasks) == ["reach-v3", "push-v3"]  # MT10's order
     assert tasks["push-v3"] == {"expert": {}} and "0" in tasks["reach-v3"]["genrl"]
+    lines = out.with_suffix(".md").read_text().splitlines()
+    reach = next(line for line in lines if line.startswith("| reach-v3 |"))
+    assert "| not run |" in reach and lines[-1].startswith("| mean over the 2 tasks |")  # no SAC seed asked for
     assert not out.with_name("metaworld.json.lock").exists()
+
+
+def test_a_stopped_sac_run_resumes_from_its_checkpoint(tmp_path, monkeypatch):
+    """SAC's run (hours per task) checkpoints its model and replay buffer; the same command after a stop goes on from
+    the checkpoint's episode, says so in its row, and a finished run keeps its model, not its checkpoint."""
+    import benchmarks.metaworld as benchmark
+
+    out, work = tmp_path / "metaworld.json", tmp_path / "work"
+    argv = [*TINY, "--seeds", "--episodes", "6", "--work", str(work), "--out", str(out)]
+    monkeypatch.setattr(benchmark, "SAC_CHECKPOINT_EVERY", 2)
+    checkpoint = benchmark.ReplayBufferCheckpoint
+
+    class StopAfterFirstCheckpoint(checkpoint):
+        def save(self, episodes):
+            super().save(episodes)
+            raise KeyboardInterrupt  # the run stopped right after its first checkpoint
+
+    monkeypatch.setattr(benchmark, "ReplayBufferCheckpoint", StopAfterFirstCheckpoint)
+    with pytest.raises(KeyboardInterrupt):
+        benchmark.main(argv)
+    folder = work / "reach-v3" / "sac_seed0"
+    state = json.loads((folder / "checkpoint" / "state.json").read_text())
+    assert state["episodes"] == 2 and "sac" not in json.loads(out.read_text())["tasks"]["reach-v3"]
+    monkeypatch.setattr(benchmark, "ReplayBufferCheckpoint", checkpoint)
+    assert benchmark.main(argv) == 0
+    row = json.loads(out.read_text())["tasks"]["reach-v3"]["sac"]["0"]
+    assert row["resumed_at_episodes"] == [2] and row["episodes"] == 6 and row["cpu_seconds"] > 0.0
+    assert (folder / "model.zip").is_file() and not (folder / "checkpoint").exists()
+    horizon = json.loads(out.read_text())["tasks"]["reach-v3"]["horizon"]["horizon"]
+    assert benchmark.SAC.load(folder / "model.zip").num_timesteps == 6 * horizon

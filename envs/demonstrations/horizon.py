@@ -17,13 +17,26 @@ goes on), the horizon is the one whose last fifth holds the highest mean success
 
 from __future__ import annotations
 
+import concurrent.futures
+import functools
 import math
+import multiprocessing
 from collections.abc import Callable
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from sb3_genrl.envs.demonstrations.recorder import _expert_action, _probe, _reset_seed, task_expert
+from sb3_genrl.envs.control import default_threads
+from sb3_genrl.envs.demonstrations.recorder import (
+    MAIN_GUARD,
+    _expert_action,
+    _probe,
+    _reset_seed,
+    _worker_job,
+    in_worker,
+    task_expert,
+    worker_pool,
+)
 from sb3_genrl.envs.external import task_env_and_horizon, task_name
 
 from sb3_genrl.checks import check_non_negative_float, check_positive_int, check_seed
@@ -34,6 +47,10 @@ SETTLED_SHARE = 0.2  # the success must have held for the last fifth of the hori
 # The stream of random draws of the resets (np.random.default_rng([seed, HORIZON_STREAM, i])): apart from the
 # recorder's episodes (default_rng([seed, k])), so that the probe's resets are not the demonstrations' own
 HORIZON_STREAM = 2**32 - 1
+# Below this many steps in all (resets x the longest horizon), the default plays the resets in this process: a pool of
+# worker processes takes seconds to start (each imports the package), more than so short a probe gains. Meta-World's
+# probe (100 resets of 500 steps) is above it.
+SMALL_PROBE_STEPS = 20_000
 
 
 def expert_horizon(
@@ -46,6 +63,7 @@ def expert_horizon(
     success_key: str = "is_success",
     tolerance: float = HORIZON_TOLERANCE,
     settled_share: float = SETTLED_SHARE,
+    n_threads: int | None = None,
 ) -> dict[str, Any]:
     """The shortest horizon at which the expert's success has settled (see the module's description).
 
@@ -58,6 +76,10 @@ def expert_horizon(
     :param tolerance: how far below its best (a share of the resets) the success may be
     :param settled_share: the share of the horizon, at its end, over which the success must have been within
         ``tolerance`` of its best
+    :param n_threads: worker processes that play the resets (default: the available cores, or this process alone for
+        a probe of fewer than :data:`SMALL_PROBE_STEPS` steps in all); the answer is the same for any number. As with
+        :func:`~sb3_genrl.envs.demonstrations.record_demonstrations`, a script that uses more than one must call this
+        under ``if __name__ == "__main__":``
     :return: ``horizon`` (where the success never settles, ``settled`` False: the shortest whose last
         ``settled_share`` has the highest mean success), ``success`` (the
         expert's success at the last step of that horizon), ``best`` (its best
@@ -73,10 +95,21 @@ def expert_horizon(
     settled_share = check_non_negative_float(settled_share, "settled_share")
     if settled_share >= 1.0:
         raise ValueError(f"settled_share must be below 1, got {settled_share}")
+    if n_threads is not None:
+        check_positive_int(n_threads, "n_threads")
     env, steps = task_env_and_horizon(task, max_steps, success_key)
+    workers = (default_threads() if resets * steps >= SMALL_PROBE_STEPS else 1) if n_threads is None else int(n_threads)
+    workers = min(workers, resets)
+    if workers > 1 and getattr(multiprocessing.current_process(), "_inheriting", False):  # Python's own test
+        env.close()
+        raise RuntimeError(MAIN_GUARD)  # in a worker process that re-imports the script: its stderr shows why
     seeds = [_reset_seed(np.random.default_rng([seed, HORIZON_STREAM, i])) for i in range(resets)]
     _probe(env, expert, seeds[0], success_key, name)
-    successes = np.array([_successes(env, expert, reset_seed, steps) for reset_seed in seeds])
+    job = _worker_job(task, expert, steps, success_key, seed, np.zeros(0)) if workers > 1 else None
+    if job is None:  # one process, or a task or an expert that cannot be sent to another: the same answer
+        successes = np.array([_successes(env, expert, reset_seed, steps) for reset_seed in seeds])
+    else:
+        successes = np.array(_successes_in_workers(job, workers, seeds, name))
     env.close()
     by_step = successes.mean(axis=0)
     best = float(by_step.max())
@@ -116,6 +149,20 @@ def describe_horizon(found: dict[str, Any]) -> str:
 def _settled_from(horizon: int, settled_share: float) -> int:
     """The first step of the window, at the end of ``horizon``, over which the success must have settled."""
     return max(1, math.ceil((1.0 - settled_share) * horizon))
+
+
+def _successes_in_workers(job: bytes, workers: int, seeds: list[int], name: str) -> list[np.ndarray]:
+    """:func:`_successes` of each reset seed, in ``workers`` worker processes, in the seeds' order."""
+    pool = worker_pool(job, workers, name)
+    try:
+        return list(pool.map(functools.partial(in_worker, _successes), seeds, chunksize=max(1, len(seeds) // (4 * workers))))
+    except concurrent.futures.process.BrokenProcessPool as error:  # killed (out of memory), crashed, or never started
+        raise RuntimeError(
+            f"a worker process ended abruptly while it played the expert of {name} (its error, if it had one, is "
+            f"above). Where it could not start: {MAIN_GUARD}"
+        ) from error
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
 def _successes(env: gym.Env, expert: Callable[[Any], np.ndarray], reset_seed: int, steps: int) -> np.ndarray:

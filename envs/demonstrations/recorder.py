@@ -57,8 +57,8 @@ SMALL_RUN = 100
 
 MAIN_GUARD = (
     "the worker processes that play the episodes (n_threads > 1, the default on more than one core) import the script "
-    'that started them: a script must call record_demonstrations under `if __name__ == "__main__":`, as any script with '
-    "SB3's SubprocVecEnv, or pass n_threads=1"
+    'that started them: a script must call record_demonstrations or expert_horizon under `if __name__ == "__main__":`, '
+    "as any script with SB3's SubprocVecEnv, or pass n_threads=1"
 )
 
 _WORKER: dict[str, Any] = {}  # in each worker process: what it plays (its job) and its env, made at its first chunk
@@ -418,13 +418,25 @@ def _record_in_workers(
     job: bytes, workers: int, episodes: int, progress_bar: bool, name: str
 ) -> tuple[list[dict[str, Any]], dict[str, int]]:
     """The episodes played in ``workers`` worker processes (:func:`_play_chunk`), read here in episode order."""
-    context = multiprocessing.get_context("forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn")
     chunk = max(1, min(CHUNK, episodes // (2 * workers)))
-    pool = concurrent.futures.ProcessPoolExecutor(workers, mp_context=context, initializer=_start_worker, initargs=(job, name))
+    pool = worker_pool(job, workers, name)
     try:
         return _keep(_chunk_outcomes(pool, workers, chunk, name), episodes, progress_bar, name)
     finally:
         pool.shutdown(wait=True, cancel_futures=True)  # the chunks not begun are dropped
+
+
+def worker_pool(job: bytes, workers: int, name: str) -> concurrent.futures.ProcessPoolExecutor:
+    """``workers`` worker processes for ``job`` (:func:`_worker_job`): each makes the task's env at its first call."""
+    context = multiprocessing.get_context("forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn")
+    return concurrent.futures.ProcessPoolExecutor(workers, mp_context=context, initializer=_start_worker, initargs=(job, name))
+
+
+def in_worker(function: Callable[[gym.Env, Callable[[Any], np.ndarray], Any, int], Any], argument: Any) -> Any:
+    """``function(env, expert, argument, steps)`` in a worker process of :func:`worker_pool`, with its env and its
+    job's expert and steps (``function`` a module-level function, sent by reference)."""
+    env, job = _worker_env(f"{function.__name__}({argument!r})")
+    return function(env, job["expert"], argument, job["steps"])
 
 
 def _keep(
@@ -485,9 +497,9 @@ def _start_worker(job: bytes, name: str) -> None:
     _WORKER.update(pickled=job, name=name)
 
 
-def _play_chunk(start: int, stop: int) -> list[dict[str, Any]]:
-    """Episodes ``start`` to ``stop - 1`` (:func:`_episode`), in a worker process."""
-    name = _WORKER["name"]
+def _worker_env(what: str) -> tuple[gym.Env, dict[str, Any]]:
+    """In a worker process: the task's env, made at the first call (``what`` names the work, for an env that cannot be
+    made), and the job."""
     if "env" not in _WORKER:
         try:
             job = pickle.loads(_WORKER["pickled"])
@@ -496,18 +508,23 @@ def _play_chunk(start: int, stop: int) -> list[dict[str, Any]]:
             env, _ = task_env_and_horizon(job["task"], job["steps"], job["success_key"])
         except Exception as error:
             raise RuntimeError(
-                f"a worker process could not make the env of {name} for episodes {start} to {stop - 1}: "
-                f"{type(error).__name__}: {error}"
+                f"a worker process could not make the env of {_WORKER['name']} for {what}: {type(error).__name__}: {error}"
             ) from error
         _WORKER.update(env=env, job=job)
-    env, job = _WORKER["env"], _WORKER["job"]
+    return _WORKER["env"], _WORKER["job"]
+
+
+def _play_chunk(start: int, stop: int) -> list[dict[str, Any]]:
+    """Episodes ``start`` to ``stop - 1`` (:func:`_episode`), in a worker process."""
+    env, job = _worker_env(f"episodes {start} to {stop - 1}")
     outcomes = []
     for k in range(start, stop):
         try:
             outcomes.append(_episode(env, job["expert"], job["steps"], job["seed"], k, job["heights"]))
         except Exception as error:
             raise RuntimeError(
-                f"episode {k} of {name} (seed {job['seed']}) failed in a worker process: {type(error).__name__}: {error}"
+                f"episode {k} of {_WORKER['name']} (seed {job['seed']}) failed in a worker process: "
+                f"{type(error).__name__}: {error}"
             ) from error
     return outcomes
 

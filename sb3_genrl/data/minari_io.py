@@ -200,20 +200,28 @@ def load_reached(path: str | os.PathLike[str]) -> np.ndarray:
 def load_transitions(path: str | os.PathLike[str], *, task: str | None = None) -> dict[str, np.ndarray]:
     """The demonstrations as flat transitions, for behaviour cloning and replay-buffer prefilling.
 
+    An episode that ended before the dataset's horizon (terminated early) is stored padded to it (its last observation
+    repeated, hold actions); those padding steps are no transitions of the env and are left out.
+
     :param path: the dataset directory
     :param task: if given, raise unless the dataset holds this task's demonstrations
-    :return: ``observations (N*T, D)``, ``actions (N*T, M)``, ``rewards (N*T,)``, ``next_observations (N*T, D)``
-        and ``dones (N*T,)`` (True on each episode's last step), episode by episode in time order
+    :return: ``observations (K, D)``, ``actions (K, M)``, ``rewards (K,)``, ``next_observations (K, D)`` and ``dones
+        (K,)`` (True on each episode's last step), episode by episode in time order (``K = N*T`` when every episode
+        lasts the whole horizon)
     """
     arrays = load_arrays(path, task=task, keys=("observations", "actions", "rewards", "terminations", "truncations"))
     observations = arrays["observations"]
     n, steps = arrays["actions"].shape[:2]
+    ends = arrays["terminations"] | arrays["truncations"]
+    # the steps up to each episode's first end flag (an episode without one: every step)
+    played = np.cumsum(ends, axis=1) - ends < 1
+    keep = played.reshape(-1)
     return {
-        "observations": observations[:, :-1].reshape(n * steps, -1),
-        "actions": arrays["actions"].reshape(n * steps, -1),
-        "rewards": arrays["rewards"].reshape(-1).astype(np.float32),
-        "next_observations": observations[:, 1:].reshape(n * steps, -1),
-        "dones": (arrays["terminations"] | arrays["truncations"]).reshape(-1),
+        "observations": observations[:, :-1].reshape(n * steps, -1)[keep],
+        "actions": arrays["actions"].reshape(n * steps, -1)[keep],
+        "rewards": arrays["rewards"].reshape(-1).astype(np.float32)[keep],
+        "next_observations": observations[:, 1:].reshape(n * steps, -1)[keep],
+        "dones": ends.reshape(-1)[keep],
     }
 
 
