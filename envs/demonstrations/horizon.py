@@ -2,10 +2,13 @@
 success has settled.
 
 GenRL reads an episode's success at its last step, and an env's own episode length is rarely the length its task
-needs: a Meta-World episode lasts 500 steps, where its scripted expert has pushed the puck to the goal within 100, and
-an expert that keeps acting after its task is done can undo it (push-v3's expert pushes on past the goal: on 100
-tuning resets its success at the last step is 0.99 at step 100, 0.96 at step 150 and 0.57 at step 500). Every step
-past the need costs simulation in the recording, in GenRL's search and in the evaluation.
+needs: a Meta-World episode lasts up to 500 steps, where its scripted expert has pushed the puck to the goal within
+100 on nearly every reset. Every step past the need costs simulation in the recording, in GenRL's search and in the
+evaluation. In an env that runs on after a success, an expert that keeps acting can also undo its task (in
+Meta-World's training env, push-v3's expert pushes on past the goal: on 100 tuning resets its success at the last step
+is 0.99 at step 100, 0.96 at step 150 and 0.57 at step 500); in one that ends at the first success (Meta-World's
+evaluation protocol, :mod:`sb3_genrl.envs.metaworld`) the success by step only grows, and the horizon is where it has
+reached its best.
 
 :func:`expert_horizon` plays the expert unperturbed and closed loop from seeded resets (drawn below ``2**31``, as the
 recorder draws its own, so never one of the held-out resets), reads its success at every step, and returns the
