@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import functools
 import importlib
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -52,6 +52,10 @@ class ExternalTask:
     :param horizon: the control steps of a demonstration that suit the task, which ``genrl quickstart`` records with
         (None: the shortest at which its expert's success settles, :func:`sb3_genrl.envs.demonstrations.expert_horizon`)
     :param generator_preset: the generator preset that ``genrl quickstart`` trains for the task (None: its default)
+    :param recording_kwargs: arguments of the env that demonstrations are recorded and replayed in, where it is not
+        the env GenRL plays (None: the same env). Meta-World's: its training env, which runs on after a success, so
+        that a demonstration holds the expert's actions after its success up to the horizon (the env GenRL plays ends
+        at the first success, with the same outcome for any action sequence)
     """
 
     name: str
@@ -59,6 +63,7 @@ class ExternalTask:
     make_expert: Callable[[], Callable[[Any], np.ndarray]] | None = None
     horizon: int | None = None
     generator_preset: str | None = None
+    recording_kwargs: Mapping[str, Any] | None = None
 
 
 def resolve_task(task: str) -> ExternalTask:
@@ -81,6 +86,7 @@ def resolve_task(task: str) -> ExternalTask:
             metaworld.metaworld_env_id(name),
             functools.partial(metaworld.metaworld_expert, name),
             generator_preset=metaworld.GENERATOR_PRESET,
+            recording_kwargs=metaworld.RECORDING_KWARGS,
         )
     if task in TASKS:
         return ExternalTask(task, TASKS[task].env_id)
@@ -206,9 +212,16 @@ def make_task_env(
     return task_env_and_horizon(task, horizon, success_key)[0]
 
 
-def task_env_and_horizon(task: str | Callable[[], gym.Env], horizon: int | None, success_key: str) -> tuple[gym.Env, int]:
-    """:func:`make_task_env`'s env and its horizon (the control steps of an episode, :func:`task_horizon`)."""
-    env = task() if callable(task) else gym.make(resolve_task(task).env_id)
+def task_env_and_horizon(
+    task: str | Callable[[], gym.Env], horizon: int | None, success_key: str, *, recording: bool = False
+) -> tuple[gym.Env, int]:
+    """:func:`make_task_env`'s env and its horizon (the control steps of an episode, :func:`task_horizon`); with
+    ``recording``, the env demonstrations are recorded in (:attr:`ExternalTask.recording_kwargs`)."""
+    if callable(task):
+        env = task()
+    else:
+        resolved = resolve_task(task)
+        env = gym.make(resolved.env_id, **(dict(resolved.recording_kwargs or {}) if recording else {}))
     if not isinstance(env, gym.Env):
         raise ValueError(f"the env maker {task_name(task)!r} returned a {type(env).__name__}, not a gymnasium.Env")
     steps = task_horizon(env, horizon, task_name(task))

@@ -448,6 +448,14 @@ def test_a_metaworld_task_by_name_records_its_experts_demonstrations(tmp_path):
         for action in actions:
             _, _, _, _, step_info = env.step(action)
         assert step_info["is_success"]
+    # recorded in Meta-World's training env, which runs on after a success: every demonstration holds the expert's
+    # actions up to the horizon, not hold actions after its success (the env GenRL plays ends at the first success)
+    arrays = load_arrays(path, keys=("actions", "terminations", "truncations"))
+    assert not arrays["terminations"].any() and arrays["truncations"][:, -1].all()
+    assert np.all(np.abs(arrays["actions"][:, -10:]).sum(axis=(1, 2)) > 0)
+    env.reset(seed=info["reset_seeds"][0])
+    ended = [env.step(action)[2] for action in load_actions(path)[0]]
+    assert any(ended)  # the same actions in the env GenRL plays: it ends at their first success
 
 
 def test_train_policy_truncates_the_env_to_the_demonstrations_horizon(cli, tmp_path):

@@ -108,7 +108,7 @@ def expert_horizon(
         raise RuntimeError(MAIN_GUARD)  # in a worker process that re-imports the script: its stderr shows why
     seeds = [_reset_seed(np.random.default_rng([seed, HORIZON_STREAM, i])) for i in range(resets)]
     _probe(env, expert, seeds[0], success_key, name)
-    job = _worker_job(task, expert, steps, success_key, seed, np.zeros(0)) if workers > 1 else None
+    job = _worker_job(task, expert, steps, success_key, seed, np.zeros(0), recording=False) if workers > 1 else None
     if job is None:  # one process, or a task or an expert that cannot be sent to another: the same answer
         successes = np.array([_successes(env, expert, reset_seed, steps) for reset_seed in seeds])
     else:

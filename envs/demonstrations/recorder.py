@@ -168,7 +168,7 @@ def record_demonstrations(
     workers = (default_threads() if episodes >= SMALL_RUN else 1) if n_threads is None else int(n_threads)
     if workers > 1 and getattr(multiprocessing.current_process(), "_inheriting", False):  # Python's own test
         raise RuntimeError(MAIN_GUARD)  # in a worker process that re-imports the script: its stderr shows why
-    env, steps = task_env_and_horizon(task, horizon, success_key)
+    env, steps = task_env_and_horizon(task, horizon, success_key, recording=True)
     heights = _noise_heights(env.action_space, noise)
     first_seed = _reset_seed(np.random.default_rng([seed, 0]))
     _probe(env, expert, first_seed, success_key, name)
@@ -471,6 +471,7 @@ def _worker_job(
     success_key: str,
     seed: int,
     heights: np.ndarray,
+    recording: bool = True,
 ) -> bytes | None:
     """What a worker process needs to play episodes, cloudpickled (as SB3's ``SubprocVecEnv`` sends its env makers);
     None when the task or the expert cannot be pickled. A task's Gymnasium registration goes with it, so that a worker
@@ -484,6 +485,7 @@ def _worker_job(
         "success_key": success_key,
         "seed": seed,
         "heights": heights,
+        "recording": recording,  # the env demonstrations are recorded in (ExternalTask.recording_kwargs)
     }
     try:
         return cloudpickle.dumps(job)
@@ -505,7 +507,7 @@ def _worker_env(what: str) -> tuple[gym.Env, dict[str, Any]]:
             job = pickle.loads(_WORKER["pickled"])
             if job["spec"] is not None:
                 gym.registry.setdefault(job["spec"].id, job["spec"])
-            env, _ = task_env_and_horizon(job["task"], job["steps"], job["success_key"])
+            env, _ = task_env_and_horizon(job["task"], job["steps"], job["success_key"], recording=job["recording"])
         except Exception as error:
             raise RuntimeError(
                 f"a worker process could not make the env of {_WORKER['name']} for {what}: {type(error).__name__}: {error}"

@@ -108,7 +108,7 @@ def replay_demonstrations(
         if first > len(episodes.actions):
             raise ValueError(f"episodes ({first}) is more than the {len(episodes.actions)} episodes of {episodes.name}")
         episodes = ReplaySource(episodes.actions[:first], episodes.reset_seeds[:first], episodes.labels[:first], episodes.name)
-    env, steps = task_env_and_horizon(task, horizon, success_key)
+    env, steps = task_env_and_horizon(task, horizon, success_key, recording=True)
     try:
         _check_episodes(env, episodes, steps, name)
         _probe(env, episodes, success_key, name)
