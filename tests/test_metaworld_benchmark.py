@@ -118,3 +118,18 @@ def test_a_stopped_sac_run_resumes_from_its_checkpoint(tmp_path, monkeypatch):
     assert (folder / "model.zip").is_file() and not (folder / "checkpoint").exists()
     horizon = json.loads(out.read_text())["tasks"]["reach-v3"]["horizon"]["horizon"]
     assert benchmark.SAC.load(folder / "model.zip").num_timesteps == 6 * horizon
+
+
+def test_the_horizons_benchmark_writes_each_tasks_horizon_and_cost_and_resumes(tmp_path, monkeypatch):
+    import benchmarks.metaworld_horizons as horizons
+
+    monkeypatch.setattr(horizons, "expert_horizon", functools.partial(horizons.expert_horizon, resets=8))
+    monkeypatch.setattr(horizons, "COST_RESETS", 2)
+    out = tmp_path / "horizons.json"
+    assert horizons.main(["--tasks", "reach-v3", "--out", str(out)]) == 0
+    row = json.loads(out.read_text())["tasks"]["reach-v3"]
+    assert row["settled"] and row["resets"] == 8 and 0 < row["expert_mean_steps"] <= row["horizon"] < 500
+    assert row["horizon_episode_ms"] == pytest.approx(row["step_ms"] * row["horizon"], abs=0.1)
+    assert f"| reach-v3 | {row['horizon']} | yes |" in out.with_suffix(".md").read_text()
+    stamp = out.stat().st_mtime_ns
+    assert horizons.main(["--tasks", "reach-v3", "--out", str(out)]) == 0 and out.stat().st_mtime_ns == stamp  # done
