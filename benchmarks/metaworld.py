@@ -7,7 +7,8 @@ and a rerun with others is refused before any work):
 0. the horizon, as ``genrl quickstart`` finds it: the shortest at which the scripted expert's success settles on 100
    seeded resets (:func:`~sb3_genrl.envs.demonstrations.expert_horizon`, seed 0; never the held-out resets);
 1. ``--demos`` demonstrations of Meta-World's scripted expert, perturbed, of that horizon
-   (:func:`~sb3_genrl.envs.demonstrations.record_demonstrations`, seed 0), kept when their open-loop replay succeeds;
+   (:func:`~sb3_genrl.envs.demonstrations.record_demonstrations`, seed 0, in Meta-World's training env, which runs on
+   after a success), kept when their open-loop replay succeeds;
 2. a generator of the quickstart's Meta-World preset (:data:`sb3_genrl.envs.metaworld.GENERATOR_PRESET`), ``--epochs``,
    seed 0;
 3. the expert closed loop, unperturbed, from the held-out resets, and its actions replayed open loop from the same
@@ -22,10 +23,13 @@ and a rerun with others is refused before any work):
    run resumes);
 6. per ``--sac-seeds`` seed (default one: SAC's runs take hours per task on a CPU), SB3's SAC (its defaults,
    learning from the first step, observations normalised with the demonstrations' statistics) with the
-   demonstrations' transitions in its replay buffer, for the same ``--episodes`` episodes of the task's horizon.
+   demonstrations' transitions in its replay buffer, for the same ``--episodes`` episodes of the task's horizon, in
+   Meta-World's training env (no end at a success, as Meta-World trains step-based learners); checkpointed, and a
+   stopped run resumes.
 
 Every policy is scored deterministically on ``--held-out`` held-out seeded resets: reset seeds from ``2**31``
-(:func:`~sb3_genrl.envs.external.evaluate_success`), which the recorder never draws and which choose nothing. Each
+(:func:`~sb3_genrl.envs.external.evaluate_success`), which the recorder never draws and which choose nothing, each
+episode ending at its first success (Meta-World's evaluation protocol) or at the horizon. Each
 method's CPU seconds per seed are recorded (process time; every env plays in this process). The JSON (default
 ``benchmarks/results/metaworld.json``, with :func:`sb3_genrl.provenance.provenance`) says ``"complete": false`` until
 every unit of every task asked for is done; the Markdown table is written beside it (``.md``).
