@@ -90,7 +90,7 @@ SAC_CHECKPOINT_EVERY = 250  # SAC's episodes between checkpoints (model and repl
 SAC_RECORD = "run.json"  # a finished SAC run's identity and CPU seconds, beside its model
 
 
-def _task_name(name: str, _: str = "") -> str:
+def known_task(name: str, _: str = "") -> str:
     metaworld.check_task_name(name)
     return name
 
@@ -100,7 +100,7 @@ def arguments(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument(
         "--tasks",
         nargs="+",
-        type=option(_task_name),
+        type=option(known_task),
         default=list(metaworld.MT10_TASK_NAMES),
         help="Meta-World v3 tasks (default: MT10)",
     )

@@ -23,6 +23,7 @@ from sb3_genrl.envs import metaworld
 from sb3_genrl.envs.demonstrations import expert_horizon
 from sb3_genrl.envs.external import make_task_env
 
+from benchmarks.metaworld import closed_loop, known_task
 from sb3_genrl.checks import JSON_OUT, option
 from sb3_genrl.markdown import markdown_table
 from sb3_genrl.provenance import provenance
@@ -33,25 +34,14 @@ RESULTS = Path(__file__).resolve().parent / "results"
 COST_RESETS, COST_SEED = 20, 10**6  # the expert's episodes that measure the cost (not the probe's resets)
 
 
-def _task_name(name: str, _: str = "") -> str:
-    metaworld.check_task_name(name)
-    return name
-
-
 def task_row(name: str) -> dict[str, Any]:
     """The horizon of ``name``'s expert, its success there, and the CPU cost of its steps (see the module doc)."""
     began = time.process_time()
     found = expert_horizon(f"metaworld/{name}", seed=0, n_threads=1)
     probe = time.process_time() - began
     env, expert = make_task_env(f"metaworld/{name}", horizon=found["horizon"]), metaworld.metaworld_expert(name)
-    steps, began = [], time.process_time()
-    for i in range(COST_RESETS):
-        observation, _ = env.reset(seed=COST_SEED + i)
-        played, ended = 0, False
-        while not ended:
-            observation, _, terminated, truncated, _ = env.step(expert(observation))
-            played, ended = played + 1, terminated or truncated
-        steps.append(played)
+    began = time.process_time()
+    steps = [len(closed_loop(env, expert, COST_SEED + i, found["horizon"])[1]) for i in range(COST_RESETS)]
     step_ms = 1000 * (time.process_time() - began) / sum(steps)
     env.close()
     return {key: value for key, value in found.items() if key != "success_by_step"} | {
@@ -82,7 +72,7 @@ def table(result: dict[str, Any]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--tasks", nargs="+", type=option(_task_name), default=list(metaworld.TASK_NAMES))
+    parser.add_argument("--tasks", nargs="+", type=option(known_task), default=list(metaworld.TASK_NAMES))
     parser.add_argument("--out", type=JSON_OUT, default=str(RESULTS / "metaworld_horizons.json"))
     args = parser.parse_args(argv)
     if not metaworld.installed():

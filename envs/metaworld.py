@@ -238,10 +238,11 @@ class SeededMetaWorldEnv:
         so far; terminated at a success when ``terminate_on_success`` (as Meta-World's
         ``AutoTerminateOnSuccessWrapper``)."""
         observation, reward, terminated, truncated, info = super().step(action)
-        self._solved = self._solved or info["success"] == 1.0
+        solved_now = info["success"] == 1.0
+        self._solved = self._solved or solved_now
         info["is_success"] = self._solved
         if self.terminate_on_success:
-            terminated = bool(terminated or info["success"] == 1.0)
+            terminated = bool(terminated or solved_now)
         return observation, reward, terminated, truncated, info
 
 
