@@ -165,6 +165,7 @@ def settings(args: argparse.Namespace) -> dict[str, Any]:
         "fit_steps": args.fit_steps,
         "genrl": "started from the demonstrations, a spread fixed at 0.37, else GenRL's defaults",
         "success": "Meta-World's evaluation protocol: an episode ends at its first success",
+        "reward": "Meta-World's v2 reward, 10 at the step that ends an episode at its success",
         "sac": "SB3's defaults, learning_starts 0, the demonstrations in the buffer, trained without an end at success",
     }
 

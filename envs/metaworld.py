@@ -23,7 +23,9 @@ The goal is observed (the last 3 numbers of the 39-D observation, as in Meta-Wor
 episode ends at its first success (terminated) or after 500 steps (Meta-World's ``max_path_length``, truncated).
 Ending at the first success is Meta-World's own evaluation protocol (``metaworld.evaluation`` turns its
 ``AutoTerminateOnSuccessWrapper`` on): an episode counts as solved when its task is solved at some step.
-``info["is_success"]`` says whether it has been solved at some step of the episode so far (``info["success"]``,
+The step that ends an episode at its success earns Meta-World's top reward, 10 (``SOLVED_REWARD``), so that an
+episode's last reward ranks a solved episode above an unsolved one. ``info["is_success"]`` says whether it has been
+solved at some step of the episode so far (``info["success"]``,
 Meta-World's own, whether it is solved at this step), so the success read at an episode's last step is Meta-World's.
 Several scripted experts solve their task only for a while (on 100 seeded resets, handle-press-v3's expert solves it
 within 58 steps on all of them, but at any one step on at most 0.35), so a success read at a fixed last step of an
@@ -59,6 +61,12 @@ GENERATOR_PRESET = "VAE-FETCH"
 # and a decoded trajectory that arrives a little late stops short: peg-insert-side-v3's generator reproduced 0.385 of
 # such demonstrations against 0.735 of the whole ones (the MT10 benchmark's sizes; docs/guide/your_task.md).
 RECORDING_KWARGS = {"terminate_on_success": False}
+# The reward of the step that ends an episode at its first success, with Meta-World's v2 rewards (their maximum, which
+# most tasks give once the object is within a few cm of its goal). Meta-World's own reward of that step does not tell a
+# success from a near miss: pick-place-v3 gives 10 only within 5 cm of the goal while its success is within 7 cm, so a
+# first success earns about 6.75 (the median in the MT10 benchmark's GenRL runs), and 1 in 10 of their failed episodes
+# ends at 6.66 or more; window-open-v3's first successes earn 3.6 to 8.3.
+SOLVED_REWARD = 10.0
 # Meta-World's 50 v3 tasks (metaworld.env_dict.ALL_V3_ENVIRONMENTS, in its order; a test checks this copy)
 TASK_NAMES = (
     "assembly-v3",
@@ -193,7 +201,10 @@ class SeededMetaWorldEnv:
     (padded to 14), the same 18 numbers of the previous step, and the goal's position.
 
     ## Rewards
-    Meta-World's shaped reward (version ``v2`` by default), between 0 and 10.
+    Meta-World's shaped reward (version ``v2`` by default), between 0 and 10, except at the step that ends an episode at
+    its first success, which earns 10 (:data:`SOLVED_REWARD`, with the ``v2`` rewards), so that an episode's last reward
+    ranks every solved episode above every unsolved one (the training env, ``terminate_on_success=False``, gives
+    Meta-World's reward at every step).
 
     ## Starting State
     The object and goal positions drawn uniformly from the task's ``_random_reset_space`` by ``np_random``.
@@ -236,13 +247,15 @@ class SeededMetaWorldEnv:
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """Meta-World's step, with ``info["is_success"]``: whether the task has been solved at some step of the episode
         so far; terminated at a success when ``terminate_on_success`` (as Meta-World's
-        ``AutoTerminateOnSuccessWrapper``)."""
+        ``AutoTerminateOnSuccessWrapper``), with the reward :data:`SOLVED_REWARD` (``v2`` rewards)."""
         observation, reward, terminated, truncated, info = super().step(action)
         solved_now = info["success"] == 1.0
         self._solved = self._solved or solved_now
         info["is_success"] = self._solved
         if self.terminate_on_success:
             terminated = bool(terminated or solved_now)
+            if solved_now and self.reward_function_version == "v2":
+                reward = SOLVED_REWARD
         return observation, reward, terminated, truncated, info
 
 

@@ -211,6 +211,27 @@ def test_without_termination_at_success_the_episode_runs_to_the_limit_as_metawor
 
 
 @needs_metaworld
+def test_the_step_that_ends_an_episode_at_its_success_earns_the_top_reward_and_the_training_env_metaworlds():
+    # pick-place-v3 gives 10 only within 5 cm of the goal and counts a success within 7 cm: its expert's first success
+    # earns less than 10 in Meta-World's reward
+    expert = mw.metaworld_expert("pick-place-v3")
+    ending, training = (
+        mw.make_metaworld_env("pick-place-v3"),
+        mw.make_metaworld_env("pick-place-v3", terminate_on_success=False),
+    )
+    actions, _, _, terminated = _episode(ending, 0, lambda observation, step: expert(observation))
+    assert terminated
+    rewards = {}
+    for name, env in (("ending", ending), ("training", training)):
+        env.reset(seed=0)
+        rewards[name] = np.array([env.step(action)[1] for action in actions])
+    np.testing.assert_array_equal(rewards["ending"][:-1], rewards["training"][:-1])  # Meta-World's before the end
+    assert rewards["ending"][-1] == mw.SOLVED_REWARD == 10.0
+    assert 0.0 < rewards["training"][-1] < 10.0  # Meta-World's own reward of the step: a near miss could earn as much
+    assert rewards["ending"][:-1].max() < 10.0
+
+
+@needs_metaworld
 def test_the_door_open_expert_leaves_the_callers_observation_alone():
     env, expert = mw.make_metaworld_env("door-open-v3"), mw.metaworld_expert("door-open-v3")
     observation, _ = env.reset(seed=0)
