@@ -112,7 +112,9 @@ def arguments(argv: list[str] | None = None) -> argparse.Namespace:
         default=[0],
         help="seeds of SAC (default 0: its runs take hours per task on a CPU; the table gives each method's seed count)",
     )
-    parser.add_argument("--demos", type=COUNT, default=1000, help="demonstrations per task (default 1000, the quickstart's)")
+    parser.add_argument(
+        "--demos", type=COUNT, default=1000, help="demonstrations per task (default 1000, the quickstart's up to 150 steps)"
+    )
     parser.add_argument("--epochs", type=COUNT, default=300, help="generator epochs (default 300)")
     parser.add_argument("--episodes", type=COUNT, default=3000, help="episodes of GenRL and of SAC per seed (default 3000)")
     parser.add_argument(

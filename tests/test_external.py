@@ -18,7 +18,7 @@ import torch
 from conftest import HANG_S
 from gymnasium import spaces
 from sb3_genrl.envs import metaworld
-from sb3_genrl.envs.demonstrations import expert_horizon, record_demonstrations, smooth_noise
+from sb3_genrl.envs.demonstrations import expert_horizon, play_episode, record_demonstrations, recorder, smooth_noise
 from sb3_genrl.envs.external import (
     HELD_OUT_RESETS,
     HELD_OUT_SEED,
@@ -29,12 +29,19 @@ from sb3_genrl.envs.external import (
     resolve_task,
 )
 
+import sb3_genrl
 from sb3_genrl import GenRL, LatentActionWrapper
 from sb3_genrl.cli.commands import _outside_env_maker
 from sb3_genrl.data import dataset_info, load_actions, load_arrays, read_metadata
 from sb3_genrl.generative import load, train_generator
 from sb3_genrl.genrl.demonstrations import DemonstrationCallback
 from sb3_genrl.run.train import _make_env
+from sb3_genrl.study.quickstart import (
+    OUTSIDE_DEMO_STEPS,
+    OUTSIDE_POLICY_STEPS,
+    outside_demo_episodes,
+    outside_task_settings,
+)
 
 HORIZON = 20
 STEP = 0.1  # metres moved per unit of action and step
@@ -434,10 +441,24 @@ def test_genrl_demos_plays_an_experts_episodes_in_the_worker_processes_asked_for
 
 
 @pytest.mark.skipif(not metaworld.installed(), reason=metaworld.INSTALL_HINT)
-def test_a_metaworld_task_by_name_records_its_experts_demonstrations(tmp_path):
+def test_a_metaworld_task_by_name_records_its_experts_demonstrations(tmp_path, monkeypatch):
     task = resolve_task("metaworld/reach-v3")
     assert task.env_id == "GenRL/metaworld-reach-v3" and task.make_expert is not None
+    plays = []  # (closed loop, whether the env ends at a success, steps played) of each play
+
+    def spied_play_episode(env, reset_seed, steps, expert, actions):
+        played = play_episode(env, reset_seed, steps, expert, actions)
+        plays.append((expert is not None, env.unwrapped.terminate_on_success, len(played["actions"])))
+        return played
+
+    monkeypatch.setattr(recorder, "play_episode", spied_play_episode)
     path = record_demonstrations("metaworld/reach-v3", None, 2, tmp_path / "reach", horizon=60, noise=0.1)
+    # played closed loop in the training env to the horizon, replayed in the env GenRL plays, which ends at the first
+    # success (the same outcome, fewer steps)
+    closed_loop = [(ends, steps) for closed, ends, steps in plays if closed]
+    replays = [(ends, steps) for closed, ends, steps in plays if not closed]
+    assert len(replays) == 2 and closed_loop == [(False, 60)] * len(closed_loop)
+    assert all(ends and steps < 60 for ends, steps in replays)
     info = dataset_info(path)
     assert info["env_id"] == "GenRL/metaworld-reach-v3" and info["expert"].endswith("MetaWorldExpert")
     assert load_actions(path).shape == (2, 60, 4)
@@ -498,10 +519,12 @@ def test_train_policy_truncates_the_env_to_the_demonstrations_horizon(cli, tmp_p
     assert all(torch.equal(a, b) for a, b in zip(same.state_dict().values(), given.state_dict().values(), strict=True))
 
 
-def test_quickstart_of_an_outside_task_with_an_expert_reports_its_held_out_success(cli, tmp_path):
+def test_quickstart_of_an_outside_task_with_an_expert_reports_its_held_out_success(cli, tmp_path, monkeypatch):
     task, out = "test_external:TestExternal/PointGoal-v0", tmp_path / "quick"
+    # the default count of demonstrations: as many as fit the quickstart's budget of demonstration steps
+    monkeypatch.setattr("sb3_genrl.study.quickstart.OUTSIDE_DEMO_STEPS", 96)
     arguments = (
-        "quickstart", "--task", task, "--expert", "test_external:point_expert", "--out", out, "--demo-episodes", 8,
+        "quickstart", "--task", task, "--expert", "test_external:point_expert", "--out", out,
         "--epochs", 2, "--episodes", 64, "--no-progress-bar", "--device", "cpu",
     )  # fmt: skip
     code, printed, err = cli(*arguments)
@@ -514,7 +537,9 @@ def test_quickstart_of_an_outside_task_with_an_expert_reports_its_held_out_succe
     assert found["settled"] and found["best"] == 1.0 and found["expert"] == "test_external:point_expert"
     assert horizon == expert_horizon(task, point_expert)["horizon"] < HORIZON and f"horizon: {horizon} steps" in printed
     info = dataset_info(out / "demonstrations")
-    assert info["episodes"] == 8 and info["horizon"] == horizon and info["expert"] == "test_external:point_expert"
+    demonstrations = 96 // horizon
+    assert info["episodes"] == demonstrations and info["horizon"] == horizon
+    assert info["expert"] == "test_external:point_expert"
     policy = json.loads((out / "policy" / "summary.json").read_text())
     assert policy["task"] == "TestExternal/PointGoal-v0" and policy["episodes"] == 64 and policy["horizon"] == horizon
     # The held-out success is the saved policy's, played again here on the documented reset seeds 2**31, 2**31 + 1, ...
@@ -523,9 +548,12 @@ def test_quickstart_of_an_outside_task_with_an_expert_reports_its_held_out_succe
     played = evaluate_success(model, task, resets=HELD_OUT_RESETS, horizon=horizon)
     assert summary["held_out_success"] == played["success_rate"] and summary["held_out_resets"] == HELD_OUT_RESETS == 200
     assert summary["held_out_seeds"] == [HELD_OUT_SEED, HELD_OUT_SEED + 200] and HELD_OUT_SEED == 2**31
+    # the time of each stage and of the held-out score, and the package that wrote it
+    assert list(summary["stage_seconds"]) == ["horizon", "demonstrations", "generator", "evaluation", "policy", "score"]
+    assert summary["provenance"]["sb3_genrl"] == sb3_genrl.__version__ and "git_commit" in summary["provenance"]
     assert max(info["reset_seeds"]) < HELD_OUT_SEED  # no demonstration starts from a held-out reset
     report = (out / "report.md").read_text()
-    assert f"8 perturbed episodes of the expert `test_external:point_expert`, {horizon} steps each" in report
+    assert f"{demonstrations} perturbed episodes of the expert `test_external:point_expert`, {horizon} steps each" in report
     assert f"200 held-out seeded resets (reset seeds {2**31} to {2**31 + 199}" in report
     assert f"deterministic: **{summary['held_out_success']:.1%}**" in report
     # A rerun resumes without work (the horizon read back, not searched again); one with another horizon is refused
@@ -535,6 +563,17 @@ def test_quickstart_of_an_outside_task_with_an_expert_reports_its_held_out_succe
     assert "horizon:" not in printed
     code, _, err = cli(*arguments, "--horizon", horizon + 1)
     assert code == 2 and f"horizon {horizon} (recorded) vs {horizon + 1} (this run)" in err, err
+
+
+def test_a_long_outside_task_gets_fewer_demonstrations_and_episodes_in_the_quickstart():
+    # as many as fit the quickstart's budgets of steps, below the counts a short task gets
+    assert outside_demo_episodes(89) == outside_demo_episodes(OUTSIDE_DEMO_STEPS // 1000) == 1000
+    assert outside_demo_episodes(500) == OUTSIDE_DEMO_STEPS // 500 < outside_demo_episodes(400) < 1000
+    assert outside_demo_episodes(10**6) == 4  # the fewest precision and recall take
+    task = resolve_task("test_external:TestExternal/PointGoal-v0")
+    assert outside_task_settings(task)[:2] == outside_task_settings(task, OUTSIDE_POLICY_STEPS // 3000)[:2] == (3000, 64)
+    assert outside_task_settings(task, 500)[0] == OUTSIDE_POLICY_STEPS // 500 < 3000
+    assert outside_task_settings(task, 10**6)[0] == 64  # one iteration
 
 
 def test_quickstart_refuses_an_expert_for_a_package_task_and_an_outside_task_without_one(cli, tmp_path):

@@ -115,7 +115,9 @@ def record_demonstrations(
     with that seed and the expert plays closed loop, each of its actions changed by :func:`smooth_noise` and clipped to
     the action space, for ``horizon`` steps (or until the episode ends; the rest of the trajectory is the hold action,
     zeros, as :class:`~sb3_genrl.LatentActionWrapper` plays after a trajectory). The episode is kept when its last step
-    succeeds and its actions, replayed open loop from a reset with the same seed, succeed too. Episodes are tried in
+    succeeds and its actions, replayed open loop from a reset with the same seed, succeed too (replayed in the env that
+    GenRL plays, where the task records in another: Meta-World's replay ends at its first success, with the outcome of
+    the training env, which runs on). Episodes are tried in
     order until ``episodes`` are kept, so the dataset depends on ``seed`` only, and a smaller set is a prefix of a
     larger one.
 
@@ -169,6 +171,7 @@ def record_demonstrations(
     if workers > 1 and getattr(multiprocessing.current_process(), "_inheriting", False):  # Python's own test
         raise RuntimeError(MAIN_GUARD)  # in a worker process that re-imports the script: its stderr shows why
     env, steps = task_env_and_horizon(task, horizon, success_key, recording=True)
+    replay_env = _replay_env(task, env, steps, success_key)
     heights = _noise_heights(env.action_space, noise)
     first_seed = _reset_seed(np.random.default_rng([seed, 0]))
     _probe(env, expert, first_seed, success_key, name)
@@ -178,7 +181,7 @@ def record_demonstrations(
         refuse_existing_output(out_dir)
         began = time.perf_counter()
         if job is None:
-            kept, counts = _record(env, expert, episodes, steps, seed, heights, progress_bar, name)
+            kept, counts = _record(env, replay_env, expert, episodes, steps, seed, heights, progress_bar, name)
         else:
             kept, counts = _record_in_workers(job, workers, episodes, progress_bar, name)
         path = write_demonstrations(
@@ -198,7 +201,17 @@ def record_demonstrations(
             seconds=round(time.perf_counter() - began, 1),
         )
     env.close()
+    replay_env.close()
     return path
+
+
+def _replay_env(task: str | Callable[[], gym.Env], env: gym.Env, steps: int, success_key: str) -> gym.Env:
+    """The env a recorded episode's actions are replayed in: the one GenRL plays (``env`` itself, unless the task
+    records in another env, :attr:`~sb3_genrl.envs.external.ExternalTask.recording_kwargs`). Meta-World's ends at the
+    first success, so a replay stops there (its outcome is the training env's, whose success says solved so far)."""
+    if callable(task) or not resolve_task(task).recording_kwargs:
+        return env
+    return task_env_and_horizon(task, steps, success_key)[0]
 
 
 def task_expert(task: str | Callable[[], gym.Env], expert: Callable[[Any], np.ndarray] | None) -> Callable[[Any], Any]:
@@ -382,18 +395,25 @@ def pad_actions(actions: np.ndarray, steps: int, action_space: spaces.Box) -> np
 
 
 def _episode(
-    env: gym.Env, expert: Callable[[Any], np.ndarray], steps: int, seed: int, k: int, heights: np.ndarray
+    env: gym.Env,
+    replay_env: gym.Env,
+    expert: Callable[[Any], np.ndarray],
+    steps: int,
+    seed: int,
+    k: int,
+    heights: np.ndarray,
 ) -> dict[str, Any]:
-    """Episode ``k`` (see :func:`record_demonstrations`): its closed-loop play and, when that succeeds, its open-loop
-    replay. Returns the kept episode (the played one with its padded ``actions`` and its ``reset_seed``), or
-    ``{"failed": reason}`` with the reason the metadata counts (``failed_closed_loop``, ``failed_open_loop``)."""
+    """Episode ``k`` (see :func:`record_demonstrations`): its closed-loop play in ``env`` and, when that succeeds, its
+    open-loop replay in ``replay_env`` (:func:`_replay_env`). Returns the kept episode (the played one with its padded
+    ``actions`` and its ``reset_seed``), or ``{"failed": reason}`` with the reason the metadata counts
+    (``failed_closed_loop``, ``failed_open_loop``)."""
     rng = np.random.default_rng([seed, k])
     reset_seed = _reset_seed(rng)
     played = play_episode(env, reset_seed, steps, expert, smooth_noise(steps, rng, heights))
     if not played["success"]:
         return {"failed": "failed_closed_loop"}
     actions = pad_actions(played["actions"], steps, env.action_space)
-    replayed = play_episode(env, reset_seed, steps, None, actions)
+    replayed = play_episode(replay_env, reset_seed, steps, None, actions)
     if not (replayed["success"] and same_observation(replayed["observations"][0], played["observations"][0])):
         return {"failed": "failed_open_loop"}
     return played | {"actions": actions, "reset_seed": reset_seed}
@@ -401,6 +421,7 @@ def _episode(
 
 def _record(
     env: gym.Env,
+    replay_env: gym.Env,
     expert: Callable[[Any], np.ndarray],
     episodes: int,
     steps: int,
@@ -410,7 +431,7 @@ def _record(
     name: str,
 ) -> tuple[list[dict[str, Any]], dict[str, int]]:
     """The episodes played one after the other in this process (``n_threads=1``)."""
-    outcomes = (_episode(env, expert, steps, seed, k, heights) for k in itertools.count())
+    outcomes = (_episode(env, replay_env, expert, steps, seed, k, heights) for k in itertools.count())
     return _keep(outcomes, episodes, progress_bar, name)
 
 
@@ -508,11 +529,12 @@ def _worker_env(what: str) -> tuple[gym.Env, dict[str, Any]]:
             if job["spec"] is not None:
                 gym.registry.setdefault(job["spec"].id, job["spec"])
             env, _ = task_env_and_horizon(job["task"], job["steps"], job["success_key"], recording=job["recording"])
+            replay_env = _replay_env(job["task"], env, job["steps"], job["success_key"]) if job["recording"] else env
         except Exception as error:
             raise RuntimeError(
                 f"a worker process could not make the env of {_WORKER['name']} for {what}: {type(error).__name__}: {error}"
             ) from error
-        _WORKER.update(env=env, job=job)
+        _WORKER.update(env=env, replay_env=replay_env, job=job)
     return _WORKER["env"], _WORKER["job"]
 
 
@@ -522,7 +544,8 @@ def _play_chunk(start: int, stop: int) -> list[dict[str, Any]]:
     outcomes = []
     for k in range(start, stop):
         try:
-            outcomes.append(_episode(env, job["expert"], job["steps"], job["seed"], k, job["heights"]))
+            replay_env = _WORKER["replay_env"]
+            outcomes.append(_episode(env, replay_env, job["expert"], job["steps"], job["seed"], k, job["heights"]))
         except Exception as error:
             raise RuntimeError(
                 f"episode {k} of {_WORKER['name']} (seed {job['seed']}) failed in a worker process: "

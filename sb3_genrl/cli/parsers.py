@@ -35,7 +35,7 @@ from sb3_genrl.hyperparams import known_env_ids, load_hyperparams
 from sb3_genrl.metrics.scorecard import NOT_CONVERGED_PRECISION, RANK_MEASURES
 from sb3_genrl.run.checkpoint import CHECKPOINT_EVERY
 from sb3_genrl.study import MODELS, SCALES
-from sb3_genrl.study.quickstart import DEMO_EPISODES, MIN_DEMO_EPISODES, OUTSIDE_DEMO_EPISODES
+from sb3_genrl.study.quickstart import DEMO_EPISODES, MIN_DEMO_EPISODES, OUTSIDE_DEMO_EPISODES, OUTSIDE_DEMO_STEPS
 from sb3_genrl.video import VIDEO_SUFFIXES
 
 
@@ -447,7 +447,8 @@ def add_quickstart(sub: argparse._SubParsersAction) -> None:
         type=option(check_int, int, minimum=MIN_DEMO_EPISODES, maximum=MAX_EPISODES),
         default=None,
         help=f"demonstrations to generate, at least {MIN_DEMO_EPISODES} (default {DEMO_EPISODES}; a task from outside "
-        f"the package: {OUTSIDE_DEMO_EPISODES})",
+        f"the package: {OUTSIDE_DEMO_EPISODES}, fewer above {OUTSIDE_DEMO_STEPS // OUTSIDE_DEMO_EPISODES} steps a "
+        f"demonstration: {OUTSIDE_DEMO_STEPS} steps in all)",
     )
     quick.add_argument("--epochs", type=COUNT, default=300, help="beta-VAE training epochs (default 300)")
     own = ", ".join(

@@ -49,6 +49,7 @@ from sb3_genrl.genrl import GenRL
 from sb3_genrl.genrl.demonstrations import DEMONSTRATION_CALLBACK, uses_demonstrations
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED, known_env_ids, load_genrl_settings
 from sb3_genrl.metrics import MEASURES, evaluate_generators
+from sb3_genrl.provenance import provenance
 from sb3_genrl.run import evaluate_on_goals, train_policy
 from sb3_genrl.run.stages import check_and_record, read_settings, refuse_conflicts, settings_conflicts
 from sb3_genrl.run.train import genrl_settings, run_settings
@@ -76,6 +77,14 @@ DEMO_EPISODES, GENERATOR_EPOCHS, GENERATOR_EVAL_EVERY = 4000, 300, 10
 # push-v3, 1000 against 500 lift the fitted start from 0.76 to 0.91 and the search from 0.94 to 0.96 (tuning resets),
 # for about 110 s more of recording (docs/guide/your_task.md).
 OUTSIDE_DEMO_EPISODES = 1000
+# ... and at most this many demonstration steps, and GenRL at most this many episodes' steps of the horizon, so that a
+# long task's quickstart stays within 15 minutes on two idle cores: 1000 demonstrations up to a horizon of 150 steps and
+# 3000 episodes up to 166, fewer above (Meta-World's push-back-v3, 500 steps: 300 and 1000). Sized for the costliest
+# Meta-World step, about 1.6 ms on one core (shelf-place-v3, stick-pull-v3), a failing episode playing the whole
+# horizon: push-back-v3's quickstart took 22 minutes with 400 demonstrations and 3008 episodes (docs/guide/your_task.md,
+# "The quickstart").
+OUTSIDE_DEMO_STEPS = 150_000
+OUTSIDE_POLICY_STEPS = 500_000
 # GenRL plays two envs at a time (the arm tasks: each step's two trajectories in one threaded simulation call, see
 # sb3_genrl.vec_env; other tasks: one process each). Fixed, not the machine's core count: the result depends on it.
 # All of an iteration's episodes per call would be faster, but would give other results than the quickstart's so far.
@@ -123,7 +132,7 @@ def quickstart(
     :param task: a task name from :data:`sb3_genrl.envs.TASKS`, or a task from outside the package
         (:func:`~sb3_genrl.envs.external.resolve_task`)
     :param demo_episodes: demonstrations to generate (default: :data:`DEMO_EPISODES`; a task from outside the
-        package: :data:`OUTSIDE_DEMO_EPISODES`)
+        package: :func:`outside_demo_episodes` of its horizon, 1000 up to 200 steps)
     :param epochs: beta-VAE training epochs (:data:`QUICKSTART_PRESET` of paper table 1)
     :param policy_episodes: GenRL episodes (default: the task's); GenRL takes the task's settings and episodes per
         iteration too (its entry in ``hyperparams/genrl.yml``, see :func:`task_settings`)
@@ -148,13 +157,13 @@ def quickstart(
         episodes, batch_episodes, genrl_kwargs = task_settings(task)
         video = video and get_task(task).video  # a task without the arm tasks' renderer is not filmed
     else:
-        episodes, batch_episodes, genrl_kwargs = outside_task_settings(outside)
         expert = expert if expert is not None else outside.make_expert()
         horizon, horizon_record = _outside_horizon(outside, horizon, expert, pathlib.Path(out_dir), seed, log)
+        episodes, batch_episodes, genrl_kwargs = outside_task_settings(outside, horizon)
         video = False  # the video renders the package's arm tasks
     policy_episodes = episodes if policy_episodes is None else policy_episodes
     if demo_episodes is None:
-        demo_episodes = DEMO_EPISODES if outside is None else OUTSIDE_DEMO_EPISODES
+        demo_episodes = DEMO_EPISODES if outside is None else outside_demo_episodes(horizon)
     _check_counts(
         demo_episodes=demo_episodes,
         epochs=epochs,
@@ -192,6 +201,13 @@ def quickstart(
         log = log or (lambda _line: None)
         timings = _run_stages(out, settings, device, progress_bar, log, expert)
         return _write_report(out, task, seed, video, timings, log, horizon if outside is not None else None)
+
+
+def outside_demo_episodes(horizon: int) -> int:
+    """The demonstrations ``genrl quickstart`` records for a task from outside the package with episodes of
+    ``horizon`` steps: :data:`OUTSIDE_DEMO_EPISODES`, or fewer where they would pass :data:`OUTSIDE_DEMO_STEPS` steps
+    (at least :data:`MIN_DEMO_EPISODES`)."""
+    return max(MIN_DEMO_EPISODES, min(OUTSIDE_DEMO_EPISODES, OUTSIDE_DEMO_STEPS // int(horizon)))
 
 
 def _outside_task(task: str, expert: Callable[[Any], Any] | None, horizon: int | None) -> ExternalTask | None:
@@ -248,17 +264,21 @@ def _outside_horizon(
     return int(found["horizon"]), record
 
 
-def outside_task_settings(task: ExternalTask) -> tuple[int, int, dict[str, Any]]:
+def outside_task_settings(task: ExternalTask, horizon: int | None = None) -> tuple[int, int, dict[str, Any]]:
     """The GenRL settings of a task from outside the package, as :func:`task_settings` gives a registered task's: its
     env id's entry in ``hyperparams/genrl.yml`` if it has one, else :data:`OUTSIDE_TASK_KWARGS` (started from the
-    demonstrations, a fixed spread, else GenRL's defaults) with :data:`DEFAULT_POLICY_EPISODES` and
-    :data:`DEFAULT_BATCH_EPISODES`.
+    demonstrations, a fixed spread, else GenRL's defaults) with :data:`DEFAULT_POLICY_EPISODES` (fewer where episodes
+    of ``horizon`` steps would pass :data:`OUTSIDE_POLICY_STEPS`) and :data:`DEFAULT_BATCH_EPISODES`.
 
     :param task: the resolved task (:func:`~sb3_genrl.envs.external.resolve_task`)
+    :param horizon: the control steps of an episode (None: the episodes are not capped)
     :return: ``(episodes, batch_episodes, genrl_kwargs)``
     """
     if task.env_id not in known_env_ids("genrl"):
-        return DEFAULT_POLICY_EPISODES, DEFAULT_BATCH_EPISODES, copy.deepcopy(OUTSIDE_TASK_KWARGS)
+        episodes = DEFAULT_POLICY_EPISODES
+        if horizon is not None:
+            episodes = max(DEFAULT_BATCH_EPISODES, min(episodes, OUTSIDE_POLICY_STEPS // int(horizon)))
+        return episodes, DEFAULT_BATCH_EPISODES, copy.deepcopy(OUTSIDE_TASK_KWARGS)
     return load_genrl_settings(task.env_id)
 
 
@@ -484,10 +504,12 @@ def _write_report(
     summary = json.loads((out / "policy" / "summary.json").read_text())
     measures = json.loads((out / "evaluation" / "results.json").read_text())
     generator_settings = read_settings(out / _RECORDS["generator"])
+    began = time.perf_counter()
     if horizon is None:
         score, score_line, held_out = _policy_score(out, task, seed)
     else:
         score, score_line, held_out = _outside_policy_score(out, task, horizon)
+    timings = {**timings, "score": time.perf_counter() - began}  # the saved policy's score, played at each report
     generator = load(out / "vae.pt", device="cpu")
     lines = [
         f"# GenRL quickstart: {task}",
@@ -523,6 +545,7 @@ def _write_report(
             "policy": "policy/genrl_policy.zip",
             "policy_episodes": summary["episodes"],
             "stage_seconds": {k: v if math.isfinite(v) else None for k, v in timings.items()},
+            "provenance": provenance(),  # the package version and git commit that wrote this summary
         },
     )
     log(f"GenRL on {task}: {score_line}")
