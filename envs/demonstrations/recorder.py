@@ -201,7 +201,8 @@ def record_demonstrations(
             seconds=round(time.perf_counter() - began, 1),
         )
     env.close()
-    replay_env.close()
+    if replay_env is not env:
+        replay_env.close()
     return path
 
 
@@ -541,10 +542,9 @@ def _worker_env(what: str) -> tuple[gym.Env, dict[str, Any]]:
 def _play_chunk(start: int, stop: int) -> list[dict[str, Any]]:
     """Episodes ``start`` to ``stop - 1`` (:func:`_episode`), in a worker process."""
     env, job = _worker_env(f"episodes {start} to {stop - 1}")
-    outcomes = []
+    replay_env, outcomes = _WORKER["replay_env"], []
     for k in range(start, stop):
         try:
-            replay_env = _WORKER["replay_env"]
             outcomes.append(_episode(env, replay_env, job["expert"], job["steps"], job["seed"], k, job["heights"]))
         except Exception as error:
             raise RuntimeError(
