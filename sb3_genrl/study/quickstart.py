@@ -132,7 +132,7 @@ def quickstart(
     :param task: a task name from :data:`sb3_genrl.envs.TASKS`, or a task from outside the package
         (:func:`~sb3_genrl.envs.external.resolve_task`)
     :param demo_episodes: demonstrations to generate (default: :data:`DEMO_EPISODES`; a task from outside the
-        package: :func:`outside_demo_episodes` of its horizon, 1000 up to 200 steps)
+        package: :func:`outside_demo_episodes` of its horizon, 1000 up to 150 steps)
     :param epochs: beta-VAE training epochs (:data:`QUICKSTART_PRESET` of paper table 1)
     :param policy_episodes: GenRL episodes (default: the task's); GenRL takes the task's settings and episodes per
         iteration too (its entry in ``hyperparams/genrl.yml``, see :func:`task_settings`)
@@ -207,7 +207,13 @@ def outside_demo_episodes(horizon: int) -> int:
     """The demonstrations ``genrl quickstart`` records for a task from outside the package with episodes of
     ``horizon`` steps: :data:`OUTSIDE_DEMO_EPISODES`, or fewer where they would pass :data:`OUTSIDE_DEMO_STEPS` steps
     (at least :data:`MIN_DEMO_EPISODES`)."""
-    return max(MIN_DEMO_EPISODES, min(OUTSIDE_DEMO_EPISODES, OUTSIDE_DEMO_STEPS // int(horizon)))
+    return _within_steps(OUTSIDE_DEMO_EPISODES, OUTSIDE_DEMO_STEPS, horizon, MIN_DEMO_EPISODES)
+
+
+def _within_steps(episodes: int, steps: int, horizon: int, fewest: int) -> int:
+    """``episodes``, or as many episodes of ``horizon`` steps as ``steps`` hold where that is fewer (at least
+    ``fewest``)."""
+    return max(fewest, min(episodes, steps // int(horizon)))
 
 
 def _outside_task(task: str, expert: Callable[[Any], Any] | None, horizon: int | None) -> ExternalTask | None:
@@ -277,7 +283,7 @@ def outside_task_settings(task: ExternalTask, horizon: int | None = None) -> tup
     if task.env_id not in known_env_ids("genrl"):
         episodes = DEFAULT_POLICY_EPISODES
         if horizon is not None:
-            episodes = max(DEFAULT_BATCH_EPISODES, min(episodes, OUTSIDE_POLICY_STEPS // int(horizon)))
+            episodes = _within_steps(episodes, OUTSIDE_POLICY_STEPS, horizon, DEFAULT_BATCH_EPISODES)
         return episodes, DEFAULT_BATCH_EPISODES, copy.deepcopy(OUTSIDE_TASK_KWARGS)
     return load_genrl_settings(task.env_id)
 
