@@ -75,7 +75,8 @@ class GenRL(OnPolicyAlgorithm):
     :param learning_rate: Adam learning rate of the value function (default 3e-3), or a schedule
     :param n_steps: SB3's rollout length per env, here episodes per env per iteration (default 64): an iteration plays
         ``batch_episodes = n_steps x n_envs`` episodes
-    :param batch_size: minibatch size of the value-function fit and of the KL-penalty E-step (default 64)
+    :param batch_size: minibatch size of the value-function fit and of the KL-penalty E-step, at most the episodes of
+        one iteration (default 64: an iteration of fewer episodes, as an entry of 16 or 32, is one minibatch of them)
     :param n_critic_updates: epochs of the value-function fit per iteration (default 50)
     :param cg_max_steps: conjugate-gradient iterations of the TRPO E-step (default 15)
     :param cg_damping: damping added to the Fisher-vector product (default 0.1)
@@ -373,9 +374,15 @@ class GenRL(OnPolicyAlgorithm):
             batch,
             kl_coef=self.kl_coef,
             n_epochs=self.n_e_step_epochs,
-            batch_size=self.batch_size,
+            batch_size=self.minibatch_size,
             learning_rate=self.e_step_learning_rate,
         )
+
+    @property
+    def minibatch_size(self) -> int:
+        """The minibatch of the value-function fit and of the KL-penalty E-step: ``batch_size``, at most the episodes of
+        one iteration (``batch_episodes``)."""
+        return min(int(self.batch_size), self.batch_episodes)
 
     def _pi(self, observations: th.Tensor) -> Distribution:
         """The fixed policy pi_theta(.|s) (no gradient)."""
@@ -386,7 +393,9 @@ class GenRL(OnPolicyAlgorithm):
         """Fit ``V`` to the returns of the last ``value_history`` batches; the minibatch losses."""
         data = next(self.rollout_buffer.get(batch_size=None))
         self._value_memory.append((data.observations, data.returns))
-        return fit_value_function(self.policy, self._value_memory, epochs=self.n_critic_updates, batch_size=self.batch_size)
+        return fit_value_function(
+            self.policy, self._value_memory, epochs=self.n_critic_updates, batch_size=self.minibatch_size
+        )
 
     def _hindsight_components(
         self, hindsight: dict[str, Any] | None

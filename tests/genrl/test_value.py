@@ -140,3 +140,22 @@ def test_fused_value_fit_is_autograd_and_adam_bit_for_bit(policy_name):
     assert fused_losses == expected_losses and len(fused_losses) == 9 + 2
     assert_same_fit(fused, expected, fused.optimizer, expected.optimizer)
     assert not th.equal(fused.value_net.weight, policy.value_net.weight)  # it did fit
+
+
+def test_the_default_minibatch_is_at_most_one_iterations_episodes():
+    """With fewer episodes per iteration than ``batch_size``, the value fit's minibatches are one iteration's episodes:
+    16 episodes an iteration over 4 remembered batches give the run of ``batch_size=16``, not one minibatch of 64."""
+
+    def trained(**kwargs):
+        model = GenRL(FastReachEnv(), LinearGenerator(), seed=0, n_steps=16, value_history=4, **kwargs)
+        model.learn(6 * 16)
+        return model
+
+    default, sixteen, whole = trained(), trained(batch_size=16), trained(batch_size=10_000)
+    assert default.minibatch_size == 16 and whole.minibatch_size == 16
+    for model in (sixteen, whole):
+        for ours, theirs in zip(default.policy.parameters(), model.policy.parameters(), strict=True):
+            assert th.equal(ours, theirs)
+    # (the value fit is what differs with another minibatch)
+    eight = trained(batch_size=8)
+    assert not all(th.equal(a, b) for a, b in zip(default.policy.parameters(), eight.policy.parameters(), strict=True))
