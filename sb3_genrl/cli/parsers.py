@@ -39,6 +39,19 @@ from sb3_genrl.study.quickstart import DEMO_EPISODES, MIN_DEMO_EPISODES, OUTSIDE
 from sb3_genrl.video import VIDEO_SUFFIXES
 
 
+def _expert_option(parser: argparse.ArgumentParser) -> None:
+    """``--expert MODULE:FUNCTION``, the expert of a task from outside the package (``demos`` and ``quickstart``)."""
+    parser.add_argument(
+        "--expert",
+        type=option(_check_expert),
+        default=None,
+        metavar="MODULE:FUNCTION",
+        help="the expert of a task the package does not register, observation -> action, played closed loop with "
+        "perturbations; each demonstration is kept only when its actions replayed open loop from its seeded reset "
+        "still succeed (metaworld/<name> comes with Meta-World's scripted expert)",
+    )
+
+
 def _task_option(
     parser: argparse.ArgumentParser,
     *,
@@ -118,15 +131,7 @@ def _check_expert(spec: str, name: str = "") -> object:
 def add_demos(sub: argparse._SubParsersAction) -> None:
     demos = sub.add_parser("demos", help="generate a task's demonstrations as a Minari dataset, with a coverage report")
     _task_option(demos, external=True)
-    demos.add_argument(
-        "--expert",
-        type=option(_check_expert),
-        default=None,
-        metavar="MODULE:FUNCTION",
-        help="an expert, observation -> action, played closed loop with perturbations; each demonstration is kept only "
-        "when its actions replayed open loop from its seeded reset still succeed (needed for a task the package does "
-        "not register; metaworld/<name> comes with Meta-World's scripted expert)",
-    )
+    _expert_option(demos)
     demos.add_argument(
         "--from",
         dest="source",
@@ -426,15 +431,7 @@ def add_quickstart(sub: argparse._SubParsersAction) -> None:
     quick = sub.add_parser("quickstart", help="demonstrations -> VAE -> evaluation -> GenRL policy -> report, in minutes")
     quick.add_argument("--out", required=True, type=OUT_DIR, help="output folder (a rerun resumes it)")
     _task_option(quick, required=False, default=DEFAULT_TASK, external=True)
-    quick.add_argument(
-        "--expert",
-        type=option(_check_expert),
-        default=None,
-        metavar="MODULE:FUNCTION",
-        help="a task from outside the package: its expert, observation -> action, whose perturbed demonstrations are "
-        "kept when their actions replayed open loop still succeed (metaworld/<name> comes with Meta-World's scripted "
-        "expert)",
-    )
+    _expert_option(quick)
     quick.add_argument(
         "--horizon",
         type=COUNT,
