@@ -126,15 +126,23 @@ def make_latent_vec_env(
     """
     if isinstance(n_envs, bool) or not isinstance(n_envs, int | np.integer) or n_envs < 1:
         raise ValueError(f"n_envs must be a positive integer, got {n_envs!r}")
-    make = functools.partial(_latent_env, env_id, generator, latent_clip, False)
     if n_envs == 1:
-        venv: VecEnv = DummyVecEnv([make])
-    elif env_id_has_fast_path(env_id):
-        venv = BatchedLatentVecEnv([make] * n_envs, n_threads)
-    else:  # the spec, not the id: the processes need not know the id
-        spec = gym.spec(env_id)
-        venv = env_processes([functools.partial(_latent_env, spec, generator, latent_clip, True)] * n_envs)
+        venv: VecEnv = DummyVecEnv([functools.partial(_latent_env, env_id, generator, latent_clip, False)])
+    else:  # the spec, not the id: env processes need not know the id
+        make = functools.partial(_latent_env, gym.spec(env_id), generator, latent_clip)
+        venv = latent_envs(make, n_envs, batched=env_id_has_fast_path(env_id), n_threads=n_threads)
     return VecMonitor(venv, monitor_file)
+
+
+def latent_envs(
+    make_env: Callable[[bool], gym.Env], n_envs: int, *, batched: bool, n_threads: int | None = None
+) -> BatchedLatentVecEnv | SubprocVecEnv:
+    """``n_envs`` envs, each ``make_env(own_process)``: played together in one threaded fast-path call
+    (:class:`BatchedLatentVecEnv` on ``n_threads``) when ``batched`` (a task with a fast path), else each in its own
+    process (:func:`env_processes`)."""
+    if batched:
+        return BatchedLatentVecEnv([functools.partial(make_env, False) for _ in range(n_envs)], n_threads)
+    return env_processes([functools.partial(make_env, True) for _ in range(n_envs)])
 
 
 def env_processes(env_fns: Sequence[Callable[[], gym.Env]]) -> SubprocVecEnv:

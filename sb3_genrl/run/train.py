@@ -53,7 +53,7 @@ from sb3_genrl.genrl.settings import NOT_SETTINGS, SETTINGS, check_genrl_setting
 from sb3_genrl.run.checkpoint import CHECKPOINT_EVERY, GenRLCheckpoint, RandomStateRecorder, resume_genrl, resume_state
 from sb3_genrl.run.folder import SUMMARY, keep_episodes, open_run, remove_checkpoint
 from sb3_genrl.utils import atomic_write_json, folder_lock
-from sb3_genrl.vec_env import MAIN_GUARD, BatchedLatentVecEnv, env_processes
+from sb3_genrl.vec_env import MAIN_GUARD, latent_envs
 from sb3_genrl.wrappers import LatentActionWrapper
 
 
@@ -453,12 +453,7 @@ def training_env(
     spec, generator = env.env.spec, env.generator  # the spec, not the id: the processes need not know the id
     batched, latent_clip = env.use_fast_path, env.latent_clip
     env.close()
-    if batched:
-        venv = BatchedLatentVecEnv(
-            [partial(_episode_env, spec, generator, latent_clip, False) for _ in range(n_envs)], n_threads
-        )
-    else:
-        venv = env_processes([partial(_episode_env, spec, generator, latent_clip) for _ in range(n_envs)])
+    venv = latent_envs(partial(_episode_env, spec, generator, latent_clip), n_envs, batched=batched, n_threads=n_threads)
     keys = (*EPISODE_INFO, "cpu_seconds")
     monitor = VecMonitor(venv, None if append else str(out / MONITOR_FILE), info_keywords=keys)
     if append:  # SB3's VecMonitor always starts a new file
