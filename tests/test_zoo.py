@@ -154,9 +154,7 @@ def test_the_zoo_and_train_policy_build_the_same_genrl_from_the_file(trained, ho
         GenRL.load(path, device="cpu")
         for path in (trained / RUN / "GenRL-Hockey-v0.zip", tmp_path / "run" / "genrl_policy.zip")
     ]
-    # batch_size as in effect: at most an iteration's episodes (the zoo keeps GenRL's 64, train_policy records the cap)
-    names = [name for name in genrl_settings() if name not in ("policy_kwargs", "learning_rate", "batch_size")]
-    names.append("minibatch_size")
+    names = [name for name in genrl_settings() if name not in ("policy_kwargs", "learning_rate")]
     zoo_run, package_run = (
         {name: getattr(model, name) for name in names}
         | {
