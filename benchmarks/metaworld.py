@@ -362,17 +362,23 @@ def run_task(task: str, args: argparse.Namespace, result: dict[str, Any], save: 
         }
         save()
     horizon = int(row["horizon"]["horizon"])
+    began = time.process_time()
+    if not (dataset.is_dir() and any(dataset.iterdir())):  # a dataset is written whole or not at all
+        record_demonstrations(  # in this process, so that its CPU time is this process's
+            f"metaworld/{task}", None, args.demos, dataset, seed=0, horizon=horizon, n_threads=1
+        )
+    info = dataset_info(dataset)
+    counts = {key: info[key] for key in ("episodes", "tried", "kept_share", "failed_closed_loop", "failed_open_loop")}
     if "demonstrations" not in row:
-        began = time.process_time()
-        if not (dataset.is_dir() and any(dataset.iterdir())):  # a dataset is written whole or not at all
-            record_demonstrations(  # in this process, so that its CPU time is this process's
-                f"metaworld/{task}", None, args.demos, dataset, seed=0, horizon=horizon, n_threads=1
-            )
-        info = dataset_info(dataset)
-        row["demonstrations"] = {
-            key: info[key] for key in ("episodes", "tried", "kept_share", "failed_closed_loop", "failed_open_loop")
-        } | {"cpu_seconds": round(time.process_time() - began, 1)}
+        row["demonstrations"] = counts | {"cpu_seconds": round(time.process_time() - began, 1)}
         save()
+    elif counts != {key: row["demonstrations"][key] for key in counts}:
+        # a work folder made anew (the JSON kept, the datasets not): the recording is seeded, so it must give the
+        # dataset the JSON's other units were made from
+        raise RuntimeError(
+            f"{dataset}: {counts} differs from the demonstrations {args.out} records for {task} "
+            f"({row['demonstrations']}); remove the folder or write another --out"
+        )
     if "generator" not in row:
         began = time.process_time()
         if not generator_path.is_file():  # written atomically once training ends

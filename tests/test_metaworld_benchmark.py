@@ -3,6 +3,7 @@ work, and a rerun with other settings is refused before any."""
 
 import functools
 import json
+import shutil
 
 import pytest
 from sb3_genrl.envs import metaworld
@@ -50,6 +51,19 @@ def test_the_metaworld_benchmark_writes_every_unit_resumes_and_refuses_other_set
     row = json.loads(out.read_text())["tasks"]["reach-v3"]
     assert sorted(row["fit"]) == sorted(row["genrl"]) == ["0", "1"] and sorted(row["sac"]) == ["0"]
     assert row["genrl"]["0"] == result["tasks"]["reach-v3"]["genrl"]["0"]
+    # the work folder made anew, the JSON kept: the seeded dataset is recorded again and SAC's new seed learns from it
+    shutil.rmtree(work)
+    assert main([*argv, "--seeds", "--sac-seeds", "1"]) == 0
+    assert sorted(json.loads(out.read_text())["tasks"]["reach-v3"]["sac"]) == ["0", "1"]
+    # ... and a dataset that is not the one the JSON records is refused, naming both
+    shutil.rmtree(work)
+    recorded = json.loads(out.read_text())
+    recorded["tasks"]["reach-v3"]["demonstrations"]["tried"] += 1
+    out.write_text(json.dumps(recorded))
+    with pytest.raises(RuntimeError, match="differs from the demonstrations"):
+        main([*argv, "--seeds", "--sac-seeds", "2"])
+    recorded["tasks"]["reach-v3"]["demonstrations"]["tried"] -= 1
+    out.write_text(json.dumps(recorded))
     # other settings: refused before any work, naming the setting
     before = out.read_text()
     with pytest.raises(SystemExit) as exit_:
