@@ -14,6 +14,9 @@ Feedback baselines (per-step actions on the task's observation plus the time fea
 - ``sac-her``: SAC with hindsight experience replay on the task's goal-conditioned variant
   (:mod:`sb3_genrl.envs.goal`), the demonstrations written into its ``HerReplayBuffer`` as episodes.
 
+A task from outside the package (``metaworld/<name>``, a Gymnasium id, ``module:Id``) takes ``sac`` and
+``sac-no-prefill`` on its recorded demonstrations, scored on held-out seeded resets (:mod:`sb3_genrl.baselines.outside`).
+
 Latent-space baselines (the same generator as GenRL, on :class:`~sb3_genrl.LatentActionWrapper`, one-step
 episodes): ``latent-ppo``, ``latent-sac``, ``latent-trpo`` - stock SB3 / sb3-contrib algorithms with their
 defaults except 64 episodes per update (GenRL's batch; ``hyperparams/latent_*.yml``), so they show what the EM update
@@ -37,6 +40,7 @@ import os
 import pathlib
 import time
 import warnings
+from collections.abc import Callable
 from typing import Any
 
 import gymnasium as gym
@@ -58,7 +62,17 @@ from sb3_genrl.baselines.hyperparameters import (
     zoo_hyperparams,
 )
 from sb3_genrl.baselines.models import ppo_with_behaviour_cloning, sac_her_with_demonstrations, sac_with_demonstrations
+from sb3_genrl.baselines.outside import (
+    OUTSIDE_BASELINES,
+    OUTSIDE_SETTINGS,
+    evaluate_step_policy,
+    outside_env,
+    outside_horizon,
+    outside_sac,
+    outside_transitions,
+)
 from sb3_genrl.envs import get_task
+from sb3_genrl.envs.external import HELD_OUT_RESETS, resolve_task
 from stable_baselines3 import PPO, SAC
 
 from sb3_genrl.checks import (
@@ -105,11 +119,18 @@ def train_baseline(
     overwrite: bool = False,
     n_envs: int | None = None,
     n_threads: int | None = None,
+    eval_resets: int = HELD_OUT_RESETS,
 ) -> dict[str, Any]:
     """Train one baseline for ``episodes`` episodes and write its outputs to ``out_dir``.
 
+    A task from outside the package (one without a TaskSpec: ``metaworld/<name>``, a Gymnasium id, ``module:Id``)
+    takes ``sac`` and ``sac-no-prefill`` (:mod:`sb3_genrl.baselines.outside`): SB3's SAC learns from its recorded
+    demonstrations (``demos``, a dataset folder of ``genrl demos``), for ``episodes`` episodes of their horizon, and is
+    scored closed loop on ``eval_resets`` held-out seeded resets, the summary's ``final_eval``.
+
     :param algorithm: one of :data:`BASELINES`
-    :param task: a task name from :data:`sb3_genrl.envs.TASKS` (or its Gymnasium id)
+    :param task: a task name from :data:`sb3_genrl.envs.TASKS` (or its Gymnasium id), or a task from outside the
+        package (:func:`~sb3_genrl.envs.external.resolve_task`)
     :param episodes: budget of episodes (the horizon's worth of environment steps each for the feedback baselines)
     :param out_dir: output folder (created)
     :param seed: random seed
@@ -134,10 +155,22 @@ def train_baseline(
         the number of cores; ``latent_vector_settings`` says how the settings follow it
     :param n_threads: simulation threads of a fast path's batched envs (default: all cores); the result does not
         depend on it
+    :param eval_resets: a task from outside the package: the held-out seeded resets its policy is scored on
+        (:func:`~sb3_genrl.baselines.outside.evaluate_step_policy`, those GenRL's policies are scored on)
     """
     _check_arguments(algorithm, episodes, seed, demos, demo_episodes, generator, eval_goals, checkpoint_every, device)
     _check_envs(algorithm, n_envs, n_threads)
-    changes, spec, out = check_algorithm_kwargs(algorithm, algorithm_kwargs), get_task(task), check_output_dir(out_dir)
+    spec, out = resolve_task(task).spec, check_output_dir(out_dir)
+    if spec is None:
+        return _train_outside(
+            algorithm,
+            task,
+            out,
+            {"episodes": int(episodes), "seed": seed, "demos": demos, "demo_episodes": demo_episodes},
+            {"algorithm_kwargs": algorithm_kwargs, "eval_resets": eval_resets, "checkpoint_every": checkpoint_every},
+            {"device": device, "verbose": verbose, "progress_bar": progress_bar, "window": window, "overwrite": overwrite},
+        )
+    changes = check_algorithm_kwargs(algorithm, algorithm_kwargs)
     began = time.perf_counter(), time.process_time()
     transitions, generator = _inputs(algorithm, spec.name, demos, demo_episodes, generator)
     steps = int(episodes) if transitions is None else int(episodes) * spec.horizon
@@ -173,7 +206,14 @@ def train_baseline(
             summary["learn_seconds"] = _learn(model, steps, out, state, checkpoint_every, summary, progress_bar, verbose)
         finally:  # the training env: its Monitor file (complete after this) and any env processes
             model.get_env().close()
-        return _finish(algorithm, spec.name, model, out, summary, generator, eval_goals, window)
+        return _finish(
+            algorithm,
+            spec.name,
+            out,
+            summary,
+            window,
+            lambda: evaluate_trained(algorithm, model, spec.name, generator=generator, goals=eval_goals),
+        )
 
 
 CURVE_FILES = ("learning_curve.csv", "learning_curve.png", MONITOR_FILE, LOG_DIR)
@@ -225,22 +265,86 @@ def _model(
 def _finish(
     algorithm: str,
     task: str,
-    model: Any,
     out: pathlib.Path,
     summary: dict[str, Any],
-    generator: Any,
-    eval_goals: int,
     window: int,
+    final_eval: Callable[[], dict[str, Any]],
 ) -> dict[str, Any]:
-    """The trained run's results, final evaluation and health in ``summary.json``; its checkpoint removed."""
+    """The trained run's results, final evaluation (``final_eval()``) and health in ``summary.json``; its checkpoint
+    removed."""
     summary |= _episode_results(algorithm, task, out, window, summary["settings"])
-    summary["final_eval"] = evaluate_trained(algorithm, model, task, generator=generator, goals=eval_goals)
+    summary["final_eval"] = final_eval()
     summary["training_health"] = training_health(out)
     for warning in summary["training_health"]["warnings"]:
         warnings.warn(f"{algorithm} on {task}: {warning}", stacklevel=3)
     atomic_write_json(out / "summary.json", summary)
     remove_checkpoint(out)
     return summary
+
+
+def _train_outside(
+    algorithm: str,
+    task: str,
+    out: pathlib.Path,
+    run: dict[str, Any],
+    options: dict[str, Any],
+    common: dict[str, Any],
+) -> dict[str, Any]:
+    """:func:`train_baseline` on a task from outside the package (:mod:`sb3_genrl.baselines.outside`): ``run`` holds
+    the episodes, seed, demonstrations and their count; ``options`` the SAC changes, the held-out resets and the
+    checkpoints; ``common`` the device, verbosity, progress bar, curve window and overwrite."""
+    if algorithm not in OUTSIDE_BASELINES:
+        raise ValueError(
+            f"task {task!r} is from outside the package: genrl baseline takes {' and '.join(OUTSIDE_BASELINES)} there "
+            f"(SAC learning from its recorded demonstrations), not {algorithm}"
+        )
+    check_positive_int(options["eval_resets"], "eval_resets")
+    changes = check_algorithm_kwargs(algorithm, options["algorithm_kwargs"])
+    began = time.perf_counter(), time.process_time()
+    horizon = outside_horizon(run["demos"])
+    transitions = _first_episodes(outside_transitions(task, run["demos"]), run["demo_episodes"])
+    steps = run["episodes"] * horizon
+    summary = {"algorithm": algorithm, "task": task, "episodes": run["episodes"], "seed": run["seed"]} | {
+        "horizon": horizon,
+        "demo_transitions": len(transitions["observations"]),
+        "demo_sha256": _fingerprint(transitions),
+        "settings": {"policy": "MlpPolicy", **OUTSIDE_SETTINGS, **changes},
+    }
+    checkpoint_every = options["checkpoint_every"]
+    identity = _identity(summary) | {"eval_resets": options["eval_resets"]}
+    with folder_lock(out):  # one run at a time in out; another run's files are refused, never mixed in
+        finished = open_run(out, identity, (f"{algorithm}_policy.zip", *CURVE_FILES), overwrite=common["overwrite"])
+        if finished is not None:  # this very run, finished: nothing to do
+            return finished
+        state = None if checkpoint_every is None else resume_state(out, _identity(summary))
+        if state is None:
+            env = monitor_episodes(outside_env(task, horizon), out)
+            model = outside_sac(algorithm, env, transitions, steps, run["seed"], device=common["device"], **changes)
+            summary |= {
+                "setup_seconds": time.perf_counter() - began[0],
+                "setup_cpu_seconds": time.process_time() - began[1],
+            }
+        else:
+            model, summary = _resumed_model(algorithm, task, out, state, common["device"])
+        try:
+            summary["learn_seconds"] = _learn(
+                model, steps, out, state, checkpoint_every, summary, common["progress_bar"], common["verbose"]
+            )
+        finally:  # the training env: its Monitor file (complete after this)
+            model.get_env().close()
+        return _finish(
+            algorithm,
+            task,
+            out,
+            summary,
+            common["window"],
+            lambda: evaluate_step_policy(
+                lambda observation: model.predict(observation, deterministic=True)[0],
+                task,
+                horizon=horizon,
+                resets=options["eval_resets"],
+            ),
+        )
 
 
 def _learn(
@@ -313,7 +417,8 @@ def _resumed_model(
     """The off-policy baseline as its checkpoint left it, on a new monitored env that appends to the Monitor file, and
     the run's summary so far (the setup's record, and the episodes at which it was resumed)."""
     keep_episodes(out, int(state["episodes"]))
-    model = resume_off_policy(state, _monitored_env(algorithm, task, out, append=True), device=device)
+    env = _monitored_env(algorithm, task, out, append=True, horizon=state["summary"].get("horizon"))
+    model = resume_off_policy(state, env, device=device)
     model.set_random_seed(sub_seed(state["identity"]["seed"], state["episodes"]))  # a resumed run is reproducible
     resumed = [*state["summary"].get("resumed_at_episodes", []), state["episodes"]]
     return model, state["summary"] | {"resumed_at_episodes": resumed}
@@ -366,10 +471,14 @@ def _check_arguments(
             check_input_path(path, name)
 
 
-def _monitored_env(algorithm: str, task: str, out: pathlib.Path, *, append: bool = False) -> Any:
+def _monitored_env(algorithm: str, task: str, out: pathlib.Path, *, append: bool = False, horizon: int | None = None) -> Any:
     """A feedback baseline's env under the run's Monitor: the goal-conditioned task for SAC + HER, else the task with
-    the time feature (``append``: a resumed run adds to the Monitor file)."""
-    env = gym.make(get_task(task).goal_env_id) if algorithm == "sac-her" else make_feedback_env(task)
+    the time feature, or, for a task from outside the package (its ``horizon`` given), the env its demonstrations were
+    recorded in (``append``: a resumed run adds to the Monitor file)."""
+    if horizon is not None:
+        env = outside_env(task, horizon)
+    else:
+        env = gym.make(get_task(task).goal_env_id) if algorithm == "sac-her" else make_feedback_env(task)
     return monitor_episodes(env, out, append=append)
 
 
@@ -437,6 +546,11 @@ def _demonstrations(demos: Any, demo_episodes: int | None, task: str) -> dict[st
         transitions = demos
     else:
         transitions = load_transitions(demos, task=task)  # refuses another task's demonstrations
+    return _first_episodes(transitions, demo_episodes)
+
+
+def _first_episodes(transitions: dict[str, np.ndarray], demo_episodes: int | None) -> dict[str, np.ndarray]:
+    """The transitions of the first ``demo_episodes`` demonstrations (None: all)."""
     if demo_episodes is None:
         return transitions
     ends = np.flatnonzero(np.asarray(transitions["dones"]))

@@ -20,7 +20,7 @@ from __future__ import annotations
 import functools
 import importlib
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import gymnasium as gym
@@ -28,6 +28,7 @@ import numpy as np
 from gymnasium.wrappers import TimeLimit
 from sb3_genrl.envs import metaworld
 from sb3_genrl.envs.registry import TASKS
+from sb3_genrl.envs.spec import TaskSpec
 
 from sb3_genrl import LatentActionWrapper
 from sb3_genrl.checks import check_positive_int
@@ -43,12 +44,15 @@ HELD_OUT_RESETS = 200
 
 
 @dataclass(frozen=True)
-class ExternalTask:
-    """A task named on the command line or in the API, resolved to its Gymnasium id.
+class Task:
+    """A task as every command and the API take it by name (:func:`resolve_task`): its Gymnasium id and what the
+    package knows of it. The package's own tasks, Meta-World's and a user's (:func:`register`) are all of this kind.
 
-    :param name: the name as given (``"metaworld/push-v3"``, ``"GenRL/Hockey-v0"``, ``"my_module:MyEnv-v0"``)
+    :param name: the name as given (``"metaworld/push-v3"``, ``"my_module:MyEnv-v0"``), or the short name of a task
+        registered with a TaskSpec (``hockey`` for ``GenRL/Hockey-v0`` too)
     :param env_id: the registered Gymnasium id
-    :param make_expert: makes the expert the package knows for the task (Meta-World's scripted policies); None: none
+    :param make_expert: makes the task's expert, observation -> action (Meta-World's scripted policies); None: none,
+        an expert is given (``expert=``, ``--expert MODULE:FUNCTION``) where demonstrations are recorded
     :param horizon: the control steps of a demonstration that suit the task, which ``genrl quickstart`` records with
         (None: the shortest at which its expert's success settles, :func:`sb3_genrl.envs.demonstrations.expert_horizon`)
     :param generator_preset: the generator preset that ``genrl quickstart`` trains for the task (None: its default)
@@ -56,6 +60,14 @@ class ExternalTask:
         the env GenRL plays (None: the same env). Meta-World's: its training env, which runs on after a success, so
         that a demonstration holds the expert's actions after its success up to the horizon (the env GenRL plays ends
         at the first success, with the same outcome for any action sequence)
+    :param make_demonstrations: the task's own demonstration maker, ``(episodes, out_dir, *, seed, n_threads,
+        progress_bar) -> dataset folder``, for a task whose demonstrations are not its expert's closed-loop episodes;
+        None: recorded from the expert (:func:`sb3_genrl.envs.demonstrations.demonstrations` chooses)
+    :param spec: the task's :class:`~sb3_genrl.envs.spec.TaskSpec` where it is registered with one (the package's
+        hockey, basketball and Fetch tasks, or a user's :func:`sb3_genrl.envs.register_task`): its own demonstration
+        maker (:func:`sb3_genrl.envs.demonstrations.make_demonstrations`: hockey's and basketball's open-loop motions,
+        each labelled with the goal it reaches, which have no success to check; the Fetch tasks' expert aimed at
+        relabelled goals), its goal region and, for the arm tasks, the fast path
     """
 
     name: str
@@ -64,32 +76,80 @@ class ExternalTask:
     horizon: int | None = None
     generator_preset: str | None = None
     recording_kwargs: Mapping[str, Any] | None = None
+    make_demonstrations: Callable[..., Any] | None = None
+    spec: TaskSpec | None = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name:
+            raise ValueError(f"a task's name must be a non-empty string, got {self.name!r}")
+        if not isinstance(self.env_id, str) or not self.env_id:
+            raise ValueError(f"task {self.name!r}: env_id must be a non-empty string, got {self.env_id!r}")
+        if self.horizon is not None:
+            check_positive_int(self.horizon, f"task {self.name!r}: horizon")
+        for hook in ("make_expert", "make_demonstrations"):
+            if getattr(self, hook) is not None and not callable(getattr(self, hook)):
+                raise ValueError(f"task {self.name!r}: {hook} must be callable, got {type(getattr(self, hook)).__name__}")
 
 
-def resolve_task(task: str) -> ExternalTask:
-    """The Gymnasium id of a task name (and its expert, where the package knows one).
+_NAMED: dict[str, Task] = {}  # the tasks named by register(), by name and by env id
 
-    :param task: a registered task's short name or id, ``metaworld/<name>``, a registered Gymnasium id, or
-        ``"module:Id"`` (the module is imported first, as ``gymnasium.make`` does, so that it registers ``Id``)
+
+def register(task: Task) -> Task:
+    """Give ``task`` a name that every command and the API take (``genrl quickstart --task NAME``), with its expert,
+    horizon, generator preset or own demonstration maker, as the package's own tasks are named.
+
+    :param task: the task; its ``env_id`` must be registered with Gymnasium (``gymnasium.register``)
+    :return: ``task``
+    :raises ValueError: when the name is another task's, or ``metaworld/`` (Meta-World's), or the env id is unknown
+    """
+    if not isinstance(task, Task):
+        raise ValueError(f"register() takes a sb3_genrl.envs.external.Task, got {type(task).__name__}")
+    if task.name.startswith(METAWORLD_PREFIX):
+        raise ValueError(f"task {task.name!r}: names under {METAWORLD_PREFIX!r} are Meta-World's tasks")
+    if task.env_id not in gym.registry:
+        raise ValueError(f"task {task.name!r}: {task.env_id!r} is not a registered Gymnasium id (gymnasium.register it)")
+    for key in (task.name, task.env_id):
+        known = _NAMED.get(key) or next((spec_task(spec) for spec in TASKS.values() if key in (spec.name, spec.env_id)), None)
+        if known is not None and known != task:
+            raise ValueError(f"{key!r} already names another task ({known.name!r}, {known.env_id!r})")
+    _NAMED[task.name] = _NAMED[task.env_id] = task
+    return task
+
+
+def spec_task(spec: TaskSpec) -> Task:
+    """The :class:`Task` of a task registered with a :class:`~sb3_genrl.envs.spec.TaskSpec` (the package's own)."""
+    return Task(spec.name, spec.env_id, horizon=spec.horizon, generator_preset=spec.generator_preset, spec=spec)
+
+
+def resolve_task(task: str) -> Task:
+    """The task a name stands for, as every command and the API take it.
+
+    :param task: a task's name or id: one given a name by :func:`register` or registered with a TaskSpec (the package's
+        ``hockey``, ``basketball``, ``fetch-push``, ... or their Gymnasium ids), ``metaworld/<name>``, a registered
+        Gymnasium id, or ``"module:Id"`` (the module is imported first, as ``gymnasium.make`` does, so that it
+        registers ``Id``)
     :raises ValueError: naming ``task`` and what is accepted, when it is none of them
     """
     if not isinstance(task, str) or not task:
         raise ValueError(f"a task must be a non-empty string, got {task!r}")
+    if task in _NAMED:
+        return _NAMED[task]
     if task.startswith(METAWORLD_PREFIX):
         name = task.removeprefix(METAWORLD_PREFIX)
         metaworld.check_task_name(name)
         if not metaworld.installed():
             raise ValueError(f"task {task!r} needs Meta-World. {metaworld.INSTALL_HINT}")
         metaworld.register_metaworld_envs()
-        return ExternalTask(
+        return Task(
             task,
             metaworld.metaworld_env_id(name),
             functools.partial(metaworld.metaworld_expert, name),
             generator_preset=metaworld.GENERATOR_PRESET,
             recording_kwargs=metaworld.RECORDING_KWARGS,
         )
-    if task in TASKS:
-        return ExternalTask(task, TASKS[task].env_id)
+    spec = next((spec for spec in TASKS.values() if task in (spec.name, spec.env_id)), None)
+    if spec is not None:
+        return spec_task(spec)
     env_id = task
     if ":" in task:
         module, env_id = task.split(":", 1)
@@ -99,11 +159,14 @@ def resolve_task(task: str) -> ExternalTask:
             raise ValueError(
                 f"task {task!r}: cannot import the module {module!r} that should register {env_id!r} ({error})"
             ) from None
+    if env_id in _NAMED:
+        return _NAMED[env_id]
     if env_id in gym.registry:
-        return ExternalTask(task, env_id)
+        return Task(task, env_id)
     raise ValueError(
         f"unknown task {task!r}; expected a task of the package ({sorted(TASKS)}), metaworld/<name> (one of Meta-World's "
-        "50 v3 tasks), a registered Gymnasium id, or module:Id with a module that registers Id"
+        "50 v3 tasks), a task named with sb3_genrl.envs.external.register, a registered Gymnasium id, or module:Id with "
+        "a module that registers Id"
     )
 
 
@@ -216,7 +279,7 @@ def task_env_and_horizon(
     task: str | Callable[[], gym.Env], horizon: int | None, success_key: str, *, recording: bool = False
 ) -> tuple[gym.Env, int]:
     """:func:`make_task_env`'s env and its horizon (the control steps of an episode, :func:`task_horizon`); with
-    ``recording``, the env demonstrations are recorded in (:attr:`ExternalTask.recording_kwargs`)."""
+    ``recording``, the env demonstrations are recorded in (:attr:`Task.recording_kwargs`)."""
     if callable(task):
         env = task()
     else:
@@ -259,11 +322,17 @@ def evaluate_success(
         _, _, _, _, info = env.step(model.predict(context, deterministic=True)[0])
         successes.append(float(bool(info.get("is_success", False))))
     env.close()
+    return held_out_result(successes)
+
+
+def held_out_result(successes: list[float]) -> dict[str, Any]:
+    """A policy's score on the held-out resets ``HELD_OUT_SEED + i``, one 0/1 success each: ``success_rate``,
+    ``successes``, ``resets`` and ``seeds`` (first and last + 1)."""
     return {
         "success_rate": float(np.mean(successes)),
         "successes": successes,
-        "resets": int(resets),
-        "seeds": [HELD_OUT_SEED, HELD_OUT_SEED + int(resets)],
+        "resets": len(successes),
+        "seeds": [HELD_OUT_SEED, HELD_OUT_SEED + len(successes)],
     }
 
 

@@ -50,12 +50,12 @@ from gymnasium.envs.registration import register, registry
 METAWORLD_VERSION = "3.1.1"  # the release the fixes below are written for
 INSTALL_HINT = f"Meta-World is an optional extra: pip install --no-deps metaworld=={METAWORLD_VERSION}"
 MAX_EPISODE_STEPS = 500  # Meta-World's max_path_length of every task
-# The generator preset genrl quickstart trains for a Meta-World task (ExternalTask.generator_preset): the Fetch tasks'
+# The generator preset genrl quickstart trains for a Meta-World task (Task.generator_preset): the Fetch tasks'
 # recipe (10 latent dimensions, beta = 0.001, the hand's path weighed in the loss: a Meta-World action moves the hand as
 # a Fetch action moves the gripper), chosen by how often its reconstructions of tuning demonstrations, replayed open
 # loop, still succeed (docs/guide/your_task.md).
 GENERATOR_PRESET = "VAE-FETCH"
-# The env a Meta-World task's demonstrations are recorded in (ExternalTask.recording_kwargs): its training env, which
+# The env a Meta-World task's demonstrations are recorded in (Task.recording_kwargs): its training env, which
 # runs on after a success, so that a demonstration keeps the expert's actions after its success up to the horizon.
 # Recorded in the env that ends at the first success, a demonstration's actions stop there (hold actions after it),
 # and a decoded trajectory that arrives a little late stops short: peg-insert-side-v3's generator reproduced 0.385 of

@@ -20,6 +20,7 @@ from sb3_genrl.envs.demonstrations import (
     recorder,
     replay,
     sample_trajectories,
+    tasks,
     within_limits,
 )
 
@@ -210,9 +211,9 @@ def test_basketball_throws_all_swing_at_the_same_steps():
 
 
 def test_every_maker_of_demonstrations_lives_in_the_demonstrations_package() -> None:
-    # the arm tasks', the Fetch tasks', any env's recorder, its horizon and the replay of a dataset are its modules,
-    # their public names re-exported by it
-    makers = (arm, fetch, recorder, horizon, replay)
+    # the arm tasks', the Fetch tasks', any env's recorder, its horizon, the replay of a dataset and the one entry of
+    # every task are its modules, their public names re-exported by it
+    makers = (arm, fetch, recorder, horizon, replay, tasks)
     for module in makers:
         assert module.__name__.startswith("sb3_genrl.envs.demonstrations.")
     for name in demonstrations_package.__all__:

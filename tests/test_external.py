@@ -17,11 +17,20 @@ import pytest
 import torch
 from conftest import HANG_S
 from gymnasium import spaces
-from sb3_genrl.envs import metaworld
-from sb3_genrl.envs.demonstrations import expert_horizon, play_episode, record_demonstrations, recorder, smooth_noise
+from sb3_genrl.envs import external, metaworld
+from sb3_genrl.envs.demonstrations import (
+    expert_horizon,
+    make_demonstrations,
+    play_episode,
+    record_demonstrations,
+    recorder,
+    smooth_noise,
+    task_demonstrations,
+)
 from sb3_genrl.envs.external import (
     HELD_OUT_RESETS,
     HELD_OUT_SEED,
+    Task,
     check_reproducible_reset,
     evaluate_success,
     load_expert,
@@ -35,7 +44,7 @@ from sb3_genrl.cli.commands import _outside_env_maker
 from sb3_genrl.data import dataset_info, load_actions, load_arrays, read_metadata
 from sb3_genrl.generative import load, train_generator
 from sb3_genrl.genrl.demonstrations import DemonstrationCallback
-from sb3_genrl.run.train import _make_env
+from sb3_genrl.run.train import _make_env, _resolve_env_id
 from sb3_genrl.study.quickstart import (
     OUTSIDE_DEMO_STEPS,
     OUTSIDE_POLICY_STEPS,
@@ -669,3 +678,123 @@ def test_train_policy_of_an_outside_task_starts_from_its_demonstrations(cli, tmp
     spreads = {name: GenRL.load(tmp_path / name / "genrl_policy.zip", device="cpu").policy.log_std for name in errors}
     assert torch.equal(spreads["fitted"], torch.full_like(spreads["fitted"], -1.0))
     assert not torch.equal(spreads["defaults"], spreads["fitted"])
+
+
+gym.register("TestExternal/PointGoalOwn-v0", entry_point=PointGoalEnv, max_episode_steps=HORIZON)
+
+
+def quiet_expert():
+    """Makes :func:`point_expert` (a task's ``make_expert``)."""
+    return point_expert
+
+
+def unperturbed_maker(episodes, out_dir, *, seed, n_threads, progress_bar):
+    """A task's own demonstration maker: the point expert unperturbed, from the reset seeds of ``seed + 1``."""
+    return record_demonstrations(
+        "TestExternal/PointGoalOwn-v0", point_expert, episodes, out_dir, seed=seed + 1, noise=0.0, n_threads=1
+    )
+
+
+@pytest.fixture
+def named_tasks(monkeypatch):
+    """The tasks named with register() in this test only."""
+    monkeypatch.setattr(external, "_NAMED", {})
+    return external
+
+
+def test_the_package_tasks_and_a_users_make_their_demonstrations_through_the_one_entry(tmp_path, named_tasks):
+    # the package's task: its TaskSpec's maker, the same dataset as make_demonstrations'
+    made = make_demonstrations("hockey", 3, tmp_path / "made", seed=4, n_threads=1, progress_bar=False)
+    entered = task_demonstrations("hockey", 3, tmp_path / "entered", seed=4, n_threads=1)
+    for key, value in load_arrays(made).items():
+        np.testing.assert_array_equal(load_arrays(entered)[key], value, err_msg=key)
+    with pytest.raises(ValueError, match="noise apply to demonstrations recorded from an expert, not to hockey's own"):
+        task_demonstrations("hockey", 3, tmp_path / "noisy", noise=0.1)
+    # a user's task named with its own maker: made with it, by name; given an expert, recorded from the expert
+    named_tasks.register(Task("point-own", "TestExternal/PointGoalOwn-v0", make_demonstrations=unperturbed_maker))
+    own = task_demonstrations("point-own", 5, tmp_path / "own", seed=2)
+    mine = unperturbed_maker(5, tmp_path / "mine", seed=2, n_threads=1, progress_bar=False)
+    np.testing.assert_array_equal(load_actions(own), load_actions(mine))
+    recorded = task_demonstrations("point-own", 5, tmp_path / "recorded", expert=point_expert, seed=2, n_threads=1)
+    assert dataset_info(recorded)["noise"] == 0.3 and not np.array_equal(load_actions(recorded), load_actions(mine))
+
+
+def test_a_task_named_with_register_takes_the_commands_by_its_name(cli, tmp_path, named_tasks):
+    task = named_tasks.register(Task("point", "TestExternal/PointGoal-v0", make_expert=quiet_expert, horizon=12))
+    assert named_tasks.register(task) is task  # again: the same task
+    assert resolve_task("point") is resolve_task("TestExternal/PointGoal-v0") is task
+    assert _resolve_env_id("point") == ("TestExternal/PointGoal-v0", "point")
+    for other, message in (
+        (Task("hockey", "TestExternal/PointGoalShove-v0"), "'hockey' already names another task"),
+        (Task("point", "TestExternal/PointGoalShove-v0"), "'point' already names another task"),
+        (Task("metaworld/point", "TestExternal/PointGoalShove-v0"), "are Meta-World's tasks"),
+        (Task("nowhere", "NoSuch-v0"), "not a registered Gymnasium id"),
+    ):
+        with pytest.raises(ValueError, match=message):
+            named_tasks.register(other)
+    with pytest.raises(ValueError, match="make_expert must be callable"):
+        Task("point", "TestExternal/PointGoal-v0", make_expert=point_expert(np.zeros(4)))
+    # genrl demos by the name: the task's own expert, no --expert
+    code, printed, err = cli(
+        "demos", "--task", "point", "--episodes", 6, "--threads", 1, "--out", tmp_path / "d", "--no-progress-bar"
+    )
+    assert code == 0, err
+    expected = record_demonstrations("TestExternal/PointGoal-v0", point_expert, 6, tmp_path / "e", n_threads=1)
+    np.testing.assert_array_equal(load_actions(tmp_path / "d"), load_actions(expected))
+    assert "6 demonstrations of point (20 steps) kept of" in printed
+    # a named task with its own maker and neither an expert nor a horizon: the quickstart says what it needs
+    named_tasks.register(Task("point-own", "TestExternal/PointGoalOwn-v0", make_demonstrations=unperturbed_maker))
+    code, _, err = cli("quickstart", "--task", "point-own", "--out", tmp_path / "q", "--no-progress-bar")
+    assert code == 2 and "makes its own demonstrations and has no expert to find a horizon" in err, err
+    code, _, err = cli("demos", "--task", "point-own", "--noise", 0.1, "--out", tmp_path / "n", "--no-progress-bar")
+    assert code == 2 and "--noise apply to demonstrations from an expert (--expert), not to point-own's own" in err, err
+    assert not (tmp_path / "q").exists() and not (tmp_path / "n").exists()
+
+
+def test_genrl_baseline_sac_learns_an_outside_task_from_its_demonstrations_and_resumes(cli, tmp_path, monkeypatch):
+    from sb3_genrl.baselines.outside import evaluate_step_policy
+    from stable_baselines3 import SAC
+
+    from sb3_genrl.run import checkpoint
+
+    demos, out = tmp_path / "demos", tmp_path / "sac"
+    record_demonstrations("TestExternal/PointGoal-v0", point_expert, 6, demos, seed=1, n_threads=1)
+    arguments = (
+        "baseline", "sac", "--task", "test_external:TestExternal/PointGoal-v0", "--demos", demos, "--episodes", 5,
+        "--checkpoint-every", 2, "--seed", 1, "--device", "cpu", "--out", out, "--no-progress-bar",
+    )  # fmt: skip
+    watch = checkpoint.EpisodeCheckpoint._on_rollout_start
+
+    def killed(callback):  # a stop 5 steps into the 4th episode of 20 steps
+        watch(callback)
+        if callback.model.num_timesteps == 3 * HORIZON + 5:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(checkpoint.EpisodeCheckpoint, "_on_rollout_start", killed)
+    code, _, err = cli(*arguments)
+    assert code == 130 and "rerun the same command to resume" in err, err
+    assert json.loads((out / "checkpoint" / "state.json").read_text())["episodes"] == 2
+    monkeypatch.undo()
+    code, printed, err = cli(*arguments)  # the same command: resumed from episode 2
+    assert code == 0, err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["resumed_at_episodes"] == [2] and summary["episodes_played"] == 5 and summary["horizon"] == HORIZON
+    assert summary["settings"] == {"policy": "MlpPolicy", "learning_starts": 0}
+    assert summary["demo_transitions"] == 6 * HORIZON
+    # scored closed loop on the held-out seeded resets GenRL's policies are scored on, as played here again
+    model = SAC.load(out / "sac_policy.zip", device="cpu")
+    assert model.num_timesteps == 5 * HORIZON
+    again = evaluate_step_policy(
+        lambda observation: model.predict(observation, deterministic=True)[0], "TestExternal/PointGoal-v0", horizon=HORIZON
+    )
+    assert summary["final_eval"] == again and again["resets"] == HELD_OUT_RESETS and again["seeds"][0] == HELD_OUT_SEED
+    assert f"success on {HELD_OUT_RESETS} held-out seeded resets {again['success_rate']:.3f}" in printed
+    # the expert itself, through the same scoring, solves them all: the score reads the env's success
+    assert evaluate_step_policy(point_expert, "TestExternal/PointGoal-v0", horizon=HORIZON, resets=20)["success_rate"] == 1.0
+    # what an outside task cannot take, refused before any work
+    for algorithm, message in (("ppo", "takes sac and sac-no-prefill there"), ("latent-ppo", "needs a generator")):
+        code, _, err = cli("baseline", algorithm, *arguments[2:-3], "--out", tmp_path / algorithm)
+        assert code == 2 and message in err, err
+        assert not (tmp_path / algorithm).exists()
+    code, _, err = cli("baseline", "sac", "--task", "fetch-push", "--demos", demos, "--episodes", 2, "--out", tmp_path / "f")
+    assert code == 2 and "genrl baseline takes a task on the package's arm" in err, err

@@ -11,6 +11,8 @@
   loop with smooth perturbations and kept when its open-loop replay succeeds (:func:`record_demonstrations`).
 - :mod:`sb3_genrl.envs.demonstrations.horizon`: the horizon a task's demonstrations need, the shortest at which its
   expert's success settles (:func:`expert_horizon`).
+- :mod:`sb3_genrl.envs.demonstrations.tasks`: the one entry of every task (:func:`task_demonstrations`): its own maker
+  where it has one, else its expert's recorded demonstrations.
 - :mod:`sb3_genrl.envs.demonstrations.replay`: any episodic Gymnasium env with a dataset of actions and their reset
   seeds (Minari, or arrays), each episode kept when its open-loop replay succeeds (:func:`replay_demonstrations`).
 
@@ -38,6 +40,7 @@ from sb3_genrl.envs.demonstrations.recorder import (
     write_demonstrations,
 )
 from sb3_genrl.envs.demonstrations.replay import read_replay_source, replay_demonstrations
+from sb3_genrl.envs.demonstrations.tasks import own_maker, task_demonstrations
 
 __all__ = [
     "BUMP_DURATIONS",
@@ -49,6 +52,7 @@ __all__ = [
     "is_valid",
     "make_arrays",
     "make_demonstrations",
+    "own_maker",
     "pad_actions",
     "perturbation",
     "play_episode",
@@ -59,6 +63,7 @@ __all__ = [
     "replay_demonstrations",
     "sample_trajectories",
     "smooth_noise",
+    "task_demonstrations",
     "within_limits",
     "write_demonstrations",
 ]

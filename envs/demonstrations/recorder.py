@@ -208,7 +208,7 @@ def record_demonstrations(
 
 def _replay_env(task: str | Callable[[], gym.Env], env: gym.Env, steps: int, success_key: str) -> gym.Env:
     """The env a recorded episode's actions are replayed in: the one GenRL plays (``env`` itself, unless the task
-    records in another env, :attr:`~sb3_genrl.envs.external.ExternalTask.recording_kwargs`). Meta-World's ends at the
+    records in another env, :attr:`~sb3_genrl.envs.external.Task.recording_kwargs`). Meta-World's ends at the
     first success, so a replay stops there (its outcome is the training env's, whose success says solved so far)."""
     if callable(task) or not resolve_task(task).recording_kwargs:
         return env
@@ -507,7 +507,7 @@ def _worker_job(
         "success_key": success_key,
         "seed": seed,
         "heights": heights,
-        "recording": recording,  # the env demonstrations are recorded in (ExternalTask.recording_kwargs)
+        "recording": recording,  # the env demonstrations are recorded in (Task.recording_kwargs)
     }
     try:
         return cloudpickle.dumps(job)

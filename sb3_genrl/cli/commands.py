@@ -16,15 +16,14 @@ from sb3_genrl.baselines.compare import compare_runs
 from sb3_genrl.baselines.train import train_baseline
 from sb3_genrl.checks import check_output_dir
 from sb3_genrl.data import dataset_info, load_trajectories
-from sb3_genrl.envs import TASKS, get_task
+from sb3_genrl.envs import arm_tasks
 from sb3_genrl.envs.demonstrations import (
-    DEFAULT_NOISE,
     describe_horizon,
     expert_horizon,
-    make_demonstrations,
-    record_demonstrations,
+    own_maker,
     refuse_existing_output,
     replay_demonstrations,
+    task_demonstrations,
 )
 from sb3_genrl.envs.external import make_task_env, resolve_task
 from sb3_genrl.generative import train_generator
@@ -50,37 +49,19 @@ EXPERT_HORIZON = "expert"  # genrl demos --horizon expert: the shortest at which
 
 
 def demos_command(args: argparse.Namespace) -> int:
+    """``genrl demos``: a dataset replayed open loop (``--from``), else the task's demonstrations through the one entry
+    of every task (:func:`sb3_genrl.envs.demonstrations.task_demonstrations`): its own maker, or its expert's."""
     if args.source is not None:
         return _replayed_demos(args)
     args.episodes = DEMONSTRATIONS if args.episodes is None else args.episodes
     args.seed = 0 if args.seed is None else args.seed
-
-    if args.expert is not None or args.task not in TASKS:
-        return _expert_demos(args)
+    task = resolve_task(args.task)
+    recorded = args.expert is not None or own_maker(task) is None
+    if recorded and args.expert is None and task.make_expert is None:
+        raise ValueError(f"task {args.task!r} has no expert of the package's: give its expert as --expert MODULE:FUNCTION")
     given = [f"--{name.replace('_', '-')}" for name in ("noise", "horizon", "success_key") if getattr(args, name) is not None]
-    if given:
+    if given and not recorded:
         raise ValueError(f"{', '.join(given)} apply to demonstrations from an expert (--expert), not to {args.task}'s own")
-    began = time.perf_counter()
-    path = make_demonstrations(
-        args.task, args.episodes, args.out, seed=args.seed, n_threads=args.threads, progress_bar=not args.no_progress_bar
-    )
-    info = dataset_info(path)
-    report = json.loads((path / "coverage.json").read_text())
-    print(
-        f"{info['episodes']} {info['task']} demonstrations ({info['drawn']} drawn) in {time.perf_counter() - began:.1f} s"
-        f" -> {path}"
-    )
-    print(
-        f"coverage: {100 * report['coverage']:.1f}% of {report['cells']} goal-region cells of {report['cell_size']} m"
-        f" ({100 * report['in_region']:.1f}% of reached points in the region) -> {report['png']}"
-    )
-    return 0
-
-
-def _expert_demos(args: argparse.Namespace) -> int:
-    """``genrl demos`` of a task from an expert (:func:`sb3_genrl.envs.demonstrations.record_demonstrations`)."""
-    if args.expert is None and resolve_task(args.task).make_expert is None:
-        raise ValueError(f"task {args.task!r} is not one of the package's: give its expert as --expert MODULE:FUNCTION")
     began = time.perf_counter()
     if args.horizon == EXPERT_HORIZON:
         check_output_dir(args.out, "out")
@@ -88,25 +69,40 @@ def _expert_demos(args: argparse.Namespace) -> int:
         found = expert_horizon(args.task, args.expert, seed=args.seed, success_key=args.success_key or "is_success")
         args.horizon = found["horizon"]
         print(f"horizon: {found['horizon']} steps, {describe_horizon(found)}")
-    path = record_demonstrations(
+    path = task_demonstrations(
         args.task,
-        args.expert,
         args.episodes,
         args.out,
+        expert=args.expert,
         seed=args.seed,
-        noise=DEFAULT_NOISE if args.noise is None else args.noise,
+        noise=args.noise,
         horizon=args.horizon,
-        success_key=args.success_key or "is_success",
+        success_key=args.success_key,
         n_threads=args.threads,
         progress_bar=not args.no_progress_bar,
     )
-    info = dataset_info(path)
-    print(
-        f"{info['episodes']} demonstrations of {info['task']} ({info['horizon']} steps) kept of {info['tried']} tried "
-        f"({100 * info['kept_share']:.1f}%: {info['failed_closed_loop']} failed closed loop, {info['failed_open_loop']} "
-        f"failed when replayed open loop) in {time.perf_counter() - began:.1f} s -> {path}"
-    )
+    print(f"{dataset_line(path)} in {time.perf_counter() - began:.1f} s -> {path}")
+    coverage = path / "coverage.json"
+    if coverage.is_file():
+        report = json.loads(coverage.read_text())
+        print(
+            f"coverage: {100 * report['coverage']:.1f}% of {report['cells']} goal-region cells of {report['cell_size']} m"
+            f" ({100 * report['in_region']:.1f}% of reached points in the region) -> {report['png']}"
+        )
     return 0
+
+
+def dataset_line(path: Path) -> str:
+    """What a dataset of ``genrl demos`` holds, in words: a recorded one's kept share and why the others were dropped,
+    or a task's own maker's episodes and draws."""
+    info = dataset_info(path)
+    if "failed_open_loop" in info:
+        return (
+            f"{info['episodes']} demonstrations of {info['task']} ({info['horizon']} steps) kept of {info['tried']} tried "
+            f"({100 * info['kept_share']:.1f}%: {info['failed_closed_loop']} failed closed loop, {info['failed_open_loop']} "
+            "failed when replayed open loop)"
+        )
+    return f"{info['episodes']} {info['task']} demonstrations ({info['drawn']} drawn)"
 
 
 def _replayed_demos(args: argparse.Namespace) -> int:
@@ -169,14 +165,14 @@ def train_generator_command(args: argparse.Namespace) -> int:
 
 
 def evaluate_command(args: argparse.Namespace) -> int:
-    task = args.task
-    if task is not None and task not in TASKS and task not in {spec.env_id for spec in TASKS.values()}:
+    task, spec = args.task, None if args.task is None else resolve_task(args.task).spec
+    if task is not None and spec is None:
         task = _outside_env_maker(task, args.data)
         print(
             f"{args.task} is a task from outside the package: the prior rollout plays its {args.contexts} x {args.draws} "
             "episodes through its step path, as long as the data's trajectories"
         )
-    elif task is not None and not hasattr(get_task(task).env_class, "play_trajectories"):
+    elif spec is not None and not hasattr(spec.env_class, "play_trajectories"):
         print(
             f"{task} has no fast path (play_trajectories): the prior rollout plays its "
             f"{args.contexts} x {args.draws} episodes through the step path"
@@ -212,8 +208,8 @@ def _outside_env_maker(task: str, data: str | Path) -> Callable[[], Any]:
 
 
 def train_policy_command(args: argparse.Namespace) -> int:
-    outside = args.task not in TASKS
-    if outside:  # metaworld/<name>, module:Id: the Gymnasium id
+    outside = resolve_task(args.task).spec is None
+    if outside:  # metaworld/<name>, module:Id, a name given by register(): the Gymnasium id
         args.task = resolve_task(args.task).env_id
     result = train_policy(
         args.task,
@@ -270,7 +266,7 @@ def policy_arguments(args: argparse.Namespace) -> dict:
     '{"callback": null}'``: none) is checked by :func:`sb3_genrl.genrl.demonstrations.callback_entries`."""
     if args.library_defaults:
         batch_episodes, genrl_kwargs = None, {}
-    elif args.task in TASKS or args.task in {spec.env_id for spec in TASKS.values()}:
+    elif resolve_task(args.task).spec is not None:
         _, batch_episodes, genrl_kwargs = task_settings(args.task)
     else:  # a task of the user's own: its entry if it has one, else GenRL's defaults started from the demonstrations
         _, batch_episodes, genrl_kwargs = outside_task_settings(resolve_task(args.task))
@@ -291,6 +287,13 @@ def policy_arguments(args: argparse.Namespace) -> dict:
 
 
 def baseline_command(args: argparse.Namespace) -> int:
+    spec = resolve_task(args.task).spec
+    if spec is not None and spec.name not in arm_tasks():
+        raise ValueError(
+            f"genrl baseline takes a task on the package's arm ({', '.join(arm_tasks())}) or one from outside the "
+            f"package (sac, sac-no-prefill), not {args.task}: the Fetch tasks' SAC + HER runs through rl-zoo3 "
+            "(benchmarks/fetch_sac_her.py)"
+        )
     summary = train_baseline(
         args.algorithm,
         args.task,
@@ -320,6 +323,13 @@ def baseline_command(args: argparse.Namespace) -> int:
             )
         )
     final = summary["final_eval"]
+    if "success_rate" in final:  # a task from outside the package: its held-out seeded resets
+        print(
+            f"{args.algorithm} on {args.task}: {summary['episodes_played']} episodes of {summary['horizon']} steps; the "
+            f"trained policy, deterministic: success on {final['resets']} held-out seeded resets {final['success_rate']:.3f}"
+            f" -> {args.out}"
+        )
+        return 0
     print(
         f"{args.algorithm} on {args.task}: {summary['episodes_played']} episodes, final mean reward "
         f"{summary['final_mean_reward']:.4g}, best {summary['best_mean_reward']:.4g}; the trained policy, "

@@ -351,7 +351,7 @@ def add_baseline(sub: argparse._SubParsersAction) -> None:
         help="train PPO (BC), SAC (with or without prefilled buffer), SAC+HER, or a stock algorithm on the latent space",
     )
     baseline.add_argument("algorithm", choices=BASELINES)
-    _task_option(baseline, arm_only=True)
+    _task_option(baseline, external=True)  # a task on the package's arm, or one from outside the package (sac)
     baseline.add_argument(
         "--demos", type=EXISTING, default=None, help="demonstration dataset (ppo, sac, sac-no-prefill, sac-her)"
     )

@@ -42,7 +42,7 @@ from sb3_genrl.curves import (
 from sb3_genrl.data import dataset_info
 from sb3_genrl.data.fingerprints import dataset_fingerprint
 from sb3_genrl.envs import TASKS, get_task
-from sb3_genrl.envs.external import SuccessInfo, check_success_key
+from sb3_genrl.envs.external import SuccessInfo, check_success_key, resolve_task
 from sb3_genrl.generative import load
 from sb3_genrl.generative.base import TrajectoryGenerator
 from sb3_genrl.genrl.demonstrations import DemonstrationCallback, build_callbacks, callback_entries
@@ -83,11 +83,12 @@ def evaluate_on_goals(
 
 
 def _resolve_env_id(task: str) -> tuple[str, str]:
-    """The Gymnasium id and name of a registered task, or of any registered Gymnasium id (a user's own env)."""
+    """The Gymnasium id and name of a registered task, of any registered Gymnasium id (a user's own env), or of a task
+    named otherwise (``metaworld/<name>``, ``module:Id``, a name given by :func:`sb3_genrl.envs.external.register`)."""
     if task not in TASKS and task in gym.registry:
         return task, task
-    spec = get_task(task)  # raises, listing the registered tasks
-    return spec.env_id, spec.name
+    resolved = resolve_task(task)  # raises, naming what a task may be
+    return resolved.env_id, resolved.spec.name if resolved.spec is not None else resolved.name
 
 
 def train_policy(

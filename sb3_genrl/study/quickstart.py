@@ -1,10 +1,12 @@
 """The quickstart: demonstrations -> a beta-VAE -> its evaluation -> a GenRL policy -> a short report with plots.
 
-A task of the package's makes its demonstrations with its own generator
-(:func:`sb3_genrl.envs.demonstrations.make_demonstrations`); any other episodic Gymnasium task with an expert
-(``metaworld/<name>``, a Gymnasium id, ``module:Id``; see :mod:`sb3_genrl.envs.external`) records them with
-:func:`~sb3_genrl.envs.demonstrations.record_demonstrations`, and its policy is scored on the held-out seeded resets of
-:func:`~sb3_genrl.envs.external.evaluate_success`. The stages, their records and the resume are the same for both.
+Every task makes its demonstrations through the one entry of every task
+(:func:`sb3_genrl.envs.demonstrations.task_demonstrations`): its own maker where it has one (the package's tasks,
+through their :class:`~sb3_genrl.envs.spec.TaskSpec`), else its expert's recorded episodes (``metaworld/<name>``, a
+Gymnasium id, ``module:Id``; see :mod:`sb3_genrl.envs.external`). A task with a TaskSpec takes its entry in
+``hyperparams/genrl.yml`` and is scored on held-out goals (or its own ``evaluate``); any other is scored on the held-out
+seeded resets of :func:`~sb3_genrl.envs.external.evaluate_success`. The stages, their records and the resume are the
+same for all.
 """
 
 from __future__ import annotations
@@ -34,16 +36,16 @@ from sb3_genrl.checks import (
 )
 from sb3_genrl.data import dataset_info
 from sb3_genrl.data.fingerprints import dataset_fingerprint, file_fingerprint
-from sb3_genrl.envs import TASKS, get_task
+from sb3_genrl.envs import get_task
 from sb3_genrl.envs.demonstrations import (
     DEFAULT_NOISE,
     describe_horizon,
     expert_horizon,
     expert_name,
-    make_demonstrations,
-    record_demonstrations,
+    own_maker,
+    task_demonstrations,
 )
-from sb3_genrl.envs.external import HELD_OUT_RESETS, ExternalTask, evaluate_success, resolve_task, task_horizon
+from sb3_genrl.envs.external import HELD_OUT_RESETS, Task, evaluate_success, resolve_task, task_horizon
 from sb3_genrl.generative import load, train_generator
 from sb3_genrl.genrl import GenRL
 from sb3_genrl.genrl.demonstrations import DEMONSTRATION_CALLBACK, uses_demonstrations
@@ -147,7 +149,7 @@ def quickstart(
     :param expert: a task from outside the package: its expert, observation -> action (None: the task's own, such as
         Meta-World's scripted policies); a task of the package's takes none
     :param horizon: a task from outside the package: the control steps of a demonstration and of GenRL's episodes
-        (None: the task's, :attr:`~sb3_genrl.envs.external.ExternalTask.horizon`, where it has one; else the shortest
+        (None: the task's, :attr:`~sb3_genrl.envs.external.Task.horizon`, where it has one; else the shortest
         at which the expert's success settles, :func:`~sb3_genrl.envs.demonstrations.expert_horizon`, written to
         ``horizon.json``)
     :return: the report's path
@@ -157,7 +159,8 @@ def quickstart(
         episodes, batch_episodes, genrl_kwargs = task_settings(task)
         video = video and get_task(task).video  # a task without the arm tasks' renderer is not filmed
     else:
-        expert = expert if expert is not None else outside.make_expert()
+        if expert is None and outside.make_expert is not None and own_maker(outside) is None:
+            expert = outside.make_expert()
         horizon, horizon_record = _outside_horizon(outside, horizon, expert, pathlib.Path(out_dir), seed, log)
         episodes, batch_episodes, genrl_kwargs = outside_task_settings(outside, horizon)
         video = False  # the video renders the package's arm tasks
@@ -216,10 +219,12 @@ def _within_steps(episodes: int, steps: int, horizon: int, fewest: int) -> int:
     return max(fewest, min(episodes, steps // int(horizon)))
 
 
-def _outside_task(task: str, expert: Callable[[Any], Any] | None, horizon: int | None) -> ExternalTask | None:
-    """The resolved task when it is not one of the package's (None for one of the package's), with its expert and
-    horizon checked before any work."""
-    if _is_package_task(task):
+def _outside_task(task: str, expert: Callable[[Any], Any] | None, horizon: int | None) -> Task | None:
+    """The resolved task when it has no :class:`~sb3_genrl.envs.spec.TaskSpec` (None for one that has: the package's
+    own, whose entry, goal region and score the quickstart uses), with its expert and horizon checked before any
+    work."""
+    resolved = resolve_task(task)
+    if resolved.spec is not None:
         given = [name for name, value in dict(expert=expert, horizon=horizon).items() if value is not None]
         if given:
             raise ValueError(
@@ -227,16 +232,18 @@ def _outside_task(task: str, expert: Callable[[Any], Any] | None, horizon: int |
                 "which makes its own demonstrations"
             )
         return None
-    outside = resolve_task(task)
-    if expert is None and outside.make_expert is None:
-        raise ValueError(f"task {task!r} is not one of the package's: give its expert (expert=, --expert MODULE:FUNCTION)")
+    if expert is None and resolved.make_expert is None:
+        if own_maker(resolved) is None:
+            raise ValueError(f"task {task!r} is not one of the package's: give its expert (expert=, --expert MODULE:FUNCTION)")
+        if horizon is None and resolved.horizon is None:
+            raise ValueError(f"task {task!r} makes its own demonstrations and has no expert to find a horizon: give horizon=")
     if expert is not None and not callable(expert):
         raise ValueError(f"expert must be a callable observation -> action, got {type(expert).__name__}")
-    return outside
+    return resolved
 
 
 def _outside_horizon(
-    task: ExternalTask,
+    task: Task,
     horizon: int | None,
     expert: Callable[[Any], Any],
     out: pathlib.Path,
@@ -270,7 +277,7 @@ def _outside_horizon(
     return int(found["horizon"]), record
 
 
-def outside_task_settings(task: ExternalTask, horizon: int | None = None) -> tuple[int, int, dict[str, Any]]:
+def outside_task_settings(task: Task, horizon: int | None = None) -> tuple[int, int, dict[str, Any]]:
     """The GenRL settings of a task from outside the package, as :func:`task_settings` gives a registered task's: its
     env id's entry in ``hyperparams/genrl.yml`` if it has one, else :data:`OUTSIDE_TASK_KWARGS` (started from the
     demonstrations, a fixed spread, else GenRL's defaults) with :data:`DEFAULT_POLICY_EPISODES` (fewer where episodes
@@ -289,11 +296,13 @@ def outside_task_settings(task: ExternalTask, horizon: int | None = None) -> tup
 
 
 def _add_outside_settings(
-    settings: dict[str, dict[str, Any]], task: ExternalTask, expert: Callable[[Any], Any], horizon: int | None
+    settings: dict[str, dict[str, Any]], task: Task, expert: Callable[[Any], Any], horizon: int | None
 ) -> None:
     """What the stages of a task from outside the package are made with besides a registered task's: the recorder's
-    settings (compared with the dataset's metadata on a rerun), the env id and horizon of the policy."""
-    settings["demonstrations"] |= {"horizon": horizon, "expert": expert_name(expert), "noise": DEFAULT_NOISE}
+    settings (compared with the dataset's metadata on a rerun; none for a task's own maker), the env id and horizon
+    of the policy."""
+    if expert is not None:
+        settings["demonstrations"] |= {"horizon": horizon, "expert": expert_name(expert), "noise": DEFAULT_NOISE}
     settings["policy"] |= {"env_id": task.env_id, "horizon": horizon}
 
 
@@ -419,18 +428,16 @@ def _run_stages(
             tensorboard_log=str(out / "tensorboard"),
         )
 
-    def demonstrate() -> None:
-        if "expert" not in demos:  # a task of the package's: its own demonstrations
-            make_demonstrations(demos["task"], demos["episodes"], dataset, seed=demos["seed"], progress_bar=progress_bar)
-            return
-        record_demonstrations(
+    def demonstrate() -> None:  # the one entry of every task: its own maker, or its expert's recorded episodes
+        recorded = expert is not None
+        task_demonstrations(
             demos["task"],
-            expert,
             demos["episodes"],
             dataset,
+            expert=expert,
             seed=demos["seed"],
-            noise=demos["noise"],
-            horizon=demos["horizon"],
+            noise=demos["noise"] if recorded else None,
+            horizon=demos["horizon"] if recorded else None,
             progress_bar=progress_bar,
         )
 
@@ -622,14 +629,8 @@ def _outside_policy_score(out: pathlib.Path, task: str, horizon: int) -> tuple[s
 def quickstart_preset(task: str) -> str:
     """The generator preset the quickstart trains for ``task``: the task's own (its ``TaskSpec.generator_preset``, a
     latent space as large as its expert's family of motions; a task from outside the package: its
-    ``ExternalTask.generator_preset``) or :data:`QUICKSTART_PRESET`."""
-    own = get_task(task).generator_preset if _is_package_task(task) else resolve_task(task).generator_preset
-    return own or QUICKSTART_PRESET
-
-
-def _is_package_task(task: str) -> bool:
-    """Whether ``task`` names a task of the package (:data:`sb3_genrl.envs.TASKS`) by its short name or Gymnasium id."""
-    return task in TASKS or task in {spec.env_id for spec in TASKS.values()}
+    ``Task.generator_preset``) or :data:`QUICKSTART_PRESET`."""
+    return resolve_task(task).generator_preset or QUICKSTART_PRESET
 
 
 def task_settings(task: str) -> tuple[int, int, dict[str, Any]]:
