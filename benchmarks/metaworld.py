@@ -21,11 +21,11 @@ and a rerun with others is refused before any work):
    (:data:`~sb3_genrl.study.quickstart.OUTSIDE_TASK_KWARGS`: the fit of step 4, a spread fixed at 0.37 prior standard
    deviations, then GenRL's defaults, ``--batch-episodes`` a batch), ``--episodes`` episodes (checkpointed; a stopped
    run resumes);
-6. per ``--sac-seeds`` seed (default one: SAC's runs take hours per task on a CPU), SB3's SAC (its defaults,
-   learning from the first step, observations normalised with the demonstrations' statistics) with the
-   demonstrations' transitions in its replay buffer, for the same ``--episodes`` episodes of the task's horizon, in
-   Meta-World's training env (no end at a success, as Meta-World trains step-based learners); checkpointed, and a
-   stopped run resumes.
+6. per ``--sac-seeds`` seed (default one: SAC's runs take hours per task on a CPU), ``genrl baseline sac`` of the
+   task (:mod:`sb3_genrl.baselines.outside`): SB3's SAC (its defaults, learning from the first step, observations
+   normalised with the demonstrations' statistics) with the demonstrations' transitions in its replay buffer, for the
+   same ``--episodes`` episodes of the task's horizon, in Meta-World's training env (no end at a success, as
+   Meta-World trains step-based learners); checkpointed, and a stopped run resumes.
 
 Every policy is scored deterministically on ``--held-out`` held-out seeded resets: reset seeds from ``2**31``
 (:func:`~sb3_genrl.envs.external.evaluate_success`), which the recorder never draws and which choose nothing, each
@@ -46,48 +46,37 @@ from __future__ import annotations
 import argparse
 import contextlib
 import copy
-import functools
-import json
-import shutil
 import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 import torch
-from sb3_genrl.baselines.checkpoint import ReplayBufferCheckpoint, resume_off_policy
-from sb3_genrl.baselines.models import normalized_policy
-from sb3_genrl.baselines.prefill import prefill_replay_buffer
+from sb3_genrl.baselines.train import train_baseline
 from sb3_genrl.envs import metaworld
 from sb3_genrl.envs.demonstrations import expert_horizon, record_demonstrations
 from sb3_genrl.envs.external import HELD_OUT_SEED, evaluate_success, make_task_env
-from stable_baselines3 import SAC
-from stable_baselines3.common.monitor import Monitor
 
 from sb3_genrl import GenRL, LatentActionWrapper
 from sb3_genrl.checks import COUNT, JSON_OUT, OUT_DIR, SEED, check_int, option
-from sb3_genrl.curves import episode_info
-from sb3_genrl.data import dataset_info, load_transitions
+from sb3_genrl.curves import MONITOR_FILE, read_monitor
+from sb3_genrl.data import dataset_info
 from sb3_genrl.generative import load, train_generator
 from sb3_genrl.genrl.demonstrations import DemonstrationCallback, fit_mean_to_demonstrations
 from sb3_genrl.markdown import markdown_table
 from sb3_genrl.provenance import provenance
 from sb3_genrl.run import train_policy
-from sb3_genrl.run.checkpoint import resume_state
-from sb3_genrl.run.folder import CHECKPOINT_DIR
 from sb3_genrl.run.stages import STAGE_FILE, SettingsConflictError, read_settings, refuse_conflicts, settings_conflicts
 from sb3_genrl.study.quickstart import OUTSIDE_TASK_KWARGS
-from sb3_genrl.utils import FolderInUseError, atomic_path, atomic_write_json, atomic_write_text, folder_lock
+from sb3_genrl.utils import FolderInUseError, atomic_write_json, atomic_write_text, folder_lock
 
 RESULTS = Path(__file__).resolve().parent / "results"
 METHODS = ("fit", "genrl", "sac")  # the per-seed units, in the order they run
 RECONSTRUCTIONS = 200  # demonstrations the generator's reconstructions are replayed from
 COMPLETE_SEEDS, COMPLETE_SAC_SEEDS = (0, 1, 2), (0,)  # the seeds of a complete result (the defaults)
 SAC_CHECKPOINT_EVERY = 250  # SAC's episodes between checkpoints (model and replay buffer)
-SAC_RECORD = "run.json"  # a finished SAC run's identity and CPU seconds, beside its model
 
 
 def known_task(name: str, _: str = "") -> str:
@@ -294,57 +283,33 @@ def outside_settings(fit_steps: int) -> dict[str, Any]:
 
 
 def sac_row(task: str, dataset: Path, work: Path, seed: int, horizon: int, args: argparse.Namespace) -> dict[str, Any]:
-    """SAC with the demonstrations' transitions in its replay buffer, ``--episodes`` episodes, on held-out resets.
+    """SAC with the demonstrations' transitions in its replay buffer, ``--episodes`` episodes, on held-out resets:
+    ``genrl baseline sac --task metaworld/TASK --demos DATASET`` (:func:`~sb3_genrl.baselines.train_baseline` of a task
+    from outside the package, :mod:`sb3_genrl.baselines.outside`) in ``work/sac_seedN``.
 
-    The run checkpoints its model and replay buffer in ``work/sac_seedN`` every :data:`SAC_CHECKPOINT_EVERY` episodes
-    (:class:`~sb3_genrl.baselines.checkpoint.ReplayBufferCheckpoint`, as ``genrl baseline`` does) and a rerun resumes
+    The run checkpoints its model and replay buffer every :data:`SAC_CHECKPOINT_EVERY` episodes and a rerun resumes
     from it, since a run takes hours of CPU; a resumed run is not bitwise the uninterrupted one (SB3's random streams
-    restart), and the row names the episodes it resumed at. The trained model is kept as ``work/sac_seedN/model.zip``.
+    restart), and the row names the episodes it resumed at. The row's CPU seconds are the Monitor's, those of the
+    episodes played and the updates between them (before a resume included).
     """
     folder = work / f"sac_seed{seed}"
-    final = folder / "model.zip"
-    transitions = load_transitions(dataset)
-    # SAC learns in Meta-World's training env, which runs on after a success (and ends by truncation only): the last
-    # step of a demonstration (its first success, or the horizon) is no terminal state there
-    transitions["dones"] = np.zeros_like(transitions["dones"])
-    identity = {"task": task, "seed": seed, "horizon": horizon, "episodes": args.episodes, "sac": settings(args)["sac"]}
-    identity["demonstration_steps"] = len(transitions["observations"])
-    training_env = functools.partial(gym.make, metaworld.metaworld_env_id(task), terminate_on_success=False)
-    env = Monitor(episode_info(make_task_env(training_env, horizon=horizon)))
-    steps = args.episodes * horizon
-    record = json.loads((folder / SAC_RECORD).read_text()) if final.is_file() else None
-    if record is None or record.get("identity") != json.loads(json.dumps(identity)):
-        state = resume_state(folder, identity)
-        if state is None:
-            model = SAC(
-                "MlpPolicy",
-                env,
-                buffer_size=len(transitions["observations"]) + steps,
-                learning_starts=0,
-                seed=seed,
-                device="cpu",
-                policy_kwargs=normalized_policy({}, transitions["observations"]),
-            )
-            prefill_replay_buffer(model, transitions)
-        else:
-            model = resume_off_policy(state, env, device="cpu")
-        resumed = [] if state is None else [*state.get("resumed_at_episodes", []), int(state["episodes"])]
-        checkpoint = ReplayBufferCheckpoint(folder, SAC_CHECKPOINT_EVERY, identity, state, {"resumed_at_episodes": resumed})
-        model.learn(steps - model.num_timesteps, callback=checkpoint, reset_num_timesteps=state is None)
-        with atomic_path(final) as path:
-            model.save(path)
-        record = {"identity": identity, "cpu_seconds": env.get_wrapper_attr("cpu_seconds")(), "resumed": resumed}
-        atomic_write_json(folder / SAC_RECORD, record)
-        shutil.rmtree(folder / CHECKPOINT_DIR, ignore_errors=True)  # a finished run keeps its model, not its buffer
-    env.close()
-    model, env = SAC.load(final, device="cpu"), make_task_env(f"metaworld/{task}", horizon=horizon)
-    successes = [
-        closed_loop(env, lambda observation: model.predict(observation, deterministic=True)[0], HELD_OUT_SEED + i, horizon)[0]
-        for i in range(args.held_out)
-    ]
-    env.close()
-    row = {"success": float(np.mean(successes)), "cpu_seconds": round(record["cpu_seconds"], 1), "episodes": args.episodes}
-    return row | ({"resumed_at_episodes": record["resumed"]} if record["resumed"] else {})
+    summary = train_baseline(
+        "sac",
+        f"metaworld/{task}",
+        episodes=args.episodes,
+        out_dir=folder,
+        seed=seed,
+        demos=dataset,
+        checkpoint_every=SAC_CHECKPOINT_EVERY,
+        device="cpu",
+        eval_resets=args.held_out,
+    )
+    if summary["horizon"] != horizon:
+        raise RuntimeError(f"{dataset}: recorded with {summary['horizon']} steps, the task's horizon is {horizon}")
+    cpu_seconds = float(read_monitor(folder / MONITOR_FILE)["cpu_seconds"][-1])
+    row = {"success": summary["final_eval"]["success_rate"], "cpu_seconds": round(cpu_seconds, 1), "episodes": args.episodes}
+    resumed = summary.get("resumed_at_episodes")
+    return row | ({"resumed_at_episodes": resumed} if resumed else {})
 
 
 def run_task(task: str, args: argparse.Namespace, result: dict[str, Any], save: Any) -> None:

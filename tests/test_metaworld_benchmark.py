@@ -7,6 +7,7 @@ import shutil
 
 import pytest
 from sb3_genrl.envs import metaworld
+from stable_baselines3 import SAC
 
 pytestmark = pytest.mark.skipif(not metaworld.installed(), reason=metaworld.INSTALL_HINT)
 
@@ -105,33 +106,39 @@ def test_runs_of_other_tasks_into_one_json_keep_each_others_rows(tmp_path, monke
 
 
 def test_a_stopped_sac_run_resumes_from_its_checkpoint(tmp_path, monkeypatch):
-    """SAC's run (hours per task) checkpoints its model and replay buffer; the same command after a stop goes on from
-    the checkpoint's episode, says so in its row, and a finished run keeps its model, not its checkpoint."""
+    """SAC's run (hours per task, ``genrl baseline sac``'s) checkpoints its model and replay buffer; the same command
+    after a stop goes on from the checkpoint's episode, says so in its row, and a finished run keeps its model, not its
+    checkpoint."""
+    from sb3_genrl.baselines import train as baseline_train
+
     import benchmarks.metaworld as benchmark
 
     out, work = tmp_path / "metaworld.json", tmp_path / "work"
     argv = [*TINY, "--seeds", "--episodes", "6", "--work", str(work), "--out", str(out)]
     monkeypatch.setattr(benchmark, "SAC_CHECKPOINT_EVERY", 2)
-    checkpoint = benchmark.ReplayBufferCheckpoint
+    checkpoint = baseline_train.ReplayBufferCheckpoint
 
     class StopAfterFirstCheckpoint(checkpoint):
         def save(self, episodes):
             super().save(episodes)
             raise KeyboardInterrupt  # the run stopped right after its first checkpoint
 
-    monkeypatch.setattr(benchmark, "ReplayBufferCheckpoint", StopAfterFirstCheckpoint)
+    monkeypatch.setattr(baseline_train, "ReplayBufferCheckpoint", StopAfterFirstCheckpoint)
     with pytest.raises(KeyboardInterrupt):
         benchmark.main(argv)
     folder = work / "reach-v3" / "sac_seed0"
     state = json.loads((folder / "checkpoint" / "state.json").read_text())
     assert state["episodes"] == 2 and "sac" not in json.loads(out.read_text())["tasks"]["reach-v3"]
-    monkeypatch.setattr(benchmark, "ReplayBufferCheckpoint", checkpoint)
+    monkeypatch.setattr(baseline_train, "ReplayBufferCheckpoint", checkpoint)
     assert benchmark.main(argv) == 0
     row = json.loads(out.read_text())["tasks"]["reach-v3"]["sac"]["0"]
     assert row["resumed_at_episodes"] == [2] and row["episodes"] == 6 and row["cpu_seconds"] > 0.0
-    assert (folder / "model.zip").is_file() and not (folder / "checkpoint").exists()
+    assert (folder / "sac_policy.zip").is_file() and not (folder / "checkpoint").exists()
     horizon = json.loads(out.read_text())["tasks"]["reach-v3"]["horizon"]["horizon"]
-    assert benchmark.SAC.load(folder / "model.zip").num_timesteps == 6 * horizon
+    assert SAC.load(folder / "sac_policy.zip").num_timesteps == 6 * horizon
+    # the row's success is the saved policy's on the held-out resets, as genrl baseline sac scores it
+    summary = json.loads((folder / "summary.json").read_text())
+    assert row["success"] == summary["final_eval"]["success_rate"] and summary["final_eval"]["resets"] == 4
 
 
 def test_the_horizons_benchmark_writes_each_tasks_horizon_and_cost_and_resumes(tmp_path, monkeypatch):
