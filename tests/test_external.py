@@ -719,7 +719,7 @@ def test_the_package_tasks_and_a_users_make_their_demonstrations_through_the_one
     assert dataset_info(recorded)["noise"] == 0.3 and not np.array_equal(load_actions(recorded), load_actions(mine))
 
 
-def test_a_task_named_with_register_takes_the_commands_by_its_name(cli, tmp_path, named_tasks):
+def test_a_task_named_with_register_takes_the_commands_by_its_name(cli, tmp_path, named_tasks, monkeypatch):
     task = named_tasks.register(Task("point", "TestExternal/PointGoal-v0", make_expert=quiet_expert, horizon=12))
     assert named_tasks.register(task) is task  # again: the same task
     assert resolve_task("point") is resolve_task("TestExternal/PointGoal-v0") is task
@@ -742,6 +742,19 @@ def test_a_task_named_with_register_takes_the_commands_by_its_name(cli, tmp_path
     expected = record_demonstrations("TestExternal/PointGoal-v0", point_expert, 6, tmp_path / "e", n_threads=1)
     np.testing.assert_array_equal(load_actions(tmp_path / "d"), load_actions(expected))
     assert "6 demonstrations of point (20 steps) kept of" in printed
+    # a module that names its task when imported: module:name, as module:Id for a Gymnasium id
+    (tmp_path / "my_point_tasks.py").write_text(
+        "from sb3_genrl.envs.external import Task, register\n"
+        "from test_external import quiet_expert\n"
+        "register(Task('point-mod', 'TestExternal/PointGoalShove-v0', make_expert=quiet_expert))\n"
+    )
+    monkeypatch.syspath_prepend(str(tmp_path))
+    code, printed, err = cli(
+        "demos", "--task", "my_point_tasks:point-mod", "--episodes", 2, "--threads", 1, "--out", tmp_path / "m",
+        "--no-progress-bar",
+    )  # fmt: skip
+    assert code == 0, err
+    assert dataset_info(tmp_path / "m")["env_id"] == "TestExternal/PointGoalShove-v0"
     # a named task with its own maker and neither an expert nor a horizon: the quickstart says what it needs
     named_tasks.register(Task("point-own", "TestExternal/PointGoalOwn-v0", make_demonstrations=unperturbed_maker))
     code, _, err = cli("quickstart", "--task", "point-own", "--out", tmp_path / "q", "--no-progress-bar")
