@@ -127,7 +127,7 @@ def resolve_task(task: str) -> Task:
     :param task: a task's name or id: one given a name by :func:`register` or registered with a TaskSpec (the package's
         ``hockey``, ``basketball``, ``fetch-push``, ... or their Gymnasium ids), ``metaworld/<name>``, a registered
         Gymnasium id, or ``"module:Id"`` (the module is imported first, as ``gymnasium.make`` does, so that it
-        registers ``Id``)
+        registers ``Id``, a Gymnasium id or a name it gives with :func:`register`)
     :raises ValueError: naming ``task`` and what is accepted, when it is none of them
     """
     if not isinstance(task, str) or not task:

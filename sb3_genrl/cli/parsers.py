@@ -69,7 +69,8 @@ def _task_option(
             default=default,
             type=option(_check_task),
             help="a registered task, metaworld/<name> (one of Meta-World's 50 v3 tasks), a registered Gymnasium id, "
-            "or module:Id (the module registers Id when imported)" + (f" (default: {default})" if default else ""),
+            "or module:Id (the module registers Id when imported: a Gymnasium id, or a name it gives with "
+            "sb3_genrl.envs.external.register)" + (f" (default: {default})" if default else ""),
         )
         return
     parser.add_argument(
