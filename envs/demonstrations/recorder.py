@@ -457,7 +457,7 @@ def worker_pool(job: bytes, workers: int, name: str) -> concurrent.futures.Proce
 def in_worker(function: Callable[[gym.Env, Callable[[Any], np.ndarray], Any, int], Any], argument: Any) -> Any:
     """``function(env, expert, argument, steps)`` in a worker process of :func:`worker_pool`, with its env and its
     job's expert and steps (``function`` a module-level function, sent by reference)."""
-    env, job = _worker_env(f"{function.__name__}({argument!r})")
+    env, _, job = _worker_env(f"{function.__name__}({argument!r})")
     return function(env, job["expert"], argument, job["steps"])
 
 
@@ -521,9 +521,9 @@ def _start_worker(job: bytes, name: str) -> None:
     _WORKER.update(pickled=job, name=name)
 
 
-def _worker_env(what: str) -> tuple[gym.Env, dict[str, Any]]:
-    """In a worker process: the task's env, made at the first call (``what`` names the work, for an env that cannot be
-    made), and the job."""
+def _worker_env(what: str) -> tuple[gym.Env, gym.Env, dict[str, Any]]:
+    """In a worker process: the task's env and the env its episodes are replayed in (:func:`_replay_env`), made at the
+    first call (``what`` names the work, for an env that cannot be made), and the job."""
     if "env" not in _WORKER:
         try:
             job = pickle.loads(_WORKER["pickled"])
@@ -536,13 +536,13 @@ def _worker_env(what: str) -> tuple[gym.Env, dict[str, Any]]:
                 f"a worker process could not make the env of {_WORKER['name']} for {what}: {type(error).__name__}: {error}"
             ) from error
         _WORKER.update(env=env, replay_env=replay_env, job=job)
-    return _WORKER["env"], _WORKER["job"]
+    return _WORKER["env"], _WORKER["replay_env"], _WORKER["job"]
 
 
 def _play_chunk(start: int, stop: int) -> list[dict[str, Any]]:
     """Episodes ``start`` to ``stop - 1`` (:func:`_episode`), in a worker process."""
-    env, job = _worker_env(f"episodes {start} to {stop - 1}")
-    replay_env, outcomes = _WORKER["replay_env"], []
+    env, replay_env, job = _worker_env(f"episodes {start} to {stop - 1}")
+    outcomes = []
     for k in range(start, stop):
         try:
             outcomes.append(_episode(env, replay_env, job["expert"], job["steps"], job["seed"], k, job["heights"]))
