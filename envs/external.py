@@ -62,7 +62,7 @@ class Task:
         at the first success, with the same outcome for any action sequence)
     :param make_demonstrations: the task's own demonstration maker, ``(episodes, out_dir, *, seed, n_threads,
         progress_bar) -> dataset folder``, for a task whose demonstrations are not its expert's closed-loop episodes;
-        None: recorded from the expert (:func:`sb3_genrl.envs.demonstrations.demonstrations` chooses)
+        None: recorded from the expert (:func:`sb3_genrl.envs.demonstrations.task_demonstrations` chooses)
     :param spec: the task's :class:`~sb3_genrl.envs.spec.TaskSpec` where it is registered with one (the package's
         hockey, basketball and Fetch tasks, or a user's :func:`sb3_genrl.envs.register_task`): its own demonstration
         maker (:func:`sb3_genrl.envs.demonstrations.make_demonstrations`: hockey's and basketball's open-loop motions,
