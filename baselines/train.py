@@ -181,16 +181,20 @@ def train_baseline(
     )
     checkpoint_every = checkpoint_every if algorithm in OFF_POLICY_BASELINES else None  # the others: short runs
     identity = _identity(summary) | {"eval_goals": eval_goals, "generator_sha256": generator_digest(generator)}
-    with folder_lock(out):  # one run at a time in out; another run's files are refused, never mixed in
-        finished = open_run(out, identity, (f"{algorithm}_policy.zip", "bc_policy.zip", *CURVE_FILES), overwrite=overwrite)
-        if finished is not None:  # this very run, finished: nothing to do
-            return finished
-        state = None if checkpoint_every is None else resume_state(out, _identity(summary))  # this run's checkpoint
-        model, summary = _model(
+    outputs = (f"{algorithm}_policy.zip", "bc_policy.zip", *CURVE_FILES)
+    return _run_in_folder(
+        out,
+        summary,
+        identity,
+        outputs,
+        steps,
+        began,
+        {"checkpoint_every": checkpoint_every, "overwrite": overwrite, "device": device, "verbose": verbose}
+        | {"progress_bar": progress_bar, "window": window},
+        lambda: _model(
             algorithm,
             spec.name,
             out,
-            state,
             transitions,
             generator,
             steps,
@@ -198,22 +202,50 @@ def train_baseline(
             eval_goals,
             bc_kwargs,
             changes,
-            began,
             {"seed": seed, "device": device, "verbose": verbose},
             n_threads,
-        )
+        ),
+        lambda model: evaluate_trained(algorithm, model, spec.name, generator=generator, goals=eval_goals),
+    )
+
+
+def _run_in_folder(
+    out: pathlib.Path,
+    summary: dict[str, Any],
+    identity: dict[str, Any],
+    outputs: tuple[str, ...],
+    steps: int,
+    began: tuple[float, float],
+    options: dict[str, Any],
+    new_model: Callable[[], Any],
+    final_eval: Callable[[Any], dict[str, Any]],
+) -> dict[str, Any]:
+    """A baseline's run in ``out``, locked (another run's files are refused, never mixed in): a finished run's summary,
+    or the model (``new_model()``, its setup's seconds since ``began`` recorded, or its checkpoint's) trained to
+    ``steps`` environment steps and finished with ``final_eval(model)``. ``options``: ``checkpoint_every``,
+    ``overwrite``, ``device``, ``verbose``, ``progress_bar`` and ``window``."""
+    algorithm, task = summary["algorithm"], summary["task"]
+    with folder_lock(out):
+        finished = open_run(out, identity, outputs, overwrite=options["overwrite"])
+        if finished is not None:  # this very run, finished: nothing to do
+            return finished
+        state = None if options["checkpoint_every"] is None else resume_state(out, _identity(summary))
+        if state is None:
+            model = new_model()
+            # demonstrations, behaviour cloning and its evaluation: wall-clock and this process' CPU seconds
+            summary |= {
+                "setup_seconds": time.perf_counter() - began[0],
+                "setup_cpu_seconds": time.process_time() - began[1],
+            }
+        else:  # this run's checkpoint
+            model, summary = _resumed_model(algorithm, task, out, state, options["device"])
         try:
-            summary["learn_seconds"] = _learn(model, steps, out, state, checkpoint_every, summary, progress_bar, verbose)
+            summary["learn_seconds"] = _learn(
+                model, steps, out, state, options["checkpoint_every"], summary, options["progress_bar"], options["verbose"]
+            )
         finally:  # the training env: its Monitor file (complete after this) and any env processes
             model.get_env().close()
-        return _finish(
-            algorithm,
-            spec.name,
-            out,
-            summary,
-            window,
-            lambda: evaluate_trained(algorithm, model, spec.name, generator=generator, goals=eval_goals),
-        )
+        return _finish(algorithm, task, out, summary, options["window"], lambda: final_eval(model))
 
 
 CURVE_FILES = ("learning_curve.csv", "learning_curve.png", MONITOR_FILE, LOG_DIR)
@@ -233,7 +265,6 @@ def _model(
     algorithm: str,
     task: str,
     out: pathlib.Path,
-    state: dict[str, Any] | None,
     transitions: Any,
     generator: Any,
     steps: int,
@@ -241,25 +272,15 @@ def _model(
     eval_goals: int,
     bc_kwargs: dict[str, Any] | None,
     changes: dict[str, Any],
-    began: tuple[float, float],
     common: dict[str, Any],
     n_threads: int | None = None,
-) -> tuple[Any, dict[str, Any]]:
-    """The model to train and the summary so far: resumed from ``state``, or new (its setup's seconds recorded)."""
-    if state is not None:
-        return _resumed_model(algorithm, task, out, state, common["device"])
-    model = (
-        _latent_model(algorithm, task, generator, summary, common, out, n_threads)
-        if transitions is None
-        else _feedback_model(
-            algorithm, task, transitions, steps, out, summary, eval_goals, bc_kwargs, common | {"settings": changes}
-        )
+) -> Any:
+    """A new model to train: a latent-space baseline's, or a feedback baseline's with its demonstrations in place."""
+    if transitions is None:
+        return _latent_model(algorithm, task, generator, summary, common, out, n_threads)
+    return _feedback_model(
+        algorithm, task, transitions, steps, out, summary, eval_goals, bc_kwargs, common | {"settings": changes}
     )
-    # demonstrations, behaviour cloning and its evaluation: wall-clock and this process' CPU seconds
-    return model, summary | {
-        "setup_seconds": time.perf_counter() - began[0],
-        "setup_cpu_seconds": time.process_time() - began[1],
-    }
 
 
 def _finish(
@@ -276,7 +297,7 @@ def _finish(
     summary["final_eval"] = final_eval()
     summary["training_health"] = training_health(out)
     for warning in summary["training_health"]["warnings"]:
-        warnings.warn(f"{algorithm} on {task}: {warning}", stacklevel=3)
+        warnings.warn(f"{algorithm} on {task}: {warning}", stacklevel=4)
     atomic_write_json(out / "summary.json", summary)
     remove_checkpoint(out)
     return summary
@@ -310,41 +331,31 @@ def _train_outside(
         "demo_sha256": _fingerprint(transitions),
         "settings": {"policy": "MlpPolicy", **OUTSIDE_SETTINGS, **changes},
     }
-    checkpoint_every = options["checkpoint_every"]
     identity = _identity(summary) | {"eval_resets": options["eval_resets"]}
-    with folder_lock(out):  # one run at a time in out; another run's files are refused, never mixed in
-        finished = open_run(out, identity, (f"{algorithm}_policy.zip", *CURVE_FILES), overwrite=common["overwrite"])
-        if finished is not None:  # this very run, finished: nothing to do
-            return finished
-        state = None if checkpoint_every is None else resume_state(out, _identity(summary))
-        if state is None:
-            env = monitor_episodes(outside_env(task, horizon), out)
-            model = outside_sac(algorithm, env, transitions, steps, run["seed"], device=common["device"], **changes)
-            summary |= {
-                "setup_seconds": time.perf_counter() - began[0],
-                "setup_cpu_seconds": time.process_time() - began[1],
-            }
-        else:
-            model, summary = _resumed_model(algorithm, task, out, state, common["device"])
-        try:
-            summary["learn_seconds"] = _learn(
-                model, steps, out, state, checkpoint_every, summary, common["progress_bar"], common["verbose"]
-            )
-        finally:  # the training env: its Monitor file (complete after this)
-            model.get_env().close()
-        return _finish(
+    return _run_in_folder(
+        out,
+        summary,
+        identity,
+        (f"{algorithm}_policy.zip", *CURVE_FILES),
+        steps,
+        began,
+        common | {"checkpoint_every": options["checkpoint_every"]},
+        lambda: outside_sac(
             algorithm,
+            monitor_episodes(outside_env(task, horizon), out),
+            transitions,
+            steps,
+            run["seed"],
+            device=common["device"],
+            **changes,
+        ),
+        lambda model: evaluate_step_policy(
+            lambda observation: model.predict(observation, deterministic=True)[0],
             task,
-            out,
-            summary,
-            common["window"],
-            lambda: evaluate_step_policy(
-                lambda observation: model.predict(observation, deterministic=True)[0],
-                task,
-                horizon=horizon,
-                resets=options["eval_resets"],
-            ),
-        )
+            horizon=horizon,
+            resets=options["eval_resets"],
+        ),
+    )
 
 
 def _learn(
