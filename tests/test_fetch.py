@@ -363,7 +363,7 @@ def test_the_results_table_says_which_runs_used_former_settings():
     from sb3_genrl.study.quickstart import task_settings
 
     _, batch_episodes, genrl_kwargs = task_settings("fetch-push")
-    now = genrl_settings(genrl_kwargs | {"n_steps": batch_episodes})
+    now = genrl_settings(genrl_kwargs | {"n_steps": batch_episodes, "batch_size": batch_episodes})  # GenRL's minibatch
     result = {"complete": True, "runs": [], "settings": {"batch_episodes": batch_episodes, "genrl_settings": now}}
     assert status(result, "fetch-push") == "complete"
     result["settings"]["genrl_settings"] = dict(now, n_steps=64)  # as older files record it: not a difference

@@ -59,7 +59,6 @@ def test_genrl_settings_of_the_tasks():
         16,
         {
             "policy": "MlpPolicy",
-            "batch_size": 16,
             "hindsight_kwargs": {"history": 120, "regression_steps": 512},
             "policy_kwargs": {"net_arch": {"pi": [64, 64, 64], "vf": [64, 64]}},
         },
@@ -175,7 +174,9 @@ def test_the_genrl_that_train_policy_builds_is_the_entrys(hockey_generator, tmp_
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
     # the command plays an iteration's episodes together by default: N = n_steps x n_envs = batch_episodes
     assert summary["n_envs"] == batch_episodes
-    assert summary["genrl_settings"] == genrl_settings(kwargs | {"n_steps": batch_episodes // summary["n_envs"]})
+    # and its minibatch is one iteration's episodes, GenRL's default of 64 capped at the batch
+    n_steps = batch_episodes // summary["n_envs"]
+    assert summary["genrl_settings"] == genrl_settings(kwargs | {"n_steps": n_steps, "batch_size": batch_episodes})
     assert summary["iterations"] == 32 // batch_episodes
 
 

@@ -298,7 +298,8 @@ def test_quickstart_and_video(tmp_path, cli):
     assert summary["n_envs"] == 2  # the quickstart plays GenRL's episodes in two env processes
     # with hockey's entry in hyperparams/genrl.yml, its episodes per iteration kept (2 envs x 8 = 16)
     _, batch_episodes, kwargs = load_genrl_settings("GenRL/Hockey-v0")
-    assert summary["genrl_settings"] == genrl_settings(kwargs | {"n_steps": batch_episodes // 2})
+    # (and a minibatch of the iteration's episodes: GenRL's default of 64 capped at the batch)
+    assert summary["genrl_settings"] == genrl_settings(kwargs | {"n_steps": batch_episodes // 2, "batch_size": batch_episodes})
 
     video = tmp_path / "gen.gif"
     code, printed, _ = cli("video", "--task", "hockey", "--generator", out / "vae.pt", "--goals", 1, "--out", video)
@@ -513,6 +514,11 @@ def test_each_task_runs_its_own_episodes_per_iteration_and_a_changed_budget_is_r
     for record, wanted, _ in _stages("hockey", tmp_path, hockey, None):
         atomic_write_json(record, wanted)
     assert _conflicts("hockey", hockey, tmp_path) == []
+    # The record holds the minibatch GenRL runs with: at most an iteration's episodes, not GenRL's default of 64.
+    for task in ("hockey", "basketball"):
+        scale = task_scale(small, task)
+        [policies] = [wanted for record, wanted, _ in _stages(task, tmp_path / task, scale, None) if "policies" in str(record)]
+        assert policies["genrl"]["n_steps"] == policies["genrl"]["batch_size"] == scale["batch_episodes"] == 16, task
     changed = task_scale(replace(SCALES["small"], batch_episodes=64).as_dict(), "hockey")
     [line] = [line for line in _conflicts("hockey", changed, tmp_path) if "policies" in line]
     assert line.startswith(
