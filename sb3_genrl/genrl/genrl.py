@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import collections
+import contextlib
 import io
 import os
 import pathlib
+from collections.abc import Iterator
 from typing import Any, ClassVar, Literal, TypeVar
 
 import numpy as np
@@ -47,6 +49,23 @@ from sb3_genrl.wrappers import latent_action_env
 
 SelfGenRL = TypeVar("SelfGenRL", bound="GenRL")
 EStep = Literal["trpo", "kl_penalty"]
+
+
+@contextlib.contextmanager
+def one_torch_thread() -> Iterator[None]:
+    """Torch on one CPU thread for the block; the caller's thread count is restored after.
+
+    GenRL builds and trains its networks under it. Torch's default (one thread per core) would make a result depend on
+    the machine: the work of an operation is split by thread (SB3's orthogonal initialisation, sums), so the last bits,
+    and from them the policy, differ. GenRL's networks are small, so more threads gain little, and their idle workers
+    spin on the cores that the simulation needs next.
+    """
+    threads = th.get_num_threads()
+    th.set_num_threads(1)
+    try:
+        yield
+    finally:
+        th.set_num_threads(threads)
 
 
 class GenRL(OnPolicyAlgorithm):
@@ -258,6 +277,10 @@ class GenRL(OnPolicyAlgorithm):
             self.env.env_method("set_reset_seeds", seeds, first, indices=[index])
 
     def _setup_model(self) -> None:
+        with one_torch_thread():  # the initial weights too (SB3's orthogonal initialisation differs by thread count)
+            self._setup_components()
+
+    def _setup_components(self) -> None:
         # SB3's rollout buffer, refusing a non-finite reward where it enters GenRL (after every wrapper of the env); with
         # hindsight, one that also stores each pull's relabelling (and success, for the refits), as HER is a buffer class
         hindsight = None if self.hindsight_kwargs is None else HINDSIGHT_DEFAULTS | self.hindsight_kwargs
@@ -449,11 +472,14 @@ class GenRL(OnPolicyAlgorithm):
     ) -> SelfGenRL:
         """Train for ``total_timesteps`` episodes (one step = one episode = one trajectory played). With hindsight, a
         :class:`~sb3_genrl.genrl.hindsight_buffer.PullInfosCallback` comes first among the callbacks: it hands each
-        step's infos to the rollout buffer."""
+        step's infos to the rollout buffer.
+
+        Torch runs on one CPU thread while the model learns (:func:`one_torch_thread`)."""
         if isinstance(self.rollout_buffer, HindsightRolloutBuffer):
             given = callback if isinstance(callback, list) else [] if callback is None else [callback]
             callback = [PullInfosCallback(), *(c if isinstance(c, BaseCallback) else ConvertCallback(c) for c in given)]
-        return super().learn(total_timesteps, callback, log_interval, tb_log_name, reset_num_timesteps, progress_bar)
+        with one_torch_thread():
+            return super().learn(total_timesteps, callback, log_interval, tb_log_name, reset_num_timesteps, progress_bar)
 
     def set_env(self, env: GymEnv, force_reset: bool = True) -> None:
         """Like SB3's ``set_env``; a raw env is wrapped with this model's generator first. A wrapped env must hold this
