@@ -92,7 +92,7 @@ from sb3_genrl.hyperparams import EVAL_GOAL_SEED
 from sb3_genrl.run import training_env
 from sb3_genrl.run.checkpoint import resume_state
 from sb3_genrl.run.folder import keep_episodes, open_run, remove_checkpoint
-from sb3_genrl.utils import atomic_path, atomic_write_json, folder_lock
+from sb3_genrl.utils import atomic_path, atomic_write_json, folder_lock, one_torch_thread
 from sb3_genrl.wrappers import LatentActionWrapper, env_id_has_fast_path
 
 CHECKPOINT_EVERY = 250  # episodes between checkpoints of an off-policy baseline (about 5 minutes of one core)
@@ -223,9 +223,10 @@ def _run_in_folder(
     """A baseline's run in ``out``, locked (another run's files are refused, never mixed in): a finished run's summary,
     or the model (``new_model()``, its setup's seconds since ``began`` recorded, or its checkpoint's) trained to
     ``steps`` environment steps and finished with ``final_eval(model)``. ``options``: ``checkpoint_every``,
-    ``overwrite``, ``device``, ``verbose``, ``progress_bar`` and ``window``."""
+    ``overwrite``, ``device``, ``verbose``, ``progress_bar`` and ``window``. Torch runs on one thread meanwhile
+    (:func:`~sb3_genrl.utils.one_torch_thread`), as GenRL learns: the result does not depend on the machine."""
     algorithm, task = summary["algorithm"], summary["task"]
-    with folder_lock(out):
+    with folder_lock(out), one_torch_thread():
         finished = open_run(out, identity, outputs, overwrite=options["overwrite"])
         if finished is not None:  # this very run, finished: nothing to do
             return finished

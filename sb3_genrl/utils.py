@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import torch
 
 LOCK_FILE = ".lock"
 
@@ -270,3 +271,20 @@ def same_observation(first: Any, second: Any) -> bool:
     if isinstance(first, tuple | list):
         return isinstance(second, tuple | list) and len(first) == len(second) and all(map(same_observation, first, second))
     return np.array_equal(np.asarray(first), np.asarray(second))
+
+
+@contextlib.contextmanager
+def one_torch_thread() -> Iterator[None]:
+    """Torch on one CPU thread for the block; the caller's thread count is restored after.
+
+    GenRL and the baselines' runs build and train their networks under it. Torch's default (one thread per core) would
+    make a result depend on the machine: the work of an operation is split by thread (SB3's orthogonal initialisation,
+    sums), so the last bits, and from them the policy, differ. The networks are small, so more threads gain little,
+    and their idle workers spin on the cores that the simulation needs next.
+    """
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(threads)

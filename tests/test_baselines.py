@@ -682,21 +682,25 @@ def test_latent_baselines_play_an_updates_episodes_together_and_the_result_does_
 ):
     """With no n_envs, a latent-space baseline on a task with a fast path plays an update's episodes in one threaded
     call (PPO: its 64 steps as 64 envs of one step; SAC: 16 envs, one gradient step per episode); the saved policy is
-    the same, bit for bit, on 1 simulation thread and on 2."""
-    runs = [
-        train_baseline(
-            algorithm,
-            "hockey",
-            episodes=episodes,
-            out_dir=tmp_path / str(threads),
-            seed=3,
-            generator=hockey_generator,
-            eval_goals=4,
-            device="cpu",
-            n_threads=threads,
+    the same, bit for bit, on 1 simulation thread and on 2, whatever torch's thread count (the run trains on one and
+    gives the caller's back)."""
+    runs = []
+    for threads in (1, 2):
+        th.set_num_threads(threads)
+        runs.append(
+            train_baseline(
+                algorithm,
+                "hockey",
+                episodes=episodes,
+                out_dir=tmp_path / str(threads),
+                seed=3,
+                generator=hockey_generator,
+                eval_goals=4,
+                device="cpu",
+                n_threads=threads,
+            )
         )
-        for threads in (1, 2)
-    ]
+        assert th.get_num_threads() == threads
     for run in runs:
         assert run["n_envs"] == n_envs and per_update.items() <= run["settings"].items()
         assert run["episodes_played"] == episodes

@@ -3,11 +3,9 @@
 from __future__ import annotations
 
 import collections
-import contextlib
 import io
 import os
 import pathlib
-from collections.abc import Iterator
 from typing import Any, ClassVar, Literal, TypeVar
 
 import numpy as np
@@ -44,28 +42,11 @@ from sb3_genrl.genrl.policies import (
 from sb3_genrl.genrl.refits import Refits
 from sb3_genrl.genrl.settings import POLICY_ALIASES, SETTINGS, check_genrl_settings
 from sb3_genrl.genrl.value import fit_value_function
-from sb3_genrl.utils import atomic_path
+from sb3_genrl.utils import atomic_path, one_torch_thread
 from sb3_genrl.wrappers import latent_action_env
 
 SelfGenRL = TypeVar("SelfGenRL", bound="GenRL")
 EStep = Literal["trpo", "kl_penalty"]
-
-
-@contextlib.contextmanager
-def one_torch_thread() -> Iterator[None]:
-    """Torch on one CPU thread for the block; the caller's thread count is restored after.
-
-    GenRL builds and trains its networks under it. Torch's default (one thread per core) would make a result depend on
-    the machine: the work of an operation is split by thread (SB3's orthogonal initialisation, sums), so the last bits,
-    and from them the policy, differ. GenRL's networks are small, so more threads gain little, and their idle workers
-    spin on the cores that the simulation needs next.
-    """
-    threads = th.get_num_threads()
-    th.set_num_threads(1)
-    try:
-        yield
-    finally:
-        th.set_num_threads(threads)
 
 
 class GenRL(OnPolicyAlgorithm):
@@ -474,7 +455,7 @@ class GenRL(OnPolicyAlgorithm):
         :class:`~sb3_genrl.genrl.hindsight_buffer.PullInfosCallback` comes first among the callbacks: it hands each
         step's infos to the rollout buffer.
 
-        Torch runs on one CPU thread while the model learns (:func:`one_torch_thread`)."""
+        Torch runs on one CPU thread while the model learns (:func:`sb3_genrl.utils.one_torch_thread`)."""
         if isinstance(self.rollout_buffer, HindsightRolloutBuffer):
             given = callback if isinstance(callback, list) else [] if callback is None else [callback]
             callback = [PullInfosCallback(), *(c if isinstance(c, BaseCallback) else ConvertCallback(c) for c in given)]
