@@ -154,10 +154,12 @@ def test_the_zoo_and_train_policy_build_the_same_genrl_from_the_file(trained, ho
         GenRL.load(path, device="cpu")
         for path in (trained / RUN / "GenRL-Hockey-v0.zip", tmp_path / "run" / "genrl_policy.zip")
     ]
-    names = [name for name in genrl_settings() if name not in ("policy_kwargs", "learning_rate")]
+    # (the minibatch as GenRL fits it: train_policy passes the batch_size it caps, the zoo GenRL's default)
+    names = [name for name in genrl_settings() if name not in ("policy_kwargs", "learning_rate", "batch_size")]
     zoo_run, package_run = (
         {name: getattr(model, name) for name in names}
         | {
+            "minibatch_size": model.minibatch_size,
             "policy": type(model.policy),
             "policy_kwargs": model.policy_kwargs,
             "episodes_per_iteration": model.n_steps * model.n_envs,
