@@ -11,9 +11,9 @@ from collections.abc import Callable  # noqa: E402
 import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
-import torch  # noqa: E402
 from gymnasium import spaces  # noqa: E402
 
+from sb3_genrl import utils  # noqa: E402
 from sb3_genrl.generative import TrajectoryGenerator  # noqa: E402
 
 # Seconds a test waits on another process before it gives up: a bound against a hang only, far beyond any run on a
@@ -23,10 +23,8 @@ HANG_S = 1800
 
 @pytest.fixture(autouse=True)
 def one_torch_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+    with utils.one_torch_thread():
+        yield
 
 
 @pytest.fixture
