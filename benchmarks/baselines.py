@@ -64,8 +64,7 @@ from sb3_genrl.hyperparams import EVAL_GOAL_SEED
 from sb3_genrl.provenance import provenance
 from sb3_genrl.run import train_policy
 from sb3_genrl.run.folder import differing
-from sb3_genrl.run.train import genrl_settings
-from sb3_genrl.run.train import run_settings as effective_settings
+from sb3_genrl.run.train import effective_genrl_settings
 from sb3_genrl.utils import atomic_write_json
 
 HERE = pathlib.Path(__file__).resolve().parent
@@ -120,7 +119,7 @@ def run_settings(method: str, args: argparse.Namespace, seed: int, demos: str, g
         }
         if method == "genrl":  # the chosen GenRL arguments, and every setting in effect
             settings["genrl_kwargs"] = args.genrl_kwargs
-            settings["genrl"] = genrl_settings(effective_settings(args.genrl_kwargs, settings["batch_episodes"], n_envs=1))
+            settings["genrl"] = effective_genrl_settings(args.genrl_kwargs, settings["batch_episodes"], n_envs=1)
     else:
         settings |= {
             "demos": os.path.abspath(demos),

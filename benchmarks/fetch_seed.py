@@ -32,7 +32,7 @@ from sb3_genrl.genrl.generator_files import generator_digest
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED
 from sb3_genrl.run.checkpoint import GenRLCheckpoint, RandomStateRecorder, resume_genrl, resume_state
 from sb3_genrl.run.folder import RunFolderError, keep_episodes
-from sb3_genrl.run.train import genrl_settings, make_genrl, run_settings
+from sb3_genrl.run.train import effective_genrl_settings, make_genrl
 from sb3_genrl.study.quickstart import task_settings
 from sb3_genrl.wrappers import LatentActionWrapper
 
@@ -90,7 +90,7 @@ def recorded_genrl_settings(task: str) -> dict[str, Any]:
     """Every GenRL setting the task's entry runs with, its episodes per iteration as ``n_steps`` (the runs are made
     with ``n_steps=batch_episodes``): what the benchmark's JSON and each run's checkpoint record."""
     _, batch_episodes, genrl_kwargs = task_settings(task)
-    return genrl_settings(run_settings(genrl_kwargs, batch_episodes, n_envs=1))
+    return effective_genrl_settings(genrl_kwargs, batch_episodes, n_envs=1)
 
 
 def fitted_policy(

@@ -43,7 +43,7 @@ from sb3_genrl.genrl.settings import SETTINGS as GENRL_SETTINGS
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED, lay_over
 from sb3_genrl.provenance import provenance
 from sb3_genrl.run import evaluate_on_goals
-from sb3_genrl.run.train import genrl_settings, make_genrl, run_settings
+from sb3_genrl.run.train import effective_genrl_settings, make_genrl
 from sb3_genrl.study.quickstart import task_settings
 from sb3_genrl.utils import atomic_path, atomic_write_json
 
@@ -312,8 +312,8 @@ def main(argv: list[str] | None = None) -> None:
         "target_m": setting.target_m,
         "genrl_kwargs": args.genrl_kwargs,
         # in effect on one env: the minibatch at most the iteration's episodes, as GenRL caps it
-        "genrl_settings": genrl_settings(
-            run_settings(args.genrl_kwargs, args.genrl_kwargs.get("n_steps", GENRL_SETTINGS["n_steps"].default), n_envs=1)
+        "genrl_settings": effective_genrl_settings(
+            args.genrl_kwargs, args.genrl_kwargs.get("n_steps", GENRL_SETTINGS["n_steps"].default), n_envs=1
         ),
         "runs": [],
     }

@@ -525,6 +525,12 @@ def genrl_settings(genrl_kwargs: dict[str, Any] | None = None) -> dict[str, Any]
     return _json_settings({name: value for name, value in settings.items() if name not in (*NOT_SETTINGS, "callback")})
 
 
+def effective_genrl_settings(genrl_kwargs: dict[str, Any], batch_episodes: int, n_envs: int) -> dict[str, Any]:
+    """Every GenRL setting in effect in :func:`train_policy`'s run with ``genrl_kwargs``, ``batch_episodes`` and
+    ``n_envs`` (:func:`genrl_settings` of :func:`run_settings`): what a stage that trains GenRL records."""
+    return genrl_settings(run_settings(genrl_kwargs, batch_episodes, n_envs))
+
+
 def _output_paths(out: pathlib.Path) -> dict[str, str]:
     files = {
         "model_path": "genrl_policy.zip",

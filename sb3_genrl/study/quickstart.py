@@ -54,7 +54,7 @@ from sb3_genrl.metrics import MEASURES, evaluate_generators
 from sb3_genrl.provenance import provenance
 from sb3_genrl.run import evaluate_on_goals, train_policy
 from sb3_genrl.run.stages import check_and_record, read_settings, refuse_conflicts, settings_conflicts
-from sb3_genrl.run.train import genrl_settings, run_settings
+from sb3_genrl.run.train import effective_genrl_settings
 from sb3_genrl.utils import atomic_write_json, atomic_write_text, folder_lock
 from sb3_genrl.video import record_video
 
@@ -341,7 +341,7 @@ def _stage_settings(
             "seed": seed,
             "genrl_kwargs": genrl_kwargs,
             # every GenRL setting in effect, defaults included, as train_policy runs them
-            "genrl": genrl_settings(run_settings(genrl_kwargs, batch_episodes, QUICKSTART_ENVS)),
+            "genrl": effective_genrl_settings(genrl_kwargs, batch_episodes, QUICKSTART_ENVS),
         },
         **({"video": {**VIDEO, "seed": sub_seed(seed, 1)}} if video else {}),
     }

@@ -32,7 +32,7 @@ from sb3_genrl.run.stages import (
     refuse_conflicts,
     settings_conflicts,
 )
-from sb3_genrl.run.train import genrl_settings, run_settings
+from sb3_genrl.run.train import effective_genrl_settings
 from sb3_genrl.study.cluster import DEFAULT_CONNECT_TIMEOUT, connect_ray
 from sb3_genrl.study.jobs import (
     EVALUATION_SEED,
@@ -172,7 +172,7 @@ def _stages(
                 "batch_episodes": scale["batch_episodes"],
                 "genrl_kwargs": task_genrl_kwargs(task),
                 # every GenRL setting in effect, GenRL's defaults included
-                "genrl": genrl_settings(run_settings(task_genrl_kwargs(task), scale["batch_episodes"], n_envs=1)),
+                "genrl": effective_genrl_settings(task_genrl_kwargs(task), scale["batch_episodes"], n_envs=1),
             },
             any(policies.glob("*/seed*/summary.json")),
         ),
