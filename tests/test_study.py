@@ -295,11 +295,11 @@ def test_quickstart_and_video(tmp_path, cli):
     assert f"precision {measures['precision']:.3f}, recall {measures['recall']:.3f}" in report
     summary = json.loads((out / "policy" / "summary.json").read_text())
     assert summary["episodes"] == 64 and f"{summary['episodes']} episodes" in report
-    assert summary["n_envs"] == 2  # the quickstart plays GenRL's episodes in two env processes
-    # with hockey's entry in hyperparams/genrl.yml, its episodes per iteration kept (2 envs x 8 = 16)
+    # with hockey's entry in hyperparams/genrl.yml, its episodes per iteration played together (the fast path's one
+    # threaded call, as train-policy's default), and a minibatch of them: GenRL's default of 64 capped at the batch
     _, batch_episodes, kwargs = load_genrl_settings("GenRL/Hockey-v0")
-    # (and a minibatch of the iteration's episodes: GenRL's default of 64 capped at the batch)
-    assert summary["genrl_settings"] == genrl_settings(kwargs | {"n_steps": batch_episodes // 2, "batch_size": batch_episodes})
+    assert summary["n_envs"] == batch_episodes == 16
+    assert summary["genrl_settings"] == genrl_settings(kwargs | {"n_steps": 1, "batch_size": batch_episodes})
 
     video = tmp_path / "gen.gif"
     code, printed, _ = cli("video", "--task", "hockey", "--generator", out / "vae.pt", "--goals", 1, "--out", video)
@@ -375,7 +375,7 @@ def test_the_quickstart_video_seed_stays_a_valid_seed_for_the_largest_seed():
     from sb3_genrl.study.quickstart import _stage_settings
 
     def video_seed(seed: int) -> int:
-        return _stage_settings("hockey", 10, 2, 64, 32, {}, 10, 10, seed, True)["video"]["seed"]
+        return _stage_settings("hockey", 10, 2, 64, 32, 32, {}, 10, 10, seed, True)["video"]["seed"]
 
     assert video_seed(0) == 1 and video_seed(7) == 8  # the derivation the committed quickstart results were made with
     assert check_seed(video_seed(MAX_SEED)) != MAX_SEED  # the video of a run with seed 2**32 - 1 no longer fails

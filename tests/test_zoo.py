@@ -302,7 +302,7 @@ def test_the_cached_generator_is_the_quickstarts():
     from sb3_genrl.zoo import generators
 
     defaults = inspect.signature(quickstart).parameters
-    stage = _stage_settings("hockey", 1, defaults["epochs"].default, 1, 2, {}, 1, 1, generators.SEED, False)["generator"]
+    stage = _stage_settings("hockey", 1, defaults["epochs"].default, 1, 2, 2, {}, 1, 1, generators.SEED, False)["generator"]
     recorded = generators.generator_settings("hockey")
     assert (recorded["demo_episodes"], recorded["epochs"], recorded["preset"], recorded["eval_every"]) == (
         defaults["demo_episodes"].default,

@@ -57,6 +57,7 @@ from sb3_genrl.run.stages import check_and_record, read_settings, refuse_conflic
 from sb3_genrl.run.train import effective_genrl_settings
 from sb3_genrl.utils import atomic_write_json, atomic_write_text, folder_lock
 from sb3_genrl.video import record_video
+from sb3_genrl.wrappers import task_has_fast_path
 
 # Paper table 1's VAE1 (N_alpha = 2, beta = 0.01). Of the 2-D VAEs, its stronger prior term lays the hockey
 # demonstrations out as one unfolded sheet (shot distance along one latent axis, direction along the other); with
@@ -87,9 +88,9 @@ OUTSIDE_DEMO_EPISODES = 1000
 # "The quickstart").
 OUTSIDE_DEMO_STEPS = 150_000
 OUTSIDE_POLICY_STEPS = 500_000
-# GenRL plays two envs at a time (the arm tasks: each step's two trajectories in one threaded simulation call, see
-# sb3_genrl.vec_env; other tasks: one process each). Fixed, not the machine's core count: the result depends on it.
-# All of an iteration's episodes per call would be faster, but would give other results than the quickstart's so far.
+# GenRL's envs played at a time by a task without the fast path (one process each; Fetch, Meta-World, a task of
+# yours). A task with it (the arm tasks) plays an iteration's episodes in one threaded simulation call, as
+# `genrl train-policy` does by default (sb3_genrl.vec_env). Fixed, not the machine's core count: the result depends on it.
 QUICKSTART_ENVS = 2
 # Precision and recall with k = 3 neighbours need more than 3 samples in each set: the demonstrations, at least 4
 MIN_DEMO_EPISODES = 4
@@ -174,10 +175,11 @@ def quickstart(
         pr_samples=pr_samples,
         dwpr_samples=dwpr_samples,
     )
-    if batch_episodes % QUICKSTART_ENVS:
+    n_envs = quickstart_envs(task if outside is None else None, batch_episodes)
+    if batch_episodes % n_envs:
         raise ValueError(
-            f"task {task!r}: the quickstart plays its GenRL episodes in {QUICKSTART_ENVS} envs at a time, "
-            f"so the task's batch_episodes ({batch_episodes}) must be a multiple of {QUICKSTART_ENVS}"
+            f"task {task!r}: the quickstart plays its GenRL episodes in {n_envs} envs at a time, "
+            f"so the task's batch_episodes ({batch_episodes}) must be a multiple of {n_envs}"
         )
     check_seed(seed)
     check_device(device)
@@ -186,7 +188,17 @@ def quickstart(
     torch.set_num_threads(1)
     out = pathlib.Path(out_dir)
     settings = _stage_settings(
-        task, demo_episodes, epochs, policy_episodes, batch_episodes, genrl_kwargs, pr_samples, dwpr_samples, seed, video
+        task,
+        demo_episodes,
+        epochs,
+        policy_episodes,
+        batch_episodes,
+        n_envs,
+        genrl_kwargs,
+        pr_samples,
+        dwpr_samples,
+        seed,
+        video,
     )
     if outside is not None:
         _add_outside_settings(settings, outside, expert, horizon)
@@ -204,6 +216,13 @@ def quickstart(
         log = log or (lambda _line: None)
         timings = _run_stages(out, settings, device, progress_bar, log, expert)
         return _write_report(out, task, seed, video, timings, log, horizon if outside is not None else None)
+
+
+def quickstart_envs(task: str | None, batch_episodes: int) -> int:
+    """The envs the quickstart's GenRL stage plays at a time: an iteration's ``batch_episodes`` for a task of the
+    package's with the fast path (one threaded call on all cores, as :func:`~sb3_genrl.run.train.default_n_envs`),
+    else :data:`QUICKSTART_ENVS` env processes (``task`` None: a task from outside the package)."""
+    return batch_episodes if task is not None and task_has_fast_path(get_task(task).env_class) else QUICKSTART_ENVS
 
 
 def outside_demo_episodes(horizon: int) -> int:
@@ -321,6 +340,7 @@ def _stage_settings(
     epochs: int,
     policy_episodes: int,
     batch_episodes: int,
+    n_envs: int,
     genrl_kwargs: dict[str, Any],
     pr_samples: int,
     dwpr_samples: int,
@@ -337,11 +357,11 @@ def _stage_settings(
             "task": task,
             "episodes": policy_episodes,
             "batch_episodes": batch_episodes,
-            "n_envs": QUICKSTART_ENVS,
+            "n_envs": n_envs,
             "seed": seed,
             "genrl_kwargs": genrl_kwargs,
             # every GenRL setting in effect, defaults included, as train_policy runs them
-            "genrl": effective_genrl_settings(genrl_kwargs, batch_episodes, QUICKSTART_ENVS),
+            "genrl": effective_genrl_settings(genrl_kwargs, batch_episodes, n_envs),
         },
         **({"video": {**VIDEO, "seed": sub_seed(seed, 1)}} if video else {}),
     }

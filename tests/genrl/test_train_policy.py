@@ -193,23 +193,17 @@ def test_evaluate_on_goals_plays_the_deterministic_policy(tmp_path):
 
 def test_quickstart_records_the_settings_train_policy_runs_with(fast_reach_task, tmp_path):
     """The quickstart's policy stage records the GenRL settings of the run it makes (n_steps = batch_episodes / its
-    envs, batch_size capped at batch_episodes), not GenRL's defaults for them."""
-    from sb3_genrl.study.quickstart import QUICKSTART_ENVS, _stage_settings
+    envs, batch_size capped at batch_episodes), not GenRL's defaults for them; a task with the fast path plays an
+    iteration's episodes together, as train_policy's default does."""
+    from sb3_genrl.study.quickstart import _stage_settings, quickstart_envs
 
     settings = {"batch_size": 64, "target_kl": 0.02}
-    run = train_policy(
-        "fast-reach",
-        LinearGenerator(),
-        episodes=16,
-        seed=0,
-        out_dir=tmp_path,
-        batch_episodes=16,
-        n_envs=QUICKSTART_ENVS,
-        **settings,
-    )
-    recorded = _stage_settings("fast-reach", 10, 2, 16, 16, settings, 10, 10, 0, False)["policy"]["genrl"]
+    n_envs = quickstart_envs("fast-reach", 16)
+    run = train_policy("fast-reach", LinearGenerator(), episodes=16, seed=0, out_dir=tmp_path, batch_episodes=16, **settings)
+    assert n_envs == run["n_envs"] == 16
+    recorded = _stage_settings("fast-reach", 10, 2, 16, 16, n_envs, settings, 10, 10, 0, False)["policy"]["genrl"]
     assert recorded == run["genrl_settings"]
-    assert (recorded["n_steps"], recorded["batch_size"], recorded["target_kl"]) == (16 // QUICKSTART_ENVS, 16, 0.02)
+    assert (recorded["n_steps"], recorded["batch_size"], recorded["target_kl"]) == (1, 16, 0.02)
 
 
 def test_genrl_settings_record_the_policy_arguments_as_json():
