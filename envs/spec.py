@@ -51,6 +51,8 @@ class TaskSpec:
     :param generator_preset: the generator of paper table 1 that the quickstart trains for this task (None: its
         default); the latent space must be as large as the expert's family of motions
     :param video: whether the quickstart renders the policy (the arm tasks' offscreen renderer)
+    :param quickstart_demo_episodes: the demonstrations ``genrl quickstart`` makes for this task (None: its default,
+        :data:`sb3_genrl.study.quickstart.DEMO_EPISODES`)
     """
 
     name: str
@@ -73,6 +75,7 @@ class TaskSpec:
     evaluate: Callable[..., dict[str, Any]] | None = None
     generator_preset: str | None = None
     video: bool = True
+    quickstart_demo_episodes: int | None = None
 
     def __post_init__(self) -> None:
         if not self.name or "/" in self.name:
@@ -89,6 +92,9 @@ class TaskSpec:
                 f"task {self.name!r}: perturbation_scales must have shape ({self.action_dim},), "
                 f"got {np.shape(self.perturbation_scales)}"
             )
+        episodes = self.quickstart_demo_episodes
+        if episodes is not None and (isinstance(episodes, bool) or int(episodes) != episodes or episodes < 1):
+            raise ValueError(f"task {self.name!r}: quickstart_demo_episodes must be a positive integer, got {episodes!r}")
         if getattr(self.env_class, "horizon", self.horizon) != self.horizon:
             raise ValueError(
                 f"task {self.name!r}: horizon {self.horizon} differs from {self.env_class.__name__}.horizon "

@@ -28,7 +28,7 @@ from sb3_genrl.run import train_policy
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default="hockey_example", help="output folder")
-    parser.add_argument("--demo-episodes", type=int, default=4000, help="demonstrations to generate")
+    parser.add_argument("--demo-episodes", type=int, default=2000, help="demonstrations to generate (the quickstart's)")
     parser.add_argument("--epochs", type=int, default=300, help="beta-VAE training epochs")
     parser.add_argument("--episodes", type=int, default=3000, help="GenRL episodes (one episode = one trajectory)")
     parser.add_argument("--seed", type=int, default=0)

@@ -381,6 +381,30 @@ def test_the_quickstart_video_seed_stays_a_valid_seed_for_the_largest_seed():
     assert check_seed(video_seed(MAX_SEED)) != MAX_SEED  # the video of a run with seed 2**32 - 1 no longer fails
 
 
+@pytest.mark.parametrize(
+    ("task", "given", "demonstrations", "episodes"),
+    [
+        ("hockey", {}, 2000, 3000),  # hockey's own demonstration count, its whole budget
+        ("basketball", {}, 4000, 10000),  # the default count, its budget of 20000 capped
+        ("basketball", {"demo_episodes": 10, "policy_episodes": 20000}, 10, 20000),  # a user's counts are kept
+    ],
+)
+def test_the_quickstart_makes_the_tasks_counts_unless_given(monkeypatch, tmp_path, task, given, demonstrations, episodes):
+    from sb3_genrl.study import quickstart as module
+
+    made = {}
+
+    def stages(out, settings, *args):
+        made.update(settings)
+        raise KeyboardInterrupt  # stop before any work
+
+    monkeypatch.setattr(module, "_run_stages", stages)
+    with pytest.raises(KeyboardInterrupt):
+        module.quickstart(tmp_path / "quick", task=task, progress_bar=False, **given)
+    assert made["demonstrations"]["episodes"] == demonstrations
+    assert made["policy"]["episodes"] == episodes
+
+
 def _study_row(name: str, precision: float, score: float, half: float, final: float, prior: float) -> dict:
     return {
         "model": name,

@@ -298,14 +298,16 @@ def test_a_changed_generator_is_refused(hockey_generator):
 
 
 def test_the_cached_generator_is_the_quickstarts():
-    from sb3_genrl.study.quickstart import _stage_settings, quickstart
+    from sb3_genrl.study.quickstart import DEMO_EPISODES, _stage_settings, quickstart, quickstart_demo_episodes
     from sb3_genrl.zoo import generators
 
     defaults = inspect.signature(quickstart).parameters
     stage = _stage_settings("hockey", 1, defaults["epochs"].default, 1, 2, 2, {}, 1, 1, generators.SEED, False)["generator"]
     recorded = generators.generator_settings("hockey")
+    # the quickstart's recipe, at the generator stage's default count (hockey's quickstart alone makes fewer)
+    assert quickstart_demo_episodes("basketball") == DEMO_EPISODES > quickstart_demo_episodes("hockey")
     assert (recorded["demo_episodes"], recorded["epochs"], recorded["preset"], recorded["eval_every"]) == (
-        defaults["demo_episodes"].default,
+        DEMO_EPISODES,
         stage["epochs"],
         stage["preset"],
         stage["eval_every"],

@@ -35,7 +35,13 @@ from sb3_genrl.hyperparams import known_env_ids, load_hyperparams
 from sb3_genrl.metrics.scorecard import NOT_CONVERGED_PRECISION, RANK_MEASURES
 from sb3_genrl.run.checkpoint import CHECKPOINT_EVERY
 from sb3_genrl.study import MODELS, SCALES
-from sb3_genrl.study.quickstart import DEMO_EPISODES, MIN_DEMO_EPISODES, OUTSIDE_DEMO_EPISODES, OUTSIDE_DEMO_STEPS
+from sb3_genrl.study.quickstart import (
+    DEMO_EPISODES,
+    MIN_DEMO_EPISODES,
+    OUTSIDE_DEMO_EPISODES,
+    OUTSIDE_DEMO_STEPS,
+    QUICKSTART_MAX_EPISODES,
+)
 from sb3_genrl.video import VIDEO_SUFFIXES
 
 
@@ -440,13 +446,16 @@ def add_quickstart(sub: argparse._SubParsersAction) -> None:
         help="a task from outside the package: control steps of a demonstration and of GenRL's episodes (default: the "
         "task's; else the shortest at which the expert's success settles, written to horizon.json)",
     )
+    own_demos = ", ".join(
+        f"{name} {spec.quickstart_demo_episodes}" for name, spec in TASKS.items() if spec.quickstart_demo_episodes
+    )
     quick.add_argument(
         "--demo-episodes",
         type=option(check_int, int, minimum=MIN_DEMO_EPISODES, maximum=MAX_EPISODES),
         default=None,
-        help=f"demonstrations to generate, at least {MIN_DEMO_EPISODES} (default {DEMO_EPISODES}; a task from outside "
-        f"the package: {OUTSIDE_DEMO_EPISODES}, fewer above {OUTSIDE_DEMO_STEPS // OUTSIDE_DEMO_EPISODES} steps a "
-        f"demonstration: {OUTSIDE_DEMO_STEPS} steps in all)",
+        help=f"demonstrations to generate, at least {MIN_DEMO_EPISODES} (default: {own_demos}, else {DEMO_EPISODES}; a task "
+        f"from outside the package: {OUTSIDE_DEMO_EPISODES}, fewer above "
+        f"{OUTSIDE_DEMO_STEPS // OUTSIDE_DEMO_EPISODES} steps a demonstration: {OUTSIDE_DEMO_STEPS} steps in all)",
     )
     quick.add_argument("--epochs", type=COUNT, default=300, help="beta-VAE training epochs (default 300)")
     own = ", ".join(
@@ -454,7 +463,12 @@ def add_quickstart(sub: argparse._SubParsersAction) -> None:
         for name, spec in TASKS.items()
         if spec.env_id in known_env_ids("genrl")
     )
-    quick.add_argument("--episodes", type=EPISODES, default=None, help=f"GenRL episodes (default: the task's own: {own})")
+    quick.add_argument(
+        "--episodes",
+        type=EPISODES,
+        default=None,
+        help=f"GenRL episodes (default: the task's own, at most {QUICKSTART_MAX_EPISODES}: {own})",
+    )
     _seed_option(quick)
     quick.add_argument("--no-video", action="store_true", help="skip rendering the policy")
     _device_option(quick)

@@ -73,8 +73,14 @@ OUTSIDE_TASK_KWARGS: dict[str, Any] = {
     "policy_kwargs": {"log_std_init": -1.0},
     "max_log_std_change": 0.0,
 }
-# The generator stage's defaults (also the generator of the rl-zoo3 runs, sb3_genrl.zoo.generators)
+# The generator stage's defaults (also the generator of the rl-zoo3 runs, sb3_genrl.zoo.generators); a task's
+# TaskSpec.quickstart_demo_episodes sets its quickstart's own demonstration count (hockey's: 2000)
 DEMO_EPISODES, GENERATOR_EPOCHS, GENERATOR_EVAL_EVERY = 4000, 300, 10
+# The quickstart plays at most this many GenRL episodes (basketball's budget is 20000, `genrl train-policy`'s and the
+# benchmark's), so that basketball's takes 6 minutes on two idle cores. On 200 tuning goals, seeds 0 and 1, its policy
+# comes within 4.5 and 4.7 cm after 10000 episodes, 4.0 and 4.2 after 12000, 4.2 and 4.7 after 20000 (docs/results.md,
+# "The quickstart"); 12000 would take about 6 minutes.
+QUICKSTART_MAX_EPISODES = 10000
 # A task from outside the package records its demonstrations through its env's step path, closed loop and replayed
 # open loop (a Meta-World push-v3 episode of 89 steps: about 0.1 s of CPU each), so it records fewer by default. On
 # push-v3, 1000 against 500 lift the fitted start from 0.76 to 0.91 and the search from 0.94 to 0.96 (tuning resets),
@@ -103,7 +109,7 @@ def quickstart(
     out_dir: str | os.PathLike,
     *,
     task: str,
-    demo_episodes: int = DEMO_EPISODES,
+    demo_episodes: int | None = None,
     epochs: int = GENERATOR_EPOCHS,
     policy_episodes: int | None = None,
     pr_samples: int = 1000,
@@ -134,11 +140,12 @@ def quickstart(
     :param out_dir: output folder (a rerun resumes it)
     :param task: a task name from :data:`sb3_genrl.envs.TASKS`, or a task from outside the package
         (:func:`~sb3_genrl.envs.external.resolve_task`)
-    :param demo_episodes: demonstrations to generate (default: :data:`DEMO_EPISODES`; a task from outside the
+    :param demo_episodes: demonstrations to generate (None: :func:`quickstart_demo_episodes`; a task from outside the
         package: :func:`outside_demo_episodes` of its horizon, 1000 up to 150 steps)
     :param epochs: beta-VAE training epochs (:data:`QUICKSTART_PRESET` of paper table 1)
-    :param policy_episodes: GenRL episodes (default: the task's); GenRL takes the task's settings and episodes per
-        iteration too (its entry in ``hyperparams/genrl.yml``, see :func:`task_settings`)
+    :param policy_episodes: GenRL episodes (None: the task's, at most :data:`QUICKSTART_MAX_EPISODES`); GenRL takes
+        the task's settings and episodes per iteration too (its entry in ``hyperparams/genrl.yml``, see
+        :func:`task_settings`)
     :param pr_samples: samples per set for precision and recall
     :param dwpr_samples: samples per intervention for DwPR
     :param seed: seed of the demonstrations, the generator, the evaluation and the policy (the video's:
@@ -165,9 +172,9 @@ def quickstart(
         horizon, horizon_record = _outside_horizon(outside, horizon, expert, pathlib.Path(out_dir), seed, log)
         episodes, batch_episodes, genrl_kwargs = outside_task_settings(outside, horizon)
         video = False  # the video renders the package's arm tasks
-    policy_episodes = episodes if policy_episodes is None else policy_episodes
+    policy_episodes = min(episodes, QUICKSTART_MAX_EPISODES) if policy_episodes is None else policy_episodes
     if demo_episodes is None:
-        demo_episodes = DEMO_EPISODES if outside is None else outside_demo_episodes(horizon)
+        demo_episodes = quickstart_demo_episodes(task) if outside is None else outside_demo_episodes(horizon)
     _check_counts(
         demo_episodes=demo_episodes,
         epochs=epochs,
@@ -223,6 +230,12 @@ def quickstart_envs(task: str | None, batch_episodes: int) -> int:
     package's with the fast path (one threaded call on all cores, as :func:`~sb3_genrl.run.train.default_n_envs`),
     else :data:`QUICKSTART_ENVS` env processes (``task`` None: a task from outside the package)."""
     return batch_episodes if task is not None and task_has_fast_path(get_task(task).env_class) else QUICKSTART_ENVS
+
+
+def quickstart_demo_episodes(task: str) -> int:
+    """The demonstrations ``genrl quickstart`` makes for ``task``, a task of the package's: its
+    ``TaskSpec.quickstart_demo_episodes``, else :data:`DEMO_EPISODES`."""
+    return get_task(task).quickstart_demo_episodes or DEMO_EPISODES
 
 
 def outside_demo_episodes(horizon: int) -> int:

@@ -1,13 +1,14 @@
 """The generator of a task's rl-zoo3 runs when its settings name none: the quickstart's, made once into a cache.
 
 ``hyperparams/genrl.yml`` gives each task the env wrapper ``sb3_genrl.zoo.latent_action`` without a generator file, so
-that ``python -m sb3_genrl.zoo train --algo genrl --env GenRL/Hockey-v0`` runs on a fresh clone: the task's
-generator is then the one ``genrl quickstart`` trains (its demonstrations, preset, epochs and seed), made by the same
-stages into ``$SB3_GENRL_CACHE/generators/<task>/vae.pt`` (default ``~/.cache/sb3-genrl``) the first time a run needs
-it (or ahead of time: ``python -m sb3_genrl.zoo build-generator --env GenRL/Hockey-v0``), with the stages' progress
-shown, and reused after. The folder records the settings that made it (``stage.json``, the package's version
-included); a folder made with other settings, or with no record, is refused (:func:`check_cache`), never used or
-rebuilt silently.
+that ``python -m sb3_genrl.zoo train --algo genrl --env GenRL/Hockey-v0`` runs on a fresh clone: the task's generator
+is then the one ``genrl quickstart`` trains (its preset, epochs and seed, from
+:data:`~sb3_genrl.study.quickstart.DEMO_EPISODES` demonstrations: hockey's quickstart makes fewer, but the committed
+rl-zoo3 studies were made with these), made by the same stages into ``$SB3_GENRL_CACHE/generators/<task>/vae.pt``
+(default ``~/.cache/sb3-genrl``) the first time a run needs it (or ahead of time: ``python -m sb3_genrl.zoo
+build-generator --env GenRL/Hockey-v0``), with the stages' progress shown, and reused after. The folder records the
+settings that made it (``stage.json``, the package's version included); a folder made with other settings, or with no
+record, is refused (:func:`check_cache`), never used or rebuilt silently.
 """
 
 from __future__ import annotations
