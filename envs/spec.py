@@ -10,6 +10,8 @@ import gymnasium as gym
 import numpy as np
 from sb3_genrl.envs.base import ArmTaskEnv
 
+from sb3_genrl.checks import check_positive_int
+
 
 @dataclass(frozen=True, eq=False)
 class TaskSpec:
@@ -92,9 +94,8 @@ class TaskSpec:
                 f"task {self.name!r}: perturbation_scales must have shape ({self.action_dim},), "
                 f"got {np.shape(self.perturbation_scales)}"
             )
-        episodes = self.quickstart_demo_episodes
-        if episodes is not None and (isinstance(episodes, bool) or int(episodes) != episodes or episodes < 1):
-            raise ValueError(f"task {self.name!r}: quickstart_demo_episodes must be a positive integer, got {episodes!r}")
+        if self.quickstart_demo_episodes is not None:
+            check_positive_int(self.quickstart_demo_episodes, f"task {self.name!r}: quickstart_demo_episodes")
         if getattr(self.env_class, "horizon", self.horizon) != self.horizon:
             raise ValueError(
                 f"task {self.name!r}: horizon {self.horizon} differs from {self.env_class.__name__}.horizon "

@@ -148,3 +148,24 @@ class FastReachEnv(ContextReachEnv):
         reached = np.clip(trajectories, -1.0, 1.0).sum(axis=1)
         rewards = -np.sum((reached - goals) ** 2, axis=1)
         return rewards, [{"reward": float(r), "reached": p} for r, p in zip(rewards, reached, strict=True)]
+
+
+@pytest.fixture
+def quickstart_settings(monkeypatch: pytest.MonkeyPatch) -> Callable[..., dict]:
+    """Call ``quickstart(out, **kwargs)`` up to its stages and return the settings they would be made with (no stage
+    runs)."""
+    from sb3_genrl.study import quickstart as module
+
+    def settings(out: os.PathLike, **kwargs: object) -> dict:
+        made: dict = {}
+
+        def stages(out, settings, *args):
+            made.update(settings)
+            raise KeyboardInterrupt  # stop before any work
+
+        monkeypatch.setattr(module, "_run_stages", stages)
+        with pytest.raises(KeyboardInterrupt):
+            module.quickstart(out, progress_bar=False, **kwargs)
+        return made
+
+    return settings

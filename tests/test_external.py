@@ -585,19 +585,10 @@ def test_a_long_outside_task_gets_fewer_demonstrations_and_episodes_in_the_quick
     assert outside_task_settings(task, 10**6)[0] == 64  # one iteration
 
 
-def test_the_quickstart_api_gives_an_outside_task_its_own_counts(monkeypatch, tmp_path):
-    from sb3_genrl.study import quickstart as module
-
-    made = {}
-
-    def stages(out, settings, *args):
-        made.update(settings)
-        raise KeyboardInterrupt  # stop before any work
-
-    monkeypatch.setattr(module, "_run_stages", stages)
+def test_the_quickstart_api_gives_an_outside_task_its_own_counts(quickstart_settings, tmp_path):
     task = "test_external:TestExternal/PointGoal-v0"
-    with pytest.raises(KeyboardInterrupt):  # as the command line does: not the package tasks' 4000
-        module.quickstart(tmp_path / "quick", task=task, expert=point_expert, horizon=HORIZON, progress_bar=False)
+    made = quickstart_settings(tmp_path / "quick", task=task, expert=point_expert, horizon=HORIZON)
+    # as the command line does: not the package tasks' 4000
     assert made["demonstrations"]["episodes"] == outside_demo_episodes(HORIZON) == 1000
 
 

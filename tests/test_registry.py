@@ -110,7 +110,7 @@ def test_lookups_and_errors():
     with pytest.raises(ValueError, match=r"perturbation_scales must have shape \(7,\)"):
         TaskSpec(**{**vars(REACH), "perturbation_scales": np.ones(6)})
     for count in (0, 2.5, True):
-        with pytest.raises(ValueError, match=f"quickstart_demo_episodes must be a positive integer, got {count!r}"):
+        with pytest.raises(ValueError, match=f"quickstart_demo_episodes must be an integer >= 1, got {count!r}"):
             TaskSpec(**{**vars(REACH), "quickstart_demo_episodes": count})
     assert "reach" not in TASKS and REACH.env_id not in gym.registry  # nothing half-registered
 

@@ -389,18 +389,10 @@ def test_the_quickstart_video_seed_stays_a_valid_seed_for_the_largest_seed():
         ("basketball", {"demo_episodes": 10, "policy_episodes": 20000}, 10, 20000),  # a user's counts are kept
     ],
 )
-def test_the_quickstart_makes_the_tasks_counts_unless_given(monkeypatch, tmp_path, task, given, demonstrations, episodes):
-    from sb3_genrl.study import quickstart as module
-
-    made = {}
-
-    def stages(out, settings, *args):
-        made.update(settings)
-        raise KeyboardInterrupt  # stop before any work
-
-    monkeypatch.setattr(module, "_run_stages", stages)
-    with pytest.raises(KeyboardInterrupt):
-        module.quickstart(tmp_path / "quick", task=task, progress_bar=False, **given)
+def test_the_quickstart_makes_the_tasks_counts_unless_given(
+    quickstart_settings, tmp_path, task, given, demonstrations, episodes
+):
+    made = quickstart_settings(tmp_path / "quick", task=task, **given)
     assert made["demonstrations"]["episodes"] == demonstrations
     assert made["policy"]["episodes"] == episodes
 
