@@ -1,8 +1,10 @@
 """GenRL that learns from demonstrations: the policy's mean fitted to them before the first iteration, and the
 demonstrations kept among the hindsight relabelling's pulls for the whole run.
 
-A demonstration is a trajectory ``tau`` that solves the context it starts from (as a dataset written by ``genrl demos``
-stores it: its first observation, ``observations[:, 0]``, is the context with the goal it reached). Its latent action is
+A demonstration is a trajectory ``tau`` that solves a context (:func:`demonstration_contexts`): the one it starts from
+where its first observation, ``observations[:, 0]``, is a context (the Fetch tasks, Meta-World: the state with the goal
+it reached, as ``genrl demos`` stores it), else the goal it reached (``reached``: hockey's and basketball's context is
+the goal, and a demonstration solves the point it reached, as the hindsight relabelling labels a pull). Its latent action is
 the generator's posterior mean ``alpha = E[q(alpha | tau)]`` (a beta-VAE's encoder), clipped to GenRL's ``latent_clip``,
 so each demonstration is a pull ``(context, alpha, reward 0)`` that needs no simulation. :class:`DemonstrationCallback`
 uses them in two ways, both switched by its arguments:
@@ -85,14 +87,15 @@ class DemonstrationCallback(BaseCallback):
 
         self.dataset, self.fit_steps, self.keep = os.fspath(dataset), int(fit_steps), bool(keep)
         self.learning_rate, self.batch_size = float(learning_rate), int(batch_size)
-        arrays = load_arrays(self.dataset, keys=("observations", "actions"))  # raises naming a missing dataset
+        arrays = load_arrays(self.dataset, keys=("observations", "actions", "reached"))  # raises naming a missing dataset
         if dataset_fingerprint is not None:
             if fingerprint(self.dataset) != dataset_fingerprint:
                 raise ValueError(
                     f"the demonstrations {self.dataset} are not the ones this run was trained with "
                     f"(fingerprint {dataset_fingerprint}): they were changed or made again"
                 )
-        self.contexts, self.actions = arrays["observations"][:, 0], arrays["actions"]
+        self.first_observations, self.reached = arrays["observations"][:, 0], arrays["reached"]
+        self.actions = arrays["actions"]
         self.fit: dict[str, float] = {}  # the fit's demonstrations, steps and losses, once it has run
 
     def pulls(self, generator: Any, context_space: spaces.Space, latent_clip: float) -> tuple[th.Tensor, th.Tensor]:
@@ -110,14 +113,9 @@ class DemonstrationCallback(BaseCallback):
                 f"{name}: trajectories of shape {self.actions.shape[1:]} (steps, action dimension), but the "
                 f"generator makes {shape}: the dataset of another task, or a generator trained on other data"
             )
-        if not isinstance(context_space, spaces.Box) or self.contexts.shape[1:] != context_space.shape:
-            raise ValueError(
-                f"{name}: each demonstration's context is its first observation, of shape "
-                f"{self.contexts.shape[1:]}, but the env's context space is {context_space}: the "
-                "demonstrations of another task, or of a task whose first observation is not its context"
-            )
-        latents = np.clip(generator.encode(self.actions)[0], -latent_clip, latent_clip)
-        return th.as_tensor(self.contexts, dtype=th.float32), th.as_tensor(latents, dtype=th.float32)
+        contexts, rows = demonstration_contexts(self.first_observations, self.reached, context_space, name)
+        latents = np.clip(generator.encode(self.actions[rows])[0], -latent_clip, latent_clip)
+        return th.as_tensor(contexts, dtype=th.float32), th.as_tensor(latents, dtype=th.float32)
 
     def check(
         self,
@@ -163,6 +161,36 @@ class DemonstrationCallback(BaseCallback):
 
     def _on_step(self) -> bool:
         return True
+
+
+def demonstration_contexts(
+    first_observations: np.ndarray, reached: np.ndarray, context_space: spaces.Space, name: str = "demonstrations"
+) -> tuple[np.ndarray, np.ndarray]:
+    """The contexts the demonstrations solve, and the indices of the demonstrations they are of.
+
+    Each demonstration's first observation where it has the context space's shape (a task whose observation is its
+    context: the Fetch tasks, Meta-World); else the point it reached where that has the context's shape (a task
+    whose context is the goal alone: hockey, basketball), the demonstrations without one (``nan``) left out.
+
+    :param first_observations: ``observations[:, 0]`` of the dataset
+    :param reached: the dataset's ``reached`` points (``nan`` where it records none)
+    :param context_space: the env's context (observation) space
+    :param name: what the demonstrations are, for the error message
+    :raises ValueError: when neither is a context of ``context_space``, or no demonstration reached a point
+    """
+    if isinstance(context_space, spaces.Box):
+        if first_observations.shape[1:] == context_space.shape:
+            return first_observations, np.arange(len(first_observations))
+        if reached.shape[1:] == context_space.shape:
+            rows = np.flatnonzero(np.isfinite(reached).all(axis=tuple(range(1, reached.ndim))))
+            if len(rows) == 0:
+                raise ValueError(f"{name}: none records the point it reached, which would be its context")
+            return reached[rows], rows
+    raise ValueError(
+        f"{name}: a demonstration's context is its first observation, of shape {first_observations.shape[1:]}, or "
+        f"else the point it reached, of shape {reached.shape[1:]}, but the env's context space is {context_space}: the "
+        "demonstrations of another task"
+    )
 
 
 def fit_mean_to_demonstrations(

@@ -32,22 +32,24 @@ class EncodingLinearGenerator(LinearGenerator):
         return alpha.astype(np.float32), np.zeros_like(alpha, dtype=np.float32)
 
 
-def _dataset(path, contexts: np.ndarray, latents: np.ndarray, horizon: int = HORIZON):
+def _dataset(path, contexts: np.ndarray, latents: np.ndarray, horizon: int = HORIZON, *, reached=None, observations=None):
     """A dataset whose episode i plays the linear generator's trajectory of ``latents[i]`` from context
-    ``contexts[i]`` (its first observation)."""
+    ``contexts[i]`` (its first observation, unless ``observations`` (N, D) are given; ``reached`` (default: the
+    contexts) are the points its episodes reached)."""
     n = len(contexts)
     actions = LinearGenerator(horizon).decode(latents)
-    observations = np.repeat(contexts[:, None, :], horizon + 1, axis=1).astype(np.float32)
+    first = contexts if observations is None else observations
+    observations = np.repeat(first[:, None, :], horizon + 1, axis=1).astype(np.float32)
     arrays = {
         "observations": observations,
         "actions": actions,
         "rewards": np.zeros((n, horizon)),
         "terminations": np.ones((n, horizon), bool),
         "truncations": np.zeros((n, horizon), bool),
-        "reached": contexts.astype(np.float64),
+        "reached": (contexts if reached is None else reached).astype(np.float64),
         "sampled_goals": contexts.astype(np.float64),
     }
-    dim = contexts.shape[1]
+    dim = first.shape[1]
     return write_dataset(
         path,
         arrays,
@@ -90,6 +92,30 @@ def test_the_fit_lowers_the_loss_and_reaches_the_least_squares_mean(demos):
         best, rel=0.1
     )
     assert model.logger.name_to_value["demonstrations/last_loss"] == callback.fit["last_loss"]
+
+
+def test_a_task_whose_context_is_the_goal_takes_the_points_the_demonstrations_reached(demos, tmp_path):
+    """As hockey's: the first observation is the robot's state, the context the goal, which each demonstration's
+    reached point is; a demonstration that records none is left out, and a dataset where none does is refused."""
+    _, contexts, latents = demos
+    states = np.random.default_rng(1).normal(size=(N, 5)).astype(np.float32)  # not contexts: 5-D
+    reached = contexts.astype(np.float64)
+    reached[[3, 7]] = np.nan
+    dataset = _dataset(tmp_path / "goal", contexts, latents.astype(np.float32), reached=reached, observations=states)
+    got_contexts, got_latents = DemonstrationCallback(dataset).pulls(EncodingLinearGenerator(), spaces.Box(-1, 1, (2,)), 3.0)
+    rows = np.setdiff1d(np.arange(N), [3, 7])
+    np.testing.assert_array_equal(got_contexts.numpy(), contexts[rows])
+    np.testing.assert_allclose(got_latents.numpy(), np.clip(latents[rows], -3, 3), atol=1e-5)
+    # where the first observation has the context's shape it stays the context (the Fetch tasks, Meta-World)
+    same = _dataset(tmp_path / "state", contexts, latents.astype(np.float32), reached=reached[:, ::-1].copy())
+    np.testing.assert_array_equal(
+        DemonstrationCallback(same).pulls(EncodingLinearGenerator(), spaces.Box(-1, 1, (2,)), 3.0)[0].numpy(), contexts
+    )
+    none = _dataset(
+        tmp_path / "none", contexts, latents.astype(np.float32), reached=np.full((N, 2), np.nan), observations=states
+    )
+    with pytest.raises(ValueError, match="none records the point it reached"):
+        DemonstrationCallback(none).pulls(EncodingLinearGenerator(), spaces.Box(-1, 1, (2,)), 3.0)
 
 
 class _BatchRecorder(GenRL):
@@ -217,7 +243,7 @@ def test_missing_or_unfitting_demonstrations_are_refused_before_any_work(fast_re
     with pytest.raises(ValueError, match="needs a generator with an encoder"):
         DemonstrationCallback(dataset).pulls(LinearGenerator(), spaces.Box(-1, 1, (2,)), 3.0)
     wide = _dataset(tmp_path / "wide", np.hstack([contexts, contexts[:, :1]]), latents.astype(np.float32))
-    with pytest.raises(ValueError, match=r"context is its first observation, of shape \(3,\), but the env's context"):
+    with pytest.raises(ValueError, match=r"context is its first observation, of shape \(3,\), or else the point it reached"):
         train_policy(
             "fast-reach",
             EncodingLinearGenerator(),
