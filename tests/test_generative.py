@@ -190,6 +190,29 @@ def test_same_seed_same_weights(model_class, kwargs):
     assert any(not torch.equal(first[key], other[key]) for key in first if first[key].is_floating_point())
 
 
+@pytest.mark.parametrize("model_class, kwargs", [(BetaVAE, {"beta": 0.005}), (InfoGAN, {"info_weight": 0.1})])
+def test_the_multi_tensor_adam_trains_the_weights_of_the_per_parameter_one(model_class, kwargs, monkeypatch):
+    data, _ = sine_ramp_trajectories(120, 6, 2, rng=0)
+
+    def weights() -> dict[str, torch.Tensor]:
+        model = model_class(6, 2, 2, **kwargs, device="cpu")
+        return model.fit(data, epochs=3, batch_size=32, seed=5, progress_bar=False).state_tensors()
+
+    foreach = weights()
+    adam = torch.optim.Adam
+    made = []
+
+    def per_parameter(*args, **kw):
+        made.append(kw.pop("foreach"))
+        return adam(*args, **kw, foreach=False)
+
+    monkeypatch.setattr(torch.optim, "Adam", per_parameter)
+    single = weights()
+    assert made and all(made)  # the models asked for the multi-tensor steps
+    for key in foreach:
+        torch.testing.assert_close(foreach[key], single[key], rtol=0, atol=0)
+
+
 def test_presets_match_paper_table_1():
     expected_vae = [(2, 0.01), (2, 0.005), (2, 0.001), (3, 0.01), (3, 0.005), (3, 0.001), (6, 0.01), (6, 0.005), (6, 0.001)]
     expected_gan = [(2, 0.1), (2, 1.5), (2, 3.5), (3, 0.1), (3, 1.5), (3, 3.5), (6, 0.1), (6, 1.5), (6, 3.5)]

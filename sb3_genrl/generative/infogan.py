@@ -82,8 +82,8 @@ class InfoGAN(TorchTrajectoryGenerator):
 
     def _make_optimizers(self, lr: float) -> list[torch.optim.Optimizer]:
         return [
-            torch.optim.Adam(self.networks["discriminator"].parameters(), lr=lr, betas=GAN_ADAM_BETAS),
-            torch.optim.Adam(self.networks["generator"].parameters(), lr=lr, betas=GAN_ADAM_BETAS),
+            torch.optim.Adam(self.networks["discriminator"].parameters(), lr=lr, betas=GAN_ADAM_BETAS, foreach=True),
+            torch.optim.Adam(self.networks["generator"].parameters(), lr=lr, betas=GAN_ADAM_BETAS, foreach=True),
         ]
 
     def _decoder_input(self, alpha: torch.Tensor) -> torch.Tensor:

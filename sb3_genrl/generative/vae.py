@@ -84,7 +84,7 @@ class BetaVAE(TorchTrajectoryGenerator):
         )
 
     def _make_optimizers(self, lr: float) -> list[torch.optim.Optimizer]:
-        return [torch.optim.Adam(self.networks.parameters(), lr=lr)]
+        return [torch.optim.Adam(self.networks.parameters(), lr=lr, foreach=True)]
 
     def encode(self, trajectories: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Mean and log standard deviation of ``q(alpha | tau)`` for raw ``(n, T, M)`` trajectories, float32 (eval mode)."""
