@@ -1,13 +1,13 @@
 """GenRL that learns from demonstrations: the policy's mean fitted to them before the first iteration, and the
 demonstrations kept among the hindsight relabelling's pulls for the whole run.
 
-A demonstration is a trajectory ``tau`` that solves a context (:func:`demonstration_contexts`): the one it starts from
-where its first observation, ``observations[:, 0]``, is a context (the Fetch tasks, Meta-World: the state with the goal
-it reached, as ``genrl demos`` stores it), else the goal it reached (``reached``: hockey's and basketball's context is
-the goal, and a demonstration solves the point it reached, as the hindsight relabelling labels a pull). Its latent action is
-the generator's posterior mean ``alpha = E[q(alpha | tau)]`` (a beta-VAE's encoder), clipped to GenRL's ``latent_clip``,
-so each demonstration is a pull ``(context, alpha, reward 0)`` that needs no simulation. :class:`DemonstrationCallback`
-uses them in two ways, both switched by its arguments:
+A demonstration is a trajectory ``tau`` that solves a context (:func:`demonstration_contexts`): the one it starts
+from where its first observation, ``observations[:, 0]``, is a context (the Fetch tasks, Meta-World: the state with the
+goal it reached, as ``genrl demos`` stores it), else the goal it reached (``reached``: hockey's and basketball's context
+is the goal, and a demonstration solves the point it reached, as the hindsight relabelling labels a pull). Its latent
+action is the generator's posterior mean ``alpha = E[q(alpha | tau)]`` (a beta-VAE's encoder), clipped to GenRL's
+``latent_clip``, so each demonstration is a pull ``(context, alpha, reward 0)`` that needs no simulation.
+:class:`DemonstrationCallback` uses them in two ways, both switched by its arguments:
 
 - ``fit_steps``: before the first iteration of a fresh run, the policy's mean is fitted to the pairs by the regression
   of the hindsight component (:func:`~sb3_genrl.genrl.regression.regress_mean`), so that GenRL starts where the
