@@ -38,7 +38,7 @@ def test_every_file_is_installed_and_every_entry_loads():
 def test_an_entry_is_a_fresh_copy():
     entry = load_hyperparams("genrl", "GenRL/Hockey-v0")
     entry["hindsight_kwargs"]["history"] = 1
-    assert load_hyperparams("genrl", "GenRL/Hockey-v0")["hindsight_kwargs"]["history"] == 120
+    assert load_hyperparams("genrl", "GenRL/Hockey-v0")["hindsight_kwargs"]["history"] == 60
 
 
 def test_unknown_env_ids_and_algorithms_are_refused_naming_what_is_known():
@@ -56,10 +56,10 @@ def test_unknown_env_ids_and_algorithms_are_refused_naming_what_is_known():
 def test_genrl_settings_of_the_tasks():
     assert load_genrl_settings("GenRL/Hockey-v0") == (
         3000,
-        16,
+        32,
         {
             "policy": "MlpPolicy",
-            "hindsight_kwargs": {"history": 120, "regression_steps": 512},
+            "hindsight_kwargs": {"history": 60, "regression_steps": 512},
             "policy_kwargs": {"net_arch": {"pi": [64, 64, 64], "vf": [64, 64]}},
         },
     )

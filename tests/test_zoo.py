@@ -47,7 +47,7 @@ def one_at_a_time(model: GenRL, goals: int, seed: int) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def trained(tmp_path_factory: pytest.TempPathFactory, hockey_generator: str) -> Path:
-    """A zoo run of one iteration (16 episodes) of the file's hockey settings, in rl-zoo3's ``logs/`` layout, on one
+    """A zoo run of one iteration (32 episodes) of the file's hockey settings, in rl-zoo3's ``logs/`` layout, on one
     torch thread as ``genrl`` runs (another thread count rounds differently)."""
     logs = tmp_path_factory.mktemp("zoo") / "logs"
     zoo(
@@ -57,7 +57,7 @@ def trained(tmp_path_factory: pytest.TempPathFactory, hockey_generator: str) -> 
         "--env",
         ENV_ID,
         "-n",
-        16,
+        32,
         "--seed",
         3,
         "--eval-freq",
@@ -65,7 +65,7 @@ def trained(tmp_path_factory: pytest.TempPathFactory, hockey_generator: str) -> 
         "-f",
         logs,
         "--save-freq",
-        16,
+        32,
         "-tb",
         logs.parent / "tensorboard",
         "--device",
@@ -83,7 +83,7 @@ def test_train_saves_in_rl_zoo3s_layout_with_the_generator_it_used(trained, hock
 
     run = trained / RUN
     assert (run / "GenRL-Hockey-v0.zip").is_file() and (run / "0.monitor.csv").is_file()
-    assert (run / "rl_model_16_steps.zip").is_file()  # --save-freq's checkpoint
+    assert (run / "rl_model_32_steps.zip").is_file()  # --save-freq's checkpoint
     assert any((trained.parent / "tensorboard" / "GenRL-Hockey-v0").glob("*/events.out.tfevents.*"))  # -tb
     config = yaml.load((run / "GenRL-Hockey-v0" / "config.yml").read_text(), Loader=yaml.UnsafeLoader)
     (wrapper,) = config["env_wrapper"]
@@ -93,11 +93,11 @@ def test_train_saves_in_rl_zoo3s_layout_with_the_generator_it_used(trained, hock
             "generator_sha256": generator_digest(load_generator(Path(hockey_generator))),
         }
     }
-    # the iteration's 16 episodes played together as 16 envs (rl-zoo3 writes a Monitor file per env), the Monitor
+    # the iteration's 32 episodes played together as 32 envs (rl-zoo3 writes a Monitor file per env), the Monitor
     # above the one-step episodes: one row per episode played
-    assert config["n_envs"] == 16 and config["n_steps"] == 1
-    rows = [np.loadtxt(run / f"{rank}.monitor.csv", delimiter=",", skiprows=2, ndmin=2) for rank in range(16)]
-    assert [len(row) for row in rows] == [1] * 16
+    assert config["n_envs"] == 32 and config["n_steps"] == 1
+    rows = [np.loadtxt(run / f"{rank}.monitor.csv", delimiter=",", skiprows=2, ndmin=2) for rank in range(32)]
+    assert [len(row) for row in rows] == [1] * 32
 
 
 def test_enjoy_plays_the_goals_of_the_packages_evaluation(trained, tmp_path):
@@ -140,7 +140,7 @@ def test_the_zoo_and_train_policy_build_the_same_genrl_from_the_file(trained, ho
         "--generator",
         hockey_generator,
         "--episodes",
-        16,
+        32,
         "--seed",
         3,
         "--device",
@@ -168,7 +168,7 @@ def test_the_zoo_and_train_policy_build_the_same_genrl_from_the_file(trained, ho
         for model in models
     )
     assert zoo_run == package_run
-    assert [model.n_envs for model in models] == [16, 16]  # both play an iteration's episodes together by default
+    assert [model.n_envs for model in models] == [32, 32]  # both play an iteration's episodes together by default
     entry = load_hyperparams("genrl", ENV_ID)
     assert zoo_run["hindsight_kwargs"] == entry["hindsight_kwargs"]
     assert zoo_run["episodes_per_iteration"] == entry["n_steps"]
