@@ -53,7 +53,7 @@ from sb3_genrl.vec_env import default_threads
 # The parts of GenRL's update timed on their own: the kept relabelled pulls joining the batch, the E-step (the
 # conjugate gradient and the line search), the regression of the policy's mean on the kept pulls, the value fit
 UPDATE_PARTS = ("relabelled_pulls", "e_step", "regression", "value_fit")
-EPISODES = {"hockey": 960, "basketball": 1920}  # 60 and 120 iterations of the tasks' 16 episodes
+EPISODES = {"hockey": 960, "basketball": 1920}  # 30 and 120 iterations of the tasks' 32 and 16 episodes
 
 
 @contextlib.contextmanager
@@ -202,15 +202,30 @@ def measure_task(task: str, generator_path: str, args: argparse.Namespace, work:
     return rows
 
 
+def run_kind(row: dict[str, Any]) -> str:
+    """What a run measured, whatever its task's batch: ``"cli"`` (the CLI's command), ``"N"`` (an iteration's
+    episodes as envs) or its number of envs."""
+    if "cli_command" in row:
+        return "cli"
+    return "N" if row["n_envs"] == row["batch_episodes"] else str(row["n_envs"])
+
+
 def updated_runs(path: str, rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """``rows``, and the runs in the JSON at ``path`` (if any) of the tasks and ``n_envs`` not among them; in the order
-    of :data:`EPISODES`' tasks, then of ``n_envs``."""
-    measured = {(row["task"], row["n_envs"]) for row in rows}
+    """``rows``, and the runs in the JSON at ``path`` (if any) of the tasks and kinds (:func:`run_kind`) not among
+    them, so that a task whose batch changed replaces its ``N`` and CLI rows; in the order of :data:`EPISODES`' tasks,
+    then of ``n_envs`` (numbers first)."""
+    measured = {(row["task"], run_kind(row)) for row in rows}
     kept = []
     if os.path.exists(path):
         with open(path) as file:
-            kept = [row for row in json.load(file)["runs"] if (row["task"], row["n_envs"]) not in measured]
-    return sorted(kept + rows, key=lambda row: (list(EPISODES).index(row["task"]), str(row["n_envs"])))
+            kept = [row for row in json.load(file)["runs"] if (row["task"], run_kind(row)) not in measured]
+    return sorted(
+        kept + rows,
+        key=lambda row: (
+            list(EPISODES).index(row["task"]),
+            *((0, row["n_envs"], "") if isinstance(row["n_envs"], int) else (1, 0, row["n_envs"])),
+        ),
+    )
 
 
 def main() -> None:
