@@ -141,6 +141,31 @@ def test_the_genrl_benchmark_takes_the_tasks_entry_and_writes_its_default_output
     assert args.genrl_kwargs == {}
 
 
+def test_the_throughput_update_replaces_a_tasks_rows_of_the_same_kind_whatever_its_batch(tmp_path):
+    from benchmarks.genrl_throughput import updated_runs
+
+    def row(task, n_envs, batch, cli=False):
+        kept = {"task": task, "n_envs": f"cli ({n_envs})" if cli else n_envs, "batch": batch}
+        return kept | ({"cli_command": "genrl train-policy"} if cli else {"batch_episodes": batch})
+
+    before = [row("hockey", 2, 16), row("hockey", 16, 16), row("hockey", 16, 16, cli=True)]
+    before += [row("basketball", 2, 16), row("basketball", 16, 16), row("basketball", 16, 16, cli=True)]
+    path = tmp_path / "throughput.json"
+    path.write_text(json.dumps({"runs": before}))
+    # hockey measured again with a batch of 32: its "N" row (32 envs) and its CLI row replace the 16-episode ones
+    measured = [row("hockey", 32, 32, cli=True), row("hockey", 2, 32), row("hockey", 32, 32)]
+    runs = updated_runs(str(path), measured)
+    assert [(r["task"], r["n_envs"], r["batch"]) for r in runs] == [
+        ("hockey", 2, 32),
+        ("hockey", 32, 32),
+        ("hockey", "cli (32)", 32),
+        ("basketball", 2, 16),
+        ("basketball", 16, 16),
+        ("basketball", "cli (16)", 16),
+    ]
+    assert updated_runs(str(tmp_path / "none.json"), measured[:1]) == measured[:1]
+
+
 def _result(methods, **changes):
     result = {
         "benchmark": "baselines",

@@ -42,7 +42,7 @@ def test_quickstart_example_runs_the_whole_workflow(tmp_path):
     from sb3_genrl.hyperparams import load_genrl_settings
 
     _, batch_episodes, entry = load_genrl_settings("GenRL/Hockey-v0")  # hyperparams/genrl.yml's entry
-    assert summary["iterations"] == 64 // batch_episodes == 64 // 16 and summary["genrl_settings"]["hindsight_kwargs"]
+    assert summary["iterations"] == 64 // batch_episodes == 64 // 32 and summary["genrl_settings"]["hindsight_kwargs"]
     entry.pop("policy")  # (the records name the policy only when it is not the default MlpPolicy)
     # every one of the entry's settings, its network included
     assert {name: summary["genrl_settings"][name] for name in entry} == entry

@@ -298,7 +298,7 @@ def test_quickstart_and_video(tmp_path, cli):
     # with hockey's entry in hyperparams/genrl.yml, its episodes per iteration played together (the fast path's one
     # threaded call, as train-policy's default), and a minibatch of them: GenRL's default of 64 capped at the batch
     _, batch_episodes, kwargs = load_genrl_settings("GenRL/Hockey-v0")
-    assert summary["n_envs"] == batch_episodes == 16
+    assert summary["n_envs"] == batch_episodes == 32
     assert summary["genrl_settings"] == genrl_settings(kwargs | {"n_steps": 1, "batch_size": batch_episodes})
 
     video = tmp_path / "gen.gif"
@@ -534,7 +534,8 @@ def test_each_task_runs_its_own_episodes_per_iteration_and_a_changed_budget_is_r
     for task in ("hockey", "basketball"):
         scale = task_scale(small, task)
         [policies] = [wanted for record, wanted, _ in _stages(task, tmp_path / task, scale, None) if "policies" in str(record)]
-        assert policies["genrl"]["n_steps"] == policies["genrl"]["batch_size"] == scale["batch_episodes"] == 16, task
+        wanted = {"hockey": 32, "basketball": 16}[task]
+        assert policies["genrl"]["n_steps"] == policies["genrl"]["batch_size"] == scale["batch_episodes"] == wanted, task
     changed = task_scale(replace(SCALES["small"], batch_episodes=64).as_dict(), "hockey")
     [line] = [line for line in _conflicts("hockey", changed, tmp_path) if "policies" in line]
     assert line.startswith(
