@@ -244,6 +244,7 @@ def test_a_small_study_tries_the_entry_first(hockey_generator, tmp_path):
         == 0
     )
     result = json.loads((tmp_path / "held_out.json").read_text())
+    assert result["sb3_genrl"] and result["git_commit"]  # the version and the commit of the code that made it
     best = max(range(2), key=lambda number: trials[number].value)
     assert (result["entry"]["trial"], result["best"]["trial"]) == (0, best)
     for name in ("entry", "best"):

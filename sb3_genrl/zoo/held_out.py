@@ -32,6 +32,7 @@ from sb3_genrl import GenRL
 from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT
 from sb3_genrl.genrl.generator_files import generator_digest, generator_file
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED
+from sb3_genrl.provenance import provenance
 from sb3_genrl.run.train import evaluate_on_goals
 from sb3_genrl.utils import atomic_write_json
 from sb3_genrl.zoo.__main__ import main as zoo
@@ -49,6 +50,7 @@ def compare(env_id: str, storage: str, study_name: str, trials_folder: str, goal
         raise ValueError(f"study {study_name!r} has no complete trial of the task entry's settings (its first trial)")
     best = max(complete, key=lambda trial: trial.value)
     result: dict[str, Any] = {
+        **provenance(),
         "env_id": env_id,
         "study_name": study_name,
         "command": study.user_attrs.get("command"),
