@@ -219,13 +219,13 @@ def updated_runs(path: str, rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     if os.path.exists(path):
         with open(path) as file:
             kept = [row for row in json.load(file)["runs"] if (row["task"], run_kind(row)) not in measured]
-    return sorted(
-        kept + rows,
-        key=lambda row: (
-            list(EPISODES).index(row["task"]),
-            *((0, row["n_envs"], "") if isinstance(row["n_envs"], int) else (1, 0, row["n_envs"])),
-        ),
-    )
+
+    def order(row: dict[str, Any]) -> tuple[int, bool, int, str]:
+        n_envs = row["n_envs"]
+        numbered = isinstance(n_envs, int)
+        return list(EPISODES).index(row["task"]), not numbered, n_envs if numbered else 0, str(n_envs)
+
+    return sorted(kept + rows, key=order)
 
 
 def main() -> None:
