@@ -50,6 +50,7 @@ def record_video(
     width: int = 480,
     height: int = 352,
     fps: int = 25,
+    every: int = 1,
     strip: bool = True,
     trust_policy: bool = False,
 ) -> dict:
@@ -61,6 +62,8 @@ def record_video(
 
     :param task: a task name from :data:`sb3_genrl.envs.TASKS`
     :param goals: episodes (goals) to show, drawn with ``seed`` (which also draws the random latent actions)
+    :param every: a frame every ``every`` control steps (2 renders half the frames; with half the ``fps`` the video
+        keeps its pace)
     :param trust_policy: load the policy zip with SB3's unpickling (see :func:`sb3_genrl.run.loading.load_policy`);
         by default nothing in it is unpickled
     :return: ``video``, ``strip`` paths and per-episode ``rewards``
@@ -68,7 +71,7 @@ def record_video(
     spec = get_task(task)
     if (policy is None) == (generator is None):
         raise ValueError("give exactly one of policy= (a GenRL run) or generator= (a generator file)")
-    for name, value in (("goals", goals), ("width", width), ("height", height), ("fps", fps)):
+    for name, value in (("goals", goals), ("width", width), ("height", height), ("fps", fps), ("every", every)):
         check_positive_int(value, name)
     check_seed(seed)
     check_output_file(out, "out", suffixes=VIDEO_SUFFIXES)
@@ -91,7 +94,7 @@ def record_video(
     frames: list[np.ndarray] = []
     firsts = []
     for trajectory, goal in zip(trajectories, goal_list, strict=True):
-        episode = env.episode_frames(trajectory, goal)
+        episode = env.episode_frames(trajectory, goal, every=every)
         firsts.append(len(frames))
         frames += episode + [episode[-1]] * (fps // 2)  # hold the end for half a second
     env.close()

@@ -200,6 +200,21 @@ def test_rgb_array_render():
     env.close()
 
 
+def test_episode_frames_every_other_step_are_every_steps_frames_at_even_steps():
+    env = gym.make("GenRL/Hockey-v0", render_mode="rgb_array", width=32, height=24).unwrapped
+    goal = env.sample_goal(np.random.default_rng(0))
+    trajectory = scripted_hit()
+    every_step = env.episode_frames(trajectory, goal)
+    every_other = env.episode_frames(trajectory, goal, every=2)
+    # the first frame, then the 2nd, 4th, ... control step's of the motion, then those of the settle phase
+    played = min(len(trajectory), len(every_step) - 1)
+    expected = [every_step[0], *every_step[2 : played + 1 : 2], *every_step[played + 2 :: 2]]
+    assert len(every_step) > 60 and len(every_other) == len(expected)
+    for got, want in zip(every_other, expected, strict=True):
+        np.testing.assert_array_equal(got, want)
+    env.close()
+
+
 def test_throw_family_spans_the_basket_region_smoothly(basketball):
     # The expert's strengths reach past the near (1 m) and far (8 m) edges of the region at the extreme yaws too,
     # and the landing distance grows smoothly with the strength: no fold, no jump between nearby strengths.

@@ -15,6 +15,7 @@ import tempfile
 import time
 from pathlib import Path
 
+import imageio_ffmpeg
 import numpy as np
 import pytest
 from conftest import HANG_S, policy_distances
@@ -305,6 +306,17 @@ def test_quickstart_and_video(tmp_path, cli):
     code, printed, _ = cli("video", "--task", "hockey", "--generator", out / "vae.pt", "--goals", 1, "--out", video)
     assert code == 0 and video.stat().st_size > 1000 and (tmp_path / "gen_strip.png").exists()
     assert len(re.search(r"rewards (.*)\)", printed).group(1).split(", ")) == 1
+    # a frame every other control step, at half the frame rate: half the frames, the same pace, the same episode
+    frames = {}
+    for every in (1, 2):
+        path = tmp_path / f"every{every}.mp4"
+        video_args = ("--generator", out / "vae.pt", "--goals", 1, "--every", every, "--out", path)
+        code, shown, _ = cli("video", "--task", "hockey", *video_args)
+        assert code == 0 and re.search(r"rewards (.*)\)", shown).group(1) == re.search(r"rewards (.*)\)", printed).group(1)
+        frames[every] = imageio_ffmpeg.count_frames_and_secs(str(path))
+    # each video holds its last frame for half a second (12 and 6 frames); of the episode's frames, the first and
+    # every other one after it
+    assert frames[2][0] - 6 == (frames[1][0] - 12 + 1) // 2 and frames[2][1] == pytest.approx(frames[1][1], rel=0.1)
     code, printed, _ = cli(
         "video", "--task", "hockey", "--policy", out / "policy", "--goals", 2, "--seed", 7, "--out", tmp_path / "policy.mp4"
     )

@@ -352,6 +352,8 @@ def video_command(args: argparse.Namespace) -> int:
         generator=args.generator,
         goals=args.goals,
         seed=args.seed,
+        fps=max(1, 25 // args.every),
+        every=args.every,
         trust_policy=args.trust_policy,
     )
     print(f"wrote {result['video']} (rewards {', '.join(f'{r:.3f}' for r in result['rewards'])})")

@@ -427,6 +427,12 @@ def add_video(sub: argparse._SubParsersAction) -> None:
         default=6,
         help=f"episodes (goals) to show, at most {MAX_VIDEO_EPISODES} (default 6)",
     )
+    video.add_argument(
+        "--every",
+        type=option(check_int, int, minimum=1),
+        default=1,
+        help="a frame every EVERY control steps, shown at 25 / EVERY frames a second (default 1)",
+    )
     _seed_option(video, "seed of the goals (and of the latent actions)")
     video.add_argument(
         "--out", required=True, type=option(check_output_file, suffixes=VIDEO_SUFFIXES), help="output file, .mp4 or .gif"
