@@ -3,6 +3,8 @@ application layer, and every import inside a function has a reason listed here (
 
 import ast
 import pathlib
+import subprocess
+import sys
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 # The installed package's folders (pyproject's package-dir): the benchmarks are scripts of the source tree, read too.
@@ -44,6 +46,7 @@ APPLICATION = (
 # module (and `import sb3_genrl`, which imports the tasks) should not pay.
 MPL = "matplotlib costs about 0.8 s, only when a plot is drawn"
 ZOO = "rl-zoo3, the optional extra zoo"
+STATS = "scipy.stats costs about 0.5 s, only when a correlation or DwPR's interventions are computed"
 DEFERRED = {
     # the core
     ("sb3_genrl.generative.torch_generator", "torch.utils.tensorboard"): "TensorBoard only when a log folder is given",
@@ -60,6 +63,12 @@ DEFERRED = {
     ("sb3_genrl.envs.fetch_mujoco", "gymnasium_robotics.utils"): "Gymnasium-Robotics, the optional extra robotics",
     ("sb3_genrl.envs.metaworld", "metaworld"): "Meta-World, the optional extra metaworld",
     ("sb3_genrl.envs.metaworld", "metaworld.policies"): "Meta-World, the optional extra metaworld",
+    # the generator measures, which every `genrl` command imports
+    ("sb3_genrl.metrics.bootstrap", "scipy.stats"): STATS,
+    ("sb3_genrl.metrics.correlation", "scipy.stats"): STATS,
+    ("sb3_genrl.metrics.dwpr", "scipy.stats"): STATS,
+    ("sb3_genrl.metrics.plots", "matplotlib.backends.backend_agg"): MPL,
+    ("sb3_genrl.metrics.plots", "matplotlib.figure"): MPL,
     # the application layer
     ("sb3_genrl.baselines.compare", "matplotlib.backends.backend_agg"): MPL,
     ("sb3_genrl.baselines.compare", "matplotlib.figure"): MPL,
@@ -184,3 +193,11 @@ def test_every_module_is_in_one_layer():
 def test_the_deferred_imports_are_the_listed_ones():
     deferred = {(a, b) for a, b, is_deferred in EDGES if is_deferred}
     assert deferred == set(DEFERRED)
+
+
+def test_the_command_line_starts_without_scipy_stats_or_matplotlib():
+    """``genrl`` imports every command's module; the plots and the statistics load only when a command draws or
+    computes them (:data:`DEFERRED`), so that a command's start-up is torch's and SB3's."""
+    code = "import sys, sb3_genrl.cli; print(sorted(m for m in ('scipy.stats', 'matplotlib') if m in sys.modules))"
+    loaded = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
+    assert loaded == "[]"

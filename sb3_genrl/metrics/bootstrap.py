@@ -13,7 +13,6 @@ import dataclasses
 import math
 
 import numpy as np
-from scipy.stats import rankdata, spearmanr
 
 DEFAULT_RESAMPLES = 2000
 BOOTSTRAP_SEED = 0
@@ -55,6 +54,8 @@ def spearman(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
     y = np.asarray(y, dtype=np.float64)
     if len(x) < 3 or np.ptp(x) == 0 or np.ptp(y) == 0:
         return math.nan, math.nan
+    from scipy.stats import spearmanr  # scipy.stats costs about 0.5 s; every `genrl` command reaches this module
+
     result = spearmanr(x, y)
     return float(result.statistic), float(result.pvalue)
 
@@ -88,6 +89,8 @@ def bootstrap_correlations(
     if len(x) < 3:
         nothing = Interval(math.nan, math.nan, 0, resamples)
         return nothing, nothing
+    from scipy.stats import rankdata  # scipy.stats costs about 0.5 s; every `genrl` command reaches this module
+
     index = np.random.default_rng(seed).integers(0, len(x), size=(resamples, len(x)))
     xs, ys = x[index], y[index]
     pearson = rowwise_pearson(xs, ys)

@@ -16,7 +16,6 @@ import os
 from collections.abc import Mapping, Sequence
 
 import numpy as np
-from scipy.stats import pearsonr
 
 from sb3_genrl.markdown import markdown_table
 from sb3_genrl.metrics.bootstrap import BOOTSTRAP_SEED, DEFAULT_RESAMPLES, bootstrap_correlations, spearman
@@ -152,6 +151,8 @@ def pearson(x: np.ndarray, y: np.ndarray) -> tuple[float, float, str]:
         return math.nan, math.nan, f"fewer than 3 models ({len(x)})"
     if np.ptp(x) == 0 or np.ptp(y) == 0:
         return math.nan, math.nan, "constant values"
+    from scipy.stats import pearsonr  # scipy.stats costs about 0.5 s; every `genrl` command reaches this module
+
     result = pearsonr(x, y)
     return float(result.statistic), float(result.pvalue), ""
 

@@ -13,7 +13,6 @@ import dataclasses
 
 import numpy as np
 import torch
-from scipy.stats import norm
 from stable_baselines3.common.utils import get_device
 
 from sb3_genrl.generative.base import TrajectoryGenerator
@@ -74,6 +73,8 @@ def default_intervention_values(prior: str, interventions: int) -> np.ndarray:
         raise ValueError(f"interventions must be a positive integer, got {interventions!r}")
     levels = (np.arange(1, interventions + 1) - 0.5) / interventions
     if prior == "normal":
+        from scipy.stats import norm  # scipy.stats costs about 0.5 s; every `genrl` command reaches this module
+
         return norm.ppf(levels).astype(np.float32)
     if prior == "uniform":
         return (2.0 * levels - 1.0).astype(np.float32)

@@ -5,9 +5,6 @@ from __future__ import annotations
 import os
 from collections.abc import Sequence
 
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
-
 from sb3_genrl.utils import atomic_path
 
 
@@ -35,6 +32,9 @@ def labelled_scatter(
     """
     if not len(x) == len(y) == len(labels):
         raise ValueError(f"x, y and labels must have the same length, got {len(x)}, {len(y)} and {len(labels)}")
+    from matplotlib.backends.backend_agg import FigureCanvasAgg  # matplotlib costs about 0.3 s; every `genrl` command
+    from matplotlib.figure import Figure  # reaches this module
+
     figure = Figure(figsize=(5.0, 4.5))
     FigureCanvasAgg(figure)
     axes = figure.add_subplot()
