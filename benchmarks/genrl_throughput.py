@@ -238,7 +238,12 @@ def main() -> None:
         help="the generator of a task (e.g. a quickstart's vae.pt); the tasks measured are these",
     )
     parser.add_argument("--episodes", type=COUNT, default=None, help=f"GenRL episodes per run (default {EPISODES})")
-    parser.add_argument("--n-envs", nargs="+", default=["2", "N"], help="envs per step: numbers, N: an iteration's")
+    parser.add_argument(
+        "--n-envs",
+        nargs="*",
+        default=["2", "N"],
+        help="envs per step: numbers, N: an iteration's; none (with --cli): only the CLI's command",
+    )
     parser.add_argument("--threads", type=COUNT, default=default_threads(), help="simulation threads (all cores)")
     parser.add_argument("--bound-episodes", type=COUNT, default=256)
     parser.add_argument("--repeats", type=COUNT, default=2)
@@ -246,6 +251,8 @@ def main() -> None:
     parser.add_argument("--update", action="store_true", help="keep --out's runs of other tasks and n_envs")
     parser.add_argument("--cli", action="store_true", help="also time the CLI's default command, as a whole process")
     args = parser.parse_args()
+    if not args.n_envs and not args.cli:
+        parser.error("--n-envs with no value measures only the CLI's command, which needs --cli")
     generators = dict(item.split("=", 1) if "=" in item else (item, "") for item in args.generator)
     for task, path in generators.items():
         if task not in EPISODES:
@@ -255,7 +262,7 @@ def main() -> None:
     command = (
         "python -m benchmarks.genrl_throughput "
         + " ".join(f"--generator {task}=..." for task in generators)
-        + (f" --n-envs {' '.join(args.n_envs)} --update" if args.update else "")
+        + (" --n-envs" + "".join(f" {n_envs}" for n_envs in args.n_envs) + " --update" if args.update else "")
         + (" --cli" if args.cli else "")
     )
     load_before = os.getloadavg()
