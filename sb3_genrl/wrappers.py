@@ -120,6 +120,7 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
             raise ValueError(f"max_hold_steps must be a non-negative integer, got {max_hold_steps!r}")
         gym.utils.RecordConstructorArgs.__init__(
             self,
+            _disable_deepcopy=True,  # the spec holds this generator, not a copy of the model per env
             generator=generator,
             context=context,
             context_space=context_space,

@@ -235,6 +235,21 @@ def test_wrapper_is_a_gymnasium_wrapper():
     assert plain.step(np.zeros(2, dtype=np.float32))[2]
 
 
+def test_the_spec_records_the_generator_itself_and_rebuilds_the_wrapped_env(monkeypatch):
+    monkeypatch.setitem(gym.registry, "Test/FastReach-v0", gym.envs.registration.EnvSpec("Test/FastReach-v0", FastReachEnv))
+    generator = LinearGenerator()
+    env = LatentActionWrapper(gym.make("Test/FastReach-v0"), generator, latent_clip=2.0)
+    recorded = env.spec.additional_wrappers[-1]
+    # the generator object, not a copy of it per env (a batched VecEnv holds one wrapper per episode of an iteration)
+    assert recorded.kwargs["generator"] is generator and recorded.kwargs["latent_clip"] == 2.0
+    rebuilt = env.spec.make()
+    assert isinstance(rebuilt, LatentActionWrapper) and rebuilt.generator is generator and rebuilt.latent_clip == 2.0
+    alpha = np.array([0.3, -0.2], dtype=np.float32)
+    goal = {"goal": [0.25, 0.5]}
+    rewards = [wrapped.reset(seed=0, options=goal) and wrapped.step(alpha)[1] for wrapped in (env, rebuilt)]
+    assert rewards[0] == rewards[1]
+
+
 def _hockey_with_frames(generator):
     from sb3_genrl.envs.hockey import HockeyEnv
 
