@@ -2,9 +2,17 @@
 toy reaching tasks with a known optimum (a linear generator and a point mass, used by the wrapper and GenRL tests),
 the command line run as a user runs it, and an independent measure of a trained policy's distance to new goals."""
 
+import atexit
 import os
+import shutil
+import tempfile
 
 os.environ.setdefault("MUJOCO_GL", "egl")
+# SB3's logger makes an empty folder in the temporary directory for every learn() given no log folder (its default,
+# `configure(None, ...)`): a few hundred per run of the suite. The tests' learns share one, removed at exit.
+if "SB3_LOGDIR" not in os.environ:
+    os.environ["SB3_LOGDIR"] = tempfile.mkdtemp(prefix="sb3-genrl-tests-")
+    atexit.register(shutil.rmtree, os.environ["SB3_LOGDIR"], True)
 
 from collections.abc import Callable  # noqa: E402
 
