@@ -269,6 +269,7 @@ def main() -> None:
         + " ".join(f"--generator {task}=..." for task in generators)
         + (" --n-envs" + "".join(f" {n_envs}" for n_envs in args.n_envs) + " --update" if args.update else "")
         + (" --cli" if args.cli else "")
+        + (f" --repeats {args.repeats}" if args.repeats != 2 else "")
     )
     load_before = os.getloadavg()
     with tempfile.TemporaryDirectory() as work:
