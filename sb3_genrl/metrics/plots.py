@@ -32,8 +32,9 @@ def labelled_scatter(
     """
     if not len(x) == len(y) == len(labels):
         raise ValueError(f"x, y and labels must have the same length, got {len(x)}, {len(y)} and {len(labels)}")
-    from matplotlib.backends.backend_agg import FigureCanvasAgg  # matplotlib costs about 0.3 s; every `genrl` command
-    from matplotlib.figure import Figure  # reaches this module
+    # matplotlib costs about 0.3 s, and every `genrl` command reaches this module
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
 
     figure = Figure(figsize=(5.0, 4.5))
     FigureCanvasAgg(figure)
