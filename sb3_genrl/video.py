@@ -17,6 +17,7 @@ from sb3_genrl.run.loading import load_policy
 from sb3_genrl.showcase import frame_strip, save_animation, save_image
 
 VIDEO_SUFFIXES = (".mp4", ".gif")
+REAL_TIME_FPS = 25  # the arm tasks' control steps per second (20 physics steps of 2 ms): a frame each plays in real time
 
 
 def check_mp4_writer(out: str | os.PathLike) -> None:
@@ -49,7 +50,7 @@ def record_video(
     seed: int = 0,
     width: int = 480,
     height: int = 352,
-    fps: int = 25,
+    fps: int = REAL_TIME_FPS,
     every: int = 1,
     strip: bool = True,
     trust_policy: bool = False,

@@ -36,7 +36,7 @@ from sb3_genrl.run import train_policy
 from sb3_genrl.showcase import play_scripted
 from sb3_genrl.study import MODELS, run_study
 from sb3_genrl.study.quickstart import outside_task_settings, quickstart, task_settings
-from sb3_genrl.video import record_video
+from sb3_genrl.video import REAL_TIME_FPS, record_video
 
 
 def play_command(args: argparse.Namespace) -> int:
@@ -352,7 +352,7 @@ def video_command(args: argparse.Namespace) -> int:
         generator=args.generator,
         goals=args.goals,
         seed=args.seed,
-        fps=max(1, 25 // args.every),
+        fps=max(1, REAL_TIME_FPS // args.every),
         every=args.every,
         trust_policy=args.trust_policy,
     )
