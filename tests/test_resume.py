@@ -97,7 +97,9 @@ def test_workers_exit_when_the_study_process_is_killed(tmp_path: Path) -> None:
         import os, sys, time
 
         def job(seconds):
-            print(os.getpid(), flush=True)
+            # One write of the whole line: print() makes two when Python's output is unbuffered (PYTHONUNBUFFERED),
+            # and the two workers' halves could then interleave on the shared pipe.
+            os.write(sys.stdout.fileno(), f"{os.getpid()}\\n".encode())
             time.sleep(seconds)
 
         if __name__ == "__main__":
