@@ -42,7 +42,7 @@ from sb3_genrl.study.quickstart import (
     OUTSIDE_DEMO_STEPS,
     QUICKSTART_MAX_EPISODES,
 )
-from sb3_genrl.video import VIDEO_SUFFIXES
+from sb3_genrl.video import REAL_TIME_FPS, VIDEO_SUFFIXES
 
 
 def _expert_option(parser: argparse.ArgumentParser) -> None:
@@ -431,7 +431,7 @@ def add_video(sub: argparse._SubParsersAction) -> None:
         "--every",
         type=option(check_int, int, minimum=1),
         default=1,
-        help="a frame every EVERY control steps, shown at 25 / EVERY frames a second (default 1)",
+        help=f"a frame every EVERY control steps, shown at {REAL_TIME_FPS} / EVERY frames a second (default 1)",
     )
     _seed_option(video, "seed of the goals (and of the latent actions)")
     video.add_argument(
