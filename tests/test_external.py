@@ -690,6 +690,54 @@ def test_train_policy_of_an_outside_task_starts_from_its_demonstrations(cli, tmp
 gym.register("TestExternal/PointGoalOwn-v0", entry_point=PointGoalEnv, max_episode_steps=HORIZON)
 
 
+class UnboundedPointGoalEnv(PointGoalEnv):
+    """Declares an unbounded observation box, as Gymnasium-Robotics' Fetch tasks do."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.observation_space = spaces.Box(-np.inf, np.inf, shape=(4,), dtype=np.float32)
+
+
+gym.register("TestExternal/PointGoalUnbounded-v0", entry_point=UnboundedPointGoalEnv, max_episode_steps=HORIZON)
+
+
+def test_the_demonstrations_scale_the_policys_unbounded_contexts_once_and_the_policy_keeps_them(tmp_path):
+    task = "TestExternal/PointGoalUnbounded-v0"
+    demos = record_demonstrations(task, point_expert, 24, tmp_path / "demos", seed=1)
+    generator = train_generator(demos, preset="VAE1", epochs=5, batch_size=8, eval_every=5, out=tmp_path / "vae.pt")
+    model = GenRL(LatentActionWrapper(gym.make(task), generator), generator, n_steps=8, seed=0, device="cpu")
+    callback = DemonstrationCallback(demos, fit_steps=20, keep=False, scale_contexts=True)
+    contexts = callback.pulls(generator, model.observation_space, model.latent_clip)[0].numpy().astype(np.float64)
+    model.learn(8, callback=callback)
+    scaler = model.policy.features_extractor
+    # the goal (which the demonstrations vary) centred on their mean and scaled by their standard deviation; the
+    # start position (the same in every one) only centred
+    assert np.ptp(contexts[:, :2], axis=0).min() > 0.5 and np.ptp(contexts[:, 2:], axis=0).max() == 0
+    np.testing.assert_allclose(scaler.centre.numpy(), contexts.mean(axis=0), atol=1e-6)
+    np.testing.assert_allclose(scaler.half_width.numpy(), [*contexts[:, :2].std(axis=0, ddof=1), 1.0, 1.0], rtol=1e-5)
+    features = scaler(torch.as_tensor(contexts, dtype=torch.float32)).numpy()
+    np.testing.assert_allclose(features[:, :2].mean(axis=0), 0.0, atol=1e-5)
+    np.testing.assert_allclose(features[:, :2].std(axis=0, ddof=1), 1.0, rtol=1e-5)
+    # the policy's value head reads the same features (one extractor), and the scale is saved with the policy
+    assert model.policy.vf_features_extractor is scaler
+    model.save(tmp_path / "model")
+    loaded = GenRL.load(tmp_path / "model", device="cpu")
+    for name in ("centre", "half_width"):
+        assert torch.equal(getattr(loaded.policy.features_extractor, name), getattr(scaler, name))
+    np.testing.assert_array_equal(
+        loaded.predict(contexts, deterministic=True)[0], model.predict(contexts, deterministic=True)[0]
+    )
+    # a run that goes on keeps its scale, even given other demonstrations
+    scale = scaler.centre.clone(), scaler.half_width.clone()
+    other = record_demonstrations(task, point_expert, 12, tmp_path / "other", seed=7)
+    model.learn(8, callback=DemonstrationCallback(other, keep=False, scale_contexts=True), reset_num_timesteps=False)
+    assert torch.equal(scaler.centre, scale[0]) and torch.equal(scaler.half_width, scale[1])
+    # without the setting, an unbounded context passes unscaled
+    plain = GenRL(LatentActionWrapper(gym.make(task), generator), generator, n_steps=8, seed=0, device="cpu")
+    plain.learn(8, callback=DemonstrationCallback(demos, fit_steps=20, keep=False))
+    assert not plain.policy.features_extractor.centre.any() and (plain.policy.features_extractor.half_width == 1).all()
+
+
 def quiet_expert():
     """Makes :func:`point_expert` (a task's ``make_expert``)."""
     return point_expert

@@ -40,6 +40,7 @@ from stable_baselines3.common.policies import ActorCriticPolicy
 
 from sb3_genrl.data import load_arrays
 from sb3_genrl.data.fingerprints import dataset_fingerprint as fingerprint
+from sb3_genrl.genrl.policies import context_scalers
 from sb3_genrl.genrl.regression import fit_mean
 
 DEMONSTRATION_CALLBACK = "sb3_genrl.genrl.demonstrations.DemonstrationCallback"
@@ -61,6 +62,9 @@ class DemonstrationCallback(BaseCallback):
         needs GenRL's ``hindsight_kwargs``)
     :param learning_rate: Adam learning rate of the fit (default 1e-3)
     :param batch_size: demonstrations per step of the fit, drawn with replacement (default 256)
+    :param scale_contexts: on a fresh run, before the fit, centre and scale each unbounded dimension of the policy's
+        context features by the demonstrations' contexts (:meth:`~sb3_genrl.genrl.policies.BoxScaler.scale_unbounded`;
+        saved with the policy). Default False: unbounded dimensions pass unscaled
     :param dataset_fingerprint: the dataset's :func:`~sb3_genrl.data.fingerprints.dataset_fingerprint`, when known (a saved
         run records it): a dataset whose content differs is refused
     :param verbose: 1: print the fit's losses
@@ -74,11 +78,14 @@ class DemonstrationCallback(BaseCallback):
         keep: bool = True,
         learning_rate: float = 1e-3,
         batch_size: int = 256,
+        scale_contexts: bool = False,
         dataset_fingerprint: str | None = None,
         verbose: int = 0,
     ) -> None:
         super().__init__(verbose)
-        check_demonstration_settings(fit_steps=fit_steps, keep=keep, learning_rate=learning_rate, batch_size=batch_size)
+        check_demonstration_settings(
+            fit_steps=fit_steps, keep=keep, learning_rate=learning_rate, batch_size=batch_size, scale_contexts=scale_contexts
+        )
         if dataset is None:
             raise ValueError(
                 "DemonstrationCallback(dataset=None): settings that "
@@ -87,6 +94,7 @@ class DemonstrationCallback(BaseCallback):
 
         self.dataset, self.fit_steps, self.keep = os.fspath(dataset), int(fit_steps), bool(keep)
         self.learning_rate, self.batch_size = float(learning_rate), int(batch_size)
+        self.scale_contexts = bool(scale_contexts)
         arrays = load_arrays(self.dataset, keys=("observations", "actions", "reached"))  # raises naming a missing dataset
         if dataset_fingerprint is not None:
             if fingerprint(self.dataset) != dataset_fingerprint:
@@ -138,7 +146,11 @@ class DemonstrationCallback(BaseCallback):
             tensor.to(model.device)
             for tensor in self.check(model.generator, model.observation_space, model.latent_clip, model.kept_pulls is not None)
         )
-        if self.fit_steps and model.num_timesteps == 0 and model._n_updates == 0:  # a fresh run, never a resumed one
+        fresh = model.num_timesteps == 0 and model._n_updates == 0  # never a resumed run, whose policy holds both
+        if self.scale_contexts and fresh:
+            for extractor in context_scalers(model.policy):
+                extractor.scale_unbounded(contexts)
+        if self.fit_steps and fresh:
             self.fit = fit_mean_to_demonstrations(
                 model.policy,
                 contexts,
@@ -147,8 +159,6 @@ class DemonstrationCallback(BaseCallback):
                 learning_rate=self.learning_rate,
                 batch_size=self.batch_size,
             )
-            if model.policy_average is not None:  # the average starts from the fitted policy too
-                model.policy_average.load_state_dict(model.policy.state_dict())
             for key, value in self.fit.items():
                 self.logger.record(f"demonstrations/{key}", value)
             if self.verbose:
@@ -156,6 +166,8 @@ class DemonstrationCallback(BaseCallback):
                     f"policy mean fitted to {self.fit['demonstrations']} demonstrations: loss "
                     f"{self.fit['first_loss']:.4g} -> {self.fit['last_loss']:.4g}"
                 )
+        if (self.fit_steps or self.scale_contexts) and fresh and model.policy_average is not None:
+            model.policy_average.load_state_dict(model.policy.state_dict())  # the average starts from this policy too
         if self.keep and model.kept_pulls.pulls is None:  # (a resumed run's checkpoint holds them already)
             model.kept_pulls.keep(contexts, latents, th.zeros(len(latents), device=model.device))
 
@@ -217,13 +229,16 @@ def fit_mean_to_demonstrations(
     }
 
 
-def check_demonstration_settings(*, fit_steps: Any, keep: Any, learning_rate: Any, batch_size: Any) -> None:
+def check_demonstration_settings(
+    *, fit_steps: Any, keep: Any, learning_rate: Any, batch_size: Any, scale_contexts: Any = False
+) -> None:
     """Refuse settings :class:`DemonstrationCallback` would not take, naming the setting."""
     for key, value, minimum in (("fit_steps", fit_steps, 0), ("batch_size", batch_size, 1)):
         if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < minimum:
             raise ValueError(f"DemonstrationCallback: {key} must be an integer >= {minimum}, got {value!r}")
-    if not isinstance(keep, bool | np.bool_):
-        raise ValueError(f"DemonstrationCallback: keep must be True or False, got {keep!r}")
+    for key, value in (("keep", keep), ("scale_contexts", scale_contexts)):
+        if not isinstance(value, bool | np.bool_):
+            raise ValueError(f"DemonstrationCallback: {key} must be True or False, got {value!r}")
     if isinstance(learning_rate, bool) or not isinstance(learning_rate, int | float) or not learning_rate > 0:
         raise ValueError(f"DemonstrationCallback: learning_rate must be positive, got {learning_rate!r}")
     if not fit_steps and not keep:
@@ -257,7 +272,7 @@ def callback_entries(spec: Any, name: str = "callback") -> list[tuple[str, dict[
             check_demonstration_settings(
                 **{
                     key: kwargs.get(key, parameters[key].default)
-                    for key in ("fit_steps", "keep", "learning_rate", "batch_size")
+                    for key in ("fit_steps", "keep", "learning_rate", "batch_size", "scale_contexts")
                 }
             )
         entries.append((path, dict(kwargs)))

@@ -88,9 +88,48 @@ class BoxScaler(BaseFeaturesExtractor):
         self.register_buffer("centre", th.as_tensor(centre, dtype=th.float32))
         self.register_buffer("half_width", th.as_tensor(half_width, dtype=th.float32))
         self.all_bounded = bool(bounded.all())  # then every context's features lie in [-1, 1]
+        self.unbounded = th.as_tensor(~bounded)  # the dimensions scale_unbounded may scale (not a buffer: the space's)
 
     def forward(self, observations: th.Tensor) -> th.Tensor:
         return (observations.flatten(1) - self.centre) / self.half_width
+
+    def scale_unbounded(self, contexts: th.Tensor) -> None:
+        """Centre each unbounded dimension on its mean over ``contexts`` and scale it by their standard deviation, so
+        that the contexts' features have mean 0 and standard deviation 1 there; a dimension whose standard deviation
+        is below a thousandth of the largest one's is only centred (a context entry that barely moves, such as a
+        robot's start pose, is not blown up into noise). Bounded dimensions keep their box's scaling.
+
+        :param contexts: ``(n, *observation_shape)`` contexts, ``n >= 2``, all finite
+        :raises ValueError: for fewer than two contexts, contexts of another shape, or a non-finite entry
+        """
+        contexts = th.as_tensor(contexts, dtype=th.float32).flatten(1)
+        if len(contexts) < 2 or contexts.shape[1] != self.centre.numel():
+            raise ValueError(
+                f"BoxScaler.scale_unbounded: needs at least 2 contexts of {self.centre.numel()} entries each, "
+                f"got shape {tuple(contexts.shape)}"
+            )
+        if not th.isfinite(contexts).all():
+            raise ValueError("BoxScaler.scale_unbounded: the contexts hold a non-finite entry (nan or inf)")
+        std = contexts.std(0)
+        unbounded, moving = self.unbounded, self.unbounded & (std > 0) & (std >= 1e-3 * std.max())
+        with th.no_grad():
+            self.centre[unbounded.to(self.centre.device)] = contexts.mean(0)[unbounded].to(self.centre.device)
+            self.half_width[moving.to(self.centre.device)] = std[moving].to(self.centre.device)
+
+
+def context_scalers(policy: ActorCriticPolicy) -> list[BoxScaler]:
+    """The policy's features extractors (one when shared), each a :class:`BoxScaler`.
+
+    :raises ValueError: when one is another extractor (a user's ``features_extractor_class``, an image's)
+    """
+    extractors = {id(e): e for e in (policy.pi_features_extractor, policy.vf_features_extractor)}.values()
+    for extractor in extractors:
+        if not isinstance(extractor, BoxScaler):
+            raise ValueError(
+                "scaling the contexts needs the policy's features extractor to be BoxScaler (GenRL's default for a "
+                f"Box context); this policy's is {type(extractor).__name__}"
+            )
+    return list(extractors)
 
 
 class ContextStdPolicy(ActorCriticPolicy):

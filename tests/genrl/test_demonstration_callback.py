@@ -267,10 +267,13 @@ def test_the_fetch_entries_name_the_callback_and_a_bad_one_is_refused():
 
     for env_id in ("FetchReach-v4", "FetchPush-v4", "FetchPickAndPlace-v4", "FetchSlide-v4"):
         callback = load_genrl_settings(env_id)[2]["callback"]
-        assert callback == [{DEMONSTRATION_CALLBACK: {"fit_steps": 4000, "keep": True}}] and uses_demonstrations(callback)
+        assert callback == [{DEMONSTRATION_CALLBACK: {"fit_steps": 4000, "keep": True, "scale_contexts": True}}]
+        assert uses_demonstrations(callback)
     assert "callback" not in load_genrl_settings("GenRL/Hockey-v0")[2]
     assert callback_entries(DEMONSTRATION_CALLBACK) == [(DEMONSTRATION_CALLBACK, {})]  # rl-zoo3's other forms
     with pytest.raises(ValueError, match="expected a callback class path or"):
         callback_entries([{"a": {}, "b": {}}])
     with pytest.raises(ValueError, match="would not use the demonstrations"):
         callback_entries([{DEMONSTRATION_CALLBACK: {"fit_steps": 0, "keep": False}}])
+    with pytest.raises(ValueError, match="scale_contexts must be True or False, got 'yes'"):
+        callback_entries([{DEMONSTRATION_CALLBACK: {"scale_contexts": "yes"}}])

@@ -34,6 +34,47 @@ def test_box_scaler_on_unbounded_observations_does_not_warn():
     th.testing.assert_close(out, th.tensor([[5.0, 3.0, 0.5]]))
 
 
+def test_box_scaler_standardises_the_unbounded_dimensions_that_move_and_keeps_the_box_of_the_others():
+    space = gym.spaces.Box(
+        np.array([-2.0, -np.inf, -np.inf, -np.inf], np.float32), np.array([2.0, np.inf, np.inf, np.inf], np.float32)
+    )
+    rng = np.random.default_rng(0)
+    contexts = np.stack(
+        [
+            rng.uniform(-2, 2, 500),  # bounded: keeps [-2, 2] -> [-1, 1]
+            rng.normal(5.0, 3.0, 500),  # unbounded, moving: standardised
+            1.36 + rng.normal(0.0, 1e-5, 500),  # unbounded, barely moving (a start pose): centred only
+            rng.normal(-1.0, 0.02, 500),  # unbounded, moving on a smaller scale than the second: standardised
+        ],
+        axis=1,
+    ).astype(np.float32)
+    scaler = BoxScaler(space)
+    scaler.scale_unbounded(th.as_tensor(contexts))
+    features = scaler(th.as_tensor(contexts)).double().numpy()
+    x = contexts.astype(np.float64)
+    expected = np.stack(
+        [
+            x[:, 0] / 2.0,
+            (x[:, 1] - x[:, 1].mean()) / x[:, 1].std(ddof=1),
+            x[:, 2] - x[:, 2].mean(),
+            (x[:, 3] - x[:, 3].mean()) / x[:, 3].std(ddof=1),
+        ],
+        axis=1,
+    )
+    np.testing.assert_allclose(features, expected, rtol=1e-4, atol=1e-5)
+    # all constant: centred only, never divided by zero
+    constant = BoxScaler(gym.spaces.Box(-np.inf, np.inf, (2,), np.float32))
+    constant.scale_unbounded(th.tensor([[1.0, 2.0], [1.0, 2.0]]))
+    th.testing.assert_close(constant(th.tensor([[1.5, 2.0]])), th.tensor([[0.5, 0.0]]))
+    for bad, says in (
+        (th.zeros((1, 4)), "at least 2 contexts"),
+        (th.zeros((5, 3)), "of 4 entries"),
+        (th.tensor([[0.0, np.nan, 0.0, 0.0]] * 3), "non-finite"),
+    ):
+        with pytest.raises(ValueError, match=says):
+            BoxScaler(space).scale_unbounded(bad)
+
+
 class _LogStdRecorder(Recorder):
     """The policy's log-std at the start of every rollout (after every update but the last) and at the end."""
 
