@@ -102,7 +102,7 @@ class BoxScaler(BaseFeaturesExtractor):
         :param contexts: ``(n, *observation_shape)`` contexts, ``n >= 2``, all finite
         :raises ValueError: for fewer than two contexts, contexts of another shape, or a non-finite entry
         """
-        contexts = th.as_tensor(contexts, dtype=th.float32).flatten(1)
+        contexts = th.as_tensor(contexts, dtype=th.float32).detach().cpu().flatten(1)  # self.unbounded's device
         if len(contexts) < 2 or contexts.shape[1] != self.centre.numel():
             raise ValueError(
                 f"BoxScaler.scale_unbounded: needs at least 2 contexts of {self.centre.numel()} entries each, "
