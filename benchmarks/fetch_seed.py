@@ -29,6 +29,7 @@ from sb3_genrl.generative import load
 from sb3_genrl.genrl import GenRL
 from sb3_genrl.genrl.demonstrations import DemonstrationCallback, build_callbacks, fit_mean_to_demonstrations
 from sb3_genrl.genrl.generator_files import generator_digest
+from sb3_genrl.genrl.policies import context_scalers
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED
 from sb3_genrl.run.checkpoint import GenRLCheckpoint, RandomStateRecorder, resume_genrl, resume_state
 from sb3_genrl.run.folder import RunFolderError, keep_episodes
@@ -97,7 +98,8 @@ def fitted_policy(
     task: str, generator_path: str, dataset: str, fit_steps: int | None = None, net_arch: list[int] | None = None
 ) -> tuple[GenRL, DemonstrationCallback, tuple[th.Tensor, th.Tensor]]:
     """GenRL with the task's entry (policy seed 0) and its mean fitted to the demonstrations ``dataset`` as the entry's
-    ``DemonstrationCallback`` fits them (``fit_steps``: another number of Adam steps; 0: no fit), before any episode.
+    ``DemonstrationCallback`` fits them, its contexts scaled first where the entry's callback scales them
+    (``fit_steps``: another number of Adam steps; 0: no fit), before any episode.
     ``net_arch``: other hidden layers of the policy's mean. Returns the model, the entry's callback and the
     demonstrations as pulls (contexts, latent actions)."""
     _, batch_episodes, genrl_kwargs = task_settings(task)
@@ -126,6 +128,9 @@ def fitted_policy(
         **genrl_kwargs,
     )
     pulls = fit.pulls(generator, model.observation_space, model.latent_clip)
+    if fit.scale_contexts:  # as the callback scales them on a fresh run, before its fit
+        for extractor in context_scalers(model.policy):
+            extractor.scale_unbounded(pulls[0])
     steps = fit.fit_steps if fit_steps is None else fit_steps
     if steps:
         fit_mean_to_demonstrations(
