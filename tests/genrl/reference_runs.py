@@ -7,12 +7,15 @@ that a change meant to leave the numbers alone is checked bit for bit (tests/gen
   the mean to the solving pulls, and demonstrations fitted before the first iteration and kept among the pulls.
 
 Run ``python tests/genrl/reference_runs.py`` to write the file again, only when a change is meant to change the
-numbers (with one torch thread, as the tests run).
+numbers (with one torch thread, as the tests run). The file records the machine that wrote it (:func:`machine`): float
+kernels differ in their last bits from one CPU to another, so only that machine can expect the same bits.
 """
 
 from __future__ import annotations
 
+import hashlib
 import pathlib
+import platform
 import sys
 import tempfile
 
@@ -109,6 +112,17 @@ def refits_demonstrations_run() -> dict[str, np.ndarray]:
     return _parameters(model, "refits_demonstrations")
 
 
+def machine() -> str:
+    """What sets a run's last bits: the CPU (its model and instruction-set flags), torch's version and the kernels it
+    dispatches to."""
+    cpuinfo = pathlib.Path("/proc/cpuinfo")
+    lines = cpuinfo.read_text().splitlines() if cpuinfo.exists() else []
+    model = next((line.split(":", 1)[1].strip() for line in lines if line.startswith("model name")), platform.processor())
+    flags = next((line.split(":", 1)[1].split() for line in lines if line.startswith("flags")), [])
+    digest = hashlib.sha256(" ".join(sorted(set(flags))).encode()).hexdigest()[:12]
+    return f"{model} (flags {digest}), torch {th.__version__}, {th.backends.cpu.get_cpu_capability()}"
+
+
 def reference_parameters() -> dict[str, np.ndarray]:
     """The parameters of both runs, by ``run/tensor`` name."""
     return hindsight_run() | refits_demonstrations_run()
@@ -117,5 +131,5 @@ def reference_parameters() -> dict[str, np.ndarray]:
 if __name__ == "__main__":
     th.set_num_threads(1)
     REFERENCE.parent.mkdir(exist_ok=True)
-    np.savez(REFERENCE, **reference_parameters())
+    np.savez(REFERENCE, machine=np.array(machine()), **reference_parameters())
     print(f"wrote {REFERENCE}")
