@@ -29,7 +29,7 @@ from sb3_genrl.generative import load
 from sb3_genrl.genrl import GenRL
 from sb3_genrl.genrl.demonstrations import DemonstrationCallback, build_callbacks, fit_mean_to_demonstrations
 from sb3_genrl.genrl.generator_files import generator_digest
-from sb3_genrl.genrl.policies import context_scalers
+from sb3_genrl.genrl.policies import scale_contexts
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED
 from sb3_genrl.run.checkpoint import GenRLCheckpoint, RandomStateRecorder, resume_genrl, resume_state
 from sb3_genrl.run.folder import RunFolderError, keep_episodes
@@ -129,8 +129,7 @@ def fitted_policy(
     )
     pulls = fit.pulls(generator, model.observation_space, model.latent_clip)
     if fit.scale_contexts:  # as the callback scales them on a fresh run, before its fit
-        for extractor in context_scalers(model.policy):
-            extractor.scale_unbounded(pulls[0])
+        scale_contexts(model.policy, pulls[0])
     steps = fit.fit_steps if fit_steps is None else fit_steps
     if steps:
         fit_mean_to_demonstrations(

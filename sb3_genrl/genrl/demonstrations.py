@@ -40,7 +40,7 @@ from stable_baselines3.common.policies import ActorCriticPolicy
 
 from sb3_genrl.data import load_arrays
 from sb3_genrl.data.fingerprints import dataset_fingerprint as fingerprint
-from sb3_genrl.genrl.policies import context_scalers
+from sb3_genrl.genrl.policies import scale_contexts
 from sb3_genrl.genrl.regression import fit_mean
 
 DEMONSTRATION_CALLBACK = "sb3_genrl.genrl.demonstrations.DemonstrationCallback"
@@ -148,8 +148,7 @@ class DemonstrationCallback(BaseCallback):
         )
         fresh = model.num_timesteps == 0 and model._n_updates == 0  # never a resumed run, whose policy holds both
         if self.scale_contexts and fresh:
-            for extractor in context_scalers(model.policy):
-                extractor.scale_unbounded(contexts)
+            scale_contexts(model.policy, contexts)
         if self.fit_steps and fresh:
             self.fit = fit_mean_to_demonstrations(
                 model.policy,

@@ -117,10 +117,12 @@ class BoxScaler(BaseFeaturesExtractor):
             self.half_width[moving.to(self.centre.device)] = std[moving].to(self.centre.device)
 
 
-def context_scalers(policy: ActorCriticPolicy) -> list[BoxScaler]:
-    """The policy's features extractors (one when shared), each a :class:`BoxScaler`.
+def scale_contexts(policy: ActorCriticPolicy, contexts: th.Tensor) -> None:
+    """Scale the unbounded context entries of every features extractor of the policy (one when shared) by ``contexts``
+    (:meth:`BoxScaler.scale_unbounded`).
 
-    :raises ValueError: when one is another extractor (a user's ``features_extractor_class``, an image's)
+    :raises ValueError: when an extractor is not a :class:`BoxScaler` (a user's ``features_extractor_class``, an
+        image's), before any is changed
     """
     extractors = {id(e): e for e in (policy.pi_features_extractor, policy.vf_features_extractor)}.values()
     for extractor in extractors:
@@ -129,7 +131,8 @@ def context_scalers(policy: ActorCriticPolicy) -> list[BoxScaler]:
                 "scaling the contexts needs the policy's features extractor to be BoxScaler (GenRL's default for a "
                 f"Box context); this policy's is {type(extractor).__name__}"
             )
-    return list(extractors)
+    for extractor in extractors:
+        extractor.scale_unbounded(contexts)
 
 
 class ContextStdPolicy(ActorCriticPolicy):
