@@ -51,7 +51,13 @@ from sb3_genrl.envs.demonstrations.fetch import (
     reconstruction_success,
 )
 
-from benchmarks.fetch_results import BENCHMARK_SEEDS, all_seeds_finished, seed_row, write_result
+from benchmarks.fetch_results import (
+    BENCHMARK_SEEDS,
+    all_seeds_finished,
+    recorded_demonstration_recipe,
+    seed_row,
+    write_result,
+)
 from benchmarks.fetch_seed import fitted_mean_success, recorded_genrl_settings, train_seed
 from benchmarks.genrl import make_benchmark_demonstrations
 from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, SEED
@@ -61,6 +67,7 @@ from sb3_genrl.generative.presets import resolve_generator_spec
 from sb3_genrl.genrl import GenRL
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED, TUNING_GOAL_SEED
 from sb3_genrl.provenance import provenance
+from sb3_genrl.run.stages import settings_conflicts
 from sb3_genrl.study.quickstart import quickstart_preset, task_settings
 
 RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
@@ -154,6 +161,7 @@ def settings_of(args: argparse.Namespace) -> dict[str, object]:
         "eval_states": args.eval_states,
         "eval_seed": EVAL_GOAL_SEED,
         "demonstrations": args.demos if args.data is None else os.path.abspath(args.data),
+        "demonstration_recipe": get_task(args.task).demonstration_recipe if args.data is None else None,
         "generator": "trained" if args.generator is None else os.path.abspath(args.generator),
         "preset": quickstart_preset(args.task),
         "generator_recipe": resolve_generator_spec(quickstart_preset(args.task)),
@@ -176,6 +184,9 @@ def start(args: argparse.Namespace) -> dict[str, object]:
     if os.path.exists(args.out) and not args.overwrite:
         with open(args.out) as file:
             result = json.load(file)
+        recorded = result.setdefault("settings", {})
+        if "demonstration_recipe" not in recorded:  # a file of an earlier version, which did not record it
+            recorded["demonstration_recipe"] = recorded_demonstration_recipe(recorded)
         if result.get("settings") != settings:
             differ = sorted(key for key in settings if result.get("settings", {}).get(key) != settings[key])
             if not (args.new_runs and set(differ) <= set(RUN_SETTINGS)):
@@ -207,6 +218,9 @@ def generator_stage(args: argparse.Namespace, result: dict, write) -> str:
         return path
     data = os.path.join(args.work, "demonstrations")
     if args.data is None and os.path.isdir(data) and os.listdir(data):
+        conflicts = settings_conflicts(data, dataset_info(data), get_task(args.task).demonstration_recipe)
+        if conflicts:
+            raise SystemExit(f"{conflicts[0]}: move that dataset away to make it again, or give it as --data")
         args.data = data  # made before the stop (a dataset folder is written as one unit)
     args.data = args.data or make_benchmark_demonstrations(args.task, args.demos, args.work, args.threads)
     record = result.setdefault("generator", {})

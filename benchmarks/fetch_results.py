@@ -21,6 +21,7 @@ import json
 import os
 
 import numpy as np
+from sb3_genrl.envs import get_task
 
 from benchmarks.fetch_seed import recorded_genrl_settings
 from sb3_genrl.generative.presets import resolve_generator_spec
@@ -87,12 +88,22 @@ def read(results: str) -> dict[str, dict]:
 
 # VAE-FETCH's recipe when the JSON files did not record it yet (they record the preset's name only)
 UNRECORDED_RECIPE = {"model": "vae", "latent_dim": 10, "beta": 0.001}
+# the demonstrations' recipe when the JSON files did not record it yet (aims over the goal region widened by 2 cm)
+UNRECORDED_DEMONSTRATION_RECIPE = {"aim_margin": 0.02}
+
+
+def recorded_demonstration_recipe(settings: dict) -> dict | None:
+    """The recipe of the demonstrations a benchmark JSON's ``settings`` made (None: a given dataset, ``--data``)."""
+    if not isinstance(settings.get("demonstrations"), int):
+        return None
+    return settings.get("demonstration_recipe", UNRECORDED_DEMONSTRATION_RECIPE)
 
 
 def former_settings(task: str, result: dict) -> list[str]:
     """The settings in which ``result``'s runs differ from those the benchmark would use now: GenRL's (the task's entry
     in ``hyperparams/genrl.yml``; the episodes per iteration compared as ``batch_episodes``: older JSON files record
-    GenRL's default ``n_steps``), and the recipe of the generator it trains (``generator recipe``)."""
+    GenRL's default ``n_steps``), the recipe of the generator it trains (``generator recipe``) and of the
+    demonstrations it makes (``demonstration recipe``)."""
     settings = result.get("settings", {})
     if "genrl_settings" not in settings:
         return []
@@ -108,6 +119,8 @@ def former_settings(task: str, result: dict) -> list[str]:
     if settings.get("generator") == "trained" and settings.get("preset") == preset:
         recorded = settings.get("generator_recipe", UNRECORDED_RECIPE if preset == "VAE-FETCH" else None)
         differ += ["generator recipe"] if recorded is not None and recorded != resolve_generator_spec(preset) else []
+    demonstrations = recorded_demonstration_recipe(settings)
+    differ += ["demonstration recipe"] if demonstrations not in (None, get_task(task).demonstration_recipe) else []
     return differ
 
 

@@ -43,7 +43,10 @@ GOAL_BOXES = {
     "PickAndPlace": ((1.19, 0.60), (1.49, 0.90)),
     "Slide": ((1.11, 0.45), (1.71, 1.05)),
 }
-AIM_MARGIN = 0.02  # the demonstrations' aims are drawn over the goal region widened by this much (m)
+# The demonstrations' aims are drawn over the goal region widened by a margin on every side (m; Reach's height range
+# too), so that a goal at the region's edge lies inside the demonstrations rather than at their edge, where a generator
+# reproduces them least well. Reach's margin is the success distance (measured: docs/guide/tasks.md, the aims' margin).
+AIM_MARGIN = 0.02
 PERTURBATION = np.array([0.05, 0.05, 0.03, 0.0])  # m travelled by one bump per axis at level 1 (gripper untouched)
 # Slide: the puck's travel (m) after a strike of each speed (units of action), measured on random reset states
 SLIDE_DISTANCE_TO_SPEED = (
@@ -126,40 +129,43 @@ class FetchFamily:
 
     :param name: ``Reach``, ``Push``, ``Slide`` or ``PickAndPlace``
     :param expert: ``(reset observation, aim) -> (50, 4)`` actions
-    :param aim_height: ``(rng, env) -> z`` of an aim (m)
+    :param aim_height: ``(rng, env, margin) -> z`` of an aim (m), over its task's heights widened by ``margin`` where
+        the task's goals vary in height over a range (Reach)
+    :param aim_margin: how far the aims' region reaches beyond the goal region on every side (m)
     """
 
     name: str
     expert: Callable[[np.ndarray, np.ndarray], np.ndarray]
-    aim_height: Callable[[np.random.Generator, Any], float]
+    aim_height: Callable[[np.random.Generator, Any, float], float]
+    aim_margin: float = AIM_MARGIN
 
     @property
     def env_id(self) -> str:
         return f"Fetch{self.name}-v4"
 
     def sample_aim(self, rng: np.random.Generator, env: Any) -> np.ndarray:
-        """An aim uniform over the goal region (widened by :data:`AIM_MARGIN`), its height by the task."""
+        """An aim uniform over the goal region widened by ``aim_margin``, its height by the task."""
         low, high = (np.asarray(corner) for corner in GOAL_BOXES[self.name])
-        xy = rng.uniform(low - AIM_MARGIN, high + AIM_MARGIN)
-        return np.r_[xy, self.aim_height(rng, env)]
+        xy = rng.uniform(low - self.aim_margin, high + self.aim_margin)
+        return np.r_[xy, self.aim_height(rng, env, self.aim_margin)]
 
 
-def _on_table(rng: np.random.Generator, env: Any) -> float:
+def _on_table(rng: np.random.Generator, env: Any, margin: float) -> float:
     return float(env.height_offset)
 
 
-def _reach_height(rng: np.random.Generator, env: Any) -> float:
-    return float(env.initial_gripper_xpos[2] + rng.uniform(-0.15, 0.15))
+def _reach_height(rng: np.random.Generator, env: Any, margin: float) -> float:  # the env's goals: start +- 0.15
+    return float(env.initial_gripper_xpos[2] + rng.uniform(-0.15 - margin, 0.15 + margin))
 
 
-def _table_or_air(rng: np.random.Generator, env: Any) -> float:  # as Gymnasium-Robotics samples PickAndPlace's goals
+def _table_or_air(rng: np.random.Generator, env: Any, margin: float) -> float:  # as Gymnasium-Robotics samples them
     return float(env.height_offset + (rng.uniform(0.0, 0.45) if rng.uniform() < 0.5 else 0.0))
 
 
 FAMILIES = {
     family.name: family
     for family in (
-        FetchFamily("Reach", reach_expert, _reach_height),
+        FetchFamily("Reach", reach_expert, _reach_height, aim_margin=SUCCESS_DISTANCE),
         FetchFamily("Push", push_expert, _on_table),
         FetchFamily("Slide", slide_expert, _on_table),
         FetchFamily("PickAndPlace", pick_and_place_expert, _table_or_air),

@@ -49,6 +49,7 @@ def _task(name: str, short: str, maker: Callable[..., Any]) -> TaskSpec:
         evaluate=evaluate_success,
         generator_preset="VAE-FETCH",
         video=False,
+        demonstration_recipe={"aim_margin": family.aim_margin},
     )
 
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import gymnasium as gym
@@ -55,6 +55,8 @@ class TaskSpec:
     :param video: whether the quickstart renders the policy (the arm tasks' offscreen renderer)
     :param quickstart_demo_episodes: the demonstrations ``genrl quickstart`` makes for this task (None: its default,
         :data:`sb3_genrl.study.quickstart.DEMO_EPISODES`)
+    :param demonstration_recipe: what the task's demonstrations depend on besides their seed and number (e.g. the
+        Fetch tasks' ``aim_margin``), recorded in each dataset's info and compared when a stage reuses a dataset
     """
 
     name: str
@@ -78,6 +80,7 @@ class TaskSpec:
     generator_preset: str | None = None
     video: bool = True
     quickstart_demo_episodes: int | None = None
+    demonstration_recipe: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not self.name or "/" in self.name:

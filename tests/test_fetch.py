@@ -4,6 +4,7 @@ the workflow (demonstrations, a generator, GenRL, the success rate) on tiny size
 import importlib
 import json
 import os
+import shutil
 
 import gymnasium as gym
 import mujoco
@@ -15,7 +16,7 @@ pytest.importorskip("gymnasium_robotics")
 
 from sb3_genrl.envs import TASKS, get_task  # noqa: E402
 from sb3_genrl.envs.demonstrations.fetch import expert_success  # noqa: E402
-from sb3_genrl.envs.fetch import FETCH_IDS, GOAL_BOXES  # noqa: E402
+from sb3_genrl.envs.fetch import FAMILIES, FETCH_IDS, GOAL_BOXES  # noqa: E402
 from sb3_genrl.envs.fetch_mujoco import fix_joint_helpers, import_robotics, upstream_test_fails  # noqa: E402
 
 FETCH_TASKS = ("fetch-reach", "fetch-push", "fetch-slide", "fetch-pick-and-place")
@@ -66,6 +67,30 @@ def test_every_fetch_task_resets_and_steps_through_its_own_id(task):
     low, high = GOAL_BOXES[task.removeprefix("fetch-").title().replace("-", "").replace("Pickandplace", "PickAndPlace")]
     goals = np.array([env.reset(seed=seed)[0]["desired_goal"][:2] for seed in range(20)])
     assert np.all(spec.in_goal_region(goals))
+
+
+@pytest.mark.parametrize("name", sorted(FAMILIES))
+def test_the_aims_cover_the_goal_region_widened_by_the_family_margin(name):
+    family = FAMILIES[name]
+    env = gym.make(family.env_id).unwrapped
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    aims = np.array([family.sample_aim(rng, env) for _ in range(4000)])
+    low, high = (np.asarray(corner) for corner in GOAL_BOXES[name])
+    margin = family.aim_margin
+    assert margin >= 0.02
+    # inside the widened region, and reaching its edges on every side (4000 uniform draws: within 1.5 cm)
+    assert np.all(aims[:, :2] >= low - margin) and np.all(aims[:, :2] <= high + margin)
+    np.testing.assert_allclose(aims[:, :2].min(0), low - margin, atol=0.015)
+    np.testing.assert_allclose(aims[:, :2].max(0), high + margin, atol=0.015)
+    heights = aims[:, 2] - env.initial_gripper_xpos[2]
+    if name == "Reach":  # the env's heights: the gripper's start +- 0.15, widened too
+        assert np.all(np.abs(heights) <= 0.15 + margin) and np.abs(heights).max() > 0.15 + margin - 0.015
+    elif name == "PickAndPlace":  # on the table, or up to 0.45 above it, as the env's own goals
+        above = aims[:, 2] - env.height_offset
+        assert np.all((above >= 0) & (above <= 0.45)) and np.mean(above == 0) > 0.4
+    else:
+        np.testing.assert_array_equal(aims[:, 2], env.height_offset)
 
 
 @pytest.mark.parametrize("order", ["sb3_genrl.envs, gymnasium_robotics", "gymnasium_robotics, sb3_genrl.envs"])
@@ -355,6 +380,44 @@ def test_the_benchmark_keeps_the_generator_whose_fitted_mean_solves_the_most_tun
     scored.clear()
     args = fetch.arguments(argv)
     assert fetch.generator_stage(args, fetch.start(args), lambda: None) == path and scored == []
+    assert record["demonstration_info"]["aim_margin"] == get_task("fetch-push").demonstration_recipe["aim_margin"]
+
+
+def test_the_benchmark_refuses_demonstrations_of_another_recipe(tmp_path, monkeypatch):
+    from benchmarks import fetch
+    from benchmarks.fetch_results import status
+    from sb3_genrl.data import dataset_info
+
+    monkeypatch.setattr(fetch, "fitted_mean_success", lambda *args: 0.5)
+    out, work = tmp_path / "fetch.json", tmp_path / "work"
+    argv = ["--task", "fetch-reach", "--demos", "6", "--epochs", "1", "--generator-seeds", "1", "--out", str(out)]
+    args = fetch.arguments([*argv, "--work", str(work)])
+    result = fetch.start(args)
+    fetch.generator_stage(args, result, lambda: fetch.write_result(str(out), result))
+    data = work / "demonstrations"
+    assert dataset_info(data)["aim_margin"] == 0.05 == result["settings"]["demonstration_recipe"]["aim_margin"]
+    # a dataset left by a version whose aims spread over another region is not taken into a new run
+    (tmp_path / "other").mkdir()
+    shutil.copytree(data, tmp_path / "other" / "demonstrations")
+    info_file = tmp_path / "other" / "demonstrations" / "data" / "metadata.json"
+    metadata = json.loads(info_file.read_text())
+    metadata["genrl"]["aim_margin"] = 0.02
+    info_file.write_text(json.dumps(metadata))
+    assert dataset_info(tmp_path / "other" / "demonstrations")["aim_margin"] == 0.02
+    args = fetch.arguments([*argv, "--work", str(tmp_path / "other"), "--overwrite"])
+    with pytest.raises(SystemExit, match="aim_margin 0.02 \\(recorded\\) vs 0.05"):
+        fetch.generator_stage(args, fetch.start(args), lambda: None)
+    assert not (tmp_path / "other" / "vae.pt").exists()
+    # a JSON of an earlier version, which did not record the recipe: its demonstrations had aims widened by 2 cm
+    recorded = json.loads(out.read_text())
+    del recorded["settings"]["demonstration_recipe"]
+    out.write_text(json.dumps(recorded))
+    with pytest.raises(SystemExit, match="differs in demonstration_recipe"):
+        fetch.start(fetch.arguments([*argv, "--work", str(work), "--new-runs"]))
+    recorded["complete"] = True
+    assert status(recorded, "fetch-reach") == "complete; former settings (demonstration recipe differ)"
+    recorded["settings"]["demonstration_recipe"] = {"aim_margin": 0.05}
+    assert status(recorded, "fetch-reach") == "complete"
 
 
 def test_the_results_table_says_which_runs_used_former_settings():

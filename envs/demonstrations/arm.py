@@ -218,6 +218,7 @@ def _make_demonstrations(
         "episodes": int(episodes),
         "drawn": int(drawn),
         "goal": "reached (hindsight: each demonstration's goal is the point it reached)",
+        **spec.demonstration_recipe,
         **details,
         "seconds": round(time.perf_counter() - began, 1),
     }

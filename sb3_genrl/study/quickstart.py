@@ -210,6 +210,8 @@ def quickstart(
     )
     if outside is not None:
         _add_outside_settings(settings, outside, expert, horizon)
+    else:  # what the task's demonstrations depend on besides seed and number, as their dataset records it
+        settings["demonstrations"] |= get_task(task).demonstration_recipe
     with folder_lock(out):
         refuse_conflicts(
             out,
