@@ -39,18 +39,33 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.her import HerReplayBuffer
 
-from benchmarks.fetch_results import BENCHMARK_SEEDS, all_seeds_finished, seed_row, write_result
+from benchmarks.fetch_results import (
+    BENCHMARK_SEEDS,
+    UNRECORDED_DEMONSTRATION_RECIPE,
+    all_seeds_finished,
+    seed_row,
+    write_result,
+)
 from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, SEED
 from sb3_genrl.curves import episode_info
-from sb3_genrl.data import load_arrays
+from sb3_genrl.data import dataset_info, load_arrays
 from sb3_genrl.hyperparams import EVAL_GOAL_SEED, parse_kwargs
 from sb3_genrl.provenance import provenance
 from sb3_genrl.run.checkpoint import resume_state
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 SETTINGS = os.path.join(HERE, "sac_her_fetch.yml")
+
+
+def recorded_recipe(task: str, info: dict) -> dict:
+    """The entries of the task's demonstration recipe that a dataset's ``info`` records (a dataset of an earlier
+    version records none: its Fetch aims were widened by 2 cm)."""
+    keys = get_task(task).demonstration_recipe
+    return {key: info.get(key, UNRECORDED_DEMONSTRATION_RECIPE.get(key)) for key in keys}
+
+
 # what a resumed JSON must share with the run that continues it
-RESUME_KEYS = ("benchmark", "settings", "demonstrations", "eval_states", "eval_seed", "eval_every")
+RESUME_KEYS = ("benchmark", "settings", "demonstrations", "demonstration_recipe", "eval_states", "eval_seed", "eval_every")
 ZOO_ONLY = ("n_timesteps", "policy", "normalize", "replay_buffer_class", "replay_buffer_kwargs", "policy_kwargs")
 
 
@@ -197,6 +212,8 @@ def main(argv: list[str] | None = None) -> None:
         "settings_file": "benchmarks/sac_her_fetch.yml",
         "settings": entry(get_task(args.task).env_id),
         "demonstrations": int(len(episodes_data["rewards"])) if args.variant == "demos" else 0,
+        # the recipe of the dataset (GenRL's, the same demonstrations), as its info records it
+        "demonstration_recipe": None if args.variant == "none" else recorded_recipe(args.task, dataset_info(data)),
         "eval_states": args.eval_states,
         "eval_seed": EVAL_GOAL_SEED,
         "eval_every": args.eval_every,
@@ -206,6 +223,9 @@ def main(argv: list[str] | None = None) -> None:
     if os.path.exists(args.out):  # resumed: only a run of the same settings
         with open(args.out) as file:
             kept = json.load(file)
+        if args.variant == "demos":  # a file of an earlier version, which did not record the recipe
+            kept.setdefault("demonstration_recipe", UNRECORDED_DEMONSTRATION_RECIPE)
+        kept.setdefault("demonstration_recipe", None)
         differ = sorted(key for key in RESUME_KEYS if kept.get(key) != result[key])
         if differ:
             raise SystemExit(f"{args.out} holds another run (it differs in {', '.join(differ)}): give another --out")

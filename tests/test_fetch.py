@@ -451,8 +451,12 @@ def test_sac_her_resumes_only_a_run_of_the_same_settings(tmp_path):
 
     data = make_demonstrations("fetch-reach", 4, tmp_path / "demos", seed=3, n_threads=1, progress_bar=False)
     out = tmp_path / "sac.json"
+    # a file of an earlier version records no recipe: its demonstrations aimed 2 cm beyond the goal region, Reach's
+    # now 5 cm
     out.write_text(json.dumps({"benchmark": "fetch_sac_her_fetch-reach_demos", "eval_states": 7, "runs": []}))
-    with pytest.raises(SystemExit, match="differs in demonstrations, eval_every, eval_seed, eval_states, settings"):
+    with pytest.raises(
+        SystemExit, match="differs in demonstration_recipe, demonstrations, eval_every, eval_seed, eval_states, settings"
+    ):
         fetch_sac_her.main(
             [
                 "--task",
