@@ -716,3 +716,18 @@ def test_a_resumed_benchmark_seed_keeps_the_monitors_rows_up_to_its_checkpoint(t
     train_seed("fetch-reach", str(generator), 0, args, row, lambda: None)
     assert row["resumed_at_episodes"] == [32]
     assert len(read_monitor(folder / MONITOR_FILE)["return"]) == 64
+
+
+def test_the_quickstart_refuses_fetch_demonstrations_of_another_recipe(tmp_path, cli):
+    from sb3_genrl.envs.demonstrations import make_demonstrations
+
+    out = tmp_path / "quickstart"
+    data = make_demonstrations("fetch-reach", 4, out / "demonstrations", seed=0, n_threads=1, progress_bar=False)
+    metadata_file = data / "data" / "metadata.json"
+    metadata = json.loads(metadata_file.read_text())
+    assert metadata["genrl"]["aim_margin"] == 0.05
+    metadata["genrl"]["aim_margin"] = 0.02  # as made by a version whose Reach aims spread over a narrower region
+    metadata_file.write_text(json.dumps(metadata))
+    code, _, err = cli("quickstart", "--task", "fetch-reach", "--out", out, "--demo-episodes", 4, "--no-progress-bar")
+    assert code == 2 and "aim_margin 0.02 (recorded) vs 0.05 (this run)" in err, err
+    assert sorted(path.name for path in out.iterdir()) == ["demonstrations"]  # nothing made before the refusal
