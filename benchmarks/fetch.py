@@ -54,6 +54,7 @@ from sb3_genrl.envs.demonstrations.fetch import (
 from benchmarks.fetch_results import (
     BENCHMARK_SEEDS,
     all_seeds_finished,
+    dataset_recipe,
     recorded_demonstration_recipe,
     seed_row,
     write_result,
@@ -218,7 +219,8 @@ def generator_stage(args: argparse.Namespace, result: dict, write) -> str:
         return path
     data = os.path.join(args.work, "demonstrations")
     if args.data is None and os.path.isdir(data) and os.listdir(data):
-        conflicts = settings_conflicts(data, dataset_info(data), get_task(args.task).demonstration_recipe)
+        recipe = dataset_recipe(args.task, dataset_info(data))  # (a dataset of an earlier version: the 2 cm one)
+        conflicts = settings_conflicts(data, recipe, get_task(args.task).demonstration_recipe)
         if conflicts:
             raise SystemExit(f"{conflicts[0]}: move that dataset away to make it again, or give it as --data")
         args.data = data  # made before the stop (a dataset folder is written as one unit)

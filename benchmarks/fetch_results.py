@@ -92,6 +92,12 @@ UNRECORDED_RECIPE = {"model": "vae", "latent_dim": 10, "beta": 0.001}
 UNRECORDED_DEMONSTRATION_RECIPE = {"aim_margin": 0.02}
 
 
+def dataset_recipe(task: str, info: dict) -> dict:
+    """The entries of ``task``'s demonstration recipe that a dataset's ``info`` records (a dataset of an earlier
+    version records none: it was made with :data:`UNRECORDED_DEMONSTRATION_RECIPE`)."""
+    return {key: info.get(key, UNRECORDED_DEMONSTRATION_RECIPE.get(key)) for key in get_task(task).demonstration_recipe}
+
+
 def recorded_demonstration_recipe(settings: dict) -> dict | None:
     """The recipe of the demonstrations a benchmark JSON's ``settings`` made (None: a given dataset, ``--data``)."""
     if not isinstance(settings.get("demonstrations"), int):

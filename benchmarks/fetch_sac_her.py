@@ -43,6 +43,7 @@ from benchmarks.fetch_results import (
     BENCHMARK_SEEDS,
     UNRECORDED_DEMONSTRATION_RECIPE,
     all_seeds_finished,
+    dataset_recipe,
     seed_row,
     write_result,
 )
@@ -55,13 +56,6 @@ from sb3_genrl.run.checkpoint import resume_state
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 SETTINGS = os.path.join(HERE, "sac_her_fetch.yml")
-
-
-def recorded_recipe(task: str, info: dict) -> dict:
-    """The entries of the task's demonstration recipe that a dataset's ``info`` records (a dataset of an earlier
-    version records none: its Fetch aims were widened by 2 cm)."""
-    keys = get_task(task).demonstration_recipe
-    return {key: info.get(key, UNRECORDED_DEMONSTRATION_RECIPE.get(key)) for key in keys}
 
 
 # what a resumed JSON must share with the run that continues it
@@ -213,7 +207,7 @@ def main(argv: list[str] | None = None) -> None:
         "settings": entry(get_task(args.task).env_id),
         "demonstrations": int(len(episodes_data["rewards"])) if args.variant == "demos" else 0,
         # the recipe of the dataset (GenRL's, the same demonstrations), as its info records it
-        "demonstration_recipe": None if args.variant == "none" else recorded_recipe(args.task, dataset_info(data)),
+        "demonstration_recipe": None if args.variant == "none" else dataset_recipe(args.task, dataset_info(data)),
         "eval_states": args.eval_states,
         "eval_seed": EVAL_GOAL_SEED,
         "eval_every": args.eval_every,
