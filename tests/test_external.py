@@ -48,6 +48,7 @@ from sb3_genrl.run.train import _make_env, _resolve_env_id
 from sb3_genrl.study.quickstart import (
     OUTSIDE_DEMO_STEPS,
     OUTSIDE_POLICY_STEPS,
+    QUICKSTART_PRESET,
     outside_demo_episodes,
     outside_task_settings,
 )
@@ -590,6 +591,14 @@ def test_the_quickstart_api_gives_an_outside_task_its_own_counts(quickstart_sett
     made = quickstart_settings(tmp_path / "quick", task=task, expert=point_expert, horizon=HORIZON)
     # as the command line does: not the package tasks' 4000
     assert made["demonstrations"]["episodes"] == outside_demo_episodes(HORIZON) == 1000
+    # its generator keeps the checkpoint that reconstructs the held-out demonstrations best, after at least 4800
+    # minibatch steps; epochs given are trained as given
+    assert made["generator"] == {
+        "preset": QUICKSTART_PRESET, "epochs": 300, "eval_every": 10, "seed": 0, "selection": "reconstruction",
+        "min_steps": 4800, "even_batches": True,
+    }  # fmt: skip
+    made = quickstart_settings(tmp_path / "quick", task=task, expert=point_expert, horizon=HORIZON, epochs=7)
+    assert (made["generator"]["epochs"], made["generator"]["min_steps"]) == (7, 0)
 
 
 def test_quickstart_refuses_an_expert_for_a_package_task_and_an_outside_task_without_one(cli, tmp_path):

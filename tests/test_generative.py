@@ -19,7 +19,13 @@ from sb3_genrl.generative import (
     make_generator,
     train_generator,
 )
-from sb3_genrl.generative.common import MIN_STD, normalisation_statistics, selection_mse, split_train_validation
+from sb3_genrl.generative.common import (
+    MIN_STD,
+    minibatch_indices,
+    normalisation_statistics,
+    selection_mse,
+    split_train_validation,
+)
 from sb3_genrl.generative.synthetic import sine_ramp_basis, sine_ramp_trajectories
 
 HORIZON, ACTION_DIM = 20, 3
@@ -348,6 +354,9 @@ def test_train_generator_and_cli_write_loadable_models(tmp_path, capsys):
         (("--lr", "-1"), "argument --lr: must be a finite number > 0, got -1.0"),
         (("--lr", "inf"), "argument --lr: must be a finite number > 0, got inf"),
         (("--epochs", "0"), "argument --epochs: must be an integer >= 1, got 0"),
+        (("--min-steps", "-1"), "argument --min-steps: must be an integer >= 0, got -1"),
+        (("--selection", "best"), "argument --selection: invalid choice: 'best'"),
+        (("--preset", "GAN1", "--selection", "reconstruction"), "selection='reconstruction' needs a model with an encoder"),
         (("--seed", "-1"), "argument --seed: must be an integer between 0 and 4294967295, got -1"),
         (("--device", "bogus"), "argument --device: must be 'auto' or a torch device"),
         (("--out", "."), "argument --out: '.' is a folder; expected a file name"),
@@ -370,6 +379,9 @@ def test_train_generator_checks_arguments_before_training(tmp_path):
         ({"batch_size": 2.5}, r"batch_size must be an integer >= 1, got 2.5 \(float\)"),
         ({"lr": float("nan")}, "lr must be a finite number > 0"),
         ({"out": tmp_path / "folder"}, "is a folder; expected a file name"),
+        ({"min_steps": -1}, "min_steps must be an integer >= 0, got -1"),
+        ({"selection": "best"}, "selection must be one of"),
+        ({"preset": "GAN1", "selection": "reconstruction"}, "InfoGAN has none"),
     ):
         with pytest.raises(ValueError, match=message):
             train_generator(data, **kwargs)
@@ -550,3 +562,85 @@ def test_path_weight_trains_a_model_that_saves_and_loads_with_it(family, tmp_pat
     loaded = load(tmp_path / "path.pt", device="cpu")
     assert loaded.path_weight == 4.0
     np.testing.assert_array_equal(loaded.decode(latents), models[1].decode(latents))
+
+
+def test_reconstruction_selection_keeps_the_checkpoint_that_reconstructs_the_held_out_split_best(family, tmp_path):
+    train = family[0][:400]
+    model = BetaVAE(HORIZON, ACTION_DIM, 2, beta=0.01, device="cpu").fit(
+        train, epochs=20, seed=3, progress_bar=False, eval_every=2, selection="reconstruction"
+    )
+    assert model.selection == "reconstruction"
+    errors = {entry["epoch"]: entry["selection_mse"] for entry in model.history}
+    assert model.best_epoch == min(errors, key=errors.get)
+    # the held-out split fit() draws first from its seed, decoded from the posterior means by hand (the brute force)
+    _, held_out = split_train_validation(train, 0.1, np.random.default_rng(3))
+    with torch.no_grad():
+        normalised = model.normalise(torch.as_tensor(held_out))
+        means, _ = model.networks["encoder"](normalised)
+        decoded = model.denormalise(model.networks["decoder"](means).reshape(held_out.shape))
+    brute_force = float(((decoded.double() - torch.as_tensor(held_out).double()) ** 2).mean())
+    assert model.reconstruction_mse(held_out) == pytest.approx(brute_force, rel=1e-5)
+    assert errors[model.best_epoch] == pytest.approx(brute_force, rel=1e-5)  # the restored weights are the best's
+    # the paper's selection scores other errors (generated trajectories against their nearest held-out ones)
+    paper = BetaVAE(HORIZON, ACTION_DIM, 2, beta=0.01, device="cpu").fit(
+        train, epochs=20, seed=3, progress_bar=False, eval_every=2
+    )
+    assert paper.selection == "prior" and [entry["selection_mse"] for entry in paper.history] != list(errors.values())
+    # the choice is saved with the model; a file written before it existed reads as the paper's
+    model.save(tmp_path / "vae.pt")
+    assert load(tmp_path / "vae.pt").selection == "reconstruction"
+    with pytest.raises(ValueError, match="InfoGAN has none"):
+        InfoGAN(HORIZON, ACTION_DIM, 2, info_weight=1.5, device="cpu").fit(train, epochs=1, selection="reconstruction")
+
+
+def test_min_steps_raises_the_epochs_of_a_small_dataset(family, monkeypatch):
+    steps = []
+    original = BetaVAE._train_step
+
+    def counted(self, *args, **kwargs):
+        steps.append(1)
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(BetaVAE, "_train_step", counted)
+    # 100 trajectories: 90 to train on, in minibatches of 32, 32 and 26: 3 steps an epoch
+    data = family[0][:100]
+    model = BetaVAE(HORIZON, ACTION_DIM, 2, beta=0.01, device="cpu")
+    model.fit(data, epochs=2, batch_size=32, seed=0, progress_bar=False, eval_every=1, min_steps=31)
+    assert len(steps) == 33 and model.history[-1]["epoch"] == 11  # ceil(31 / 3) epochs
+    steps.clear()
+    model.fit(data, epochs=12, batch_size=32, seed=0, progress_bar=False, eval_every=1, min_steps=31)
+    assert len(steps) == 36 and model.history[-1]["epoch"] == 12  # enough epochs already: as given
+    steps.clear()
+    model.fit(data, epochs=2, batch_size=32, seed=0, progress_bar=False, eval_every=1)
+    assert len(steps) == 6
+
+
+@pytest.mark.parametrize(("n", "batch_size"), [(523, 256), (270, 256), (90, 32), (512, 256), (7, 3), (1, 4)])
+def test_even_minibatches_cover_the_permutation_in_as_many_batches_of_nearly_equal_sizes(n, batch_size):
+    permutation = np.random.default_rng(0).permutation(n)
+    plain = minibatch_indices(n, batch_size, permutation)
+    even = minibatch_indices(n, batch_size, permutation, even=True)
+    sizes = [len(batch) for batch in even]
+    if n < 2:
+        assert plain == even == []  # batch norm needs two
+        return
+    assert len(even) == -(-n // batch_size) and max(sizes) <= batch_size and max(sizes) - min(sizes) <= 1
+    np.testing.assert_array_equal(np.concatenate(even), permutation)  # every index once, in the permutation's order
+    # the plain split: full batches and the remainder (523 = 256 + 256 + 11, against 175 + 174 + 174), a remainder
+    # of one dropped (7 = 3 + 3 + 1, against 3 + 2 + 2)
+    remainder = n % batch_size
+    assert [len(batch) for batch in plain] == [batch_size] * (n // batch_size) + ([remainder] if remainder > 1 else [])
+
+
+def test_even_batches_train_on_every_trajectory_in_batches_of_nearly_equal_sizes(family, monkeypatch):
+    sizes = []
+    original = BetaVAE._train_step
+
+    def recorded(self, batch, *args, **kwargs):
+        sizes.append(len(batch))
+        return original(self, batch, *args, **kwargs)
+
+    monkeypatch.setattr(BetaVAE, "_train_step", recorded)
+    model = BetaVAE(HORIZON, ACTION_DIM, 2, beta=0.01, device="cpu")
+    model.fit(family[0][:100], epochs=2, batch_size=32, seed=0, progress_bar=False, even_batches=True)
+    assert sizes == [30, 30, 30] * 2  # 90 training trajectories: 3 batches of 30, against 32 + 32 + 26

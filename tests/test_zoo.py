@@ -3,7 +3,6 @@ on hockey with a small untrained generator."""
 
 from __future__ import annotations
 
-import inspect
 import json
 from pathlib import Path
 
@@ -298,12 +297,13 @@ def test_a_changed_generator_is_refused(hockey_generator):
         latent_action(gym.make(ENV_ID), generator=hockey_generator, generator_sha256="0" * 64)
 
 
-def test_the_cached_generator_is_the_quickstarts():
-    from sb3_genrl.study.quickstart import DEMO_EPISODES, _stage_settings, quickstart, quickstart_demo_episodes
+def test_the_cached_generator_is_the_quickstarts(quickstart_settings, tmp_path):
+    from sb3_genrl.study.quickstart import DEMO_EPISODES, quickstart_demo_episodes
     from sb3_genrl.zoo import generators
 
-    defaults = inspect.signature(quickstart).parameters
-    stage = _stage_settings("hockey", 1, defaults["epochs"].default, 1, 2, 2, {}, 1, 1, generators.SEED, False)["generator"]
+    stage = quickstart_settings(tmp_path / "quick", task="hockey")["generator"]  # the quickstart's defaults
+    # a package task's generator: the paper's checkpoint selection, its epochs as they are
+    assert "selection" not in stage and "min_steps" not in stage
     recorded = generators.generator_settings("hockey")
     # the quickstart's recipe, at the generator stage's default count (hockey's quickstart alone makes fewer)
     assert quickstart_demo_episodes("basketball") == DEMO_EPISODES > quickstart_demo_episodes("hockey")
@@ -313,7 +313,7 @@ def test_the_cached_generator_is_the_quickstarts():
         stage["preset"],
         stage["eval_every"],
     )
-    assert recorded["seed"] == defaults["seed"].default == stage["seed"]
+    assert recorded["seed"] == generators.SEED == stage["seed"]
 
 
 def test_a_demonstration_callback_gets_the_cached_generators_demonstrations(monkeypatch, tmp_path, hockey_generator):

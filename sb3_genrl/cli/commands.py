@@ -150,6 +150,9 @@ def train_generator_command(args: argparse.Namespace) -> int:
         lr=args.lr,
         seed=args.seed,
         eval_every=args.eval_every,
+        selection=args.selection,
+        min_steps=args.min_steps,
+        even_batches=args.even_batches,
         out=args.out,
         tensorboard_log=args.tensorboard_log and str(args.tensorboard_log),
         progress_bar=not args.no_progress_bar,
@@ -158,7 +161,8 @@ def train_generator_command(args: argparse.Namespace) -> int:
     best = next((entry for entry in generator.history if entry["epoch"] == generator.best_epoch), {})
     print(
         f"{type(generator).__name__} (T={generator.horizon}, M={generator.action_dim}, N_alpha={generator.latent_dim})"
-        f" best epoch {generator.best_epoch}, selection MSE {best.get('selection_mse', float('nan')):.6g}"
+        f" best epoch {generator.best_epoch} of {generator.history[-1]['epoch'] if generator.history else 0},"
+        f" {generator.selection} selection MSE {best.get('selection_mse', float('nan')):.6g}"
         f" -> {args.out}"
     )
     return 0

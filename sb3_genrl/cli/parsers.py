@@ -31,6 +31,7 @@ from sb3_genrl.envs.demonstrations import DEFAULT_NOISE, refuse_existing_output
 from sb3_genrl.envs.external import load_expert, resolve_task
 from sb3_genrl.generative import PRESETS
 from sb3_genrl.generative.presets import TASK_PRESETS
+from sb3_genrl.generative.torch_generator import SELECTIONS
 from sb3_genrl.hyperparams import known_env_ids, load_hyperparams
 from sb3_genrl.metrics.scorecard import NOT_CONVERGED_PRECISION, RANK_MEASURES
 from sb3_genrl.run.checkpoint import CHECKPOINT_EVERY
@@ -234,6 +235,24 @@ def add_train_generator(sub: argparse._SubParsersAction) -> None:
     gen.add_argument("--lr", type=option(check_positive_float, float), default=2e-4, help="Adam learning rate (2e-4)")
     _seed_option(gen, "training seed")
     gen.add_argument("--eval-every", type=COUNT, default=10, help="epochs between model-selection evaluations")
+    gen.add_argument(
+        "--selection",
+        choices=SELECTIONS,
+        default="prior",
+        help="how the kept checkpoint is chosen: 'prior' (the paper's: generated trajectories against their nearest "
+        "held-out ones) or 'reconstruction' (a VAE: the held-out trajectories decoded from their posterior means)",
+    )
+    gen.add_argument(
+        "--min-steps",
+        type=option(check_int, int, minimum=0),
+        default=0,
+        help="at least this many minibatch steps: on a small dataset the epochs are raised to reach them (default 0)",
+    )
+    gen.add_argument(
+        "--even-batches",
+        action="store_true",
+        help="minibatches of nearly equal sizes (at most --batch-size) instead of full ones and a remainder",
+    )
     _device_option(gen)
     gen.add_argument("--tensorboard-log", type=OUT_DIR, default=None, help="TensorBoard log folder")
     _progress_option(gen)
@@ -463,7 +482,13 @@ def add_quickstart(sub: argparse._SubParsersAction) -> None:
         f"from outside the package: {OUTSIDE_DEMO_EPISODES}, fewer above "
         f"{OUTSIDE_DEMO_STEPS // OUTSIDE_DEMO_EPISODES} steps a demonstration: {OUTSIDE_DEMO_STEPS} steps in all)",
     )
-    quick.add_argument("--epochs", type=COUNT, default=300, help="beta-VAE training epochs (default 300)")
+    quick.add_argument(
+        "--epochs",
+        type=COUNT,
+        default=None,
+        help="generator training epochs (default 300; a task from outside the package: at least 4800 minibatch steps, "
+        "its epochs raised on a small dataset; given: exactly these epochs)",
+    )
     own = ", ".join(
         f"{name} {load_hyperparams('genrl', spec.env_id)['n_timesteps']}"
         for name, spec in TASKS.items()

@@ -6,6 +6,8 @@ These are pure array-in/array-out functions; the epoch loop that uses them lives
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 # A joint whose training actions never change gets a unit scale instead of a zero one.
@@ -107,9 +109,12 @@ def selection_mse(generated: np.ndarray, reference: np.ndarray, chunk_size: int 
     return float(np.maximum(best, 0.0).mean() / generated.shape[1])
 
 
-def minibatch_indices(n: int, batch_size: int, permutation: np.ndarray) -> list[np.ndarray]:
-    """Split a permutation of ``range(n)`` into minibatches, dropping a last batch of one (batch norm needs two)."""
+def minibatch_indices(n: int, batch_size: int, permutation: np.ndarray, *, even: bool = False) -> list[np.ndarray]:
+    """Split a permutation of ``range(n)`` into minibatches of ``batch_size`` and a remainder, dropping a last batch of
+    one (batch norm needs two); ``even``: into as many batches, of sizes that differ by at most one."""
     if batch_size < 2:
         raise ValueError(f"batch_size must be at least 2 (batch normalisation), got {batch_size}")
+    if even:
+        return [batch for batch in np.array_split(permutation[:n], math.ceil(n / batch_size)) if len(batch) >= 2]
     batches = [permutation[start : start + batch_size] for start in range(0, n, batch_size)]
     return [batch for batch in batches if len(batch) >= 2]

@@ -73,7 +73,14 @@ def save_generator(generator: TorchTrajectoryGenerator, path: str | os.PathLike[
         "class": type(generator).__name__,
         "sb3_genrl_version": __version__,
         "config": json.dumps(generator.config()),
-        "history": json.dumps({"history": generator.history, "best_epoch": generator.best_epoch, "seed": generator.seed}),
+        "history": json.dumps(
+            {
+                "history": generator.history,
+                "best_epoch": generator.best_epoch,
+                "seed": generator.seed,
+                "selection": generator.selection,
+            }
+        ),
         "state": generator.state_tensors(),
     }
     payload["sha256"] = payload_digest(payload)

@@ -31,6 +31,8 @@ PRESETS: dict[str, dict[str, Any]] = _grid()
 # BetaVAE's path_weight) weighed with the per-step error lets its reconstructions reach their aims far more often;
 # its weight is the one whose mean fitted to the demonstrations solves the most tuning states over the four tasks
 # (all measured in docs/guide/tasks.md).
+# The class of each model kind.
+GENERATOR_KINDS: dict[str, type[TorchTrajectoryGenerator]] = {"vae": BetaVAE, "gan": InfoGAN}
 TASK_PRESETS: dict[str, dict[str, Any]] = {"VAE-FETCH": {"model": "vae", "latent_dim": 10, "beta": 0.001, "path_weight": 1.0}}
 
 

@@ -38,5 +38,6 @@ def load(path: str | os.PathLike[str], device: torch.device | str = "auto") -> T
     generator.history = extra.get("history", [])
     generator.best_epoch = extra.get("best_epoch")
     generator.seed = extra.get("seed")
+    generator.selection = extra.get("selection", "prior")  # a file written before the choice existed: the paper's
     generator.saved_version = payload["sb3_genrl_version"]
     return generator

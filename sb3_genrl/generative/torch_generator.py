@@ -17,6 +17,7 @@ from stable_baselines3.common.utils import get_device
 from torch import nn
 from tqdm.auto import tqdm
 
+from sb3_genrl.checks import check_int
 from sb3_genrl.generative.base import Prior, TrajectoryGenerator
 from sb3_genrl.generative.common import (
     STD_FLOOR,
@@ -29,7 +30,22 @@ from sb3_genrl.generative.common import (
 from sb3_genrl.generative.defaults import BATCH_SIZE, EPOCHS, LEARNING_RATE, SELECTION_SAMPLES
 from sb3_genrl.generative.file_format import save_generator
 
+# How :meth:`TorchTrajectoryGenerator.fit` chooses the checkpoint it keeps: "prior", paper appendix B's (trajectories
+# generated from fixed prior draws against their nearest held-out ones), or "reconstruction" (the held-out trajectories
+# decoded from their posterior means, a model with an encoder's: what GenRL's fit to the demonstrations starts from).
+SELECTIONS = ("prior", "reconstruction")
+
 SelfTorchTrajectoryGenerator = TypeVar("SelfTorchTrajectoryGenerator", bound="TorchTrajectoryGenerator")
+
+
+def check_selection(model: type | object, selection: str) -> None:
+    """Refuse a checkpoint selection that is not one of :data:`SELECTIONS`, or ``"reconstruction"`` for a model
+    (class or instance) without an encoder."""
+    if selection not in SELECTIONS:
+        raise ValueError(f"selection must be one of {SELECTIONS}, got {selection!r}")
+    if selection == "reconstruction" and not model.has_encoder:  # type: ignore[union-attr]
+        name = model.__name__ if isinstance(model, type) else type(model).__name__
+        raise ValueError(f"selection='reconstruction' needs a model with an encoder (a VAE); {name} has none: use 'prior'")
 
 
 def _summary_writer(log_dir: str | None) -> Any:
@@ -63,6 +79,7 @@ class TorchTrajectoryGenerator(TrajectoryGenerator, abc.ABC):
     """
 
     decoder_name: str = "decoder"
+    has_encoder = False  # whether reconstruction_mse (and fit's selection="reconstruction") is available
 
     def __init__(
         self,
@@ -84,6 +101,7 @@ class TorchTrajectoryGenerator(TrajectoryGenerator, abc.ABC):
         self.action_std = torch.ones(self.horizon, self.action_dim, device=self.device)
         self.history: list[dict[str, float]] = []
         self.best_epoch: int | None = None
+        self.selection = "prior"  # the checkpoint's selection (SELECTIONS) of the last fit
         self.seed: int | None = None
         self.saved_version: str | None = None  # sb3-genrl version that wrote the file this model was loaded from
 
@@ -168,12 +186,18 @@ class TorchTrajectoryGenerator(TrajectoryGenerator, abc.ABC):
         device: torch.device | str | None = None,
         selection_samples: int = SELECTION_SAMPLES,
         eval_every: int = 10,
+        selection: str = "prior",
+        min_steps: int = 0,
+        even_batches: bool = False,
     ) -> SelfTorchTrajectoryGenerator:
         """Train from a fresh initialisation drawn from ``seed`` and keep the best checkpoint (paper appendix B).
 
-        Every ``eval_every`` epochs (and after the last one) ``selection_samples`` trajectories generated from a fixed
-        set of prior samples are compared with the held-out trajectories by :func:`selection_mse`; the weights with
-        the lowest error are restored at the end. Without a held-out split the last weights are kept.
+        Every ``eval_every`` epochs (and after the last one) the model is scored on the held-out trajectories, and the
+        weights with the lowest error are restored at the end. With ``selection="prior"`` (paper appendix B)
+        ``selection_samples`` trajectories generated from a fixed set of prior samples are compared with the held-out
+        trajectories by :func:`selection_mse`; with ``selection="reconstruction"`` (a model with an encoder) the error
+        is that of the held-out trajectories decoded from their posterior means (:meth:`reconstruction_mse`). Without a
+        held-out split the last weights are kept.
 
         :param trajectories: ``(N, T, M)`` demonstrations in raw action units
         :param epochs: passes over the training split (paper: 5000)
@@ -186,19 +210,31 @@ class TorchTrajectoryGenerator(TrajectoryGenerator, abc.ABC):
         :param device: torch device or ``"auto"``; ``None`` (default) keeps the device the model was built on
         :param selection_samples: generated trajectories per model-selection evaluation (paper: 100)
         :param eval_every: epochs between model-selection evaluations
+        :param selection: how the checkpoint is chosen, one of :data:`SELECTIONS` (default ``"prior"``, the paper's)
+        :param min_steps: at least this many minibatch steps: on a dataset too small for ``epochs`` to reach them, the
+            epochs are raised until they do (default 0: ``epochs`` as given)
+        :param even_batches: split each epoch into minibatches of nearly equal sizes (at most ``batch_size``) instead
+            of full ones and a remainder, which can be a handful of trajectories (a step on a few trajectories weighs
+            as much as one on a full batch, and batch normalisation's statistics of those few are noisy)
         :return: this model, trained; per evaluation ``self.history`` holds the epoch, its mean losses and the
-            selection MSE (in squared raw action units), and ``self.best_epoch`` the restored epoch
+            selection MSE (the selection's error, in squared raw action units), and ``self.best_epoch`` the restored
+            epoch
         """
         data = check_trajectories(trajectories, self.horizon, self.action_dim)
         for name, value in (("epochs", epochs), ("selection_samples", selection_samples), ("eval_every", eval_every)):
             if int(value) != value or value < 1:
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
+        check_selection(self, selection)
+        check_int(min_steps, "min_steps", minimum=0)
         if not 0 < lr < math.inf:
             raise ValueError(f"lr must be positive and finite, got {lr}")
         self.seed = int(np.random.default_rng().integers(2**31)) if seed is None else int(seed)
         rng = np.random.default_rng(self.seed)
         train, held_out = split_train_validation(data, validation_fraction, rng)
-        minibatch_indices(len(train), batch_size, np.arange(len(train)))  # validates batch_size early
+        # validates batch_size early
+        batches = len(minibatch_indices(len(train), batch_size, np.arange(len(train)), even=even_batches))
+        epochs = max(int(epochs), math.ceil(int(min_steps) / max(batches, 1)))
+        self.selection = selection
 
         self._reset(self.seed, self.device if device is None else device)
         mean, std = normalisation_statistics(train, std_floor=self.std_floor)
@@ -219,6 +255,7 @@ class TorchTrajectoryGenerator(TrajectoryGenerator, abc.ABC):
                 noise_generator,
                 epochs=epochs,
                 batch_size=batch_size,
+                even_batches=bool(even_batches),
                 eval_every=eval_every,
                 progress_bar=progress_bar,
                 writer=writer,
@@ -242,6 +279,7 @@ class TorchTrajectoryGenerator(TrajectoryGenerator, abc.ABC):
         *,
         epochs: int,
         batch_size: int,
+        even_batches: bool,
         eval_every: int,
         progress_bar: bool,
         writer: Any,
@@ -250,13 +288,13 @@ class TorchTrajectoryGenerator(TrajectoryGenerator, abc.ABC):
         self.history, self.best_epoch = [], None
         best_error, best_state = math.inf, None
         for epoch in tqdm(range(1, epochs + 1), disable=not progress_bar, desc=type(self).__name__, unit="epoch"):
-            losses = self._train_epoch(train, batch_size, optimizers, rng, noise_generator)
+            losses = self._train_epoch(train, batch_size, optimizers, rng, noise_generator, even_batches)
             if writer is not None:
                 for name, value in losses.items():
                     writer.add_scalar(f"train/{name}", value, epoch)
             if epoch % eval_every != 0 and epoch != epochs:
                 continue
-            error = selection_mse(self.decode(selection_latents), held_out) if len(held_out) else math.nan
+            error = self._selection_error(selection_latents, held_out) if len(held_out) else math.nan
             self.history.append({"epoch": epoch, **losses, "selection_mse": error})
             if writer is not None and len(held_out):
                 writer.add_scalar("eval/selection_mse", error, epoch)
@@ -264,6 +302,17 @@ class TorchTrajectoryGenerator(TrajectoryGenerator, abc.ABC):
                 best_error, self.best_epoch = error, epoch
                 best_state = {key: value.detach().clone() for key, value in self.networks.state_dict().items()}
         return best_state
+
+    def _selection_error(self, selection_latents: np.ndarray, held_out: np.ndarray) -> float:
+        """The error :meth:`fit` selects the checkpoint by (:attr:`selection`), in squared raw action units."""
+        if self.selection == "reconstruction":
+            return self.reconstruction_mse(held_out)
+        return selection_mse(self.decode(selection_latents), held_out)
+
+    def reconstruction_mse(self, trajectories: np.ndarray) -> float:
+        """Mean squared error, per element in raw action units, of raw ``(n, T, M)`` trajectories decoded from their
+        posterior means; only a model with an encoder has one."""
+        raise NotImplementedError(f"{type(self).__name__} has no encoder: no reconstruction error")
 
     def _reset(self, seed: int, device: torch.device | str) -> None:
         """Rebuild the networks on ``device`` with initial weights drawn from ``seed`` (global torch RNG untouched)."""
@@ -279,12 +328,14 @@ class TorchTrajectoryGenerator(TrajectoryGenerator, abc.ABC):
         optimizers: list[torch.optim.Optimizer],
         rng: np.random.Generator,
         noise_generator: torch.Generator,
+        even_batches: bool = False,
     ) -> dict[str, float]:
-        """One pass over the shuffled training split; returns the losses averaged over its samples."""
+        """One pass over the shuffled training split (:func:`minibatch_indices`); returns the losses averaged over its
+        samples."""
         self.networks.train()
         sums: dict[str, float] = defaultdict(float)
         count = 0
-        for indices in minibatch_indices(len(train), batch_size, rng.permutation(len(train))):
+        for indices in minibatch_indices(len(train), batch_size, rng.permutation(len(train)), even=even_batches):
             batch = train[torch.as_tensor(indices, device=self.device)]
             for name, value in self._train_step(batch, optimizers, noise_generator).items():
                 sums[name] += value * len(indices)

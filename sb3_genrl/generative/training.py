@@ -9,11 +9,18 @@ from typing import Any
 import numpy as np
 import torch
 
-from sb3_genrl.checks import check_device, check_output_file, check_positive_float, check_positive_int, check_seed
+from sb3_genrl.checks import (
+    check_device,
+    check_int,
+    check_output_file,
+    check_positive_float,
+    check_positive_int,
+    check_seed,
+)
 from sb3_genrl.data import load_trajectories
 from sb3_genrl.generative.defaults import BATCH_SIZE, EPOCHS, LEARNING_RATE, SELECTION_SAMPLES
-from sb3_genrl.generative.presets import PRESETS, make_generator
-from sb3_genrl.generative.torch_generator import TorchTrajectoryGenerator
+from sb3_genrl.generative.presets import GENERATOR_KINDS, PRESETS, TASK_PRESETS, make_generator
+from sb3_genrl.generative.torch_generator import TorchTrajectoryGenerator, check_selection
 
 
 def train_generator(
@@ -32,6 +39,9 @@ def train_generator(
     validation_fraction: float = 0.1,
     eval_every: int = 10,
     selection_samples: int = SELECTION_SAMPLES,
+    selection: str = "prior",
+    min_steps: int = 0,
+    even_batches: bool = False,
     out: str | os.PathLike[str] | None = None,
     tensorboard_log: str | None = None,
     progress_bar: bool = False,
@@ -56,6 +66,13 @@ def train_generator(
     :param validation_fraction: held-out fraction for model selection
     :param eval_every: epochs between model-selection evaluations
     :param selection_samples: generated trajectories per evaluation (paper: 100)
+    :param selection: how the checkpoint is chosen (:data:`~sb3_genrl.generative.torch_generator.SELECTIONS`):
+        ``"prior"``, paper appendix B's (generated trajectories against their nearest held-out ones), or
+        ``"reconstruction"`` (a VAE: the held-out trajectories decoded from their posterior means)
+    :param min_steps: at least this many minibatch steps: on a small dataset the epochs are raised until they are
+        reached (default 0: ``epochs`` as given)
+    :param even_batches: minibatches of nearly equal sizes (at most ``batch_size``) instead of full ones and a
+        remainder (see :meth:`~sb3_genrl.generative.torch_generator.TorchTrajectoryGenerator.fit`)
     :param out: file to save the trained generator to (``None``: not saved)
     :param tensorboard_log: TensorBoard log directory
     :param progress_bar: show a progress bar
@@ -70,6 +87,7 @@ def train_generator(
     ):
         check_positive_int(value, name)
     check_positive_float(lr, "lr")
+    check_int(min_steps, "min_steps", minimum=0)
     check_device(device)
     if seed is not None:
         check_seed(seed)
@@ -78,11 +96,15 @@ def train_generator(
         _refuse_input_as_output(data, out)
     if preset is not None:
         spec: dict[str, Any] = {"preset_or_kind": preset}
-        preset_model = PRESETS.get(preset.upper(), {}).get("model")
+        preset_model = (PRESETS | TASK_PRESETS).get(preset.upper(), {}).get("model")
         if model is not None and preset_model is not None and model.lower() != preset_model:
             raise ValueError(f"preset {preset} is a {preset_model} model, got model={model!r}")
+        kind = preset_model or model
     else:
         spec = {"preset_or_kind": model or "vae"}
+        kind = model or "vae"
+    if kind is not None and kind.lower() in GENERATOR_KINDS:
+        check_selection(GENERATOR_KINDS[kind.lower()], selection)
     trajectories = load_trajectories(data)
     generator = make_generator(
         **spec,
@@ -106,6 +128,9 @@ def train_generator(
         device=device,
         selection_samples=selection_samples,
         eval_every=eval_every,
+        selection=selection,
+        min_steps=min_steps,
+        even_batches=even_batches,
     )
     if out is not None:
         generator.save(os.fspath(out))

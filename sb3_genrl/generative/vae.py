@@ -49,6 +49,7 @@ class BetaVAE(TorchTrajectoryGenerator):
     """
 
     decoder_name = "decoder"
+    has_encoder = True
 
     def __init__(
         self,
@@ -98,6 +99,13 @@ class BetaVAE(TorchTrajectoryGenerator):
             normalised = self.normalise(torch.as_tensor(trajectories, device=self.device))
             mean, log_std = self.networks["encoder"](normalised)
         return mean.cpu().numpy(), log_std.cpu().numpy()
+
+    def reconstruction_mse(self, trajectories: np.ndarray) -> float:
+        """Mean squared error, per element in raw action units, of raw ``(n, T, M)`` trajectories decoded from their
+        posterior means (eval mode)."""
+        trajectories = np.asarray(trajectories, dtype=np.float32)
+        mean, _ = self.encode(trajectories)
+        return float(np.mean((self.decode(mean).astype(np.float64) - trajectories) ** 2))
 
     def _train_step(
         self, batch: torch.Tensor, optimizers: list[torch.optim.Optimizer], generator: torch.Generator
