@@ -10,7 +10,9 @@ and a rerun with others is refused before any work):
    (:func:`~sb3_genrl.envs.demonstrations.record_demonstrations`, seed 0, in Meta-World's training env, which runs on
    after a success), kept when their open-loop replay succeeds;
 2. a generator of the quickstart's Meta-World preset (:data:`sb3_genrl.envs.metaworld.GENERATOR_PRESET`), ``--epochs``,
-   seed 0;
+   seed 0, trained as the committed run trained it: the paper's checkpoint selection and epochs, not the quickstart's
+   training of a task from outside the package
+   (:data:`~sb3_genrl.study.quickstart.OUTSIDE_GENERATOR_TRAINING`, newer than that run);
 3. the expert closed loop, unperturbed, from the held-out resets, and its actions replayed open loop from the same
    resets; then what the generator can reproduce: the first 200 demonstrations encoded to their latent codes, decoded
    and replayed open loop from their own resets (the share that succeeds);
