@@ -107,7 +107,7 @@ VIDEO = {"goals": 4, "width": 320, "height": 240, "fps": 10, "every": 2}
 # sizes (not 256 and a remainder of 14), and keeps the checkpoint whose reconstructions of the held-out demonstrations
 # are closest (GenRL's fit starts from the demonstrations' posterior means; the paper's selection kept epoch 10-20).
 # On push-back-v3 the reconstructions of new demonstrations, replayed open loop, then succeed on 0.605 instead of 0.00
-# (docs/guide/your_task.md, "The generator of a task from outside the package").
+# (docs/guide/your_task.md, "2. A generator").
 OUTSIDE_GENERATOR_TRAINING: dict[str, Any] = {"selection": "reconstruction", "min_steps": 4800, "even_batches": True}
 # An outside task's horizon, as the expert's success settles (expert_horizon), kept for a rerun
 HORIZON_FILE = "horizon.json"
