@@ -44,8 +44,8 @@ def _run_benchmark(script: str, argv: list[str], cwd: Path) -> subprocess.Comple
         ("genrl.py", ["--library-defaults"], "--library-defaults needs --out"),
         (
             "genrl.py",
-            ["--task", "basketball", "--genrl-kwargs", '{"hindsight_kwargs": {"history": 0}}', "--out", "r.json"],
-            "argument --genrl-kwargs: hindsight_kwargs['history'] must be an integer >= 1, got 0",
+            ["--task", "basketball", "--genrl-kwargs", '{"hindsight_kwargs": {"history": -1}}', "--out", "r.json"],
+            "argument --genrl-kwargs: hindsight_kwargs['history'] must be an integer >= 0, got -1",
         ),
         ("genrl.py", ["--genrl-kwargs", '{"hindsigt": true}', "--out", "r.json"], "hindsigt"),
         (

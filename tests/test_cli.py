@@ -120,12 +120,12 @@ def test_help_lists_the_commands_in_workflow_order_and_version(cli):
                 "--episodes",
                 "8",
                 "--genrl-kwargs",
-                '{"hindsight_kwargs": {"history": 0}}',
+                '{"hindsight_kwargs": {"history": -1}}',
                 "--out",
                 "D",
             ),
             "argument --e-step/--genrl-kwargs: hockey's entry in hyperparams/genrl.yml, --e-step trpo, --genrl-kwargs: "
-            "hindsight_kwargs['history'] must be an integer >= 1, got 0",
+            "hindsight_kwargs['history'] must be an integer >= 0, got -1",
         ),
         (
             (

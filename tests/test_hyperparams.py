@@ -76,7 +76,7 @@ def test_genrl_settings_of_the_tasks():
     ("entry", "message"),
     [
         ({"n_timesteps": 100, "n_steps": 8, "normalize": True}, "'normalize' is not a GenRL setting"),
-        ({"n_timesteps": 100, "n_steps": 8, "hindsight_kwargs": {"history": 0}}, r"hindsight_kwargs\['history'\]"),
+        ({"n_timesteps": 100, "n_steps": 8, "hindsight_kwargs": {"history": -1}}, r"hindsight_kwargs\['history'\]"),
         ({"n_timesteps": 100, "n_steps": 8, "policy": "CnnPolicy"}, "unknown policy 'CnnPolicy'"),
         ({"n_timesteps": 100, "n_steps": 8, "e_step": "kl_penalty", "hindsight_kwargs": {}}, "needs e_step='trpo'"),
         ({"n_steps": 8}, "needs n_timesteps"),

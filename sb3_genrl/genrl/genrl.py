@@ -99,7 +99,8 @@ class GenRL(OnPolicyAlgorithm):
         ``rollout_buffer_class`` slot), and the settings (``{}``: the defaults) are those of
         :class:`~sb3_genrl.genrl.hindsight.HindsightRelabelling` (``history`` and the ``regression_*``) and of
         :class:`~sb3_genrl.genrl.refits.Refits` (``refit_every``, ``refit_start``, ``refit_steps``). Needs
-        ``e_step="trpo"``, a Box context and ``info["hindsight"]`` (the refits also ``info["is_success"]``)
+        ``e_step="trpo"``, a Box context and ``info["hindsight"]`` (not with ``history: 0``, which relabels no pull: the
+        refits alone, or the kept pulls); the refits also need ``info["is_success"]``
     :param latent_critic_kwargs: take the E-step's baseline from a critic over latent actions fitted to the pulls of
         the last batches, ``A = r - E_{alpha ~ pi}[Q(s0, alpha)]``, instead of ``A = r - V(s0)`` (default None: the
         paper's ``V``): the arguments of :class:`~sb3_genrl.genrl.latent_critic.LatentCritic` (``{}``: its defaults)
@@ -270,7 +271,7 @@ class GenRL(OnPolicyAlgorithm):
         self.rollout_buffer_kwargs = {}
         if hindsight is not None:
             self.rollout_buffer_class = HindsightRolloutBuffer
-            self.rollout_buffer_kwargs = {"success": bool(hindsight["refit_every"])}
+            self.rollout_buffer_kwargs = {"success": bool(hindsight["refit_every"]), "relabel": bool(hindsight["history"])}
         super()._setup_model()
         extractor = self.policy.pi_features_extractor
         if (

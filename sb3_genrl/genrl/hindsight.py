@@ -58,7 +58,7 @@ def check_hindsight_kwargs(hindsight_kwargs: Mapping[str, Any]) -> dict[str, Any
         raise ValueError(f"hindsight_kwargs: {', '.join(map(repr, unknown))} not among its settings ({', '.join(DEFAULTS)})")
     settings = DEFAULTS | dict(hindsight_kwargs)
     for key, minimum in (
-        ("history", 1),
+        ("history", 0),
         ("regression_steps", 0),
         ("regression_batch_size", 1),
         ("refit_every", 0),
@@ -90,7 +90,8 @@ class HindsightRelabelling:
 
     :param policy: the policy (a Box context); its current distribution and value function weigh the kept pulls
     :param kept_pulls: the pulls kept for the whole run, joined after the relabelled ones (default None: none)
-    :param history: batches whose relabelled pulls join the E-step: the current one and those before it (default 1)
+    :param history: batches whose relabelled pulls join the E-step: the current one and those before it (default 1;
+        0: none, and the pulls need no ``info["hindsight"]``; the kept pulls and the refits work as with relabelling)
     :param regression_steps: Adam steps per iteration fitting the policy's mean to the kept pulls (default 0: none)
     :param regression_lr: Adam learning rate of that fit (default 1e-3)
     :param regression_batch_size: pulls per step of the fit, drawn with replacement from the kept ones (default 256)
@@ -146,8 +147,10 @@ class HindsightRelabelling:
             (:meth:`~sb3_genrl.genrl.hindsight_buffer.HindsightRolloutBuffer.relabelled_pulls`)
         :return: the joined batch, and the pulls joined per pull played
         """
-        self.memory.append(relabelled)
+        self.memory.append(relabelled)  # (with history 0, none are kept)
         contexts, actions, rewards = self._kept()
+        if not len(contexts):
+            return batch, 0.0
         with th.no_grad():  # the current policy and value function, also for the pulls of earlier batches
             log_prob = self.policy.get_distribution(contexts).log_prob(actions)
             values = self.policy.predict_values(contexts).flatten()
@@ -159,7 +162,7 @@ class HindsightRelabelling:
     def regress(self) -> list[float]:
         """Fit the policy's mean to the kept relabelled pulls (``regression_steps`` Adam steps); the minibatch losses
         (none without the regression or without kept pulls)."""
-        if not self.regression_steps or not self.memory:
+        if not self.regression_steps:
             return []
         contexts, actions, _ = self._kept()
         if not len(contexts):
@@ -184,4 +187,13 @@ class HindsightRelabelling:
         """The kept relabelled pulls, oldest batch first, then those kept for the whole run: contexts, latent actions,
         rewards."""
         whole_run = [] if self.kept_pulls is None or self.kept_pulls.pulls is None else [self.kept_pulls.pulls]
-        return tuple(th.cat(part) for part in zip(*self.memory, *whole_run, strict=True))  # type: ignore[return-value]
+        parts = [*self.memory, *whole_run]
+        if not parts:  # history 0 and nothing kept for the run
+            device = self.policy.device
+            shape = self.policy.observation_space.shape
+            return (
+                th.zeros((0, *shape), device=device),
+                th.zeros((0, *self.policy.action_space.shape), device=device),
+                th.zeros(0, device=device),
+            )
+        return tuple(th.cat(part) for part in zip(*parts, strict=True))  # type: ignore[return-value]

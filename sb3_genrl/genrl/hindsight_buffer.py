@@ -34,7 +34,8 @@ NO_HINDSIGHT_INFO = (
     "hindsight_kwargs needs every pull's info['hindsight']: (context, reward) or None. "
     "LatentActionWrapper reports it when the task defines hindsight(info) and the context is the task's "
     "get_context(), and for any goal-conditioned env (a Dict observation with observation, achieved_goal "
-    "and desired_goal, and compute_reward); this env's info has no such key"
+    "and desired_goal, and compute_reward); this env's info has no such key (history: 0 relabels no pull, for "
+    "the refits alone)"
 )
 NO_SUCCESS_INFO = (
     "hindsight_kwargs['refit_every'] refits the policy's mean to the pulls that solved their own context, "
@@ -70,6 +71,8 @@ class HindsightRolloutBuffer(FiniteRewardRolloutBuffer):
     :param gamma: as SB3's ``RolloutBuffer`` (GenRL: 1)
     :param n_envs: envs of the VecEnv
     :param success: also store whether each pull solved its own context, ``info["is_success"]`` (default False)
+    :param relabel: store each pull's relabelling, ``info["hindsight"]`` (default True; False: ``hindsight_kwargs``'s
+        ``history: 0``, where no pull is relabelled and the env need not report it)
     """
 
     def __init__(
@@ -83,10 +86,11 @@ class HindsightRolloutBuffer(FiniteRewardRolloutBuffer):
         n_envs: int = 1,
         *,
         success: bool = False,
+        relabel: bool = True,
     ) -> None:
         if not isinstance(observation_space, spaces.Box):
             raise ValueError(f"hindsight_kwargs relabels Box contexts; this env's context space is {observation_space}")
-        self.success = bool(success)
+        self.success, self.relabel = bool(success), bool(relabel)
         self.infos: list[dict[str, Any]] | None = None  # the infos of the step the next add() stores
         super().__init__(buffer_size, observation_space, action_space, device, gae_lambda, gamma, n_envs)
 
@@ -102,17 +106,17 @@ class HindsightRolloutBuffer(FiniteRewardRolloutBuffer):
         super().reset()
 
     def add_infos(self, infos: list[dict[str, Any]]) -> None:
-        """Hold one step's infos (one per env) for the next :meth:`add`; refused at once when a pull cannot be
-        relabelled, when a relabelled reward is not one finite number, or (``success``) when a pull has no
+        """Hold one step's infos (one per env) for the next :meth:`add`; refused at once (``relabel``) when a pull
+        cannot be relabelled or a relabelled reward is not one finite number, or (``success``) when a pull has no
         ``info["is_success"]``."""
         if len(infos) != self.n_envs:
             raise ValueError(f"add_infos: {len(infos)} infos for a step of {self.n_envs} envs")
-        if not all("hindsight" in info for info in infos):
+        if self.relabel and not all("hindsight" in info for info in infos):
             raise ValueError(NO_HINDSIGHT_INFO)
         if self.success and not all("is_success" in info for info in infos):
             raise ValueError(NO_SUCCESS_INFO)
         for info in infos:
-            if info["hindsight"] is not None:
+            if self.relabel and info["hindsight"] is not None:
                 check_relabelled_reward(info["hindsight"])
         self.infos = list(infos)
 
@@ -137,7 +141,7 @@ class HindsightRolloutBuffer(FiniteRewardRolloutBuffer):
         self.pull_actions[row] = np.array(action).reshape((self.n_envs, self.action_dim))
         for env_index, info in enumerate(infos):
             self.successes[row, env_index] = self.success and bool(info["is_success"])
-            if info["hindsight"] is None:
+            if not self.relabel or info["hindsight"] is None:
                 continue
             context, relabelled_reward = info["hindsight"]
             context = np.asarray(context, dtype=space.dtype).reshape(space.shape)

@@ -33,6 +33,17 @@ class SuccessReachEnv(HindsightReachEnv):
         return rewards, infos
 
 
+class SuccessOnlyReachEnv(FastReachEnv):
+    """FastReachEnv that reports ``info["is_success"]`` (the reached point within 0.5 of the goal) and no
+    relabelling: no ``hindsight(info)``, as a task from outside the package (Meta-World)."""
+
+    def play_trajectories(self, trajectories, goals, *, n_threads=1):
+        rewards, infos = super().play_trajectories(trajectories, goals, n_threads=n_threads)
+        for reward, info in zip(rewards, infos, strict=True):
+            info["is_success"] = bool(reward > -0.25)
+        return rewards, infos
+
+
 class EStepBatchRecorder(GenRL):
     """GenRL that keeps its first E-step batch, with V and the policy's log-probabilities then."""
 

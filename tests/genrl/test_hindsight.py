@@ -13,13 +13,14 @@ from conftest import (
     LinearGenerator,
     optimal_latent,
 )
-from genrl_test_helpers import GOALS, EStepBatchRecorder, HindsightReachEnv, SuccessReachEnv
+from genrl_test_helpers import GOALS, EStepBatchRecorder, HindsightReachEnv, SuccessOnlyReachEnv, SuccessReachEnv
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from sb3_genrl import GenRL, LatentActionWrapper
 from sb3_genrl.genrl.hindsight import HindsightRelabelling
 from sb3_genrl.genrl.hindsight_buffer import HindsightRolloutBuffer
+from sb3_genrl.genrl.kept_pulls import KeptPulls
 from sb3_genrl.genrl.refits import Refits
 from sb3_genrl.genrl.regression import mean_parameters, regress_mean
 
@@ -312,7 +313,7 @@ def test_refit_fits_the_mean_from_its_initial_weights_to_the_solving_pulls_alone
     with pytest.raises(ValueError, match=r"info\['is_success'\]"):
         _buffer(trained, success=True).add_infos([{"hindsight": None}])
     no_refits = GenRL(LatentActionWrapper(HindsightReachEnv(), LinearGenerator()), hindsight_kwargs={})
-    assert no_refits.refits is None and no_refits.rollout_buffer_kwargs == {"success": False}
+    assert no_refits.refits is None and no_refits.rollout_buffer_kwargs == {"success": False, "relabel": True}
 
 
 def test_refit_inside_genrl_logs_its_pairs_and_brings_the_mean_to_the_solving_pulls():
@@ -330,6 +331,54 @@ def test_refit_inside_genrl_logs_its_pairs_and_brings_the_mean_to_the_solving_pu
     with th.no_grad():
         error = (model.policy.get_distribution(contexts).distribution.mean - actions).pow(2).mean().item()
     assert error < 0.5 * actions.var(0).mean().item()  # closer to the pairs than their own spread
+
+
+def test_history_0_relabels_no_pull_and_needs_no_relabelling_from_the_env():
+    """``history: 0``: the refits of an env that reports its success but no relabelling (a task from outside the
+    package). Until the first refit the run is the run without hindsight, parameter for parameter; the refit then
+    happens on the solving pulls, as with relabelling."""
+    settings = {"refit_every": 64, "refit_start": 48, "refit_steps": 300, "regression_lr": 1e-2}
+
+    def run(hindsight_kwargs, episodes):
+        env = LatentActionWrapper(SuccessOnlyReachEnv(), LinearGenerator())
+        model = GenRL(env, seed=0, n_steps=16, device="cpu", hindsight_kwargs=hindsight_kwargs)
+        return model.learn(episodes)
+
+    with pytest.raises(ValueError, match=r"this env's info has no such key \(history: 0 relabels no pull"):
+        run(settings, 16)  # relabelling asked for (history 1), which this env cannot give
+    plain, refitted = run(None, 32), run({"history": 0, **settings}, 32)
+    assert refitted.rollout_buffer_kwargs == {"success": True, "relabel": False}
+    assert refitted.logger.name_to_value["train/hindsight_pulls"] == 0
+    for ours, theirs in zip(refitted.policy.parameters(), plain.policy.parameters(), strict=True):
+        th.testing.assert_close(ours, theirs, rtol=0, atol=0)
+    refitted = run({"history": 0, **settings}, 48)
+    contexts, actions = (th.cat(part) for part in zip(*refitted.refits.solved, strict=True))
+    assert refitted.logger.name_to_value["train/refit_pairs"] == len(actions) > 0
+    with th.no_grad():
+        error = (refitted.policy.get_distribution(contexts).distribution.mean - actions).pow(2).mean().item()
+    assert error < 0.5 * actions.var(0).mean().item()  # closer to the pairs than their own spread
+
+
+def test_history_0_joins_the_kept_pulls_alone_and_regresses_on_them(trained):
+    policy = trained.policy
+    hindsight = HindsightRelabelling(policy, history=0, regression_steps=200, regression_lr=1e-2, regression_batch_size=4)
+    played = (th.randn(8, 2), th.randn(8, 2), th.randn(8), th.randn(8))
+    relabelled = _filled(trained, _relabel_infos(CONTEXTS, REWARDS)).relabelled_pulls()
+    joined, fraction = hindsight.extend_batch(played, relabelled, 0.0, 1.0)
+    assert fraction == 0.0 and all(part is original for part, original in zip(joined, played, strict=True))
+    assert hindsight.regress() == []  # nothing kept
+    kept = KeptPulls(trained.observation_space, trained.action_space, "cpu")
+    contexts = th.tensor([CONTEXTS[i] for i in INSIDE], dtype=th.float32)
+    targets = th.tensor([[1.0, -1.0], [0.5, 0.5], [-1.0, 0.0], [0.0, 1.5]])
+    kept.keep(contexts, targets, th.zeros(4))
+    hindsight.kept_pulls = kept
+    joined, fraction = hindsight.extend_batch(played, relabelled, 0.0, 1.0)
+    assert fraction == 0.5 and len(hindsight.memory) == 0  # the 4 kept pulls, none of the 4 relabelled
+    th.testing.assert_close(joined[0][8:], contexts, rtol=0, atol=0)
+    losses = hindsight.regress()
+    with th.no_grad():
+        after = (policy.get_distribution(contexts).distribution.mean - targets).abs().max().item()
+    assert len(losses) == 200 and after < 0.1
 
 
 class _NanHindsightEnv(HindsightReachEnv):
@@ -379,7 +428,7 @@ def test_hindsight_is_a_rollout_buffer_class_in_sb3s_slot_with_no_private_method
     env = LatentActionWrapper(SuccessReachEnv(), LinearGenerator())
     model = GenRL(env, seed=0, n_steps=8, hindsight_kwargs={"refit_every": 16})
     assert model.rollout_buffer_class is HindsightRolloutBuffer and type(model.rollout_buffer) is HindsightRolloutBuffer
-    assert model.rollout_buffer_kwargs == {"success": True} and model.rollout_buffer.success
+    assert model.rollout_buffer_kwargs == {"success": True, "relabel": True} and model.rollout_buffer.success
     assert "_update_info_buffer" not in GenRL.__dict__ and "collect_rollouts" not in GenRL.__dict__
     model.learn(16)
     assert len(model.refits.solved) == 2 and model.logger.name_to_value["train/hindsight_pulls"] > 0
