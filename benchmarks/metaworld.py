@@ -9,10 +9,10 @@ and a rerun with others is refused before any work):
 1. ``--demos`` demonstrations of Meta-World's scripted expert, perturbed, of that horizon
    (:func:`~sb3_genrl.envs.demonstrations.record_demonstrations`, seed 0, in Meta-World's training env, which runs on
    after a success), kept when their open-loop replay succeeds;
-2. a generator of the quickstart's Meta-World preset (:data:`sb3_genrl.envs.metaworld.GENERATOR_PRESET`), ``--epochs``,
-   seed 0, trained as the committed run trained it: the paper's checkpoint selection and epochs, not the quickstart's
-   training of a task from outside the package
-   (:data:`~sb3_genrl.study.quickstart.OUTSIDE_GENERATOR_TRAINING`, newer than that run);
+2. a generator of the quickstart's Meta-World preset (:data:`sb3_genrl.envs.metaworld.GENERATOR_PRESET`), seed 0,
+   trained as the quickstart trains the generator of a task from outside the package
+   (:data:`~sb3_genrl.study.quickstart.OUTSIDE_GENERATOR_TRAINING`: ``--epochs``, raised to at least its minibatch
+   steps, in even minibatches, the checkpoint with the closest reconstructions kept);
 3. the expert closed loop, unperturbed, from the held-out resets, and its actions replayed open loop from the same
    resets; then what the generator can reproduce: the first 200 demonstrations encoded to their latent codes, decoded
    and replayed open loop from their own resets (the share that succeeds);
@@ -23,7 +23,8 @@ and a rerun with others is refused before any work):
    (:data:`~sb3_genrl.study.quickstart.OUTSIDE_TASK_KWARGS`: the fit of step 4, a spread fixed at 0.37 prior standard
    deviations, then GenRL's defaults, ``--batch-episodes`` a batch), ``--episodes`` episodes (checkpointed; a stopped
    run resumes);
-6. per ``--sac-seeds`` seed (default one: SAC's runs take hours per task on a CPU), ``genrl baseline sac`` of the
+6. per ``--sac-seeds`` seed (default one: SAC's runs take hours per task on a CPU; ``--sac-from`` takes them from an
+   earlier result whose SAC settings and demonstrations are this run's), ``genrl baseline sac`` of the
    task (:mod:`sb3_genrl.baselines.outside`): SB3's SAC (its defaults, learning from the first step, observations
    normalised with the demonstrations' statistics) with the demonstrations' transitions in its replay buffer, for the
    same ``--episodes`` episodes of the task's horizon, in Meta-World's training env (no end at a success, as
@@ -39,6 +40,7 @@ every unit of every task asked for is done; the Markdown table is written beside
     python -m benchmarks.metaworld                                   # MT10 x seeds 0 1 2 (hours on a CPU)
     python -m benchmarks.metaworld --tasks push-v3 --seeds 0 --out push.json
     python -m benchmarks.metaworld --seeds --sac-seeds               # each task's stages 1-3 only (no seed)
+    python -m benchmarks.metaworld --out new.json --sac-from benchmarks/results/metaworld.json   # GenRL anew, SAC kept
 
 Runs with other ``--tasks`` can write one JSON at the same time (two cores, two runs): each keeps the other's rows.
 """
@@ -62,7 +64,7 @@ from sb3_genrl.envs.demonstrations import expert_horizon, record_demonstrations
 from sb3_genrl.envs.external import HELD_OUT_SEED, evaluate_success, make_task_env
 
 from sb3_genrl import GenRL, LatentActionWrapper
-from sb3_genrl.checks import COUNT, JSON_OUT, OUT_DIR, SEED, check_int, option
+from sb3_genrl.checks import COUNT, EXISTING, JSON_OUT, OUT_DIR, SEED, check_int, option
 from sb3_genrl.curves import MONITOR_FILE, read_monitor
 from sb3_genrl.data import dataset_info
 from sb3_genrl.generative import load, train_generator
@@ -71,7 +73,7 @@ from sb3_genrl.markdown import markdown_table
 from sb3_genrl.provenance import provenance
 from sb3_genrl.run import train_policy
 from sb3_genrl.run.stages import STAGE_FILE, SettingsConflictError, read_settings, refuse_conflicts, settings_conflicts
-from sb3_genrl.study.quickstart import OUTSIDE_TASK_KWARGS
+from sb3_genrl.study.quickstart import OUTSIDE_GENERATOR_TRAINING, OUTSIDE_TASK_KWARGS
 from sb3_genrl.utils import FolderInUseError, atomic_write_json, atomic_write_text, folder_lock
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -79,6 +81,8 @@ METHODS = ("fit", "genrl", "sac")  # the per-seed units, in the order they run
 RECONSTRUCTIONS = 200  # demonstrations the generator's reconstructions are replayed from
 COMPLETE_SEEDS, COMPLETE_SAC_SEEDS = (0, 1, 2), (0,)  # the seeds of a complete result (the defaults)
 SAC_CHECKPOINT_EVERY = 250  # SAC's episodes between checkpoints (model and replay buffer)
+# The settings SAC's rows depend on (--sac-from takes the rows of a result that records the same), beside its data
+SAC_SETTINGS = ("horizon", "demos", "episodes", "held_out", "held_out_seed", "success", "reward", "sac")
 
 
 def known_task(name: str, _: str = "") -> str:
@@ -120,9 +124,21 @@ def arguments(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument(
         "--out", type=JSON_OUT, default=str(RESULTS / "metaworld.json"), help="result JSON (the table beside it, .md)"
     )
+    parser.add_argument(
+        "--sac-from",
+        type=EXISTING,
+        default=None,
+        help="take each task's SAC rows from this result JSON of the benchmark instead of running SAC (its SAC settings "
+        "must be this run's, and each task's demonstrations, checked as they are recorded)",
+    )
     args = parser.parse_args(argv)
     if not metaworld.installed():
         parser.error(metaworld.INSTALL_HINT)
+    if args.sac_from is not None:
+        try:
+            args.sac_rows = sac_rows(Path(args.sac_from), settings(args))
+        except ValueError as error:
+            parser.error(f"argument --sac-from: {error}")
     try:  # a result or a work folder of other settings: refused before any work
         refuse_conflicts(args.out if Path(args.out).is_file() else args.work, _conflicts(args))
     except SettingsConflictError as error:
@@ -151,15 +167,40 @@ def settings(args: argparse.Namespace) -> dict[str, Any]:
         "demos": args.demos,
         "epochs": args.epochs,
         "preset": metaworld.GENERATOR_PRESET,
+        "generator_training": dict(OUTSIDE_GENERATOR_TRAINING),
         "episodes": args.episodes,
         "batch_episodes": args.batch_episodes,
         "held_out": args.held_out,
         "held_out_seed": HELD_OUT_SEED,
         "fit_steps": args.fit_steps,
-        "genrl": "started from the demonstrations, a spread fixed at 0.37, else GenRL's defaults",
+        "genrl": outside_settings(args.fit_steps),
         "success": "Meta-World's evaluation protocol: an episode ends at its first success",
         "reward": "Meta-World's v2 reward, 10 at the step that ends an episode at its success",
         "sac": "SB3's defaults, learning_starts 0, the demonstrations in the buffer, trained without an end at success",
+    }
+
+
+def sac_rows(path: Path, wanted: dict[str, Any]) -> dict[str, Any]:
+    """The tasks of the benchmark's result ``path`` that have SAC rows: per task, its SAC rows and the demonstrations
+    and horizon they were made from, with the file's commit; ``ValueError`` when its SAC settings are not ``wanted``'s."""
+    recorded = read_settings(path)
+    if not recorded or "settings" not in recorded or "tasks" not in recorded:
+        raise ValueError(f"{path} is not a result of this benchmark")
+    differ = [key for key in SAC_SETTINGS if recorded["settings"].get(key) != wanted[key]]
+    if differ:
+        raise ValueError(
+            f"{path} records SAC's runs with other settings: "
+            + "; ".join(f"{key} {recorded['settings'].get(key)!r} (recorded) vs {wanted[key]!r} (this run)" for key in differ)
+        )
+    return {
+        task: {
+            "sac": row["sac"],
+            "demonstrations": row["demonstrations"],
+            "horizon": row["horizon"]["horizon"],
+            "from": {"file": str(path), "git_commit": recorded.get("git_commit")},
+        }
+        for task, row in recorded["tasks"].items()
+        if row.get("sac")
     }
 
 
@@ -349,7 +390,14 @@ def run_task(task: str, args: argparse.Namespace, result: dict[str, Any], save: 
     if "generator" not in row:
         began = time.process_time()
         if not generator_path.is_file():  # written atomically once training ends
-            train_generator(dataset, preset=metaworld.GENERATOR_PRESET, epochs=args.epochs, seed=0, out=generator_path)
+            train_generator(
+                dataset,
+                preset=metaworld.GENERATOR_PRESET,
+                epochs=args.epochs,
+                seed=0,
+                out=generator_path,
+                **OUTSIDE_GENERATOR_TRAINING,
+            )
         row["generator"] = {
             "best_epoch": load(generator_path).best_epoch,
             "cpu_seconds": round(time.process_time() - began, 1),
@@ -357,6 +405,17 @@ def run_task(task: str, args: argparse.Namespace, result: dict[str, Any], save: 
         save()
     if "expert" not in row:
         row["expert"] = expert_row(task, args.held_out, horizon)
+        save()
+    kept = getattr(args, "sac_rows", {}).get(task)
+    if kept is not None and "sac_from" not in row:  # SAC's rows of an earlier result, made from the same data
+        made = {key: kept["demonstrations"][key] for key in counts}
+        if kept["horizon"] != horizon or made != counts:
+            raise RuntimeError(
+                f"{args.sac_from}: {task}'s SAC rows were made from the demonstrations {made} of horizon "
+                f"{kept['horizon']}, this run's are {counts} of horizon {horizon}"
+            )
+        row["sac"] = copy.deepcopy(kept["sac"]) | row.get("sac", {})
+        row["sac_from"] = kept["from"]
         save()
     if "reconstruction" not in row:
         row["reconstruction"] = reconstruction_row(task, generator_path, dataset, horizon, RECONSTRUCTIONS)
@@ -419,7 +478,13 @@ def table(result: dict[str, Any]) -> str:
         "GenRL CPU s",
         "SAC CPU s",
     ]
-    return markdown_table(header, rows, digits=3, align="lrrrrrrrrrr")
+    text = markdown_table(header, rows, digits=3, align="lrrrrrrrrrr")
+    sources = sorted(
+        {(row["sac_from"]["file"], row["sac_from"]["git_commit"]) for row in result["tasks"].values() if "sac_from" in row}
+    )
+    for path, commit in sources:  # SAC's rows taken from an earlier result (--sac-from)
+        text += f"\n\nSAC's rows: from {path} (commit {commit}), made from the same demonstrations and SAC settings."
+    return text
 
 
 def main(argv: list[str] | None = None) -> int:

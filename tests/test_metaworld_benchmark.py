@@ -73,6 +73,46 @@ def test_the_metaworld_benchmark_writes_every_unit_resumes_and_refuses_other_set
     assert out.read_text() == before
 
 
+def test_sac_rows_are_taken_from_an_earlier_result_of_the_same_sac_settings_and_data(tmp_path, capsys):
+    """--sac-from: GenRL's units made anew (another generator), SAC's taken from an earlier result, which must record
+    the same SAC settings (refused before any work) and the same demonstrations (refused as they are recorded)."""
+    from benchmarks.metaworld import main
+
+    earlier, work = tmp_path / "earlier.json", tmp_path / "work"
+    assert main([*TINY, "--work", str(work), "--out", str(earlier)]) == 0
+    sac = json.loads(earlier.read_text())["tasks"]["reach-v3"]["sac"]
+    out = tmp_path / "new.json"
+    argv = [*TINY, "--epochs", "3", "--work", str(tmp_path / "new"), "--out", str(out), "--sac-from", str(earlier)]
+    with pytest.raises(SystemExit) as exit_:
+        main([*argv, "--episodes", "8"])
+    message = capsys.readouterr().err
+    assert exit_.value.code == 2 and "argument --sac-from" in message and "episodes 4 (recorded) vs 8 (this run)" in message
+    assert not out.exists()
+    assert main(argv) == 0
+    result = json.loads(out.read_text())
+    row = result["tasks"]["reach-v3"]
+    assert row["sac"] == sac and row["sac_from"]["file"] == str(earlier) and result["settings"]["epochs"] == 3
+    assert "0" in row["genrl"] and not (tmp_path / "new" / "reach-v3" / "sac_seed0").exists()  # SAC not run again
+    assert f"SAC's rows: from {earlier}" in out.with_suffix(".md").read_text()
+    recorded = json.loads(earlier.read_text())
+    recorded["tasks"]["reach-v3"]["demonstrations"]["tried"] += 1  # rows made from other demonstrations
+    earlier.write_text(json.dumps(recorded))
+    with pytest.raises(RuntimeError, match="SAC rows were made from the demonstrations"):
+        main(
+            [
+                *TINY,
+                "--epochs",
+                "3",
+                "--work",
+                str(tmp_path / "third"),
+                "--out",
+                str(tmp_path / "third.json"),
+                "--sac-from",
+                str(earlier),
+            ]
+        )
+
+
 def test_the_metaworld_benchmark_refuses_an_unknown_task_before_any_work(tmp_path, capsys):
     from benchmarks.metaworld import main
 
