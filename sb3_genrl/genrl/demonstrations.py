@@ -14,7 +14,10 @@ action is the generator's posterior mean ``alpha = E[q(alpha | tau)]`` (a beta-V
   demonstrations are (as behaviour cloning starts PPO); a resumed run is not fitted again;
 - ``keep``: the pulls are kept for the whole run (GenRL's :class:`~sb3_genrl.genrl.kept_pulls.KeptPulls`), beside the
   relabelled pulls of the last ``history`` batches of :class:`~sb3_genrl.genrl.hindsight.HindsightRelabelling`: they
-  join every E-step's batch and every regression of the mean, as demonstrations stay in SAC+HER's replay buffer.
+  join every E-step's batch and every regression of the mean, as demonstrations stay in SAC+HER's replay buffer;
+- ``refit``: the pairs join every refit of the mean to the run's solving pulls (GenRL's
+  :class:`~sb3_genrl.genrl.refits.Refits`, ``hindsight_kwargs["refit_every"]``), so that a refit made while the run has
+  found few solving pulls still covers the contexts the demonstrations solve.
 
 The callback is an SB3 callback, given to ``learn`` or named in a task's entry of ``hyperparams/genrl.yml`` in
 rl-zoo3's ``callback`` form (see :func:`build_callbacks`)::
@@ -60,6 +63,8 @@ class DemonstrationCallback(BaseCallback):
         run (default 4000; 0: no fit)
     :param keep: keep the demonstrations among the hindsight relabelling's pulls for the whole run (default True;
         needs GenRL's ``hindsight_kwargs``)
+    :param refit: the demonstrations join the pairs of every refit of the mean (default False; needs
+        ``hindsight_kwargs["refit_every"]``)
     :param learning_rate: Adam learning rate of the fit (default 1e-3)
     :param batch_size: demonstrations per step of the fit, drawn with replacement (default 256)
     :param scale_contexts: on a fresh run, before the fit, centre and scale each unbounded dimension of the policy's
@@ -76,6 +81,7 @@ class DemonstrationCallback(BaseCallback):
         *,
         fit_steps: int = 4000,
         keep: bool = True,
+        refit: bool = False,
         learning_rate: float = 1e-3,
         batch_size: int = 256,
         scale_contexts: bool = False,
@@ -84,7 +90,12 @@ class DemonstrationCallback(BaseCallback):
     ) -> None:
         super().__init__(verbose)
         check_demonstration_settings(
-            fit_steps=fit_steps, keep=keep, learning_rate=learning_rate, batch_size=batch_size, scale_contexts=scale_contexts
+            fit_steps=fit_steps,
+            keep=keep,
+            refit=refit,
+            learning_rate=learning_rate,
+            batch_size=batch_size,
+            scale_contexts=scale_contexts,
         )
         if dataset is None:
             raise ValueError(
@@ -92,7 +103,7 @@ class DemonstrationCallback(BaseCallback):
                 + NO_DATASET.format(name=DEMONSTRATION_CALLBACK, task="TASK")
             )
 
-        self.dataset, self.fit_steps, self.keep = os.fspath(dataset), int(fit_steps), bool(keep)
+        self.dataset, self.fit_steps, self.keep, self.refit = os.fspath(dataset), int(fit_steps), bool(keep), bool(refit)
         self.learning_rate, self.batch_size = float(learning_rate), int(batch_size)
         self.scale_contexts = bool(scale_contexts)
         arrays = load_arrays(self.dataset, keys=("observations", "actions", "reached"))  # raises naming a missing dataset
@@ -131,12 +142,19 @@ class DemonstrationCallback(BaseCallback):
         context_space: spaces.Space,
         latent_clip: float,
         hindsight: bool,
+        refits: bool = False,
     ) -> tuple[th.Tensor, th.Tensor]:
-        """:meth:`pulls`, refused (before any work) also for ``keep`` without GenRL's hindsight relabelling."""
+        """:meth:`pulls`, refused (before any work) also for ``keep`` without GenRL's hindsight relabelling, and for
+        ``refit`` without its refits (``refits``: GenRL's ``hindsight_kwargs["refit_every"]`` is set)."""
         if self.keep and not hindsight:
             raise ValueError(
                 "DemonstrationCallback(keep=True) keeps the demonstrations among the hindsight "
                 "relabelling's pulls, which needs GenRL's hindsight_kwargs (or keep=False)"
+            )
+        if self.refit and not refits:
+            raise ValueError(
+                "DemonstrationCallback(refit=True) adds the demonstrations to the refits of the mean, which need "
+                "GenRL's hindsight_kwargs['refit_every'] (or refit=False)"
             )
         return self.pulls(generator, context_space, latent_clip)
 
@@ -144,7 +162,13 @@ class DemonstrationCallback(BaseCallback):
         model = self.model
         contexts, latents = (
             tensor.to(model.device)
-            for tensor in self.check(model.generator, model.observation_space, model.latent_clip, model.kept_pulls is not None)
+            for tensor in self.check(
+                model.generator,
+                model.observation_space,
+                model.latent_clip,
+                model.kept_pulls is not None,
+                model.refits is not None,
+            )
         )
         fresh = model.num_timesteps == 0 and model._n_updates == 0  # never a resumed run, whose policy holds both
         if self.scale_contexts and fresh:
@@ -169,6 +193,8 @@ class DemonstrationCallback(BaseCallback):
             model.policy_average.load_state_dict(model.policy.state_dict())  # the average starts from this policy too
         if self.keep and model.kept_pulls.pulls is None:  # (a resumed run's checkpoint holds them already)
             model.kept_pulls.keep(contexts, latents, th.zeros(len(latents), device=model.device))
+        if self.refit:  # (handed over at every start, a resumed run's too: the checkpoint holds the solving pulls alone)
+            model.refits.demonstrations = (contexts, latents)
 
     def _on_step(self) -> bool:
         return True
@@ -229,19 +255,19 @@ def fit_mean_to_demonstrations(
 
 
 def check_demonstration_settings(
-    *, fit_steps: Any, keep: Any, learning_rate: Any, batch_size: Any, scale_contexts: Any = False
+    *, fit_steps: Any, keep: Any, learning_rate: Any, batch_size: Any, scale_contexts: Any = False, refit: Any = False
 ) -> None:
     """Refuse settings :class:`DemonstrationCallback` would not take, naming the setting."""
     for key, value, minimum in (("fit_steps", fit_steps, 0), ("batch_size", batch_size, 1)):
         if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < minimum:
             raise ValueError(f"DemonstrationCallback: {key} must be an integer >= {minimum}, got {value!r}")
-    for key, value in (("keep", keep), ("scale_contexts", scale_contexts)):
+    for key, value in (("keep", keep), ("scale_contexts", scale_contexts), ("refit", refit)):
         if not isinstance(value, bool | np.bool_):
             raise ValueError(f"DemonstrationCallback: {key} must be True or False, got {value!r}")
     if isinstance(learning_rate, bool) or not isinstance(learning_rate, int | float) or not learning_rate > 0:
         raise ValueError(f"DemonstrationCallback: learning_rate must be positive, got {learning_rate!r}")
-    if not fit_steps and not keep:
-        raise ValueError("DemonstrationCallback with fit_steps=0 and keep=False would not use the demonstrations")
+    if not fit_steps and not keep and not refit:
+        raise ValueError("DemonstrationCallback with fit_steps=0, keep=False and refit=False would not use the demonstrations")
 
 
 def callback_entries(spec: Any, name: str = "callback") -> list[tuple[str, dict[str, Any]]]:
@@ -271,7 +297,7 @@ def callback_entries(spec: Any, name: str = "callback") -> list[tuple[str, dict[
             check_demonstration_settings(
                 **{
                     key: kwargs.get(key, parameters[key].default)
-                    for key in ("fit_steps", "keep", "learning_rate", "batch_size", "scale_contexts")
+                    for key in ("fit_steps", "keep", "refit", "learning_rate", "batch_size", "scale_contexts")
                 }
             )
         entries.append((path, dict(kwargs)))

@@ -5,7 +5,9 @@ Switched on by ``hindsight_kwargs["refit_every"]`` (the pulls' success, ``info["
 pair of the map the mean should learn, as a demonstration is. Fitted from its initial weights rather than moved a few
 steps from where it is, the mean becomes the regression of what the run has found so far, without what earlier fits put
 in it (a fit continued for long over-fits; :mod:`sb3_genrl.genrl.demonstrations`); between refits the E-step searches
-around it.
+around it. The demonstrations can join every refit's pairs (``DemonstrationCallback(refit=True)`` sets
+:attr:`Refits.demonstrations`), so that a refit made while the run has found few solving pulls still covers the contexts
+they solve.
 """
 
 from __future__ import annotations
@@ -56,13 +58,17 @@ class Refits:
         self.learning_rate, self.batch_size = learning_rate, int(batch_size)
         # (contexts, latent actions) of the pulls that solved their own context, one entry per batch, for the whole run
         self.solved: list[tuple[th.Tensor, th.Tensor]] = []
+        # pairs that join every refit, after the solving pulls: the demonstrations' (contexts, latent actions), set by
+        # DemonstrationCallback(refit=True) at every training start (not in a run's checkpoint)
+        self.demonstrations: tuple[th.Tensor, th.Tensor] | None = None
         # the weights of the policy's mean as it was made, from which every refit starts
         self.initial_mean = [parameter.detach().clone() for parameter in mean_parameters(policy)]
 
     def refit(self, rollout_buffer: HindsightRolloutBuffer, episodes: int) -> dict[str, float]:
         """Keep this rollout's pulls that solved their own context; when the run's episode count ``episodes`` has just
-        reached ``start``, or ``start`` plus a multiple of ``every``, refit the policy's mean to all those kept so far:
-        from its initial weights, by ``steps`` steps of a new Adam, as the demonstrations are fitted.
+        reached ``start``, or ``start`` plus a multiple of ``every``, refit the policy's mean to all those kept so far
+        (and to :attr:`demonstrations`): from its initial weights, by ``steps`` steps of a new Adam, as the
+        demonstrations are fitted.
 
         :param rollout_buffer: the rollout's buffer, storing the pulls' success
         :param episodes: the episodes played so far, this rollout's among them
@@ -72,7 +78,8 @@ class Refits:
         played = rollout_buffer.buffer_size * rollout_buffer.n_envs
         if self._refits_due(episodes) == self._refits_due(episodes - played):
             return {}
-        contexts, actions = (th.cat(part) for part in zip(*self.solved, strict=True))
+        extra = [] if self.demonstrations is None else [self.demonstrations]
+        contexts, actions = (th.cat(part) for part in zip(*self.solved, *extra, strict=True))
         if not len(actions):
             return {"refit_pairs": 0.0}
         with th.no_grad():

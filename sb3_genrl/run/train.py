@@ -262,8 +262,13 @@ def _callback_identity(
     datasets = []
     for demonstrations in (item for item in callbacks if isinstance(item, DemonstrationCallback)):
         try:
+            hindsight = settings.get("hindsight_kwargs")
             demonstrations.check(
-                env.generator, env.observation_space, settings["latent_clip"], settings.get("hindsight_kwargs") is not None
+                env.generator,
+                env.observation_space,
+                settings["latent_clip"],
+                hindsight is not None,
+                bool((hindsight or {}).get("refit_every")),
             )
         except ValueError:
             env.close()

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import torch as th
 from conftest import C, LinearGenerator, R
-from genrl_test_helpers import HindsightReachEnv
+from genrl_test_helpers import HindsightReachEnv, SuccessOnlyReachEnv
 from gymnasium import spaces
 from stable_baselines3.common.logger import Logger
 from test_checkpoint import _Killed, _parameters, hindsight_task  # noqa: F401 (the fixture)
@@ -159,6 +159,53 @@ def test_kept_demonstrations_join_every_e_step_and_every_regression(demos, monke
         assert len(observations) == 16 + (len(x) - N) + N and np.all(np.isfinite(advantages.numpy()))
         np.testing.assert_allclose(x[-N:].numpy(), contexts, atol=1e-6)
         np.testing.assert_allclose(y[-N:].numpy(), clipped, atol=1e-5)
+
+
+def test_refit_demonstrations_join_every_refit_after_the_solving_pulls(demos, fast_reach_task, tmp_path, monkeypatch):  # noqa: F811
+    from sb3_genrl.genrl import refits as refits_module
+
+    dataset, contexts, latents = demos
+    fitted = []
+    fit = refits_module.fit_mean
+    monkeypatch.setattr(
+        refits_module,
+        "fit_mean",
+        lambda policy, x, y, **kw: fitted.append((x.clone(), y.clone())) or fit(policy, x, y, **kw),
+    )
+    model = GenRL(
+        SuccessOnlyReachEnv(),  # no relabelling: history 0
+        EncodingLinearGenerator(),
+        seed=1,
+        n_steps=16,
+        batch_size=16,
+        hindsight_kwargs={"history": 0, "refit_every": 16, "refit_steps": 5},
+    )
+    model.learn(32, callback=DemonstrationCallback(dataset, fit_steps=0, keep=False, refit=True))
+    assert len(fitted) == 2 and model.kept_pulls.pulls is None
+    clipped = np.clip(latents, -3, 3).astype(np.float32)
+    for batches, (x, y) in enumerate(fitted, start=1):  # the solving pulls of the batches so far, then the demonstrations
+        solved_x, solved_y = (th.cat(part) for part in zip(*model.refits.solved[:batches], strict=True))
+        assert len(x) == len(solved_x) + N
+        th.testing.assert_close(x[: len(solved_x)], solved_x, rtol=0, atol=0)
+        th.testing.assert_close(y[: len(solved_x)], solved_y, rtol=0, atol=0)
+        np.testing.assert_allclose(x[-N:].numpy(), contexts, atol=1e-6)
+        np.testing.assert_allclose(y[-N:].numpy(), clipped, atol=1e-5)
+    assert model.logger.name_to_value["train/refit_pairs"] == len(fitted[-1][0])
+    # refit=True without the refits: refused before any work
+    with pytest.raises(ValueError, match=r"refit=True\) adds the demonstrations to the refits.*refit_every"):
+        train_policy(
+            "fast-reach",
+            EncodingLinearGenerator(),
+            episodes=32,
+            batch_episodes=16,
+            out_dir=tmp_path / "run",
+            hindsight_kwargs={},
+            callback=[{DEMONSTRATION_CALLBACK: {"fit_steps": 0, "keep": False, "refit": True}}],
+            demonstrations=dataset,
+        )
+    assert not (tmp_path / "run").exists()
+    with pytest.raises(ValueError, match="DemonstrationCallback: refit must be True or False, got 'yes'"):
+        DemonstrationCallback(dataset, refit="yes")
 
 
 def test_a_resumed_run_keeps_the_demonstrations_and_is_not_fitted_again(
