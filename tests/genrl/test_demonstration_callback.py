@@ -69,6 +69,11 @@ def demos(tmp_path):
     return _dataset(tmp_path / "demos", contexts, latents.astype(np.float32)), contexts, latents
 
 
+def _short_run(out_dir, **kwargs):
+    """``train_policy`` of 32 fast-reach episodes, 16 an iteration, into ``out_dir``."""
+    return train_policy("fast-reach", EncodingLinearGenerator(), episodes=32, batch_episodes=16, out_dir=out_dir, **kwargs)
+
+
 def _model(**kwargs):
     return GenRL(HindsightReachEnv(), EncodingLinearGenerator(), seed=1, n_steps=16, batch_size=16, **kwargs)
 
@@ -193,12 +198,8 @@ def test_refit_demonstrations_join_every_refit_after_the_solving_pulls(demos, fa
     assert model.logger.name_to_value["train/refit_pairs"] == len(fitted[-1][0])
     # refit=True without the refits: refused before any work
     with pytest.raises(ValueError, match=r"refit=True\) adds the demonstrations to the refits.*refit_every"):
-        train_policy(
-            "fast-reach",
-            EncodingLinearGenerator(),
-            episodes=32,
-            batch_episodes=16,
-            out_dir=tmp_path / "run",
+        _short_run(
+            tmp_path / "run",
             hindsight_kwargs={},
             callback=[{DEMONSTRATION_CALLBACK: {"fit_steps": 0, "keep": False, "refit": True}}],
             demonstrations=dataset,
@@ -261,46 +262,21 @@ def test_missing_or_unfitting_demonstrations_are_refused_before_any_work(fast_re
         match=r"learn from demonstrations .* need their dataset: give it .*--data DIR.*"
         r"`genrl demos --task fast-reach --episodes 4000 --out DIR`",
     ):
-        train_policy(
-            "fast-reach",
-            EncodingLinearGenerator(),
-            episodes=32,
-            batch_episodes=16,
-            out_dir=tmp_path / "run",
-            hindsight_kwargs={},
-            callback=callback,
-        )
+        _short_run(tmp_path / "run", hindsight_kwargs={}, callback=callback)
     assert not (tmp_path / "run").exists()
     with pytest.raises(ValueError, match="do not learn from demonstrations"):
         build_callbacks(None, demonstrations=dataset)
     with pytest.raises(ValueError, match="no demonstration dataset at"):
         DemonstrationCallback(tmp_path / "none")
     with pytest.raises(ValueError, match="needs GenRL's hindsight_kwargs"):
-        train_policy(
-            "fast-reach",
-            EncodingLinearGenerator(),
-            episodes=32,
-            batch_episodes=16,
-            out_dir=tmp_path / "run",
-            callback=callback,
-            demonstrations=dataset,
-        )
+        _short_run(tmp_path / "run", callback=callback, demonstrations=dataset)
     with pytest.raises(ValueError, match=r"trajectories of shape \(5, 2\).*the generator makes \(4, 2\)"):
         DemonstrationCallback(dataset).pulls(EncodingLinearGenerator(4), spaces.Box(-1, 1, (2,)), 3.0)
     with pytest.raises(ValueError, match="needs a generator with an encoder"):
         DemonstrationCallback(dataset).pulls(LinearGenerator(), spaces.Box(-1, 1, (2,)), 3.0)
     wide = _dataset(tmp_path / "wide", np.hstack([contexts, contexts[:, :1]]), latents.astype(np.float32))
     with pytest.raises(ValueError, match=r"context is its first observation, of shape \(3,\), or else the point it reached"):
-        train_policy(
-            "fast-reach",
-            EncodingLinearGenerator(),
-            episodes=32,
-            batch_episodes=16,
-            out_dir=tmp_path / "run",
-            hindsight_kwargs={},
-            callback=callback,
-            demonstrations=wide,
-        )
+        _short_run(tmp_path / "run", hindsight_kwargs={}, callback=callback, demonstrations=wide)
     assert not (tmp_path / "run").exists()
     with pytest.raises(ValueError, match="'fit_step' not among DemonstrationCallback's arguments"):
         build_callbacks([{DEMONSTRATION_CALLBACK: {"fit_step": 10}}], demonstrations=dataset)
