@@ -21,8 +21,8 @@ and a rerun with others is refused before any work):
    episode is played;
 5. per seed, GenRL with the settings of a task without an entry in ``hyperparams/genrl.yml``
    (:data:`~sb3_genrl.study.quickstart.OUTSIDE_TASK_KWARGS`: the fit of step 4, a spread fixed at 0.37 prior standard
-   deviations, then GenRL's defaults, ``--batch-episodes`` a batch), ``--episodes`` episodes (checkpointed; a stopped
-   run resumes);
+   deviations, the mean refitted to the pulls that solved their own reset, then GenRL's defaults, ``--batch-episodes``
+   a batch), ``--episodes`` episodes (checkpointed; a stopped run resumes);
 6. per ``--sac-seeds`` seed (default one: SAC's runs take hours per task on a CPU; ``--sac-from`` takes them from an
    earlier result whose SAC settings and demonstrations are this run's), ``genrl baseline sac`` of the
    task (:mod:`sb3_genrl.baselines.outside`): SB3's SAC (its defaults, learning from the first step, observations
@@ -289,7 +289,8 @@ def genrl_row(
     task: str, generator_path: Path, dataset: Path, work: Path, seed: int, horizon: int, args: argparse.Namespace
 ) -> dict[str, Any]:
     """GenRL with the settings of a task without an entry (:data:`~sb3_genrl.study.quickstart.OUTSIDE_TASK_KWARGS`:
-    started from the demonstrations, a fixed spread, then its defaults) for ``--episodes`` episodes (resumed from its
+    started from the demonstrations, a fixed spread, refits to the solving pulls, then its defaults) for ``--episodes``
+    episodes (resumed from its
     checkpoint), on held-out resets."""
     began = time.process_time()
     run = train_policy(

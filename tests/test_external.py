@@ -404,10 +404,15 @@ def test_genrl_demos_and_train_policy_take_a_task_the_package_does_not_register(
     summary = json.loads((tmp_path / "policy" / "summary.json").read_text())
     assert summary["task"] == "TestExternal/PointGoal-v0" and summary["episodes"] == 32
     assert re.search(r"success: [0-9.]+ of the last episodes played \(info\['is_success'\]", out), out
-    code, out, err = cli(
+    silent = (
         "train-policy", "--task", "TestExternal/Silent-v0", "--generator", tmp_path / "vae.pt", "--data", demos,
         "--episodes", 16, "--batch-episodes", 16, "--checkpoint-every", 0, "--out", tmp_path / "silent", "--no-progress-bar",
     )  # fmt: skip
+    # a task from outside the package refits its mean to the pulls that solved their own reset, which needs the success
+    code, out, err = cli(*silent)
+    assert code == 2 and "needs every pull's info['is_success']" in err and "--success-key" in err, err
+    assert """--genrl-kwargs '{"hindsight_kwargs": null}'""" in err
+    code, out, err = cli(*silent, "--genrl-kwargs", '{"hindsight_kwargs": null}', "--overwrite")
     assert code == 0, err
     assert "success: the env reports no info['is_success']" in out
     code, out, err = cli(
@@ -694,6 +699,10 @@ def test_train_policy_of_an_outside_task_starts_from_its_demonstrations(cli, tmp
     spreads = {name: GenRL.load(tmp_path / name / "genrl_policy.zip", device="cpu").policy.log_std for name in errors}
     assert torch.equal(spreads["fitted"], torch.full_like(spreads["fitted"], -1.0))
     assert not torch.equal(spreads["defaults"], spreads["fitted"])
+    # and refit the mean to the pulls that solved their own reset, without relabelling (the env reports no
+    # info["hindsight"]; history 1 would refuse it at the first pull)
+    fitted = GenRL.load(tmp_path / "fitted" / "genrl_policy.zip", device="cpu")
+    assert fitted.hindsight_kwargs == {"history": 0, "refit_every": 256, "refit_start": 512} and fitted.refits is not None
 
 
 gym.register("TestExternal/PointGoalOwn-v0", entry_point=PointGoalEnv, max_episode_steps=HORIZON)

@@ -40,7 +40,8 @@ NO_HINDSIGHT_INFO = (
 NO_SUCCESS_INFO = (
     "hindsight_kwargs['refit_every'] refits the policy's mean to the pulls that solved their own context, "
     "which needs every pull's info['is_success'] (the goal-conditioned envs report it); this env's info "
-    "has no such key"
+    "has no such key: name the key that holds its success (train_policy's success_key, --success-key), or "
+    "leave the refits out (hindsight_kwargs without refit_every; --genrl-kwargs '{\"hindsight_kwargs\": null}')"
 )
 
 
