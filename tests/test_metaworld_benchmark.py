@@ -16,11 +16,13 @@ TINY += ["--held-out", "4", "--fit-steps", "10"]
 
 
 @pytest.fixture(autouse=True)
-def few_horizon_resets(monkeypatch):
-    """The horizon found from 8 of the expert's resets instead of 100 (each a Meta-World episode of 500 steps)."""
+def tiny_stages(monkeypatch):
+    """The horizon found from 8 of the expert's resets instead of 100 (each a Meta-World episode of 500 steps), and the
+    generator trained for the given epochs instead of at least 4800 minibatch steps."""
     import benchmarks.metaworld as benchmark
 
     monkeypatch.setattr(benchmark, "expert_horizon", functools.partial(benchmark.expert_horizon, resets=8))
+    monkeypatch.setattr(benchmark, "OUTSIDE_GENERATOR_TRAINING", benchmark.OUTSIDE_GENERATOR_TRAINING | {"min_steps": 0})
 
 
 def test_the_metaworld_benchmark_writes_every_unit_resumes_and_refuses_other_settings(tmp_path, capsys):
@@ -41,6 +43,11 @@ def test_the_metaworld_benchmark_writes_every_unit_resumes_and_refuses_other_set
     # the horizon found from the expert, as the quickstart finds it, and the expert scored at it
     assert row["horizon"]["settled"] and row["horizon"]["horizon"] < 100 and row["horizon"]["resets"] == 8
     assert row["reconstruction"]["demonstrations"] == 4 and 0.0 <= row["reconstruction"]["success"] <= 1.0
+    # the generator trained as the quickstart trains an outside task's (its checkpoint chosen by its reconstructions)
+    from sb3_genrl.generative import load
+
+    assert load(work / "reach-v3" / "vae.pt").selection == result["settings"]["generator_training"]["selection"]
+    assert result["settings"]["generator_training"]["selection"] == "reconstruction"
     assert f"| reach-v3 | {row['horizon']['horizon']} | 1.000 | 1.000 |" in out.with_suffix(".md").read_text()
     # the same command again: nothing redone
     stamps = {path: path.stat().st_mtime_ns for path in (work / "reach-v3").rglob("*") if path.is_file()}
@@ -79,7 +86,7 @@ def test_sac_rows_are_taken_from_an_earlier_result_of_the_same_sac_settings_and_
     from benchmarks.metaworld import main
 
     earlier, work = tmp_path / "earlier.json", tmp_path / "work"
-    assert main([*TINY, "--work", str(work), "--out", str(earlier)]) == 0
+    assert main([*TINY, "--seeds", "--work", str(work), "--out", str(earlier)]) == 0  # SAC's unit alone
     sac = json.loads(earlier.read_text())["tasks"]["reach-v3"]["sac"]
     out = tmp_path / "new.json"
     argv = [*TINY, "--epochs", "3", "--work", str(tmp_path / "new"), "--out", str(out), "--sac-from", str(earlier)]
@@ -97,20 +104,9 @@ def test_sac_rows_are_taken_from_an_earlier_result_of_the_same_sac_settings_and_
     recorded = json.loads(earlier.read_text())
     recorded["tasks"]["reach-v3"]["demonstrations"]["tried"] += 1  # rows made from other demonstrations
     earlier.write_text(json.dumps(recorded))
+    third = [*TINY, "--seeds", "--epochs", "3", "--work", str(tmp_path / "new"), "--out", str(tmp_path / "third.json")]
     with pytest.raises(RuntimeError, match="SAC rows were made from the demonstrations"):
-        main(
-            [
-                *TINY,
-                "--epochs",
-                "3",
-                "--work",
-                str(tmp_path / "third"),
-                "--out",
-                str(tmp_path / "third.json"),
-                "--sac-from",
-                str(earlier),
-            ]
-        )
+        main([*third, "--sac-from", str(earlier)])
 
 
 def test_the_metaworld_benchmark_refuses_an_unknown_task_before_any_work(tmp_path, capsys):
