@@ -290,8 +290,7 @@ def genrl_row(
 ) -> dict[str, Any]:
     """GenRL with the settings of a task without an entry (:data:`~sb3_genrl.study.quickstart.OUTSIDE_TASK_KWARGS`:
     started from the demonstrations, a fixed spread, refits to the solving pulls, then its defaults) for ``--episodes``
-    episodes (resumed from its
-    checkpoint), on held-out resets."""
+    episodes (resumed from its checkpoint), on held-out resets."""
     began = time.process_time()
     run = train_policy(
         metaworld.metaworld_env_id(task),
