@@ -133,19 +133,25 @@ class _BatchRecorder(GenRL):
         return super()._e_step(q, batch)
 
 
+def _record_fits(monkeypatch, module, name):
+    """Patch ``module.name`` (a fit of the mean: ``regress_mean`` or ``fit_mean``) to record the (contexts, latent
+    actions) of each call, then fit as before; the list of records."""
+    calls, fit = [], getattr(module, name)
+
+    def recorded(*args, **kwargs):
+        x, y = (arg for arg in args if isinstance(arg, th.Tensor))
+        calls.append((x.clone(), y.clone()))
+        return fit(*args, **kwargs)
+
+    monkeypatch.setattr(module, name, recorded)
+    return calls
+
+
 def test_kept_demonstrations_join_every_e_step_and_every_regression(demos, monkeypatch):
     from sb3_genrl.genrl import hindsight
 
     dataset, contexts, latents = demos
-    regressed = []
-    regress = hindsight.regress_mean
-    monkeypatch.setattr(
-        hindsight,
-        "regress_mean",
-        lambda policy, optimizer, x, y, **kw: (
-            regressed.append((x.clone(), y.clone())) or regress(policy, optimizer, x, y, **kw)
-        ),
-    )
+    regressed = _record_fits(monkeypatch, hindsight, "regress_mean")
     model = _BatchRecorder(
         HindsightReachEnv(),
         EncodingLinearGenerator(),
@@ -170,13 +176,7 @@ def test_refit_demonstrations_join_every_refit_after_the_solving_pulls(demos, fa
     from sb3_genrl.genrl import refits as refits_module
 
     dataset, contexts, latents = demos
-    fitted = []
-    fit = refits_module.fit_mean
-    monkeypatch.setattr(
-        refits_module,
-        "fit_mean",
-        lambda policy, x, y, **kw: fitted.append((x.clone(), y.clone())) or fit(policy, x, y, **kw),
-    )
+    fitted = _record_fits(monkeypatch, refits_module, "fit_mean")
     model = GenRL(
         SuccessOnlyReachEnv(),  # no relabelling: history 0
         EncodingLinearGenerator(),
