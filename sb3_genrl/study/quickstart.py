@@ -90,14 +90,14 @@ QUICKSTART_MAX_EPISODES = 10000
 # push-v3, 1000 against 500 lift the fitted start from 0.76 to 0.91 and the search from 0.94 to 0.96 (tuning resets),
 # for about 110 s more of recording (docs/guide/your_task.md).
 OUTSIDE_DEMO_EPISODES = 1000
-# ... and at most this many demonstration steps, and GenRL at most this many episodes' steps of the horizon, so that a
-# long task's quickstart stays within 15 minutes on two idle cores: 1000 demonstrations up to a horizon of 150 steps and
-# 3000 episodes up to 166, fewer above (Meta-World's push-back-v3, 500 steps: 300 and 1000). Sized for the costliest
-# Meta-World step, about 1.6 ms on one core (shelf-place-v3, stick-pull-v3), a failing episode playing the whole
-# horizon: push-back-v3's quickstart took 22 minutes with 400 demonstrations and 3008 episodes (docs/guide/your_task.md,
-# "The quickstart").
-OUTSIDE_DEMO_STEPS = 150_000
-OUTSIDE_POLICY_STEPS = 500_000
+# ... and at most this many demonstration steps, and GenRL at most this many episodes' steps of the horizon: 1000
+# demonstrations up to a horizon of 300 steps and 3000 episodes up to 333, fewer above (Meta-World's push-back-v3, 500
+# steps: 600 and 2048). On 100 tuning resets (seed 0), with half these budgets push-back's quickstart solved 0.63 and
+# shelf-place-v3's (258 steps, the costliest step of the long tasks) 0.27; with twice the demonstrations 0.70 and 0.36
+# (600 and 1162), and twice both 0.72 and 0.50 (2048 and 3968 episodes), in about 11 minutes on two cores instead of
+# 6.5. A task whose every GenRL episode fails plays the whole budget (docs/guide/your_task.md, "The quickstart").
+OUTSIDE_DEMO_STEPS = 300_000
+OUTSIDE_POLICY_STEPS = 1_000_000
 # GenRL's envs played at a time by a task without the fast path (one process each; Fetch, Meta-World, a task of
 # yours). A task with it (the arm tasks) plays an iteration's episodes in one threaded simulation call, as
 # `genrl train-policy` does by default (sb3_genrl.vec_env). Fixed, not the machine's core count: the result depends on it.
@@ -153,7 +153,7 @@ def quickstart(
     :param task: a task name from :data:`sb3_genrl.envs.TASKS`, or a task from outside the package
         (:func:`~sb3_genrl.envs.external.resolve_task`)
     :param demo_episodes: demonstrations to generate (None: :func:`quickstart_demo_episodes`; a task from outside the
-        package: :func:`outside_demo_episodes` of its horizon, 1000 up to 150 steps)
+        package: :func:`outside_demo_episodes` of its horizon, 1000 up to 300 steps)
     :param epochs: generator training epochs (None: :data:`GENERATOR_EPOCHS`, and for a task from outside the package
         at least the minibatch steps of :data:`OUTSIDE_GENERATOR_TRAINING`, its epochs raised on a small dataset;
         given: exactly these epochs)
