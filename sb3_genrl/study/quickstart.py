@@ -92,10 +92,11 @@ QUICKSTART_MAX_EPISODES = 10000
 OUTSIDE_DEMO_EPISODES = 1000
 # ... and at most this many demonstration steps, and GenRL at most this many episodes' steps of the horizon: 1000
 # demonstrations up to a horizon of 300 steps and 3000 episodes up to 333, fewer above (Meta-World's push-back-v3, 500
-# steps: 600 and 2048). On 100 tuning resets (seed 0), with half these budgets push-back's quickstart solved 0.63 and
-# shelf-place-v3's (258 steps, the costliest step of the long tasks) 0.27; with twice the demonstrations 0.70 and 0.36
-# (600 and 1162), and twice both 0.72 and 0.50 (2048 and 3968 episodes), in about 11 minutes on two cores instead of
-# 6.5. A task whose every GenRL episode fails plays the whole budget (docs/guide/your_task.md, "The quickstart").
+# steps: 600 and 2048; shelf-place-v3, 258 steps and the costliest step of the long tasks: 1000 and 3008). On 100
+# tuning resets (seed 0), with half these budgets push-back's quickstart solved 0.63 and shelf-place's 0.27, with twice
+# the demonstrations 0.70 and 0.36, with these budgets 0.72 and 0.50, in 10 min 44 s and 9 min 34 s on two idle cores
+# instead of 6.5 minutes. A task whose every GenRL episode fails plays the whole budget (docs/guide/your_task.md, "The
+# quickstart").
 OUTSIDE_DEMO_STEPS = 300_000
 OUTSIDE_POLICY_STEPS = 1_000_000
 # GenRL's envs played at a time by a task without the fast path (one process each; Fetch, Meta-World, a task of
