@@ -91,6 +91,10 @@ class GenRL(OnPolicyAlgorithm):
     :param max_log_std_change: the most the log standard deviation may change per iteration, in each latent
         dimension and, with ``ContextStdPolicy``, for every context (default None: only ``target_kl`` bounds it; 0: the
         spread stays at ``log_std_init``; see :func:`~sb3_genrl.genrl.policies.limit_log_std_change`)
+    :param success_kl_floor: scale the TRPO E-step's KL bound by the share of the batch's pulls that failed their own
+        context, ``target_kl * max(failed share, success_kl_floor)``, so that the search steps less where the policy
+        already solves (default None: ``target_kl`` at every iteration, the paper's); needs the refits of
+        ``hindsight_kwargs`` (``refit_every``), whose buffer stores each pull's ``info["is_success"]``
     :param value_history: batches the value function is fitted on: the current one and those before it (default 1)
     :param policy_averaging: decay of a moving average of the policy's weights, with which ``predict`` acts
         (default None: none; see :mod:`sb3_genrl.genrl.averaging`)
@@ -146,6 +150,7 @@ class GenRL(OnPolicyAlgorithm):
         e_step_learning_rate: float = 3e-3,
         normalize_advantage: bool = True,
         max_log_std_change: float | None = None,
+        success_kl_floor: float | None = None,
         value_history: int = 1,
         policy_averaging: float | None = None,
         hindsight_kwargs: dict[str, Any] | None = None,
@@ -204,6 +209,7 @@ class GenRL(OnPolicyAlgorithm):
         self.batch_size, self.n_critic_updates, self.value_history = batch_size, n_critic_updates, int(value_history)
         self.max_log_std_change, self.latent_clip, self.policy_averaging = max_log_std_change, latent_clip, policy_averaging
         self.latent_critic_kwargs = None if latent_critic_kwargs is None else dict(latent_critic_kwargs)
+        self.success_kl_floor = success_kl_floor
         if _init_setup_model:
             self._setup_model()
 
@@ -367,7 +373,7 @@ class GenRL(OnPolicyAlgorithm):
                 q,
                 self.policy,
                 batch,
-                target_kl=self.target_kl,
+                target_kl=self.kl_bound(),
                 cg_max_steps=self.cg_max_steps,
                 cg_damping=self.cg_damping,
                 line_search_shrinking_factor=self.line_search_shrinking_factor,
@@ -382,6 +388,15 @@ class GenRL(OnPolicyAlgorithm):
             batch_size=self.minibatch_size,
             learning_rate=self.e_step_learning_rate,
         )
+
+    def kl_bound(self) -> float:
+        """The TRPO E-step's KL bound for the batch in the rollout buffer: ``target_kl``, or with ``success_kl_floor``
+        ``target_kl`` times the share of the batch's pulls that failed their own context, at least ``success_kl_floor``
+        of it."""
+        floor = getattr(self, "success_kl_floor", None)  # (absent from a model saved before it existed)
+        if floor is None:
+            return self.target_kl
+        return self.target_kl * max(1.0 - float(np.mean(self.rollout_buffer.successes)), floor)
 
     @property
     def minibatch_size(self) -> int:

@@ -108,6 +108,7 @@ SETTINGS: dict[str, Setting] = {
         ">= 0 (0: the spread stays as it starts) or None",
         _or_none(lambda value: isinstance(value, numbers.Real) and not isinstance(value, bool) and value >= 0),
     ),
+    "success_kl_floor": Setting(None, "between 0 (exclusive) and 1, or None", _or_none(_number(lambda value: 0 < value <= 1))),
     "value_history": Setting(1, "a positive integer", _integer(1)),
     "policy_averaging": Setting(None, "between 0 and 1 (exclusive) or None", _or_none(_FRACTION)),
     "hindsight_kwargs": Setting(None, "a dict or None", lambda value: value is None or isinstance(value, Mapping)),
@@ -166,6 +167,11 @@ def _check_values(values: dict[str, Any]) -> dict[str, Any] | None:
         if values["pulls_per_context"] > 1:
             raise ValueError("latent_critic_kwargs and pulls_per_context > 1 both give the E-step its baseline: choose one")
     hindsight_kwargs = values["hindsight_kwargs"]
+    if values["success_kl_floor"] is not None and not (hindsight_kwargs or {}).get("refit_every"):
+        raise ValueError(
+            "success_kl_floor scales the KL bound by the share of the batch's pulls that failed, whose success the "
+            "buffer of the refits stores: it needs hindsight_kwargs with refit_every > 0"
+        )
     if hindsight_kwargs is None:
         return None
     if values["e_step"] != "trpo":

@@ -17,6 +17,7 @@ from genrl_test_helpers import GOALS, EStepBatchRecorder, HindsightReachEnv, Suc
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import DummyVecEnv
 
+import sb3_genrl.genrl.genrl as genrl_module
 from sb3_genrl import GenRL, LatentActionWrapper
 from sb3_genrl.genrl.hindsight import HindsightRelabelling
 from sb3_genrl.genrl.hindsight_buffer import HindsightRolloutBuffer
@@ -482,3 +483,38 @@ def test_learn_hands_the_infos_to_the_buffer_beside_the_users_callbacks_of_every
         for counter in callback if isinstance(callback, list) else [callback]:
             assert not isinstance(counter, _Counter) or counter.steps == 16
     assert len(calls) == 16
+
+
+def test_the_kl_bound_by_success_is_target_kl_times_the_batchs_failed_share_at_least_the_floor(monkeypatch):
+    """With success_kl_floor, every TRPO E-step gets target_kl * max(failed share of its batch, floor), the share
+    counted here from the successes the env reported (a callback's view of each pull's info); without it, target_kl."""
+    bounds = []
+    trpo = genrl_module.trpo_e_step
+
+    def recording(*args, target_kl, **kwargs):
+        bounds.append(target_kl)
+        return trpo(*args, target_kl=target_kl, **kwargs)
+
+    monkeypatch.setattr(genrl_module, "trpo_e_step", recording)
+
+    class Successes(BaseCallback):
+        def _on_rollout_start(self) -> None:
+            self.batches.append([])
+
+        def _on_step(self) -> bool:
+            self.batches[-1] += [bool(info["is_success"]) for info in self.locals["infos"]]
+            return True
+
+    hindsight = {"history": 0, "refit_every": 32, "refit_steps": 5}
+    env = LatentActionWrapper(SuccessOnlyReachEnv(), LinearGenerator())
+    seen = Successes()
+    seen.batches = []
+    model = GenRL(env, seed=0, n_steps=16, n_em_iterations=2, target_kl=0.02, success_kl_floor=0.6, hindsight_kwargs=hindsight)
+    model.learn(16 * 12, callback=seen)
+    failed = [1.0 - float(np.mean(batch)) for batch in seen.batches]
+    expected = [0.02 * max(share, 0.6) for share in failed for _ in range(2)]
+    assert bounds == pytest.approx(expected, rel=1e-12)
+    assert min(failed) < 0.6 < max(failed)  # batches at the floor and above it
+    bounds.clear()
+    GenRL(env, seed=0, n_steps=16, n_em_iterations=2, target_kl=0.02, hindsight_kwargs=hindsight).learn(16 * 4)
+    assert bounds == [0.02] * 8

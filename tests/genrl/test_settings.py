@@ -244,6 +244,28 @@ def test_a_value_of_the_wrong_type_is_refused_in_one_line_before_any_work(settin
         GenRL(FastReachEnv(), LinearGenerator(), **settings)
 
 
+@pytest.mark.parametrize(
+    ("settings", "message"),
+    [
+        ({"success_kl_floor": 0.0}, r"success_kl_floor must be between 0 \(exclusive\) and 1, or None, got 0.0"),
+        ({"success_kl_floor": 1.5}, r"success_kl_floor must be between 0 \(exclusive\) and 1, or None, got 1.5"),
+        ({"success_kl_floor": 0.1}, r"success_kl_floor .* needs hindsight_kwargs with refit_every > 0"),
+        (
+            {"success_kl_floor": 0.1, "hindsight_kwargs": {"history": 0}},
+            r"success_kl_floor .* needs hindsight_kwargs with refit_every > 0",
+        ),
+    ],
+    ids=_setting_id,
+)
+def test_the_kl_bound_by_success_is_checked(settings, message):
+    """A floor outside (0, 1], or one without the refits' buffer (which stores each pull's success), is refused before
+    any work."""
+    with pytest.raises(ValueError, match=message):
+        GenRL(FastReachEnv(), LinearGenerator(), **settings)
+    with pytest.raises(ValueError, match=f"--genrl-kwargs: {message}"):
+        check_genrl_settings(settings, "--genrl-kwargs")
+
+
 def test_settings_given_to_load_are_checked_with_the_saved_ones(tmp_path):
     GenRL(FastReachEnv(), LinearGenerator(), n_steps=8, e_step="kl_penalty").save(tmp_path / "model.zip")
     with pytest.raises(ValueError, match=r"GenRL.load\(.*model.zip\): hindsight_kwargs needs e_step='trpo'"):
