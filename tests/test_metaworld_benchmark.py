@@ -9,6 +9,8 @@ import pytest
 from sb3_genrl.envs import metaworld
 from stable_baselines3 import SAC
 
+from sb3_genrl.generative import load
+
 pytestmark = pytest.mark.skipif(not metaworld.installed(), reason=metaworld.INSTALL_HINT)
 
 TINY = ["--tasks", "reach-v3", "--seeds", "0", "--demos", "4", "--epochs", "2", "--episodes", "4", "--batch-episodes", "4"]
@@ -44,8 +46,6 @@ def test_the_metaworld_benchmark_writes_every_unit_resumes_and_refuses_other_set
     assert row["horizon"]["settled"] and row["horizon"]["horizon"] < 100 and row["horizon"]["resets"] == 8
     assert row["reconstruction"]["demonstrations"] == 4 and 0.0 <= row["reconstruction"]["success"] <= 1.0
     # the generator trained as the quickstart trains an outside task's (its checkpoint chosen by its reconstructions)
-    from sb3_genrl.generative import load
-
     assert load(work / "reach-v3" / "vae.pt").selection == result["settings"]["generator_training"]["selection"]
     assert result["settings"]["generator_training"]["selection"] == "reconstruction"
     assert f"| reach-v3 | {row['horizon']['horizon']} | 1.000 | 1.000 |" in out.with_suffix(".md").read_text()

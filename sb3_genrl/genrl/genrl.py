@@ -393,10 +393,9 @@ class GenRL(OnPolicyAlgorithm):
         """The TRPO E-step's KL bound for the batch in the rollout buffer: ``target_kl``, or with ``success_kl_floor``
         ``target_kl`` times the share of the batch's pulls that failed their own context, at least ``success_kl_floor``
         of it."""
-        floor = getattr(self, "success_kl_floor", None)  # (absent from a model saved before it existed)
-        if floor is None:
+        if self.success_kl_floor is None:
             return self.target_kl
-        return self.target_kl * max(1.0 - float(np.mean(self.rollout_buffer.successes)), floor)
+        return self.target_kl * max(1.0 - float(np.mean(self.rollout_buffer.successes)), self.success_kl_floor)
 
     @property
     def minibatch_size(self) -> int:

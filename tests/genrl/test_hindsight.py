@@ -498,6 +498,10 @@ def test_the_kl_bound_by_success_is_target_kl_times_the_batchs_failed_share_at_l
     monkeypatch.setattr(genrl_module, "trpo_e_step", recording)
 
     class Successes(BaseCallback):
+        def __init__(self) -> None:
+            super().__init__()
+            self.batches: list[list[bool]] = []
+
         def _on_rollout_start(self) -> None:
             self.batches.append([])
 
@@ -508,7 +512,6 @@ def test_the_kl_bound_by_success_is_target_kl_times_the_batchs_failed_share_at_l
     hindsight = {"history": 0, "refit_every": 32, "refit_steps": 5}
     env = LatentActionWrapper(SuccessOnlyReachEnv(), LinearGenerator())
     seen = Successes()
-    seen.batches = []
     model = GenRL(env, seed=0, n_steps=16, n_em_iterations=2, target_kl=0.02, success_kl_floor=0.6, hindsight_kwargs=hindsight)
     model.learn(16 * 12, callback=seen)
     failed = [1.0 - float(np.mean(batch)) for batch in seen.batches]
