@@ -411,8 +411,9 @@ def test_genrl_demos_and_train_policy_take_a_task_the_package_does_not_register(
     # a task from outside the package refits its mean to the pulls that solved their own reset, which needs the success
     code, out, err = cli(*silent)
     assert code == 2 and "needs every pull's info['is_success']" in err and "--success-key" in err, err
-    assert """--genrl-kwargs '{"hindsight_kwargs": null}'""" in err
-    code, out, err = cli(*silent, "--genrl-kwargs", '{"hindsight_kwargs": null}', "--overwrite")
+    leave_out = '{"hindsight_kwargs": null, "success_kl_floor": null}'
+    assert f"--genrl-kwargs '{leave_out}'" in err
+    code, out, err = cli(*silent, "--genrl-kwargs", leave_out, "--overwrite")
     assert code == 0, err
     assert "success: the env reports no info['is_success']" in out
     code, out, err = cli(
@@ -703,6 +704,8 @@ def test_train_policy_of_an_outside_task_starts_from_its_demonstrations(cli, tmp
     # info["hindsight"]; history 1 would refuse it at the first pull)
     fitted = GenRL.load(tmp_path / "fitted" / "genrl_policy.zip", device="cpu")
     assert fitted.hindsight_kwargs == {"history": 0, "refit_every": 256, "refit_start": 512} and fitted.refits is not None
+    assert fitted.success_kl_floor == 0.1  # and scale the KL bound by the batch's failed share
+    assert GenRL.load(tmp_path / "defaults" / "genrl_policy.zip", device="cpu").success_kl_floor is None
 
 
 gym.register("TestExternal/PointGoalOwn-v0", entry_point=PointGoalEnv, max_episode_steps=HORIZON)

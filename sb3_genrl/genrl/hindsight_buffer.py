@@ -41,7 +41,8 @@ NO_SUCCESS_INFO = (
     "hindsight_kwargs['refit_every'] refits the policy's mean to the pulls that solved their own context, "
     "which needs every pull's info['is_success'] (the goal-conditioned envs report it); this env's info "
     "has no such key: name the key that holds its success (train_policy's success_key, --success-key), or "
-    "leave the refits out (hindsight_kwargs without refit_every; --genrl-kwargs '{\"hindsight_kwargs\": null}')"
+    "leave the refits out (hindsight_kwargs without refit_every, success_kl_floor None; --genrl-kwargs "
+    '\'{"hindsight_kwargs": null, "success_kl_floor": null}\')'
 )
 
 
