@@ -411,9 +411,10 @@ def test_genrl_demos_and_train_policy_take_a_task_the_package_does_not_register(
     # a task from outside the package refits its mean to the pulls that solved their own reset, which needs the success
     code, out, err = cli(*silent)
     assert code == 2 and "needs every pull's info['is_success']" in err and "--success-key" in err, err
+    assert not (tmp_path / "silent").exists()  # refused before its run folder is made
     leave_out = '{"hindsight_kwargs": null, "success_kl_floor": null}'
     assert f"--genrl-kwargs '{leave_out}'" in err
-    code, out, err = cli(*silent, "--genrl-kwargs", leave_out, "--overwrite")
+    code, out, err = cli(*silent, "--genrl-kwargs", leave_out)
     assert code == 0, err
     assert "success: the env reports no info['is_success']" in out
     code, out, err = cli(

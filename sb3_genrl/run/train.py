@@ -1,7 +1,7 @@
 """Train a GenRL policy on a registered task, with logs, a learning curve (CSV + PNG) and the saved model.
 
-Task-level workflow code: tasks are resolved through the registry (:func:`sb3_genrl.envs.get_task`), imported inside
-the functions so that the core library (:class:`~sb3_genrl.GenRL`) never imports the tasks.
+Task-level workflow code: tasks are resolved through the registry (:func:`sb3_genrl.envs.get_task`); this layer imports
+the tasks, the core library (:class:`~sb3_genrl.GenRL`) never does.
 """
 
 from __future__ import annotations
@@ -48,6 +48,7 @@ from sb3_genrl.generative.base import TrajectoryGenerator
 from sb3_genrl.genrl.demonstrations import DemonstrationCallback, build_callbacks, callback_entries
 from sb3_genrl.genrl.generator_files import generator_digest
 from sb3_genrl.genrl.genrl import EStep, GenRL
+from sb3_genrl.genrl.hindsight_buffer import NO_SUCCESS_INFO
 from sb3_genrl.genrl.policies import MlpPolicy
 from sb3_genrl.genrl.settings import NOT_SETTINGS, SETTINGS, check_genrl_settings
 from sb3_genrl.run.checkpoint import CHECKPOINT_EVERY, GenRLCheckpoint, RandomStateRecorder, resume_genrl, resume_state
@@ -186,6 +187,12 @@ def train_policy(
         "verbose": verbose,
         **run_settings(genrl_kwargs, batch_episodes, n_envs),
     }
+    if (genrl_settings(arguments).get("hindsight_kwargs") or {}).get("refit_every"):
+        try:  # an env that reports no success is refused before its run folder is made
+            _check_reports_success(env_id, horizon, success_key, task_name not in TASKS, env.generator, latent_clip, seed)
+        except BaseException:
+            env.close()
+            raise
     identity = {
         "algorithm": "genrl",
         "task": task_name,
@@ -221,6 +228,28 @@ def _make_env(env_id: str, horizon: int | None, success_key: str | None = None, 
     if success_key is None and not outside:
         return env
     return SuccessInfo(env, success_key or "is_success")
+
+
+def _check_reports_success(
+    env_id: str,
+    horizon: int | None,
+    success_key: str | None,
+    outside: bool,
+    generator: TrajectoryGenerator,
+    latent_clip: float,
+    seed: int,
+) -> None:
+    """Play one episode of a fresh env of the run's (the prior's centre, from reset ``seed``) and refuse the run when
+    its step reports no ``info["is_success"]``: the refits of ``hindsight_kwargs`` need each pull's success, and would
+    otherwise stop at the run's first pull, its folder already made."""
+    probe = LatentActionWrapper(_make_env(env_id, horizon, success_key, outside=outside), generator, latent_clip=latent_clip)
+    try:
+        probe.reset(seed=seed)
+        info = probe.step(np.zeros(probe.action_space.shape, dtype=probe.action_space.dtype))[-1]
+    finally:
+        probe.close()
+    if "is_success" not in info:
+        raise ValueError(NO_SUCCESS_INFO)
 
 
 def _open_and_run(
