@@ -182,7 +182,8 @@ def settings(args: argparse.Namespace) -> dict[str, Any]:
 
 def sac_rows(path: Path, wanted: dict[str, Any]) -> dict[str, Any]:
     """The tasks of the benchmark's result ``path`` that have SAC rows: per task, its SAC rows and the demonstrations
-    and horizon they were made from, with the file's commit; ``ValueError`` when its SAC settings are not ``wanted``'s."""
+    and horizon they were made from, with where they were made (the file and its commit, or the result the file took
+    them from); ``ValueError`` when its SAC settings are not ``wanted``'s."""
     recorded = read_settings(path)
     if not recorded or "settings" not in recorded or "tasks" not in recorded:
         raise ValueError(f"{path} is not a result of this benchmark")
@@ -197,7 +198,7 @@ def sac_rows(path: Path, wanted: dict[str, Any]) -> dict[str, Any]:
             "sac": row["sac"],
             "demonstrations": row["demonstrations"],
             "horizon": row["horizon"]["horizon"],
-            "from": {"file": str(path), "git_commit": recorded.get("git_commit")},
+            "from": row.get("sac_from") or {"file": str(path), "git_commit": recorded.get("git_commit")},
         }
         for task, row in recorded["tasks"].items()
         if row.get("sac")

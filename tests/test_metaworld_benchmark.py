@@ -101,6 +101,12 @@ def test_sac_rows_are_taken_from_an_earlier_result_of_the_same_sac_settings_and_
     assert row["sac"] == sac and row["sac_from"]["file"] == str(earlier) and result["settings"]["epochs"] == 3
     assert "0" in row["genrl"] and not (tmp_path / "new" / "reach-v3" / "sac_seed0").exists()  # SAC not run again
     assert f"SAC's rows: from {earlier}" in out.with_suffix(".md").read_text()
+    # rows taken on from a result that took them from another keep where they were made
+    chained = tmp_path / "chained.json"
+    argv = [*TINY, "--epochs", "3", "--work", str(tmp_path / "chained"), "--out", str(chained), "--sac-from", str(out)]
+    assert main(argv) == 0
+    assert json.loads(chained.read_text())["tasks"]["reach-v3"]["sac_from"] == row["sac_from"]
+    assert f"SAC's rows: from {earlier}" in chained.with_suffix(".md").read_text()
     recorded = json.loads(earlier.read_text())
     recorded["tasks"]["reach-v3"]["demonstrations"]["tried"] += 1  # rows made from other demonstrations
     earlier.write_text(json.dumps(recorded))
