@@ -22,7 +22,8 @@ and a rerun with others is refused before any work):
 5. per seed, GenRL with the settings of a task without an entry in ``hyperparams/genrl.yml``
    (:data:`~sb3_genrl.study.quickstart.OUTSIDE_TASK_KWARGS`: the fit of step 4, a spread fixed at 0.37 prior standard
    deviations, the mean refitted to the pulls that solved their own reset, the KL bound scaled by the batch's failed
-   share, then GenRL's defaults, ``--batch-episodes`` a batch), ``--episodes`` episodes (checkpointed; a stopped run resumes);
+   share, then GenRL's defaults, ``--batch-episodes`` a batch), ``--episodes`` episodes (checkpointed; a stopped run
+   resumes);
 6. per ``--sac-seeds`` seed (default one: SAC's runs take hours per task on a CPU; ``--sac-from`` takes them from an
    earlier result whose SAC settings and demonstrations are this run's), ``genrl baseline sac`` of the
    task (:mod:`sb3_genrl.baselines.outside`): SB3's SAC (its defaults, learning from the first step, observations
