@@ -187,7 +187,8 @@ def train_policy(
         "verbose": verbose,
         **run_settings(genrl_kwargs, batch_episodes, n_envs),
     }
-    if (genrl_settings(arguments).get("hindsight_kwargs") or {}).get("refit_every"):
+    settings = genrl_settings(arguments)
+    if (settings.get("hindsight_kwargs") or {}).get("refit_every"):
         try:  # an env that reports no success is refused before its run folder is made
             _check_reports_success(env_id, horizon, success_key, task_name not in TASKS, env.generator, latent_clip, seed)
         except BaseException:
@@ -201,7 +202,7 @@ def train_policy(
         "n_envs": n_envs,
         "batch_episodes": batch_episodes,
         "generator_sha256": generator_digest(env.generator),
-        "genrl_settings": genrl_settings(arguments),
+        "genrl_settings": settings,
         **_callback_identity(callback, callbacks, env, arguments),
         **({} if horizon is None else {"horizon": int(horizon)}),
         **({} if success_key is None else {"success_key": success_key}),
