@@ -6,14 +6,50 @@ Task-level workflow code: it reads the task registry (:data:`sb3_genrl.envs.TASK
 from __future__ import annotations
 
 import errno
+import functools
+import os
+import warnings
 from pathlib import Path
 
 import imageio.v3 as iio
+import mujoco
 import numpy as np
 
 from sb3_genrl.checks import check_output_dir, check_positive_int, check_seed
 from sb3_genrl.envs import arm_tasks, get_task
 from sb3_genrl.utils import atomic_path, atomic_write_bytes, atomic_write_text
+
+
+@functools.cache
+def _rendering_failure() -> str | None:
+    """Why MuJoCo cannot render offscreen in this process (its error), or ``None`` when it can: a 16 x 16 renderer of
+    an empty model, made and closed (once per process)."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # GLFW warns before it fails without a display; the error says why
+            renderer = mujoco.Renderer(mujoco.MjModel.from_xml_string("<mujoco/>"), 16, 16)
+    except Exception as error:  # mujoco.FatalError, or the OpenGL library's own error
+        return f"{type(error).__name__}: {error}"
+    renderer.close()
+    return None
+
+
+def check_rendering(skip: str = "") -> None:
+    """Check, before any work, that MuJoCo can render offscreen here: without a display its default OpenGL backend
+    (GLFW) fails only at the first frame, after every stage before it.
+
+    :param skip: how the caller's user leaves the rendering out, added to the message (e.g. ``"--no-video"``)
+    :raises ValueError: naming ``MUJOCO_GL``'s value and the backends that need no display
+    """
+    failure = _rendering_failure()
+    if failure is None:
+        return
+    backend = os.environ.get("MUJOCO_GL")
+    backend = f"MUJOCO_GL={backend}" if backend else "MUJOCO_GL unset: GLFW, which needs a display"
+    raise ValueError(
+        f"rendering: MuJoCo cannot make an OpenGL context here ({backend}; {failure}); on a machine without a display "
+        "set MUJOCO_GL=egl (or osmesa) before the command" + (f", or leave the rendering out ({skip})" if skip else "")
+    )
 
 
 def frame_strip(frames: list[np.ndarray], n: int = 6) -> np.ndarray:
@@ -78,6 +114,7 @@ def play_scripted(
     check_positive_int(width, "width")
     check_positive_int(height, "height")
     out = check_output_dir(out_dir)
+    check_rendering()
     out.mkdir(parents=True, exist_ok=True)
     lines = [
         "# Scripted motions of the GenRL tasks",

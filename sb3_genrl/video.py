@@ -14,7 +14,7 @@ from sb3_genrl.checks import check_input_path, check_output_file, check_positive
 from sb3_genrl.envs import get_task
 from sb3_genrl.generative import load
 from sb3_genrl.run.loading import load_policy
-from sb3_genrl.showcase import frame_strip, save_animation, save_image
+from sb3_genrl.showcase import check_rendering, frame_strip, save_animation, save_image
 
 VIDEO_SUFFIXES = (".mp4", ".gif")
 REAL_TIME_FPS = 25  # the arm tasks' control steps per second (20 physics steps of 2 ms): a frame each plays in real time
@@ -78,6 +78,7 @@ def record_video(
     check_output_file(out, "out", suffixes=VIDEO_SUFFIXES)
     check_mp4_writer(out)
     check_input_path(policy if policy is not None else generator, "policy" if policy is not None else "generator")
+    check_rendering()
     env = spec.make_env(render_mode="rgb_array", width=width, height=height)
     rng = np.random.default_rng(seed)
     goal_list = np.array([env.sample_goal(rng) for _ in range(goals)])

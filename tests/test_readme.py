@@ -24,6 +24,12 @@ def test_ci_runs_exactly_the_readmes_test_command():
     assert "ruff format --check ." in commands[1] and "ruff check ." in commands[1]
 
 
+def test_the_getting_started_page_gives_the_readmes_two_commands():
+    readme = [line for line in README.splitlines() if line.startswith("python3.11")]
+    page = (ROOT / "docs" / "guide" / "getting_started.md").read_text(encoding="utf-8")
+    assert [line for line in page.splitlines() if line.startswith("python3.11")] == readme
+
+
 def test_readme_is_at_most_1200_words():
     assert len(README.split()) <= 1200
 

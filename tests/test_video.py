@@ -30,3 +30,72 @@ def test_a_video_that_ffmpeg_could_not_finish_is_not_left_at_its_path(tmp_path, 
             save_animation(frames, path, fps=10)
         assert error.value.errno == errno.EIO and error.value.filename == str(path)
     assert [path.name for path in tmp_path.iterdir()] == ["v.mp4"] and video.read_bytes() == whole
+
+
+@pytest.fixture
+def no_renderer(monkeypatch):
+    """MuJoCo's renderer failing as it does without a display and MUJOCO_GL unset (GLFW), for this test only."""
+    import mujoco
+
+    from sb3_genrl import showcase
+
+    def fail(*args, **kwargs):
+        raise mujoco.FatalError("an OpenGL platform library has not been loaded into this process")
+
+    showcase._rendering_failure.cache_clear()
+    monkeypatch.setattr(mujoco, "Renderer", fail)
+    monkeypatch.delenv("MUJOCO_GL", raising=False)
+    yield
+    showcase._rendering_failure.cache_clear()
+
+
+def test_rendering_is_checked_before_any_work(no_renderer, tmp_path):
+    from sb3_genrl.showcase import play_scripted
+    from sb3_genrl.video import record_video
+
+    message = r"MUJOCO_GL unset: GLFW, which needs a display; FatalError: an OpenGL .* set MUJOCO_GL=egl"
+    with pytest.raises(ValueError, match=message):
+        play_scripted(tmp_path / "play", tasks=("hockey",))
+    generator = tmp_path / "vae.pt"
+    generator.write_bytes(b"")  # never read: the check comes first
+    with pytest.raises(ValueError, match=message):
+        record_video("hockey", tmp_path / "v.gif", generator=generator)
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["vae.pt"]
+
+
+def test_the_quickstart_checks_rendering_only_when_it_still_has_a_video_to_make(no_renderer, tmp_path, monkeypatch):
+    from sb3_genrl.study import quickstart as quickstart_module
+
+    class Stages(Exception):
+        pass
+
+    def stages(*args, **kwargs):
+        raise Stages
+
+    monkeypatch.setattr(quickstart_module, "_run_stages", stages)
+    monkeypatch.setattr(quickstart_module, "refuse_conflicts", lambda *args: None)  # the empty files below
+    with pytest.raises(ValueError, match=r"leave the rendering out \(genrl quickstart --no-video"):
+        quickstart_module.quickstart(tmp_path / "a", task="hockey")
+    assert not (tmp_path / "a").exists()
+    with pytest.raises(Stages):  # no video: no check
+        quickstart_module.quickstart(tmp_path / "b", task="hockey", video=False)
+    (tmp_path / "c").mkdir()
+    for name in ("policy.gif", "policy_strip.png"):  # the video already made: a rerun renders nothing
+        (tmp_path / "c" / name).write_bytes(b"")
+    with pytest.raises(Stages):
+        quickstart_module.quickstart(tmp_path / "c", task="hockey")
+
+
+def test_genrl_quickstart_without_a_display_stops_before_its_first_stage(tmp_path):
+    """The real failure: GLFW with no display to open (the variables removed), through the command line."""
+    import os
+    import subprocess
+    import sys
+
+    env = {key: value for key, value in os.environ.items() if key not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    env["MUJOCO_GL"] = "glfw"
+    command = [sys.executable, "-m", "sb3_genrl.cli", "quickstart", "--out", str(tmp_path / "q")]
+    result = subprocess.run(command, env=env, capture_output=True, text=True)
+    assert result.returncode == 2, result.stderr
+    assert "MUJOCO_GL=glfw" in result.stderr and "set MUJOCO_GL=egl" in result.stderr
+    assert "--no-video" in result.stderr and not (tmp_path / "q").exists()

@@ -55,6 +55,7 @@ from sb3_genrl.provenance import provenance
 from sb3_genrl.run import evaluate_on_goals, train_policy
 from sb3_genrl.run.stages import check_and_record, read_settings, refuse_conflicts, settings_conflicts
 from sb3_genrl.run.train import effective_genrl_settings
+from sb3_genrl.showcase import check_rendering
 from sb3_genrl.utils import atomic_write_json, atomic_write_text, folder_lock
 from sb3_genrl.video import record_video
 from sb3_genrl.wrappers import task_has_fast_path
@@ -212,6 +213,8 @@ def quickstart(
     check_seed(seed)
     check_device(device)
     check_output_dir(out_dir)
+    if video and not _done(pathlib.Path(out_dir), "video"):  # a display missing fails at the first frame, else
+        check_rendering("genrl quickstart --no-video, quickstart(video=False)")
     # The models are small: one torch thread is as fast as several and leaves the other cores to MuJoCo.
     torch.set_num_threads(1)
     out = pathlib.Path(out_dir)
