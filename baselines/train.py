@@ -84,7 +84,7 @@ from sb3_genrl.checks import (
     check_seed,
     sub_seed,
 )
-from sb3_genrl.curves import LOG_DIR, MONITOR_FILE, monitor_episodes, read_monitor, training_logger, write_learning_curve
+from sb3_genrl.curves import LOG_FILES, MONITOR_FILE, monitor_episodes, read_monitor, training_logger, write_learning_curve
 from sb3_genrl.data import load_transitions
 from sb3_genrl.generative import load
 from sb3_genrl.genrl.generator_files import generator_digest
@@ -249,7 +249,7 @@ def _run_in_folder(
         return _finish(algorithm, task, out, summary, options["window"], lambda: final_eval(model))
 
 
-CURVE_FILES = ("learning_curve.csv", "learning_curve.png", MONITOR_FILE, LOG_DIR)
+CURVE_FILES = ("learning_curve.csv", "learning_curve.png", MONITOR_FILE, *LOG_FILES)
 
 
 def _inputs(algorithm: str, task: str, demos: Any, demo_episodes: int | None, generator: Any) -> tuple[Any, Any]:

@@ -29,6 +29,9 @@ from sb3_genrl.utils import atomic_path, atomic_write_text
 EPISODE_INFO = ("table_contacts", "distance")  # what the comparison needs of each finished episode's info
 MONITOR_FILE = "episodes.monitor.csv"
 LOG_DIR = "logs"
+# What a run writes in LOG_DIR (patterns under the run folder): SB3's CSV log and TensorBoard events, and the logs a
+# resume sets aside (sb3_genrl.run.folder.keep_episodes). --overwrite removes these and nothing else there.
+LOG_FILES = (f"{LOG_DIR}/progress.csv", f"{LOG_DIR}/progress.until_episode_*.csv", f"{LOG_DIR}/events.out.tfevents.*")
 _MONITOR_COLUMNS = {"r": "return", "l": "length", "t": "time"}
 
 

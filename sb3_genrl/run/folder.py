@@ -41,13 +41,20 @@ def open_run(
     :param out: the run folder
     :param identity: what the run is (JSON values): compared with the record of a run already in ``out``
     :param outputs: the names of the files and folders the run writes in ``out`` (besides ``summary.json``,
-        ``checkpoint/`` and the record)
+        ``checkpoint/`` and the record), or glob patterns of them (``logs/events.out.tfevents.*``): a folder the
+        run shares with other files is named by the patterns of its own files in it, so that only those are removed
     :param overwrite: remove a run already in ``out`` (its files only) instead of refusing or resuming it
     :return: the summary of the same run finished in ``out`` (then nothing is to be done), else ``None``: ``out``
         holds at most this run's checkpoint, to resume from
     """
     out, identity = Path(out), _normal(identity)
-    present = [name for name in (*outputs, SUMMARY, CHECKPOINT_DIR, RUN_RECORD) if (out / name).exists()]
+    present = sorted(
+        {
+            path.relative_to(out).as_posix()
+            for name in (*outputs, SUMMARY, CHECKPOINT_DIR, RUN_RECORD)
+            for path in out.glob(name)
+        }
+    )
     recorded = _read_record(out)
     if not overwrite and present:
         if recorded is None:
@@ -90,12 +97,18 @@ def _read_record(out: Path) -> dict[str, Any] | None:
 
 
 def _remove(out: Path, names: Sequence[str]) -> None:
+    """Remove the run's files and folders ``names`` in ``out``, then the folders they were in that are left empty."""
+    parents = set()
     for name in names:
         path = out / name
         if path.is_dir() and not path.is_symlink():
             shutil.rmtree(path)
         else:
             path.unlink(missing_ok=True)
+        parents.update(parent for parent in path.parents if out in parent.parents)
+    for parent in sorted(parents, key=lambda folder: len(folder.parts), reverse=True):
+        if parent.is_dir() and not any(parent.iterdir()):
+            parent.rmdir()
 
 
 def _normal(value: Mapping[str, Any]) -> dict[str, Any]:

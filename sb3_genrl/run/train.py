@@ -33,6 +33,7 @@ from sb3_genrl.checks import (
 from sb3_genrl.curves import (
     EPISODE_INFO,
     LOG_DIR,
+    LOG_FILES,
     MONITOR_FILE,
     episode_info,
     monitor_episodes,
@@ -371,7 +372,14 @@ def _run(
 
 
 # What a run writes in its folder (besides summary.json, checkpoint/ and run_record.json; see sb3_genrl.run.folder)
-OUTPUTS = ("genrl_policy.zip", "genrl_policy.generator.pt", "learning_curve.csv", "learning_curve.png", MONITOR_FILE, LOG_DIR)
+OUTPUTS = (
+    "genrl_policy.zip",
+    "genrl_policy.generator.pt",
+    "learning_curve.csv",
+    "learning_curve.png",
+    MONITOR_FILE,
+    *LOG_FILES,
+)
 
 
 def _train(

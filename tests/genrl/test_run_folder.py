@@ -66,6 +66,26 @@ def test_a_rerun_into_a_run_folder_never_mixes_two_runs(fast_reach_task, tmp_pat
         train_policy("fast-reach", LinearGenerator(), episodes=96, **run)
 
 
+def test_overwrite_removes_the_runs_own_logs_and_nothing_else_there(fast_reach_task, tmp_path):  # noqa: F811
+    run = {"seed": 0, "out_dir": tmp_path, "batch_episodes": 32}
+    train_policy("fast-reach", LinearGenerator(), episodes=32, **run)
+    mine = [tmp_path / "logs" / "mine" / "keep.txt", tmp_path / "logs" / "note.txt"]  # a user's files beside the run's
+    for path in mine:
+        path.parent.mkdir(exist_ok=True)
+        path.write_text("x")
+    train_policy("fast-reach", LinearGenerator(), episodes=64, overwrite=True, **run)
+    assert all(path.read_text() == "x" for path in mine)
+    assert len(list((tmp_path / "logs").glob("events.out.tfevents.*"))) == 1
+    assert len(read_monitor(tmp_path / MONITOR_FILE)["return"]) == 64
+    # A folder holding only another tool's logs (rl-zoo3's logs/ALGO/ENV_1/) is no run: the run goes beside them.
+    other = tmp_path / "zoo"
+    model = other / "logs" / "genrl" / "run_1" / "model.zip"
+    model.parent.mkdir(parents=True)
+    model.write_bytes(b"zip")
+    train_policy("fast-reach", LinearGenerator(), episodes=32, **{**run, "out_dir": other})
+    assert model.read_bytes() == b"zip" and (other / "summary.json").is_file()
+
+
 def test_a_second_run_into_a_locked_folder_stops_at_once_with_exit_2(hockey_generator, tmp_path, cli):
     folder = tmp_path / "run"
     holder = subprocess.Popen(
