@@ -343,7 +343,7 @@ def test_train_generator_and_cli_write_loadable_models(tmp_path, capsys):
     floored = load(tmp_path / "vae_floor.pt")
     assert floored.std_floor == 0.2
     assert float(floored.action_std.min()) >= 0.2 * float(floored.action_std.max()) * (1 - 1e-6)
-    assert cli_main(["train-generator", "--data", str(npy), "--model", "vae", "--out", str(out)]) == 2
+    assert cli_main(["train-generator", "--data", str(npy), "--model", "vae", "--out", str(tmp_path / "v.pt")]) == 2
     assert "needs" in capsys.readouterr().err
 
 
@@ -644,3 +644,15 @@ def test_even_batches_train_on_every_trajectory_in_batches_of_nearly_equal_sizes
     model = BetaVAE(HORIZON, ACTION_DIM, 2, beta=0.01, device="cpu")
     model.fit(family[0][:100], epochs=2, batch_size=32, seed=0, progress_bar=False, even_batches=True)
     assert sizes == [30, 30, 30] * 2  # 90 training trajectories: 3 batches of 30, against 32 + 32 + 26
+
+
+def test_genrl_train_generator_refuses_an_existing_out_without_overwrite(tmp_path, cli):
+    npy = tmp_path / "demos.npy"
+    np.save(npy, sine_ramp_trajectories(64, 6, 2, rng=0)[0])
+    args = ("train-generator", "--data", npy, "--preset", "VAE1", "--epochs", 1, "--batch-size", 32, "--no-progress-bar")
+    out = tmp_path / "vae.pt"
+    assert cli(*args, "--out", out)[0] == 0
+    first = out.read_bytes()
+    code, _, err = cli(*args, "--seed", 1, "--out", out)
+    assert code == 2 and "already exists; pass --overwrite" in err and out.read_bytes() == first
+    assert cli(*args, "--seed", 1, "--out", out, "--overwrite")[0] == 0 and out.read_bytes() != first

@@ -555,3 +555,13 @@ def test_each_task_runs_its_own_episodes_per_iteration_and_a_changed_budget_is_r
     )  # and the GenRL settings, whose n_steps is the batch
     fewer_draws = {**hockey, "prior_draws": 4}
     assert any("prior_draws 16 (recorded) vs 4" in line for line in _conflicts("hockey", fewer_draws, tmp_path))
+
+
+def test_the_quickstart_refuses_a_training_runs_folder(tmp_path, cli, hockey_generator):
+    run = tmp_path / "run"
+    code, _, err = cli("train-policy", "--task", "hockey", "--generator", hockey_generator, "--episodes", 32, "--out", run)
+    assert code == 0, err
+    summary = (run / "summary.json").read_bytes()
+    code, _, err = cli("quickstart", "--out", run, "--demo-episodes", 64, "--epochs", 2, "--episodes", 32, "--no-video")
+    assert code == 2 and "holds a training run (run_record.json" in err and "choose another --out" in err
+    assert (run / "summary.json").read_bytes() == summary and not (run / "demonstrations").exists()

@@ -7,6 +7,7 @@ import argparse
 import csv
 import functools
 import json
+import pathlib
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -137,6 +138,9 @@ def _replayed_demos(args: argparse.Namespace) -> int:
 
 
 def train_generator_command(args: argparse.Namespace) -> int:
+    out, data = pathlib.Path(args.out).resolve(), pathlib.Path(args.data).resolve()
+    if out.exists() and not args.overwrite and data != out and data not in out.parents:  # (the data: refused below)
+        raise FileExistsError(f"--out {str(args.out)!r} already exists; pass --overwrite to replace it")
     generator = train_generator(
         args.data,
         model=args.model,

@@ -257,6 +257,12 @@ def add_train_generator(sub: argparse._SubParsersAction) -> None:
     gen.add_argument("--tensorboard-log", type=OUT_DIR, default=None, help="TensorBoard log folder")
     _progress_option(gen)
     gen.add_argument("--out", required=True, type=option(check_output_file), help="file to write the generator to")
+    gen.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace a generator already at --out (the policies trained on it then refuse it, by its digest); "
+        "without it an existing --out is refused before training",
+    )
     gen.set_defaults(func=commands.train_generator_command)
 
 

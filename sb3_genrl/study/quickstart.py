@@ -53,6 +53,7 @@ from sb3_genrl.hyperparams import EVAL_GOAL_SEED, known_env_ids, load_genrl_sett
 from sb3_genrl.metrics import MEASURES, evaluate_generators
 from sb3_genrl.provenance import provenance
 from sb3_genrl.run import evaluate_on_goals, train_policy
+from sb3_genrl.run.folder import RUN_RECORD
 from sb3_genrl.run.stages import check_and_record, read_settings, refuse_conflicts, settings_conflicts
 from sb3_genrl.run.train import effective_genrl_settings
 from sb3_genrl.showcase import check_rendering
@@ -213,6 +214,11 @@ def quickstart(
     check_seed(seed)
     check_device(device)
     check_output_dir(out_dir)
+    if (pathlib.Path(out_dir) / RUN_RECORD).is_file():  # its summary.json would be replaced by the quickstart's
+        raise ValueError(
+            f"out: {str(out_dir)!r} holds a training run ({RUN_RECORD}, written by genrl train-policy or genrl "
+            "baseline); the quickstart writes into a folder of its own: choose another --out"
+        )
     if video and not _done(pathlib.Path(out_dir), "video"):  # a display missing fails at the first frame, else
         check_rendering("genrl quickstart --no-video, quickstart(video=False)")
     # The models are small: one torch thread is as fast as several and leaves the other cores to MuJoCo.
