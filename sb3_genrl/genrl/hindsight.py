@@ -19,6 +19,8 @@ at its new context grows faster than the penalty, so relabelling needs the TRPO 
 from __future__ import annotations
 
 import collections
+import math
+import numbers
 from collections.abc import Mapping
 from typing import Any
 
@@ -65,15 +67,16 @@ def check_hindsight_kwargs(hindsight_kwargs: Mapping[str, Any]) -> dict[str, Any
         ("refit_steps", 1),
     ):
         value = settings[key]
-        if isinstance(value, bool) or int(value) != value or value < minimum:
+        if not _is_whole(value) or value < minimum:
             raise ValueError(f"hindsight_kwargs['{key}'] must be an integer >= {minimum}, got {value!r}")
     start = settings["refit_start"]
-    if start is not None and (isinstance(start, bool) or int(start) != start or start < 1):
+    if start is not None and (not _is_whole(start) or start < 1):
         raise ValueError(f"hindsight_kwargs['refit_start'] must be an integer >= 1 or None, got {start!r}")
     if start is not None and not settings["refit_every"]:
         raise ValueError("hindsight_kwargs['refit_start'] is the episode of the first refit, which needs refit_every > 0")
-    if not settings["regression_lr"] > 0:
-        raise ValueError(f"hindsight_kwargs['regression_lr'] must be positive, got {settings['regression_lr']!r}")
+    learning_rate = settings["regression_lr"]
+    if isinstance(learning_rate, bool) or not isinstance(learning_rate, numbers.Real) or not 0 < learning_rate < math.inf:
+        raise ValueError(f"hindsight_kwargs['regression_lr'] must be a finite positive number, got {learning_rate!r}")
     if not isinstance(settings["regression_weighted"], bool | np.bool_):
         raise ValueError(
             f"hindsight_kwargs['regression_weighted'] must be True or False, got {settings['regression_weighted']!r}"
@@ -83,6 +86,11 @@ def check_hindsight_kwargs(hindsight_kwargs: Mapping[str, Any]) -> dict[str, Any
             "hindsight_kwargs['regression_weighted'] weights the regression's pulls, which needs regression_steps > 0"
         )
     return dict(hindsight_kwargs)
+
+
+def _is_whole(value: Any) -> bool:
+    """Whether ``value`` is a whole number (an int, or a float such as 30.0; not a bool, a string or NaN)."""
+    return isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value) and int(value) == value
 
 
 class HindsightRelabelling:

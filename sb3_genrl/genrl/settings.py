@@ -22,7 +22,7 @@ from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 
 from sb3_genrl.genrl.hindsight import check_hindsight_kwargs
 from sb3_genrl.genrl.latent_critic import check_latent_critic_kwargs
-from sb3_genrl.genrl.policies import ContextStdPolicy, MlpPolicy, MultiInputPolicy
+from sb3_genrl.genrl.policies import BoxScaler, ContextStdPolicy, MlpPolicy, MultiInputPolicy
 
 # GenRL's policy aliases, as SB3 algorithms name theirs (GenRL.policy_aliases)
 POLICY_ALIASES: dict[str, type[BasePolicy]] = {
@@ -226,3 +226,42 @@ def _check_policy_kwargs(policy_kwargs: Mapping[str, Any] | None, policy_class: 
         if key in _POLICY_KWARG_KINDS and not _POLICY_KWARG_KINDS[key][1](value):
             kind = "" if value is None or isinstance(value, numbers.Real) else f" ({type(value).__name__})"
             raise ValueError(f"policy_kwargs['{key}'] must be {_POLICY_KWARG_KINDS[key][0]}, got {value!r}{kind}")
+    _check_optimizer_kwargs(policy_kwargs or {})
+    _check_extractor_kwargs(policy_kwargs or {})
+
+
+def _check_optimizer_kwargs(policy_kwargs: Mapping[str, Any]) -> None:
+    """Refuse ``optimizer_kwargs`` that the policy's optimizer (``optimizer_class``, SB3's default Adam) does not take
+    or refuses: it is built here on one parameter with them (SB3 gives it ``lr`` from the learning rate itself)."""
+    optimizer_kwargs = dict(policy_kwargs.get("optimizer_kwargs") or {})
+    optimizer_class = policy_kwargs.get("optimizer_class") or th.optim.Adam
+    if not optimizer_kwargs:
+        return
+    for key in ("params", "lr"):
+        if key in optimizer_kwargs:
+            raise ValueError(f"policy_kwargs['optimizer_kwargs']: {key!r} is set by SB3 (the learning rate: learning_rate)")
+    try:
+        optimizer_class([th.zeros(1, requires_grad=True)], lr=1e-3, **optimizer_kwargs)
+    except (TypeError, ValueError, RuntimeError) as error:
+        raise ValueError(
+            f"policy_kwargs['optimizer_kwargs'] {optimizer_kwargs!r}: {optimizer_class.__name__} refuses them ({error})"
+        ) from None
+
+
+def _check_extractor_kwargs(policy_kwargs: Mapping[str, Any]) -> None:
+    """Refuse ``features_extractor_kwargs`` that are not arguments of the features extractor (``features_extractor_class``,
+    GenRL's :class:`~sb3_genrl.genrl.policies.BoxScaler` for a Box context when not given)."""
+    extractor_kwargs = policy_kwargs.get("features_extractor_kwargs") or {}
+    if not extractor_kwargs:
+        return
+    extractor = policy_kwargs.get("features_extractor_class") or BoxScaler
+    parameters = inspect.signature(extractor.__init__).parameters
+    if any(parameter.kind is inspect.Parameter.VAR_KEYWORD for parameter in parameters.values()):
+        return
+    known = [key for key in parameters if key not in ("self", "observation_space")]
+    unknown = [key for key in extractor_kwargs if key not in known]
+    if unknown:
+        raise ValueError(
+            f"policy_kwargs['features_extractor_kwargs']: {', '.join(map(repr, unknown))} not an argument of "
+            f"{extractor.__name__} (known: {', '.join(known) or 'none'})"
+        )

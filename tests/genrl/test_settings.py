@@ -68,7 +68,7 @@ def test_genrl_kwargs_argument_parses_and_checks_json():
         ({"regression_steps": -1}, r"hindsight_kwargs\['regression_steps'\] must be an integer >= 0, got -1"),
         ({"regression_steps": 1.5}, r"hindsight_kwargs\['regression_steps'\] must be an integer >= 0"),
         ({"regression_steps": True}, r"hindsight_kwargs\['regression_steps'\] must be an integer >= 0"),
-        ({"regression_lr": 0.0}, r"hindsight_kwargs\['regression_lr'\] must be positive"),
+        ({"regression_lr": 0.0}, r"hindsight_kwargs\['regression_lr'\] must be a finite positive number"),
         ({"regression_batch_size": 0}, r"hindsight_kwargs\['regression_batch_size'\] must be an integer >= 1"),
         ({"regression_batch_size": True}, r"hindsight_kwargs\['regression_batch_size'\] must be an integer >= 1"),
         (
@@ -232,6 +232,32 @@ def test_settings_that_stop_learning_are_refused_wherever_settings_are_taken(set
         ({"policy_kwargs": {"log_std_init": "0"}}, r"policy_kwargs\['log_std_init'\] must be a finite number, got '0'"),
         ({"policy_kwargs": {"net_arhc": [8]}}, r"policy_kwargs: 'net_arhc' is not an argument of ActorCriticPolicy"),
         ({"policy_kwargs": {"use_sde": True}}, r"policy_kwargs: 'use_sde' is not an argument of ActorCriticPolicy"),
+        (
+            {"policy_kwargs": {"optimizer_kwargs": {"lr": 0.1}}},
+            r"policy_kwargs\['optimizer_kwargs'\]: 'lr' is set by SB3",
+        ),
+        ({"policy_kwargs": {"optimizer_kwargs": {"eps": "x"}}}, r"policy_kwargs\['optimizer_kwargs'\] .* Adam refuses them"),
+        (
+            {"policy_kwargs": {"optimizer_kwargs": {"betas": (1.5, 0.9)}}},
+            r"policy_kwargs\['optimizer_kwargs'\] .* Adam refuses them \(Invalid beta",
+        ),
+        (
+            {"policy_kwargs": {"optimizer_kwargs": {"foo": 1}}},
+            r"policy_kwargs\['optimizer_kwargs'\] .*unexpected keyword argument 'foo'",
+        ),
+        (
+            {"policy_kwargs": {"features_extractor_kwargs": {"x": 1}}},
+            r"policy_kwargs\['features_extractor_kwargs'\]: 'x' not an argument of BoxScaler",
+        ),
+        ({"hindsight_kwargs": {"history": "a"}}, r"hindsight_kwargs\['history'\] must be an integer >= 0, got 'a'"),
+        (
+            {"hindsight_kwargs": {"regression_lr": "abc"}},
+            r"hindsight_kwargs\['regression_lr'\] must be a finite positive number, got 'abc'",
+        ),
+        (
+            {"hindsight_kwargs": {"refit_steps": float("inf")}},
+            r"hindsight_kwargs\['refit_steps'\] must be an integer >= 1, got inf",
+        ),
     ],
     ids=_setting_id,
 )
