@@ -12,6 +12,8 @@ from __future__ import annotations
 import argparse
 import inspect
 import json
+import math
+from collections.abc import Callable
 from typing import Any
 
 from sb3_contrib import TRPO
@@ -96,6 +98,81 @@ def algorithm_class(algorithm: str) -> type:
     return PPO if algorithm in ("ppo", "latent-ppo") else SAC
 
 
+def _number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _whole(minimum: int, *, or_minus_one: str = "") -> tuple[str, Callable[[Any], bool]]:
+    """An integer setting's description and check (``or_minus_one``: what -1 means, where SB3 takes it)."""
+    allowed = f"an integer >= {minimum}" + (f", or -1 ({or_minus_one})" if or_minus_one else "")
+    return (
+        allowed,
+        lambda value: _number(value) and int(value) == value and (value >= minimum or (bool(or_minus_one) and value == -1)),
+    )
+
+
+def _between(low: float, high: float, *, low_open: bool = False, high_open: bool = False, none: bool = False):
+    """A number setting's description and check: within ``[low, high]`` (an end open where asked; ``none``: or null)."""
+    interval = f"{'(' if low_open else '['}{low}, {high}{')' if high_open else ']'}"
+    allowed = f"a number in {interval}" + (", or null" if none else "")
+
+    def valid(value: Any) -> bool:
+        if value is None:
+            return none
+        above = value > low if low_open else value >= low
+        below = value < high if high_open else value <= high
+        return _number(value) and above and below
+
+    return allowed, valid
+
+
+_FLAG = ("true or false", lambda value: isinstance(value, bool))
+_TRAIN_FREQ = (
+    "an integer >= 1, or [an integer >= 1, 'step' or 'episode']",
+    lambda value: (
+        _whole(1)[1](value)
+        or (isinstance(value, list) and len(value) == 2 and _whole(1)[1](value[0]) and value[1] in ("step", "episode"))
+    ),
+)
+# What each settable argument of PPO, SAC and TRPO accepts as a JSON value, as SB3 and sb3-contrib use it: values SB3
+# would take silently into another run than asked (gamma 2, a negative clip range) or refuse with a traceback partway
+_VALUES: dict[str, tuple[str, Callable[[Any], bool]]] = {
+    "learning_rate": _between(0, math.inf, low_open=True, high_open=True),
+    **{key: _whole(1) for key in ("n_steps", "batch_size", "n_epochs", "target_update_interval", "cg_max_steps")},
+    **{key: _whole(1) for key in ("line_search_max_iter", "n_critic_updates", "stats_window_size", "sub_sampling_factor")},
+    "learning_starts": _whole(0),
+    "gradient_steps": _whole(1, or_minus_one="as many as the steps played"),
+    "sde_sample_freq": _whole(1, or_minus_one="only at a rollout's start"),
+    "train_freq": _TRAIN_FREQ,
+    "gamma": _between(0, 1),
+    "gae_lambda": _between(0, 1),
+    "tau": _between(0, 1, low_open=True),
+    "clip_range": _between(0, math.inf, low_open=True, high_open=True),
+    "clip_range_vf": _between(0, math.inf, low_open=True, high_open=True, none=True),
+    "target_kl": _between(0, math.inf, low_open=True, high_open=True, none=True),
+    "vf_coef": _between(0, math.inf, high_open=True),
+    "max_grad_norm": _between(0, math.inf, low_open=True, high_open=True),
+    "cg_damping": _between(0, math.inf, high_open=True),
+    "line_search_shrinking_factor": _between(0, 1, low_open=True, high_open=True),
+    **{key: _FLAG for key in ("normalize_advantage", "use_sde", "use_sde_at_warmup", "optimize_memory_usage")},
+}
+_ENT_COEF = "a number >= 0 (SAC: also 'auto' or 'auto_<initial value>', the initial value > 0)"
+
+
+def _valid_ent_coef(cls: type, value: Any) -> bool:
+    """PPO's entropy coefficient is a number >= 0; SAC's may also be learnt: ``"auto"`` or ``"auto_0.1"``."""
+    if _number(value):
+        return value >= 0
+    if cls is not SAC or not isinstance(value, str) or not value.startswith("auto"):
+        return False
+    if value == "auto":
+        return True
+    try:
+        return value.startswith("auto_") and math.isfinite(float(value[5:])) and float(value[5:]) > 0
+    except ValueError:
+        return False
+
+
 def check_algorithm_kwargs(algorithm: str, kwargs: dict[str, Any] | None) -> dict[str, Any]:
     """Check a user's changes to a baseline's settings: names of the algorithm's constructor arguments (e.g.
     ``{"target_kl": 0.02}`` for PPO, ``{"gamma": 1.0}`` for SAC), none of :data:`RESERVED`, values as JSON holds
@@ -113,9 +190,15 @@ def check_algorithm_kwargs(algorithm: str, kwargs: dict[str, Any] | None) -> dic
             f"change; the settable ones: {', '.join(sorted(names))}"
         )
     try:
-        return json.loads(json.dumps(kwargs))
+        plain = json.loads(json.dumps(kwargs))
     except (TypeError, ValueError) as error:
         raise ValueError(f"{algorithm}'s settings must be JSON values: {error}") from None
+    for key, value in plain.items():
+        if key == "ent_coef" and not _valid_ent_coef(cls, value):
+            raise ValueError(f"{algorithm}'s ent_coef must be {_ENT_COEF}, got {value!r}")
+        if key in _VALUES and not _VALUES[key][1](value):
+            raise ValueError(f"{algorithm}'s {key} must be {_VALUES[key][0]}, got {value!r}")
+    return plain
 
 
 def baseline_kwargs_argument(text: str) -> dict[str, dict[str, Any]]:

@@ -726,3 +726,47 @@ def test_one_env_keeps_a_latent_baselines_own_settings_and_a_bad_n_envs_is_refus
     with pytest.raises(ValueError, match="n_envs is for the latent-space baselines"):
         train_baseline("sac", "hockey", episodes=1, out_dir=tmp_path / "sac", demos={}, n_envs=2)
     assert not (tmp_path / "three").exists() and not (tmp_path / "sac").exists()
+
+
+@pytest.mark.parametrize(
+    ("algorithm", "change", "message"),
+    [
+        ("ppo", {"gamma": 2}, r"ppo's gamma must be a number in \[0, 1\], got 2"),
+        ("ppo", {"target_kl": -1}, r"ppo's target_kl must be a number in \(0, inf\), or null, got -1"),
+        ("ppo", {"clip_range": -1}, r"ppo's clip_range must be a number in \(0, inf\), got -1"),
+        ("ppo", {"n_steps": "x"}, r"ppo's n_steps must be an integer >= 1, got 'x'"),
+        ("ppo", {"n_epochs": 0}, r"ppo's n_epochs must be an integer >= 1, got 0"),
+        ("latent-ppo", {"batch_size": 0}, r"latent-ppo's batch_size must be an integer >= 1, got 0"),
+        ("ppo", {"learning_rate": float("nan")}, r"ppo's learning_rate must be a number in \(0, inf\), got nan"),
+        ("ppo", {"ent_coef": "auto"}, r"ppo's ent_coef must be a number >= 0"),
+        ("sac", {"ent_coef": "auto_x"}, r"sac's ent_coef must be a number >= 0 \(SAC: also 'auto'"),
+        ("sac", {"train_freq": [1, "epoch"]}, r"sac's train_freq must be an integer >= 1, or \[an integer"),
+        ("latent-trpo", {"line_search_shrinking_factor": 1}, r"line_search_shrinking_factor must be a number in \(0, 1\)"),
+    ],
+)
+def test_a_change_to_a_baselines_settings_outside_what_sb3_accepts_is_refused(algorithm, change, message):
+    from sb3_genrl.baselines.hyperparameters import check_algorithm_kwargs
+
+    with pytest.raises(ValueError, match=message):
+        check_algorithm_kwargs(algorithm, change)
+
+
+def test_the_values_sb3_accepts_pass_the_check():
+    from sb3_genrl.baselines.hyperparameters import check_algorithm_kwargs
+
+    for algorithm, change in (
+        ("ppo", {"gamma": 1, "gae_lambda": 0.9, "target_kl": None, "clip_range": 0.1, "ent_coef": 0.0, "n_epochs": 3}),
+        ("sac", {"ent_coef": "auto"}),
+        ("sac", {"ent_coef": "auto_0.1", "train_freq": [1, "episode"], "gradient_steps": -1, "tau": 1.0}),
+        ("latent-trpo", {"target_kl": 0.02, "cg_max_steps": 10, "sde_sample_freq": -1}),
+    ):
+        assert check_algorithm_kwargs(algorithm, change) == change
+
+
+def test_genrl_baseline_refuses_a_bad_change_before_its_run_folder(tmp_path, cli, hockey_generator):
+    out = tmp_path / "run"
+    code, _, err = cli(
+        "baseline", "latent-ppo", "--task", "hockey", "--generator", hockey_generator, "--episodes", 64,
+        "--algorithm-kwargs", '{"gamma": 2}', "--out", out,
+    )  # fmt: skip
+    assert code == 2 and "latent-ppo's gamma must be a number in [0, 1], got 2" in err and not out.exists()
