@@ -117,6 +117,20 @@ def _read_runs(run_dirs: list[str | os.PathLike], task: str | None) -> tuple[dic
         summaries.append((run_dir, json.loads(summary_path.read_text())))
     if not summaries:
         raise ValueError("no run folders given")
+    folders: dict[pathlib.Path, pathlib.Path] = {}
+    seeds: dict[tuple[str, int], pathlib.Path] = {}
+    for run_dir, summary in summaries:  # a method's runs are averaged as its seeds: each counted once
+        first = folders.setdefault(run_dir.resolve(), run_dir)
+        if first is not run_dir:
+            raise ValueError(f"{run_dir} is given twice ({first}, {run_dir}); give each run once")
+        if summary.get("seed") is not None:
+            key = (str(summary.get("algorithm")), summary["seed"])
+            first = seeds.setdefault(key, run_dir)
+            if first is not run_dir:
+                raise ValueError(
+                    f"{first} and {run_dir} are both {key[0]} with seed {key[1]}: a method's runs are averaged as its "
+                    "seeds; leave one out"
+                )
     by_task: dict[str, list[str]] = defaultdict(list)
     for run_dir, summary in summaries:
         by_task[str(summary.get("task"))].append(str(run_dir))

@@ -673,6 +673,27 @@ def test_compare_refuses_a_named_run_of_another_task_naming_it(tmp_path):
     assert compare_runs([hockey], out, task="hockey").read_text().count("| GenRL | 1 |") == 1
 
 
+def test_compare_counts_each_run_once_as_a_seed(tmp_path):
+    def run(name: str, seed: int):
+        folder = tmp_path / name
+        folder.mkdir()
+        (folder / "summary.json").write_text(json.dumps({"task": "hockey", "algorithm": "genrl", "seed": seed}))
+        (folder / "learning_curve.csv").write_text("episodes,mean_reward\n16,-0.5\n32,-0.4\n")
+        return folder
+
+    first, same_seed, second = run("a", 0), run("b", 0), run("c", 1)
+    out = tmp_path / "out"
+    for runs, message in (
+        ([first, first], f"{first} is given twice"),
+        ([first, tmp_path / "." / "a"], "is given twice"),
+        ([first, same_seed], f"{first} and {same_seed} are both genrl with seed 0"),
+    ):
+        with pytest.raises(ValueError, match=message):
+            compare_runs(runs, out)
+        assert not out.exists()
+    assert compare_runs([first, second], out).read_text().count("| GenRL | 2 |") == 1
+
+
 @pytest.mark.parametrize(
     "algorithm, episodes, n_envs, per_update",
     [("latent-ppo", 64, 64, {"n_steps": 1}), ("latent-sac", 96, 16, {"gradient_steps": -1, "learning_starts": 64})],

@@ -124,7 +124,7 @@ def test_help_lists_the_commands_in_workflow_order_and_version(cli):
                 "--out",
                 "D",
             ),
-            "argument --e-step/--genrl-kwargs: hockey's entry in hyperparams/genrl.yml, --e-step trpo, --genrl-kwargs: "
+            "argument --e-step/--genrl-kwargs: hockey's entry in hyperparams/genrl.yml, --genrl-kwargs: "
             "hindsight_kwargs['history'] must be an integer >= 0, got -1",
         ),
         (
@@ -142,7 +142,7 @@ def test_help_lists_the_commands_in_workflow_order_and_version(cli):
                 "--out",
                 "D",
             ),
-            "argument --e-step/--genrl-kwargs: GenRL's defaults, --e-step trpo, --genrl-kwargs: "
+            "argument --e-step/--genrl-kwargs: GenRL's defaults, --genrl-kwargs: "
             "hindsight_kwargs['regression_weighted'] weights the regression's pulls, which needs regression_steps > 0",
         ),
         (
@@ -177,6 +177,24 @@ def test_help_lists_the_commands_in_workflow_order_and_version(cli):
             ),
             "argument --e-step/--genrl-kwargs: basketball's entry in hyperparams/genrl.yml, --e-step kl_penalty: "
             "hindsight_kwargs needs e_step='trpo'",
+        ),
+        (
+            (
+                "train-policy",
+                "--task",
+                "hockey",
+                "--generator",
+                "GEN",
+                "--episodes",
+                "8",
+                "--e-step",
+                "kl_penalty",
+                "--genrl-kwargs",
+                '{"e_step": "trpo"}',
+                "--out",
+                "D",
+            ),  # fmt: skip
+            "--e-step kl_penalty and --genrl-kwargs' e_step 'trpo' disagree: give one of them",
         ),
         (
             ("baseline", "ppo", "--task", "hockey", "--demos", "D0", "--episodes", "8", "--bc-max-epochs", "-1", "--out", "D"),

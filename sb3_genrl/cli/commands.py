@@ -278,11 +278,16 @@ def policy_arguments(args: argparse.Namespace) -> dict:
         _, batch_episodes, genrl_kwargs = task_settings(args.task)
     else:  # a task of the user's own: its entry if it has one, else GenRL's defaults started from the demonstrations
         _, batch_episodes, genrl_kwargs = outside_task_settings(resolve_task(args.task))
-    genrl_kwargs = lay_over({**genrl_kwargs, "e_step": args.e_step}, args.genrl_kwargs)
+    given = args.genrl_kwargs.get("e_step", args.e_step)
+    if args.e_step is not None and given != args.e_step:  # neither may silently win
+        raise ValueError(
+            f"argument --e-step/--genrl-kwargs: --e-step {args.e_step} and --genrl-kwargs' e_step {given!r} disagree: "
+            "give one of them"
+        )
+    genrl_kwargs = lay_over({**genrl_kwargs, **({} if args.e_step is None else {"e_step": args.e_step})}, args.genrl_kwargs)
     source = "GenRL's defaults" if args.library_defaults else f"{args.task}'s entry in hyperparams/genrl.yml"
-    name = f"argument --e-step/--genrl-kwargs: {source}, --e-step {args.e_step}" + (
-        ", --genrl-kwargs" if args.genrl_kwargs else ""
-    )
+    name = f"argument --e-step/--genrl-kwargs: {source}" + ("" if args.e_step is None else f", --e-step {args.e_step}")
+    name += ", --genrl-kwargs" if args.genrl_kwargs else ""
     callback = genrl_kwargs.pop("callback", None)
     genrl_kwargs = check_genrl_settings(genrl_kwargs, name)
     callback_entries(callback, f"{name}: callback")

@@ -334,7 +334,9 @@ def add_train_policy(sub: argparse._SubParsersAction) -> None:
     )
     _seed_option(policy)
     policy.add_argument("--out", required=True, type=OUT_DIR, help="output folder (model, learning curve, logs)")
-    policy.add_argument("--e-step", choices=("trpo", "kl_penalty"), default="trpo", help="E-step variant")
+    policy.add_argument(
+        "--e-step", choices=("trpo", "kl_penalty"), default=None, help="E-step variant (default: the settings', trpo)"
+    )
     policy.add_argument(
         "--batch-episodes",
         type=option(check_int, int, minimum=2),
