@@ -110,6 +110,14 @@ def test_user_mistakes_are_one_line_before_any_generator_is_made(zoo, no_cache, 
         ),
         ("--env", ENV_ID, *with_generator(tmp_path / "none.pt")): f"no generator file {str(tmp_path / 'none.pt')!r}",
         ("--env", ENV_ID, "-i", tmp_path / "model.pt"): "The trained_agent must be a valid path to a .zip file",
+        (
+            "--env",
+            ENV_ID,
+            "-n",
+            "-5",
+        ): "-n/--n-timesteps must be a positive integer (left out: the entry's n_timesteps), got -5",
+        ("--env", ENV_ID, "-n", "0"): "-n/--n-timesteps must be a positive integer",
+        ("--env", ENV_ID, "-params", "n_steps:sixteen"): "-params: a value is not a Python literal (name 'sixteen' is not",
     }
     for arguments, message in mistakes.items():
         line = one_line_error(*zoo("train", "--algo", "genrl", *arguments, "-f", logs)[::2])

@@ -92,18 +92,30 @@ class _CheckedTrainParser(argparse.ArgumentParser):
     :func:`checked_train_arguments` before rl-zoo3 reads them."""
 
     def parse_args(self, args: list[str] | None = None, namespace: argparse.Namespace | None = None) -> argparse.Namespace:  # type: ignore[override]
-        return checked_train_arguments(super().parse_args(args, namespace))
+        try:
+            parsed = super().parse_args(args, namespace)
+        except (NameError, SyntaxError) as error:  # rl-zoo3 reads each -params value with eval()
+            raise ValueError(
+                f"-params: a value is not a Python literal ({error}); rl-zoo3 evaluates each KEY:VALUE's value, so "
+                "a text goes in quotes (KEY:'text')"
+            ) from None
+        return checked_train_arguments(parsed)
 
 
 def checked_train_arguments(args: argparse.Namespace) -> argparse.Namespace:
     """rl-zoo3's parsed ``train`` arguments, with ``--algo genrl``'s settings file (``hyperparams/genrl.yml``) when
-    they name none, and a Fetch env id refused, naming the extra to install, when Gymnasium-Robotics is missing.
+    they name none, a Fetch env id refused, naming the extra to install, when Gymnasium-Robotics is missing, and a
+    budget (``-n``) below 1 refused (rl-zoo3 would train the entry's whole budget instead).
 
     :param args: the arguments as rl-zoo3's parser parsed them (changed in place)
     :return: ``args``
-    :raises ValueError: for a Fetch env id without Gymnasium-Robotics
+    :raises ValueError: for a Fetch env id without Gymnasium-Robotics, or ``-n`` below 1 (other than rl-zoo3's -1)
     """
     check_env_id(args.env)
+    if args.n_timesteps != -1 and args.n_timesteps < 1:  # rl-zoo3 would fall back to the entry's budget
+        raise ValueError(
+            f"-n/--n-timesteps must be a positive integer (left out: the entry's n_timesteps), got {args.n_timesteps}"
+        )
     if args.algo == "genrl" and args.conf_file is None:
         args.conf_file = str(hyperparams_file("genrl"))
     return args
