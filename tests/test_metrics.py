@@ -395,6 +395,7 @@ def test_evaluate_generators_checks_its_arguments_first(tmp_path) -> None:
         ({"k": 2.5}, r"k must be an integer >= 1, got 2.5 \(float\)"),
         ({"seed": -1}, "seed must be an integer between 0 and"),
         ({"device": "bogus"}, "device must be 'auto' or a torch device"),
+        ({"k": 40}, "k must be smaller than n .*, got k=40 with n=40"),
     ):
         with pytest.raises(ValueError, match=message):
             evaluate_generators([generator], real, **{"n": 40, "dwpr_n": 10, "out_dir": tmp_path / "out", **kwargs})
@@ -403,6 +404,9 @@ def test_evaluate_generators_checks_its_arguments_first(tmp_path) -> None:
         evaluate_generators([generator], real, n=40, dwpr_n=10, out_dir=tmp_path / "file")
     with pytest.raises(ValueError, match="model 'missing' .* does not exist"):
         evaluate_generators([tmp_path / "missing.pt"], real, n=40, dwpr_n=10, out_dir=tmp_path / "out")
+    (tmp_path / "damaged.pt").write_bytes(b"not a generator")  # read only once the arguments pass: still before out
+    with pytest.raises(ValueError, match="is not a sb3-genrl generator file"):
+        evaluate_generators([generator, tmp_path / "damaged.pt"], real, n=40, dwpr_n=10, out_dir=tmp_path / "out")
     assert calls == [] and not (tmp_path / "out").exists()
 
 

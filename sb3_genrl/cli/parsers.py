@@ -318,7 +318,12 @@ def add_train_policy(sub: argparse._SubParsersAction) -> None:
         "hyperparams/genrl.yml, which starts from its demonstrations); the generator's own dataset, as genrl demos "
         "wrote it",
     )
-    policy.add_argument("--episodes", type=EPISODES, required=True, help="episodes (trajectories played) in total")
+    policy.add_argument(
+        "--episodes",
+        type=EPISODES,
+        required=True,
+        help="episodes (trajectories played) in total, rounded up to whole iterations of --batch-episodes",
+    )
     policy.add_argument(
         "--horizon",
         type=COUNT,
@@ -391,7 +396,12 @@ def add_baseline(sub: argparse._SubParsersAction) -> None:
     )
     baseline.add_argument("--demo-episodes", type=COUNT, default=None, help="use the first N demonstrations (default all)")
     baseline.add_argument("--generator", type=EXISTING, default=None, help="generator file (latent-ppo/-sac/-trpo)")
-    baseline.add_argument("--episodes", type=EPISODES, required=True, help="budget of episodes")
+    baseline.add_argument(
+        "--episodes",
+        type=EPISODES,
+        required=True,
+        help="budget of episodes, rounded up to whole updates (PPO's and TRPO's rollouts; the summary's episodes_played)",
+    )
     _seed_option(baseline)
     baseline.add_argument(
         "--algorithm-kwargs",

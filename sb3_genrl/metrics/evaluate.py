@@ -271,6 +271,8 @@ def _check_settings(
         raise ValueError("no models given")
     for name, value in (("n", n), ("k", k), ("dwpr_n", dwpr_n), ("interventions", interventions)):
         check_positive_int(value, name)
+    if k >= n:
+        raise ValueError(f"k must be smaller than n (a point is not its own neighbour), got k={k} with n={n}")
     check_seed(seed)
     check_device(device)
     if task is not None:
@@ -353,12 +355,13 @@ def evaluate_generators(
     real = load_trajectories(data)
     _check_sample_sizes(real, n, dwpr_n, interventions, data)
     real = real_subset(real, n, seed)
+    generators = [(name, _as_generator(model, device)) for name, model in named]  # a bad file: refused before out
     out.mkdir(parents=True, exist_ok=True)
     evaluations: list[GeneratorEvaluation] = []
-    for name, model in named:
+    for name, model in generators:
         evaluations.append(
             evaluate_generator(
-                _as_generator(model, device),
+                model,
                 real,
                 n=n,
                 k=k,
