@@ -692,6 +692,10 @@ def test_compare_counts_each_run_once_as_a_seed(tmp_path):
             compare_runs(runs, out)
         assert not out.exists()
     assert compare_runs([first, second], out).read_text().count("| GenRL | 2 |") == 1
+    made = (out / "comparison.csv").read_bytes()  # the command replaces a comparison only with --overwrite
+    assert main(["compare", "--runs", str(first), "--out", str(out)]) == 2 and (out / "comparison.csv").read_bytes() == made
+    assert main(["compare", "--runs", str(first), "--out", str(out), "--overwrite"]) == 0
+    assert (out / "comparison.csv").read_bytes() != made
 
 
 @pytest.mark.parametrize(

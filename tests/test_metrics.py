@@ -381,6 +381,12 @@ def test_cli_evaluate(tmp_path, cli) -> None:
     assert code == 2 and "n = 121 is more than the 120 real trajectories" in err and not (tmp_path / "out2").exists()
     code, _, err = cli(*args, "--n", 0)
     assert code == 2 and "argument --n: must be an integer >= 1, got 0" in err
+    # An evaluation already at --out is replaced only with --overwrite.
+    results = (tmp_path / "out" / "results.json").read_bytes()
+    code, _, err = cli(*args, "--n", 50)
+    assert code == 2 and "already holds an evaluation (results.json); pass --overwrite" in err
+    assert (tmp_path / "out" / "results.json").read_bytes() == results
+    assert cli(*args, "--n", 50, "--overwrite")[0] == 0 and (tmp_path / "out" / "results.json").read_bytes() != results
 
 
 def test_evaluate_generators_checks_its_arguments_first(tmp_path) -> None:

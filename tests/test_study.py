@@ -324,8 +324,13 @@ def test_quickstart_and_video(tmp_path, cli):
     rewards = [float(r) for r in re.search(r"rewards (.*)\)", printed).group(1).split(", ")]
     expected = -policy_distances(out / "policy" / "genrl_policy.zip", "GenRL/Hockey-v0", 2, 7)
     np.testing.assert_allclose(rewards, expected, atol=5e-4)  # the video plays the policy on its own goals
-    code, _, err = cli("video", "--task", "basketball", "--generator", out / "vae.pt", "--out", video)
+    code, _, err = cli("video", "--task", "basketball", "--generator", out / "vae.pt", "--out", tmp_path / "b.gif")
     assert code == 2 and "horizon 69 is not the basketball task's 78" in err
+    made = video.read_bytes()  # a video already there is replaced only with --overwrite
+    code, _, err = cli("video", "--task", "hockey", "--generator", out / "vae.pt", "--seed", 3, "--out", video)
+    assert code == 2 and "already holds a video (gen.gif); pass --overwrite" in err and video.read_bytes() == made
+    code, _, _ = cli("video", "--task", "hockey", "--generator", out / "vae.pt", "--seed", 3, "--out", video, "--overwrite")
+    assert code == 0 and video.read_bytes() != made
 
     # A rerun with other settings is refused before any work and names the setting; with the same ones it resumes
     # and does no work.

@@ -172,7 +172,15 @@ def train_generator_command(args: argparse.Namespace) -> int:
     return 0
 
 
+def _refuse_replacing(args: argparse.Namespace, made: pathlib.Path, what: str) -> None:
+    """Refuse ``made`` (the mark of an earlier output at ``--out``) unless ``--overwrite``: a command that would
+    replace another run's results asks first."""
+    if made.exists() and not args.overwrite:
+        raise FileExistsError(f"--out {str(args.out)!r} already holds {what} ({made.name}); pass --overwrite to replace it")
+
+
 def evaluate_command(args: argparse.Namespace) -> int:
+    _refuse_replacing(args, pathlib.Path(args.out) / "results.json", "an evaluation")
     task, spec = args.task, None if args.task is None else resolve_task(args.task).spec
     if task is not None and spec is None:
         task = _outside_env_maker(task, args.data)
@@ -353,11 +361,13 @@ def baseline_command(args: argparse.Namespace) -> int:
 
 
 def compare_command(args: argparse.Namespace) -> int:
+    _refuse_replacing(args, pathlib.Path(args.out) / "comparison.csv", "a comparison")
     print(compare_runs(args.runs, args.out, task=args.task).read_text())
     return 0
 
 
 def video_command(args: argparse.Namespace) -> int:
+    _refuse_replacing(args, pathlib.Path(args.out), "a video")
     result = record_video(
         args.task,
         args.out,

@@ -117,6 +117,12 @@ def _overwrite_option(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _replace_option(parser: argparse.ArgumentParser, what: str) -> None:
+    parser.add_argument(
+        "--overwrite", action="store_true", help=f"replace {what} already at --out (without it, refused before any work)"
+    )
+
+
 def add_play(sub: argparse._SubParsersAction) -> None:
     play = sub.add_parser("play", help="play each task's scripted expert, render it and write a short report")
     play.add_argument("--out", required=True, type=OUT_DIR, help="output folder (report.md, GIFs, frame strips)")
@@ -302,6 +308,7 @@ def add_evaluate(sub: argparse._SubParsersAction) -> None:
         help="precision below which a model is marked not converged and ranked last "
         f"(default: {NOT_CONVERGED_PRECISION}; 0: none, e.g. for a VAE with a small KL weight)",
     )
+    _replace_option(evaluate, "an evaluation")
     evaluate.set_defaults(func=commands.evaluate_command)
 
 
@@ -444,6 +451,7 @@ def add_compare(sub: argparse._SubParsersAction) -> None:
     _task_option(compare, required=False, arm_only=True)
     compare.add_argument("--runs", nargs="+", required=True, type=EXISTING, help="run folders (several seeds per method)")
     compare.add_argument("--out", required=True, type=OUT_DIR, help="output folder")
+    _replace_option(compare, "a comparison")
     compare.set_defaults(func=commands.compare_command)
 
 
@@ -468,12 +476,14 @@ def add_video(sub: argparse._SubParsersAction) -> None:
         "--every",
         type=option(check_int, int, minimum=1),
         default=1,
-        help=f"a frame every EVERY control steps, shown at {REAL_TIME_FPS} / EVERY frames a second (default 1)",
+        help=f"a frame every EVERY control steps, shown at {REAL_TIME_FPS} // EVERY frames a second, at least 1 "
+        "(default 1: real time)",
     )
     _seed_option(video, "seed of the goals (and of the latent actions)")
     video.add_argument(
         "--out", required=True, type=option(check_output_file, suffixes=VIDEO_SUFFIXES), help="output file, .mp4 or .gif"
     )
+    _replace_option(video, "a video")
     video.set_defaults(func=commands.video_command)
 
 
