@@ -470,6 +470,8 @@ def _check_arguments(
         raise ValueError(f"{algorithm} needs a generator (generator=...)")
     if algorithm not in LATENT_BASELINES and demos is None:
         raise ValueError(f"{algorithm} needs demonstrations (demos=...)")
+    if algorithm not in LATENT_BASELINES and generator is not None:  # it would be recorded, and used for nothing
+        raise ValueError(f"{algorithm} acts in action space and takes no generator (generator=..., --generator)")
     check_episodes(episodes)
     check_seed(seed)
     check_positive_int(eval_goals, "eval_goals")

@@ -757,3 +757,28 @@ def test_wrong_types_in_genrl_kwargs_are_refused_before_the_run_folder_is_claime
     code, printed, err = cli(*argv, "--genrl-kwargs", '{"target_kl": 0.02, "latent_clip": 1.0}')
     assert code == 0 and "GenRL on hockey: 8 episodes" in printed
     assert GenRL.load(run / "genrl_policy.zip", device="cpu").action_space.high.tolist() == [1.0, 1.0]
+
+
+def test_options_that_would_set_nothing_are_refused_before_any_work(tmp_path, monkeypatch, cli):
+    """An option that the rest of the command leaves unused (a cluster address without the Ray executor, the prior
+    rollout's options without a task, a generator for a baseline that acts in action space) is refused, not ignored."""
+    monkeypatch.chdir(tmp_path)
+    Path("GEN").write_text("")
+    Path("D0").mkdir()
+    for argv, message in (
+        (
+            ("study", "--scale", "smoke", "--address", "localhost:1", "--out", "D"),
+            "address 'localhost:1' is a Ray cluster's, which needs executor='ray' (--executor ray)",
+        ),
+        (
+            ("evaluate", "GEN", "--data", "D0", "--contexts", "8", "--prior-seed", "3", "--out", "D"),
+            "--contexts, --prior-seed set the prior rollout, which runs only with --task",
+        ),
+        (
+            ("baseline", "ppo", "--task", "hockey", "--demos", "D0", "--generator", "GEN", "--episodes", "8", "--out", "D"),
+            "ppo acts in action space and takes no generator",
+        ),
+    ):
+        code, printed, err = cli(*argv)
+        assert code == 2 and printed == "" and message in err, (argv, err)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["D0", "GEN"]

@@ -30,8 +30,9 @@ from sb3_genrl.envs.external import make_task_env, resolve_task
 from sb3_genrl.generative import train_generator
 from sb3_genrl.genrl import check_genrl_settings
 from sb3_genrl.genrl.demonstrations import callback_entries
-from sb3_genrl.hyperparams import lay_over
+from sb3_genrl.hyperparams import PRIOR_ROLLOUT_SEED, lay_over
 from sb3_genrl.metrics import evaluate_generators
+from sb3_genrl.metrics.prior_rollout import DEFAULT_CONTEXTS, DEFAULT_DRAWS
 from sb3_genrl.metrics.scorecard import scorecard_markdown
 from sb3_genrl.run import train_policy
 from sb3_genrl.showcase import play_scripted
@@ -181,6 +182,12 @@ def _refuse_replacing(args: argparse.Namespace, made: pathlib.Path, what: str) -
 
 def evaluate_command(args: argparse.Namespace) -> int:
     _refuse_replacing(args, pathlib.Path(args.out) / "results.json", "an evaluation")
+    rollout = {"contexts": DEFAULT_CONTEXTS, "draws": DEFAULT_DRAWS, "prior_seed": PRIOR_ROLLOUT_SEED}
+    given = [f"--{name.replace('_', '-')}" for name in rollout if getattr(args, name) is not None]
+    if args.task is None and given:  # else they would set nothing
+        raise ValueError(f"{', '.join(given)} set the prior rollout, which runs only with --task")
+    for name, default in rollout.items():
+        setattr(args, name, default if getattr(args, name) is None else getattr(args, name))
     task, spec = args.task, None if args.task is None else resolve_task(args.task).spec
     if task is not None and spec is None:
         task = _outside_env_maker(task, args.data)

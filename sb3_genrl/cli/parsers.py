@@ -290,12 +290,12 @@ def add_evaluate(sub: argparse._SubParsersAction) -> None:
     _seed_option(evaluate)
     _device_option(evaluate)
     _task_option(evaluate, required=False, external=True)
-    evaluate.add_argument("--contexts", type=COUNT, default=64, help="prior rollout (with --task): goals (64)")
-    evaluate.add_argument("--draws", type=COUNT, default=16, help="prior rollout: prior draws per goal (16)")
+    evaluate.add_argument("--contexts", type=COUNT, default=None, help="prior rollout (with --task): goals (64)")
+    evaluate.add_argument("--draws", type=COUNT, default=None, help="prior rollout: prior draws per goal (16)")
     evaluate.add_argument(
         "--prior-seed",
         type=SEED,
-        default=4242,
+        default=None,
         help="prior rollout: seed of its goals (4242: neither the final evaluations' nor the tuning's)",
     )
     evaluate.add_argument(

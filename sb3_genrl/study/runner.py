@@ -91,6 +91,8 @@ def run_study(
         raise ValueError(f"unknown scale {scale!r}; expected one of {sorted(SCALES)} or a StudyScale")
     if executor not in ("local", "ray"):
         raise ValueError(f"executor must be 'local' or 'ray', got {executor!r}")
+    if address is not None and executor != "ray":  # else the study would run here, not on the cluster asked for
+        raise ValueError(f"address {address!r} is a Ray cluster's, which needs executor='ray' (--executor ray)")
     unknown = [m for m in models if m not in MODELS]
     if unknown:
         raise ValueError(f"unknown models {unknown}; expected names among {MODELS}")
