@@ -144,6 +144,23 @@ def check_input_path(path: str | os.PathLike[str], name: str) -> Path:
     return path
 
 
+def check_not_in_input(out: str | os.PathLike[str], data: Any, out_name: str, what: str) -> None:
+    """Refuse an output ``out`` that is the input ``data`` (a file or a dataset folder) or lies inside its folder:
+    writing there would overwrite or change the input.
+
+    :param out: the output file or folder
+    :param data: the input: a path (anything else, an array in memory, is not checked)
+    :param out_name: the output's argument name, for the message
+    :param what: what writing there would do, for the message
+    """
+    if not isinstance(data, str | os.PathLike):
+        return
+    data_path, out_path = Path(data).resolve(), Path(out).resolve()
+    if out_path == data_path or (data_path.is_dir() and data_path in out_path.parents):
+        where = "inside the dataset" if out_path != data_path else "the dataset" if data_path.is_dir() else "the data file"
+        raise ValueError(f"{out_name} {os.fspath(out)!r} is {where} {os.fspath(data)!r}: {what}; choose another path")
+
+
 def check_output_dir(path: str | os.PathLike[str], name: str = "out_dir", *, empty: bool = False) -> Path:
     """A folder that can be created (or exists) and written to, checked without creating it.
 

@@ -78,6 +78,11 @@ def record_video(
     check_output_file(out, "out", suffixes=VIDEO_SUFFIXES)
     check_mp4_writer(out)
     check_input_path(policy if policy is not None else generator, "policy" if policy is not None else "generator")
+    if policy is not None and pathlib.Path(policy).is_dir() and not (pathlib.Path(policy) / "genrl_policy.zip").is_file():
+        raise ValueError(
+            f"policy: {os.fspath(policy)!r} holds no genrl_policy.zip; a GenRL run folder has one once its run has "
+            "finished (rerun its genrl train-policy command to finish it)"
+        )
     check_rendering()
     env = spec.make_env(render_mode="rgb_array", width=width, height=height)
     rng = np.random.default_rng(seed)

@@ -744,3 +744,14 @@ def test_prior_rollout_uses_all_cores_by_default_and_its_result_does_not_depend_
     results = [prior_rollout(generator, "hockey", contexts=4, draws=3, seed=2, n_threads=n) for n in (1, 2, None)]
     for result in results[1:]:
         np.testing.assert_array_equal(result.best, results[0].best)
+
+
+def test_an_evaluation_inside_its_dataset_is_refused(tmp_path) -> None:
+    generator = two_factor_generator()
+    dataset = tmp_path / "demos"
+    dataset.mkdir()
+    np.save(dataset / "real.npy", generator.decode(generator.sample_prior(50, 0)))
+    for out in (dataset, dataset / "evaluation"):
+        with pytest.raises(ValueError, match="would join the dataset's own; choose another path"):
+            evaluate_generators([generator], dataset, n=40, dwpr_n=10, out_dir=out)
+    assert sorted(path.name for path in dataset.iterdir()) == ["real.npy"]

@@ -99,3 +99,14 @@ def test_genrl_quickstart_without_a_display_stops_before_its_first_stage(tmp_pat
     assert result.returncode == 2, result.stderr
     assert "MUJOCO_GL=glfw" in result.stderr and "set MUJOCO_GL=egl" in result.stderr
     assert "--no-video" in result.stderr and not (tmp_path / "q").exists()
+
+
+def test_a_video_of_an_unfinished_run_names_what_is_missing(tmp_path, hockey_generator):
+    from sb3_genrl.video import record_video
+
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "run_record.json").write_text("{}")  # a run claimed, not finished
+    with pytest.raises(ValueError, match=r"policy: '.*run' holds no genrl_policy.zip; .* once its run has finished"):
+        record_video("hockey", tmp_path / "v.gif", policy=run)
+    assert not (tmp_path / "v.gif").exists()

@@ -232,7 +232,7 @@ def add_train_generator(sub: argparse._SubParsersAction) -> None:
     )
     gen.add_argument(
         "--std-floor",
-        type=option(check_positive_float, float),
+        type=option(check_fraction, float),
         default=None,
         help="floor of each normalisation std as a fraction of the largest (default 0.05)",
     )

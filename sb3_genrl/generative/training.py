@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -12,6 +11,7 @@ import torch
 from sb3_genrl.checks import (
     check_device,
     check_int,
+    check_not_in_input,
     check_output_file,
     check_positive_float,
     check_positive_int,
@@ -93,7 +93,7 @@ def train_generator(
         check_seed(seed)
     if out is not None:
         check_output_file(out, "out")
-        _refuse_input_as_output(data, out)
+        check_not_in_input(out, data, "out", "writing the generator there would overwrite its training data")
     if preset is not None:
         spec: dict[str, Any] = {"preset_or_kind": preset}
         preset_model = (PRESETS | TASK_PRESETS).get(preset.upper(), {}).get("model")
@@ -135,17 +135,3 @@ def train_generator(
     if out is not None:
         generator.save(os.fspath(out))
     return generator
-
-
-def _refuse_input_as_output(data: Any, out: str | os.PathLike[str]) -> None:
-    """Refuse an ``out`` that is the trajectory file itself or lies inside the dataset folder: saving the generator
-    there would overwrite or change the data it was trained on."""
-    if not isinstance(data, str | os.PathLike):
-        return
-    data_path, out_path = Path(data).resolve(), Path(out).resolve()
-    if out_path == data_path or (data_path.is_dir() and data_path in out_path.parents):
-        raise ValueError(
-            f"out {os.fspath(out)!r} is {'the data file' if out_path == data_path else 'inside the dataset'} "
-            f"{os.fspath(data)!r}: writing the generator there would overwrite its training data; choose "
-            "another path"
-        )

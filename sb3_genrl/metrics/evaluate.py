@@ -19,7 +19,15 @@ import gymnasium as gym
 import numpy as np
 import torch
 
-from sb3_genrl.checks import check_device, check_fraction, check_input_path, check_output_dir, check_positive_int, check_seed
+from sb3_genrl.checks import (
+    check_device,
+    check_fraction,
+    check_input_path,
+    check_not_in_input,
+    check_output_dir,
+    check_positive_int,
+    check_seed,
+)
 from sb3_genrl.data import load_trajectories
 from sb3_genrl.generative import load
 from sb3_genrl.generative.base import TrajectoryGenerator
@@ -352,6 +360,7 @@ def evaluate_generators(
         min_precision=min_precision,
     )
     out = check_output_dir(out_dir)
+    check_not_in_input(out, data, "out_dir", "the evaluation's files would join the dataset's own")
     real = load_trajectories(data)
     _check_sample_sizes(real, n, dwpr_n, interventions, data)
     real = real_subset(real, n, seed)

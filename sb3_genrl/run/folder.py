@@ -60,7 +60,8 @@ def open_run(
         if recorded is None:
             raise RunFolderError(
                 f"{out} holds a run's files ({', '.join(present)}) but no {RUN_RECORD} saying what run "
-                f"made them. Nothing was changed: {_WAYS_OUT}"
+                "made them. Nothing was changed: choose another output folder (--out), or pass --overwrite "
+                "(overwrite=True) to replace those files"
             )
         if recorded != identity:
             raise RunFolderError(

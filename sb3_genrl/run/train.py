@@ -25,6 +25,7 @@ from sb3_genrl.checks import (
     check_episodes,
     check_input_path,
     check_int,
+    check_not_in_input,
     check_output_dir,
     check_positive_int,
     check_seed,
@@ -170,6 +171,7 @@ def train_policy(
         episodes, batch_episodes, n_envs, seed, device, checkpoint_every, n_threads, {"e_step": e_step, **genrl_kwargs}
     )
     out = check_output_dir(out_dir)
+    check_not_in_input(out, demonstrations, "out_dir", "the run's files would join the demonstrations' own")
     callbacks = build_callbacks(callback, demonstrations=demonstrations, what=f"the settings of {task_name}", task=task)
     # Built first: a generator that does not fit the task is refused before anything is written. The settings'
     # latent_clip is the wrapper's (GenRL refuses a wrapped env with another).

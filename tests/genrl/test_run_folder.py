@@ -62,7 +62,9 @@ def test_a_rerun_into_a_run_folder_never_mixes_two_runs(fast_reach_task, tmp_pat
     assert json.loads((tmp_path / "summary.json").read_text()) == second
     # A folder with a run's files but no record of what run made them (an older version's) is refused too.
     (tmp_path / "run_record.json").unlink()
-    with pytest.raises(RunFolderError, match="no run_record.json"):
+    with pytest.raises(
+        RunFolderError, match=r"no run_record.json .*: choose another output folder \(--out\), or pass --overwrite"
+    ):
         train_policy("fast-reach", LinearGenerator(), episodes=96, **run)
 
 
@@ -132,3 +134,13 @@ def test_a_second_run_into_a_locked_folder_stops_at_once_with_exit_2(hockey_gene
     assert np.isfinite(
         train_policy("hockey", hockey_generator, episodes=4, batch_episodes=2, out_dir=folder)["final_mean_reward"]
     )
+
+
+def test_a_run_inside_its_demonstrations_folder_is_refused(fast_reach_task, tmp_path):  # noqa: F811
+    demonstrations = tmp_path / "demos"
+    demonstrations.mkdir()
+    (demonstrations / "metadata.json").write_text("{}")
+    for out in (demonstrations, demonstrations / "run"):
+        with pytest.raises(ValueError, match=r"out_dir .* is (inside )?the dataset .*would join the demonstrations' own"):
+            train_policy("fast-reach", LinearGenerator(), episodes=32, seed=0, out_dir=out, demonstrations=demonstrations)
+    assert sorted(path.name for path in demonstrations.iterdir()) == ["metadata.json"]
