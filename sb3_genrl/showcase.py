@@ -106,7 +106,7 @@ def play_scripted(
     :param height: frame height (pixels)
     :return: the report's path
     """
-    specs = [get_task(name) for name in tasks or arm_tasks()]
+    specs = [get_task(name) for name in dict.fromkeys(tasks or arm_tasks())]  # a task named twice is shown once
     others = [spec.name for spec in specs if spec.name not in arm_tasks()]
     if others:
         raise ValueError(f"the scripted motions are shown for the tasks on the package's arm {arm_tasks()}; got {others}")

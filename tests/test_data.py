@@ -218,6 +218,10 @@ def test_corrupted_hdf5_gives_an_error_naming_it(dataset, tmp_path: Path) -> Non
     with pytest.raises(ValueError, match="damaged") as error:
         load_actions(copy)
     assert str(hdf5) in str(error.value)
+    hdf5.unlink()  # a file the dataset lists gone: said so, not called damaged
+    with pytest.raises(ValueError, match="is missing: the dataset is incomplete") as error:
+        load_actions(copy)
+    assert str(hdf5) in str(error.value)
     (copy / "data" / "genrl_episodes.npz").unlink()  # only Minari's storage left, and it is damaged
     hdf5.write_bytes(b"\x89HDF\r\n\x1a\n" + bytes(4096))
     with pytest.raises(ValueError, match="damaged") as error:
@@ -258,6 +262,12 @@ def test_one_trajectory_loader_for_arrays_files_and_datasets(dataset, tmp_path) 
         load_trajectories(Path(__file__))
     with pytest.raises(ValueError, match=r"shape \(N, T, M\)"):
         load_trajectories(actions[0])
+    np.save(tmp_path / "complex.npy", actions.astype(np.complex64))
+    with pytest.raises(ValueError, match="trajectories must hold real numbers, got dtype complex64"):
+        load_trajectories(tmp_path / "complex.npy")
+    np.save(tmp_path / "objects.npy", np.empty((2, 3, 1), dtype=object), allow_pickle=True)
+    with pytest.raises(ValueError, match=r"'.*objects.npy' cannot be read as an array of trajectories: Object arrays"):
+        load_trajectories(tmp_path / "objects.npy")
     # The generators' training and their evaluation read data through this one loader.
     import sb3_genrl.generative.training
     import sb3_genrl.metrics.evaluate

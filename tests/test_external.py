@@ -434,7 +434,7 @@ def test_genrl_demos_refuses_bad_tasks_and_experts_before_any_work(cli, tmp_path
         (("--task", "TestExternal/PointGoal-v0", "--expert", "test_external:nope"), "has no attribute 'nope'"),
         (("--task", "TestExternal/PointGoal-v0", "--expert", "no_such_module:f"), "cannot import the module"),
         (("--task", "TestExternal/PointGoal-v0"), "give its expert as --expert MODULE:FUNCTION"),
-        (("--task", "hockey", "--horizon", "10"), "--horizon apply to demonstrations from an expert"),
+        (("--task", "hockey", "--horizon", "10"), "--horizon applies to demonstrations from an expert"),
         (("--task", "TestExternal/PointGoal-v0", "--expert", "test_external:point_expert", "--threads", "0"), "--threads"),
     ):
         code, _, err = cli("demos", *arguments, "--episodes", 2, "--out", out, "--no-progress-bar")
@@ -611,8 +611,8 @@ def test_the_quickstart_api_gives_an_outside_task_its_own_counts(quickstart_sett
 def test_quickstart_refuses_an_expert_for_a_package_task_and_an_outside_task_without_one(cli, tmp_path):
     out = tmp_path / "quick"
     for arguments, message in (
-        (("--task", "hockey", "--expert", "test_external:point_expert"), "expert apply to a task from outside the package"),
-        (("--task", "hockey", "--horizon", 10), "horizon apply to a task from outside the package"),
+        (("--task", "hockey", "--expert", "test_external:point_expert"), "expert applies to a task from outside the package"),
+        (("--task", "hockey", "--horizon", 10), "horizon applies to a task from outside the package"),
         (("--task", "TestExternal/PointGoal-v0"), "give its expert (expert=, --expert MODULE:FUNCTION)"),
         (("--task", "TestExternal/PointGoal-v0", "--expert", "test_external:point_expert", "--horizon", 30), "horizon 30"),
     ):
@@ -785,7 +785,7 @@ def test_the_package_tasks_and_a_users_make_their_demonstrations_through_the_one
     entered = task_demonstrations("hockey", 3, tmp_path / "entered", seed=4, n_threads=1)
     for key, value in load_arrays(made).items():
         np.testing.assert_array_equal(load_arrays(entered)[key], value, err_msg=key)
-    with pytest.raises(ValueError, match="noise apply to demonstrations recorded from an expert, not to hockey's own"):
+    with pytest.raises(ValueError, match="noise applies to demonstrations recorded from an expert, not to hockey's own"):
         task_demonstrations("hockey", 3, tmp_path / "noisy", noise=0.1)
     # a user's task named with its own maker: made with it, by name; given an expert, recorded from the expert
     named_tasks.register(Task("point-own", "TestExternal/PointGoalOwn-v0", make_demonstrations=unperturbed_maker))
@@ -837,7 +837,7 @@ def test_a_task_named_with_register_takes_the_commands_by_its_name(cli, tmp_path
     code, _, err = cli("quickstart", "--task", "point-own", "--out", tmp_path / "q", "--no-progress-bar")
     assert code == 2 and "makes its own demonstrations and has no expert to find a horizon" in err, err
     code, _, err = cli("demos", "--task", "point-own", "--noise", 0.1, "--out", tmp_path / "n", "--no-progress-bar")
-    assert code == 2 and "--noise apply to demonstrations from an expert (--expert), not to point-own's own" in err, err
+    assert code == 2 and "--noise applies to demonstrations from an expert (--expert), not to point-own's own" in err, err
     assert not (tmp_path / "q").exists() and not (tmp_path / "n").exists()
 
 

@@ -201,7 +201,7 @@ def test_bad_sources_are_refused_before_any_output(tmp_path, minari_root):
         ({"actions": actions, "reset_seeds": seeds[:1]}, r"reset_seeds .* must be 2 non-negative integers"),
         ({"actions": actions[0], "reset_seeds": seeds}, r"must be a non-empty \(N, T, M\) array .* got shape \(20, 2\)"),
         ({"actions": actions.astype(str), "reset_seeds": seeds}, r"array of real numbers"),
-        ({"actions": actions}, r"lack \['reset_seeds'\]"),
+        ({"actions": actions}, r"lacks \['reset_seeds'\]"),
         (tmp_path / "missing.npz", r"does not exist; expected an .npz file"),
         (tmp_path / "notes.txt", r"is a file but not an .npz file"),
         (tmp_path, r"is a folder but not a Minari dataset"),

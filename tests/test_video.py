@@ -110,3 +110,10 @@ def test_a_video_of_an_unfinished_run_names_what_is_missing(tmp_path, hockey_gen
     with pytest.raises(ValueError, match=r"policy: '.*run' holds no genrl_policy.zip; .* once its run has finished"):
         record_video("hockey", tmp_path / "v.gif", policy=run)
     assert not (tmp_path / "v.gif").exists()
+
+
+def test_a_task_named_twice_is_played_once(tmp_path):
+    from sb3_genrl.showcase import play_scripted
+
+    report = play_scripted(tmp_path / "play", tasks=("hockey", "hockey"), width=32, height=24)
+    assert report.read_text().count("## hockey") == 1

@@ -184,7 +184,7 @@ def _from_arrays(arrays: Mapping[str, Any], name: str) -> ReplaySource:
     """Arrays of actions ``(N, T, M)`` and reset seeds ``(N,)``, checked."""
     missing = [key for key in ARRAY_KEYS if key not in arrays]
     if missing:
-        raise ValueError(f"{name} lack {missing}: expected {list(ARRAY_KEYS)}, got {sorted(arrays)}")
+        raise ValueError(f"{name} lacks {missing}: expected {list(ARRAY_KEYS)}, got {sorted(arrays)}")
     actions = np.asarray(arrays["actions"])
     if actions.dtype.kind not in "fiu" or actions.ndim != 3 or 0 in actions.shape:
         raise ValueError(

@@ -79,7 +79,8 @@ def task_demonstrations(
     given = [name for name, value in dict(noise=noise, horizon=horizon, success_key=success_key).items() if value is not None]
     if given:
         raise ValueError(
-            f"{', '.join(given)} apply to demonstrations recorded from an expert, not to {task}'s own maker "
+            f"{', '.join(given)} {'applies' if len(given) == 1 else 'apply'} to demonstrations recorded from an expert, "
+            f"not to {task}'s own maker "
             "(give an expert to record its demonstrations instead)"
         )
     return maker(episodes, out_dir, seed=seed, n_threads=n_threads, progress_bar=progress_bar)

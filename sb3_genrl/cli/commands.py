@@ -63,7 +63,8 @@ def demos_command(args: argparse.Namespace) -> int:
         raise ValueError(f"task {args.task!r} has no expert of the package's: give its expert as --expert MODULE:FUNCTION")
     given = [f"--{name.replace('_', '-')}" for name in ("noise", "horizon", "success_key") if getattr(args, name) is not None]
     if given and not recorded:
-        raise ValueError(f"{', '.join(given)} apply to demonstrations from an expert (--expert), not to {args.task}'s own")
+        verb = "applies" if len(given) == 1 else "apply"
+        raise ValueError(f"{', '.join(given)} {verb} to demonstrations from an expert (--expert), not to {args.task}'s own")
     began = time.perf_counter()
     if args.horizon == EXPERT_HORIZON:
         check_output_dir(args.out, "out")

@@ -150,6 +150,8 @@ def _check_hdf5_opens(hdf5_file: Path) -> None:
     if importlib.util.find_spec("h5py") is None:
         return
 
+    if not hdf5_file.is_file():
+        raise ValueError(f"{str(hdf5_file)!r} is missing: the dataset is incomplete (remake it with genrl demos)")
     try:
         with h5py.File(hdf5_file, "r") as storage:
             len(storage)

@@ -30,13 +30,18 @@ def load_trajectories(data: np.ndarray | str | os.PathLike[str]) -> np.ndarray:
         elif not path.exists():
             raise FileNotFoundError(f"no trajectories at {str(path)!r}: the path does not exist")
         elif path.suffix == ".npy":
-            array = np.load(path, allow_pickle=False)
+            try:
+                array = np.load(path, allow_pickle=False)
+            except ValueError as error:  # an object array (which needs pickle), or not an array file
+                raise ValueError(f"{str(path)!r} cannot be read as an array of trajectories: {error}") from None
         elif path.suffix == ".npz":
             array = _one_array(path)
         else:
             raise ValueError(f"{str(path)!r} is neither a demonstration dataset directory nor a .npy/.npz file")
     if array.ndim != 3:
         raise ValueError(f"trajectories must have shape (N, T, M) (N, horizon, action_dim), got {array.shape}")
+    if array.dtype.kind not in "fiu":  # complex, boolean, text or object values are no actions
+        raise ValueError(f"trajectories must hold real numbers, got dtype {array.dtype}")
     return array
 
 

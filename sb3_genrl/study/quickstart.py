@@ -292,8 +292,8 @@ def _outside_task(task: str, expert: Callable[[Any], Any] | None, horizon: int |
         given = [name for name, value in dict(expert=expert, horizon=horizon).items() if value is not None]
         if given:
             raise ValueError(
-                f"{' and '.join(given)} apply to a task from outside the package; {task!r} is one of the package's, "
-                "which makes its own demonstrations"
+                f"{' and '.join(given)} {'applies' if len(given) == 1 else 'apply'} to a task from outside the package; "
+                f"{task!r} is one of the package's, which makes its own demonstrations"
             )
         return None
     if expert is None and resolved.make_expert is None:
