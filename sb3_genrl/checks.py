@@ -138,6 +138,8 @@ def check_input_path(path: str | os.PathLike[str], name: str) -> Path:
     :param path: the path
     :param name: the argument's name, for the error message
     """
+    if not os.fspath(path):  # Path("") is the current folder
+        raise ValueError(_named(name, "is empty; expected a path"))
     path = Path(path)
     if not path.exists():
         raise ValueError(_named(name, f"{str(path)!r} does not exist"))

@@ -224,6 +224,7 @@ def test_help_lists_the_commands_in_workflow_order_and_version(cli):
         (("video", "--task", "hockey", "--generator", "GEN", "--out", "D0"), "argument --out: 'D0' is a folder"),
         (("video", "--task", "hockey", "--generator", "GEN", "--goals", "0", "--out", "v.gif"), "argument --goals"),
         (("train-generator", "--data", "D0", "--batch-size", "0", "--out", "g.pt"), "argument --batch-size: must be"),
+        (("train-generator", "--data", "", "--out", "g.pt"), "argument --data: is empty; expected a path"),
     ],
 )
 def test_arguments_and_paths_are_checked_before_any_work(tmp_path, monkeypatch, cli, argv, message):

@@ -283,7 +283,12 @@ def add_evaluate(sub: argparse._SubParsersAction) -> None:
         "--data", required=True, type=EXISTING, help="real trajectories: demonstration dataset or .npy/.npz (N, T, M) array"
     )
     evaluate.add_argument("--out", required=True, type=OUT_DIR, help="output folder (results.csv/.md/.json, plots)")
-    evaluate.add_argument("--n", type=COUNT, default=15000, help="real and generated samples, at most the data's (15000)")
+    evaluate.add_argument(
+        "--n",
+        type=COUNT,
+        default=15000,
+        help="real and generated samples (paper, default: 15000); the data must hold at least as many trajectories",
+    )
     evaluate.add_argument("--dwpr-n", type=COUNT, default=10000, help="DwPR samples per intervention (paper: 10000)")
     evaluate.add_argument("--interventions", type=COUNT, default=5, help="DwPR interventions per dimension (paper: 5)")
     evaluate.add_argument("--k", type=COUNT, default=3, help="neighbourhood size (paper: 3)")
