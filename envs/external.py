@@ -155,9 +155,10 @@ def resolve_task(task: str) -> Task:
         module, env_id = task.split(":", 1)
         try:
             importlib.import_module(module)
-        except ImportError as error:
+        except Exception as error:  # not found, or the module's own code failing as it runs
             raise ValueError(
-                f"task {task!r}: cannot import the module {module!r} that should register {env_id!r} ({error})"
+                f"task {task!r}: cannot import the module {module!r} that should register {env_id!r} "
+                f"({type(error).__name__}: {error}){_path_hint(error)}"
             ) from None
     if env_id in _NAMED:
         return _NAMED[env_id]
@@ -168,6 +169,13 @@ def resolve_task(task: str) -> Task:
         "50 v3 tasks), a task named with sb3_genrl.envs.external.register, a registered Gymnasium id, or module:Id with "
         "a module that registers Id"
     )
+
+
+def _path_hint(error: Exception) -> str:
+    """For a module not found: how a module in the current folder is found (the ``genrl`` command does not look there)."""
+    if not isinstance(error, ModuleNotFoundError):
+        return ""
+    return "; a module in the current folder is found with PYTHONPATH=. before the command"
 
 
 def load_expert(spec: str) -> Callable[[Any], np.ndarray]:
@@ -181,8 +189,10 @@ def load_expert(spec: str) -> Callable[[Any], np.ndarray]:
         raise ValueError(f"an expert is given as module:function, got {spec!r}")
     try:
         found: Any = importlib.import_module(module_name)
-    except ImportError as error:
-        raise ValueError(f"expert {spec!r}: cannot import the module {module_name!r} ({error})") from None
+    except Exception as error:  # not found, or the module's own code failing as it runs
+        raise ValueError(
+            f"expert {spec!r}: cannot import the module {module_name!r} ({type(error).__name__}: {error}){_path_hint(error)}"
+        ) from None
     for part in attribute.split("."):
         if not hasattr(found, part):
             raise ValueError(f"expert {spec!r}: {module_name!r} has no attribute {attribute!r}")
@@ -231,7 +241,8 @@ def check_reports_success(info: dict[str, Any], success_key: str = "is_success",
         wanted = " or ".join(repr(key) for key in (SUCCESS_KEYS if success_key == SUCCESS_KEYS[0] else (success_key,)))
         raise ValueError(
             f"{name} reports no success: its step's info has no {wanted} (it has {sorted(info)}); give the key that "
-            "holds it as success_key (--success-key)"
+            "holds it as success_key (genrl demos and genrl train-policy: --success-key), or, for the quickstart, "
+            "which reads is_success or success, have the env report one of those"
         )
 
 

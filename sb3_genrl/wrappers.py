@@ -187,13 +187,9 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
             if not callable(context) or context_space is None:
                 raise ValueError("context must be a callable context(reset_obs) -> array, given with context_space")
             return context, context_space
-        if hasattr(task, "get_context") and hasattr(task, "context_space"):
-            return "task", task.context_space
-        if context_space is not None:
+        if context_space is not None and not (hasattr(task, "get_context") and hasattr(task, "context_space")):
             raise ValueError("context_space is only used together with a context callable")
-        if is_goal_env(self.env):
-            return "goal", goal_context_space(self.env.observation_space)
-        return "observation", self.env.observation_space
+        return default_context(self.env)
 
     def _observe(self, obs: Any) -> Any:
         if self._context_source == "task":
@@ -399,6 +395,18 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
 
 GOAL_KEYS = ("observation", "achieved_goal", "desired_goal")
+
+
+def default_context(env: gym.Env) -> tuple[str, spaces.Space]:
+    """Where :class:`LatentActionWrapper` takes ``env``'s context from when it is given no ``context`` callable, and
+    the context's space: the task's ``get_context()`` (``"task"``), a goal-conditioned env's goal and observation as
+    one Box (``"goal"``), else the reset observation (``"observation"``)."""
+    task = env.unwrapped
+    if hasattr(task, "get_context") and hasattr(task, "context_space"):
+        return "task", task.context_space
+    if is_goal_env(env):
+        return "goal", goal_context_space(env.observation_space)
+    return "observation", env.observation_space
 
 
 def is_goal_env(env: gym.Env) -> bool:

@@ -322,6 +322,20 @@ def test_bad_expert_and_noise_are_refused_before_any_work(tmp_path):
         record_demonstrations("TestExternal/PointGoal-v0", lambda observation: np.zeros(3), 2, tmp_path / "out")
     with pytest.raises(ValueError, match="noise"):
         record_demonstrations("TestExternal/PointGoal-v0", point_expert, 2, tmp_path / "out", noise=-0.1)
+
+    def raising(observation):
+        raise RuntimeError("boom")
+
+    def two_arguments(observation, info):
+        return np.zeros(2)
+
+    for expert, message in (
+        (raising, r"the expert raised RuntimeError: boom \(it is called as expert\(observation\) -> action\)"),
+        (two_arguments, r"the expert raised TypeError: .*missing 1 required positional argument: 'info'"),
+        (lambda observation: None, "the expert returned None; expected an action of the env's action space"),
+    ):
+        with pytest.raises(ValueError, match=message):
+            record_demonstrations("TestExternal/PointGoal-v0", expert, 2, tmp_path / "out")
     with pytest.raises(ValueError, match="has no expert of the package's"):
         record_demonstrations("TestExternal/PointGoal-v0", None, 2, tmp_path / "out")
     for n_threads in (0, 1.5, True):
@@ -427,12 +441,19 @@ def test_genrl_demos_and_train_policy_take_a_task_the_package_does_not_register(
     assert json.loads((tmp_path / "solved" / "summary.json").read_text())["success_key"] == "solved"
 
 
-def test_genrl_demos_refuses_bad_tasks_and_experts_before_any_work(cli, tmp_path):
+def test_genrl_demos_refuses_bad_tasks_and_experts_before_any_work(cli, tmp_path, monkeypatch):
+    (tmp_path / "failing_import.py").write_text('raise RuntimeError("the module\'s own error")\n')
+    monkeypatch.syspath_prepend(str(tmp_path))
     out = tmp_path / "demos"
     for arguments, message in (
         (("--task", "NoSuch-v0", "--expert", "test_external:point_expert"), "unknown task 'NoSuch-v0'"),
         (("--task", "TestExternal/PointGoal-v0", "--expert", "test_external:nope"), "has no attribute 'nope'"),
-        (("--task", "TestExternal/PointGoal-v0", "--expert", "no_such_module:f"), "cannot import the module"),
+        (("--task", "TestExternal/PointGoal-v0", "--expert", "no_such_module:f"), "with PYTHONPATH=. before the command"),
+        (
+            ("--task", "TestExternal/PointGoal-v0", "--expert", "failing_import:f"),
+            "cannot import the module 'failing_import' (RuntimeError: the module's own error)",
+        ),
+        (("--task", "failing_import:X-v0", "--expert", "test_external:point_expert"), "(RuntimeError: the module's own"),
         (("--task", "TestExternal/PointGoal-v0"), "give its expert as --expert MODULE:FUNCTION"),
         (("--task", "hockey", "--horizon", "10"), "--horizon applies to demonstrations from an expert"),
         (("--task", "TestExternal/PointGoal-v0", "--expert", "test_external:point_expert", "--threads", "0"), "--threads"),
@@ -888,3 +909,25 @@ def test_genrl_baseline_sac_learns_an_outside_task_from_its_demonstrations_and_r
         assert not (tmp_path / algorithm).exists()
     code, _, err = cli("baseline", "sac", "--task", "fetch-push", "--demos", demos, "--episodes", 2, "--out", tmp_path / "f")
     assert code == 2 and "genrl baseline takes a task on the package's arm" in err, err
+
+
+gym.register(
+    "TestExternal/PointGoalDict-v0",
+    entry_point=lambda: gym.wrappers.TransformObservation(
+        PointGoalEnv(), lambda observation: {"obs": observation}, gym.spaces.Dict({"obs": PointGoalEnv().observation_space})
+    ),
+    max_episode_steps=HORIZON,
+)
+
+
+def test_a_task_with_a_dict_context_is_refused_by_the_quickstart_before_any_stage(tmp_path):
+    from sb3_genrl.genrl.demonstrations import demonstration_contexts
+    from sb3_genrl.study.quickstart import quickstart
+
+    with pytest.raises(ValueError, match=r"needs a Box context .* its observation space is Dict\('obs'"):
+        quickstart(tmp_path / "q", task="TestExternal/PointGoalDict-v0", expert=lambda observation: np.zeros(2))
+    assert not (tmp_path / "q").exists()
+    # The callback's own check (genrl train-policy --data on such a task) names the reason, not another task's data.
+    space = gym.make("TestExternal/PointGoalDict-v0").observation_space
+    with pytest.raises(ValueError, match=r"demonstrations start GenRL on a Box context .* leave the demonstrations out"):
+        demonstration_contexts(np.zeros((3, 4)), np.full((3, 2), np.nan), space)

@@ -332,7 +332,15 @@ def _noise_heights(action_space: spaces.Space, noise: float | np.ndarray) -> np.
 def _expert_action(expert: Callable[[Any], np.ndarray], observation: Any, action_space: spaces.Box) -> np.ndarray:
     # the expert gets a copy: one that changes its observation in place (Meta-World's door-open-v3 policy shifts the
     # handle's position in it) would otherwise change the recorded episode's observations
-    action = np.asarray(expert(copy.deepcopy(observation)), dtype=np.float64)
+    try:
+        raw = expert(copy.deepcopy(observation))
+    except Exception as error:  # the user's code: its error in one line, named as the expert's
+        raise ValueError(
+            f"the expert raised {type(error).__name__}: {error} (it is called as expert(observation) -> action)"
+        ) from error
+    if raw is None:
+        raise ValueError(f"the expert returned None; expected an action of the env's action space {action_space}")
+    action = np.asarray(raw, dtype=np.float64)
     if action.shape != action_space.shape or not np.all(np.isfinite(action)):
         raise ValueError(
             f"the expert returned {action.tolist()!r} (shape {action.shape}); expected {action_space.shape[0]} finite "

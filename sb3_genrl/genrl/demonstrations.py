@@ -223,6 +223,12 @@ def demonstration_contexts(
             if len(rows) == 0:
                 raise ValueError(f"{name}: none records the point it reached, which would be its context")
             return reached[rows], rows
+    if not isinstance(context_space, spaces.Box):
+        raise ValueError(
+            f"{name}: demonstrations start GenRL on a Box context (a flat observation or goal), but the env's context "
+            f"space is {context_space}; leave the demonstrations out (GenRL searches from its prior), or give the env "
+            "a Box observation (e.g. gymnasium.wrappers.FlattenObservation)"
+        )
     raise ValueError(
         f"{name}: a demonstration's context is its first observation, of shape {first_observations.shape[1:]}, or "
         f"else the point it reached, of shape {reached.shape[1:]}, but the env's context space is {context_space}: the "

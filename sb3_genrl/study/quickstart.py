@@ -59,7 +59,7 @@ from sb3_genrl.run.train import effective_genrl_settings
 from sb3_genrl.showcase import check_rendering
 from sb3_genrl.utils import atomic_write_json, atomic_write_text, folder_lock
 from sb3_genrl.video import record_video
-from sb3_genrl.wrappers import task_has_fast_path
+from sb3_genrl.wrappers import default_context, task_has_fast_path
 
 # Paper table 1's VAE1 (N_alpha = 2, beta = 0.01). Of the 2-D VAEs, its stronger prior term lays the hockey
 # demonstrations out as one unfolded sheet (shot distance along one latent axis, direction along the other); with
@@ -188,6 +188,7 @@ def quickstart(
         episodes, batch_episodes, genrl_kwargs = task_settings(task)
         video = video and get_task(task).video  # a task without the arm tasks' renderer is not filmed
     else:
+        _check_box_context(outside)
         if expert is None and outside.make_expert is not None and own_maker(outside) is None:
             expert = outside.make_expert()
         horizon, horizon_record = _outside_horizon(outside, horizon, expert, pathlib.Path(out_dir), seed, log)
@@ -304,6 +305,22 @@ def _outside_task(task: str, expert: Callable[[Any], Any] | None, horizon: int |
     if expert is not None and not callable(expert):
         raise ValueError(f"expert must be a callable observation -> action, got {type(expert).__name__}")
     return resolved
+
+
+def _check_box_context(task: Task) -> None:
+    """Refuse, before any stage, a task whose GenRL context is not a Box: the quickstart starts GenRL from the
+    demonstrations (``DemonstrationCallback``), whose contexts are flat first observations."""
+    env = gym.make(task.env_id)
+    try:
+        _, space = default_context(env)
+    finally:
+        env.close()
+    if not isinstance(space, gym.spaces.Box):
+        raise ValueError(
+            f"task {task.name!r}: the quickstart starts GenRL from demonstrations, which needs a Box context (a flat "
+            f"observation, or a goal-conditioned env's goal), but its observation space is {space}; give the env a Box "
+            "observation (e.g. gymnasium.wrappers.FlattenObservation), or train GenRL on it through the API"
+        )
 
 
 def _outside_horizon(
