@@ -5,6 +5,7 @@ Task-level workflow code: it reads the task registry (:data:`sb3_genrl.envs.TASK
 
 from __future__ import annotations
 
+import json
 import os
 import pathlib
 
@@ -38,6 +39,17 @@ def check_mp4_writer(out: str | os.PathLike) -> None:
             f"out: writing {str(out)!r} needs imageio-ffmpeg, a dependency of sb3-genrl ({error}); "
             "install it (pip install imageio-ffmpeg) or write a .gif"
         ) from None
+
+
+def _why_no_policy(folder: pathlib.Path) -> str:
+    """Why a run folder holds no GenRL model: another algorithm's run, or a GenRL run not finished."""
+    try:
+        algorithm = json.loads((folder / "run_record.json").read_text()).get("algorithm")
+    except (OSError, ValueError, AttributeError):
+        algorithm = None
+    if algorithm not in (None, "genrl"):
+        return f"it is a {algorithm} run, not a GenRL one (genrl video films GenRL policies and generators)"
+    return "a GenRL run folder has one once its run has finished (rerun its genrl train-policy command to finish it)"
 
 
 def record_video(
@@ -79,10 +91,7 @@ def record_video(
     check_mp4_writer(out)
     check_input_path(policy if policy is not None else generator, "policy" if policy is not None else "generator")
     if policy is not None and pathlib.Path(policy).is_dir() and not (pathlib.Path(policy) / "genrl_policy.zip").is_file():
-        raise ValueError(
-            f"policy: {os.fspath(policy)!r} holds no genrl_policy.zip; a GenRL run folder has one once its run has "
-            "finished (rerun its genrl train-policy command to finish it)"
-        )
+        raise ValueError(f"policy: {os.fspath(policy)!r} holds no genrl_policy.zip; {_why_no_policy(pathlib.Path(policy))}")
     check_rendering()
     env = spec.make_env(render_mode="rgb_array", width=width, height=height)
     rng = np.random.default_rng(seed)

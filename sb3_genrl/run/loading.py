@@ -25,7 +25,7 @@ import torch as th
 from stable_baselines3.common.torch_layers import CombinedExtractor, FlattenExtractor
 
 from sb3_genrl.generative.base import TrajectoryGenerator
-from sb3_genrl.genrl.generator_files import check_recorded_generator, generator_file, load_generator
+from sb3_genrl.genrl.generator_files import check_model_data, check_recorded_generator, generator_file, load_generator
 from sb3_genrl.genrl.genrl import GenRL
 from sb3_genrl.genrl.policies import BoxScaler, ContextStdPolicy, MlpPolicy, MultiInputPolicy
 from sb3_genrl.wrappers import LatentActionWrapper
@@ -98,6 +98,7 @@ def load_policy(
     """
     path = os.fspath(path)
     data = _read_data(path)
+    check_model_data(path, data)  # another algorithm's zip: said first, before its generator or its pickles
     generator = _resolve_generator(path, data, generator, device)
     if trust:
         return GenRL.load(path, device=device, generator=generator)
@@ -149,7 +150,8 @@ def _resolve_generator(
             check_recorded_generator(generator, data.get("generator_sha256"), candidate, path)  # the file named here
             return generator
     raise ValueError(
-        f"no generator for {path}: none of {[str(c) for c in candidates if c is not None]} exists; pass the generator file"
+        f"no generator for {path}: none of {[str(c) for c in candidates if c is not None]} exists; pass the generator "
+        f"file (generator=...), or copy it beside the zip as {generator_file(path)} (genrl video reads it there)"
     )
 
 

@@ -336,3 +336,24 @@ def test_a_model_zip_without_a_generator_hash_is_flagged(tmp_path):
     (tmp_path / "model.generator.pt").rename(tmp_path / "older.generator.pt")
     with pytest.warns(UserWarning, match=r"older.zip was saved without its generator's SHA-256 \(by an older sb3-genrl\)"):
         assert GenRL.load(tmp_path / "older.zip", device="cpu").generator is not None
+
+
+def test_load_policy_names_another_algorithms_zip_first_and_where_a_moved_generator_goes(tmp_path):
+    from stable_baselines3 import SAC
+
+    from sb3_genrl.run.loading import load_policy
+    from sb3_genrl.video import record_video
+
+    SAC("MlpPolicy", "Pendulum-v1", learning_starts=0).save(tmp_path / "sac.zip")  # no generator anywhere near it
+    with pytest.raises(ValueError, match="sac.zip is not a GenRL model"):
+        load_policy(tmp_path / "sac.zip", gym.make("GenRL/Hockey-v0"))
+    _vae(0).save(str(tmp_path / "vae.pt"))
+    GenRL("GenRL/Hockey-v0", str(tmp_path / "vae.pt"), n_steps=8, device="cpu").save(tmp_path / "policy.zip")
+    (tmp_path / "vae.pt").rename(tmp_path / "moved.pt")
+    with pytest.raises(ValueError, match=r"pass the generator file \(generator=...\), or copy it beside the zip as .*policy"):
+        load_policy(tmp_path / "policy.zip", gym.make("GenRL/Hockey-v0"))
+    run = tmp_path / "run"  # a finished run of another algorithm: named as such by genrl video
+    run.mkdir()
+    (run / "run_record.json").write_text('{"algorithm": "latent-sac"}')
+    with pytest.raises(ValueError, match="holds no genrl_policy.zip; it is a latent-sac run, not a GenRL one"):
+        record_video("hockey", tmp_path / "v.gif", policy=run)
