@@ -931,3 +931,15 @@ def test_a_task_with_a_dict_context_is_refused_by_the_quickstart_before_any_stag
     space = gym.make("TestExternal/PointGoalDict-v0").observation_space
     with pytest.raises(ValueError, match=r"demonstrations start GenRL on a Box context .* leave the demonstrations out"):
         demonstration_contexts(np.zeros((3, 4)), np.full((3, 2), np.nan), space)
+
+
+def test_a_generator_longer_than_the_envs_episodes_is_refused_when_the_wrapper_is_built():
+    from conftest import LinearGenerator
+
+    from sb3_genrl import LatentActionWrapper
+
+    with pytest.raises(ValueError, match=rf"horizon T = {HORIZON + 5} .* end after {HORIZON} \(its max_episode_steps\)"):
+        LatentActionWrapper(gym.make("TestExternal/PointGoal-v0"), LinearGenerator(horizon=HORIZON + 5))
+    longer = gym.make("TestExternal/PointGoal-v0", max_episode_steps=HORIZON + 5)  # the fix the message names
+    assert LatentActionWrapper(longer, LinearGenerator(horizon=HORIZON + 5)).generator.horizon == HORIZON + 5
+    LatentActionWrapper(gym.make("TestExternal/PointGoal-v0"), LinearGenerator(horizon=HORIZON - 2))  # shorter: held
