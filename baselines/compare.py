@@ -15,6 +15,7 @@ import pathlib
 from collections import defaultdict
 
 import numpy as np
+from sb3_genrl.baselines import BASELINES
 
 from sb3_genrl.checks import check_output_dir
 from sb3_genrl.curves import MONITOR_FILE, mean_std_over_seeds, plot_curves, read_curve, read_monitor
@@ -147,7 +148,14 @@ def _read_runs(run_dirs: list[str | os.PathLike], task: str | None) -> tuple[dic
         runs[summary["algorithm"]].append(
             {"curve": read_curve(run_dir / "learning_curve.csv"), "summary": summary, "contacts": _nanmean(contacts)}
         )
-    return runs, next(iter(by_task))
+    # A fixed order (GenRL, then the baselines' order; each method's runs by seed), whatever order the runs came in:
+    # the study gives them as its workers finish
+    order = ("genrl", *BASELINES)
+    ranked = sorted(runs, key=lambda name: (order.index(name) if name in order else len(order), name))
+    return {
+        name: sorted(runs[name], key=lambda run: (run["summary"].get("seed") is None, run["summary"].get("seed") or 0))
+        for name in ranked
+    }, next(iter(by_task))
 
 
 def _method_row(label: str, curves: list[dict[str, np.ndarray]], contacts: list[float], budget: int) -> dict:

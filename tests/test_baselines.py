@@ -795,3 +795,26 @@ def test_genrl_baseline_refuses_a_bad_change_before_its_run_folder(tmp_path, cli
         "--algorithm-kwargs", '{"gamma": 2}', "--out", out,
     )  # fmt: skip
     assert code == 2 and "latent-ppo's gamma must be a number in [0, 1], got 2" in err and not out.exists()
+
+
+def test_a_comparison_does_not_depend_on_the_order_its_runs_are_given_in(tmp_path):
+    def run(name: str, algorithm: str, seed: int, rewards: tuple[float, float]):
+        folder = tmp_path / name
+        folder.mkdir()
+        (folder / "summary.json").write_text(json.dumps({"task": "hockey", "algorithm": algorithm, "seed": seed}))
+        (folder / "learning_curve.csv").write_text(f"episodes,mean_reward\n16,{rewards[0]}\n32,{rewards[1]}\n")
+        return folder
+
+    runs = [
+        run("ppo1", "ppo", 1, (-0.71, -0.33)),
+        run("genrl1", "genrl", 1, (-0.5, -0.1)),
+        run("latent0", "latent-trpo", 0, (-0.9, -0.8)),
+        run("ppo0", "ppo", 0, (-0.7, -0.3)),
+        run("genrl0", "genrl", 0, (-0.6, -0.2)),
+    ]
+    tables = []
+    for index, order in enumerate((runs, runs[::-1], runs[2:] + runs[:2])):
+        compare_runs(order, tmp_path / f"out{index}")
+        tables.append((tmp_path / f"out{index}" / "comparison.csv").read_text())
+    assert tables[0] == tables[1] == tables[2]
+    assert [line.split(",")[0] for line in tables[0].splitlines()[1:]] == ["GenRL", "PPO (BC)", "TRPO on latent"]

@@ -779,6 +779,23 @@ def test_options_that_would_set_nothing_are_refused_before_any_work(tmp_path, mo
             ("baseline", "ppo", "--task", "hockey", "--demos", "D0", "--generator", "GEN", "--episodes", "8", "--out", "D"),
             "ppo acts in action space and takes no generator",
         ),
+        (
+            (
+                "baseline",
+                "latent-ppo",
+                "--task",
+                "hockey",
+                "--generator",
+                "GEN",
+                "--episodes",
+                "8",
+                "--checkpoint-every",
+                "32",
+                "--out",
+                "D",
+            ),
+            "argument --checkpoint-every: latent-ppo is not checkpointed (only sac, sac-no-prefill, sac-her)",
+        ),  # fmt: skip
     ):
         code, printed, err = cli(*argv)
         assert code == 2 and printed == "" and message in err, (argv, err)

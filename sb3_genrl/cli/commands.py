@@ -13,7 +13,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from sb3_genrl.baselines import OFF_POLICY_BASELINES
 from sb3_genrl.baselines.compare import compare_runs
+from sb3_genrl.baselines.train import CHECKPOINT_EVERY as BASELINE_CHECKPOINT_EVERY
 from sb3_genrl.baselines.train import train_baseline
 from sb3_genrl.checks import check_output_dir
 from sb3_genrl.data import dataset_info, load_trajectories
@@ -323,6 +325,12 @@ def baseline_command(args: argparse.Namespace) -> int:
             f"package (sac, sac-no-prefill), not {args.task}: the Fetch tasks' SAC + HER runs through rl-zoo3 "
             "(benchmarks/fetch_sac_her.py)"
         )
+    if args.checkpoint_every is not None and args.algorithm not in OFF_POLICY_BASELINES:
+        raise ValueError(
+            f"argument --checkpoint-every: {args.algorithm} is not checkpointed (only {', '.join(OFF_POLICY_BASELINES)}); "
+            "its runs restart from their first episode"
+        )
+    checkpoint_every = BASELINE_CHECKPOINT_EVERY if args.checkpoint_every is None else args.checkpoint_every
     summary = train_baseline(
         args.algorithm,
         args.task,
@@ -334,7 +342,7 @@ def baseline_command(args: argparse.Namespace) -> int:
         generator=args.generator,
         bc_kwargs={"max_epochs": args.bc_max_epochs},
         algorithm_kwargs=args.algorithm_kwargs,
-        checkpoint_every=args.checkpoint_every or None,
+        checkpoint_every=checkpoint_every or None,
         overwrite=args.overwrite,
         device=args.device,
         progress_bar=not args.no_progress_bar,

@@ -432,9 +432,9 @@ def add_baseline(sub: argparse._SubParsersAction) -> None:
     baseline.add_argument(
         "--checkpoint-every",
         type=option(check_int, int, minimum=0),
-        default=250,
-        help="episodes between checkpoints of sac, sac-no-prefill and sac-her; a rerun into the same "
-        "--out resumes from the last one (0: none; default 250)",
+        default=None,
+        help="episodes between checkpoints of sac, sac-no-prefill and sac-her (refused for the others); a rerun into "
+        f"the same --out resumes from the last one (0: none; default {commands.BASELINE_CHECKPOINT_EVERY})",
     )
     baseline.add_argument(
         "--n-envs",
