@@ -7,7 +7,6 @@ import argparse
 import csv
 import functools
 import json
-import pathlib
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -142,7 +141,7 @@ def _replayed_demos(args: argparse.Namespace) -> int:
 
 
 def train_generator_command(args: argparse.Namespace) -> int:
-    out, data = pathlib.Path(args.out).resolve(), pathlib.Path(args.data).resolve()
+    out, data = Path(args.out).resolve(), Path(args.data).resolve()
     if out.exists() and not args.overwrite and data != out and data not in out.parents:  # (the data: refused below)
         raise FileExistsError(f"--out {str(args.out)!r} already exists; pass --overwrite to replace it")
     generator = train_generator(
@@ -176,7 +175,7 @@ def train_generator_command(args: argparse.Namespace) -> int:
     return 0
 
 
-def _refuse_replacing(args: argparse.Namespace, made: pathlib.Path, what: str) -> None:
+def _refuse_replacing(args: argparse.Namespace, made: Path, what: str) -> None:
     """Refuse ``made`` (the mark of an earlier output at ``--out``) unless ``--overwrite``: a command that would
     replace another run's results asks first."""
     if made.exists() and not args.overwrite:
@@ -184,7 +183,7 @@ def _refuse_replacing(args: argparse.Namespace, made: pathlib.Path, what: str) -
 
 
 def evaluate_command(args: argparse.Namespace) -> int:
-    _refuse_replacing(args, pathlib.Path(args.out) / "results.json", "an evaluation")
+    _refuse_replacing(args, Path(args.out) / "results.json", "an evaluation")
     rollout = {"contexts": DEFAULT_CONTEXTS, "draws": DEFAULT_DRAWS, "prior_seed": PRIOR_ROLLOUT_SEED}
     given = [f"--{name.replace('_', '-')}" for name in rollout if getattr(args, name) is not None]
     if args.task is None and given:  # else they would set nothing
@@ -377,13 +376,13 @@ def baseline_command(args: argparse.Namespace) -> int:
 
 
 def compare_command(args: argparse.Namespace) -> int:
-    _refuse_replacing(args, pathlib.Path(args.out) / "comparison.csv", "a comparison")
+    _refuse_replacing(args, Path(args.out) / "comparison.csv", "a comparison")
     print(compare_runs(args.runs, args.out, task=args.task).read_text())
     return 0
 
 
 def video_command(args: argparse.Namespace) -> int:
-    _refuse_replacing(args, pathlib.Path(args.out), "a video")
+    _refuse_replacing(args, Path(args.out), "a video")
     result = record_video(
         args.task,
         args.out,
