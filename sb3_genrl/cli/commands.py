@@ -324,7 +324,8 @@ def baseline_command(args: argparse.Namespace) -> int:
             f"package (sac, sac-no-prefill), not {args.task}: the Fetch tasks' SAC + HER runs through rl-zoo3 "
             "(benchmarks/fetch_sac_her.py)"
         )
-    if args.checkpoint_every is not None and args.algorithm not in OFF_POLICY_BASELINES:
+    # (a task from outside the package takes only checkpointed baselines: train_baseline names that first)
+    if args.checkpoint_every is not None and spec is not None and args.algorithm not in OFF_POLICY_BASELINES:
         raise ValueError(
             f"argument --checkpoint-every: {args.algorithm} is not checkpointed (only {', '.join(OFF_POLICY_BASELINES)}); "
             "its runs restart from their first episode"
