@@ -163,6 +163,16 @@ def check_not_in_input(out: str | os.PathLike[str], data: Any, out_name: str, wh
         raise ValueError(f"{out_name} {os.fspath(out)!r} is {where} {os.fspath(data)!r}: {what}; choose another path")
 
 
+def check_not_in_a_dataset(out: str | os.PathLike[str], name: str = "out") -> None:
+    """Refuse an output folder that is a demonstration dataset (a folder with ``data/metadata.json``) or lies in one:
+    the output's files would join the dataset's own."""
+    path = Path(out).resolve()
+    for folder in (path, *path.parents):
+        if (folder / "data" / "metadata.json").is_file():
+            where = "the demonstration dataset" if folder == path else f"inside the demonstration dataset {str(folder)!r}"
+            raise ValueError(_named(name, f"{os.fspath(out)!r} is {where}: its files would join the dataset's own"))
+
+
 def check_output_dir(path: str | os.PathLike[str], name: str = "out_dir", *, empty: bool = False) -> Path:
     """A folder that can be created (or exists) and written to, checked without creating it.
 

@@ -15,7 +15,7 @@ import imageio.v3 as iio
 import mujoco
 import numpy as np
 
-from sb3_genrl.checks import check_output_dir, check_positive_int, check_seed
+from sb3_genrl.checks import check_not_in_a_dataset, check_output_dir, check_positive_int, check_seed
 from sb3_genrl.envs import arm_tasks, get_task
 from sb3_genrl.utils import atomic_path, atomic_write_bytes, atomic_write_text
 
@@ -114,6 +114,7 @@ def play_scripted(
     check_positive_int(width, "width")
     check_positive_int(height, "height")
     out = check_output_dir(out_dir)
+    check_not_in_a_dataset(out)
     check_rendering()
     out.mkdir(parents=True, exist_ok=True)
     lines = [

@@ -117,3 +117,18 @@ def test_a_task_named_twice_is_played_once(tmp_path):
 
     report = play_scripted(tmp_path / "play", tasks=("hockey", "hockey"), width=32, height=24)
     assert report.read_text().count("## hockey") == 1
+
+
+def test_play_and_the_quickstart_refuse_a_demonstration_datasets_folder(tmp_path):
+    from sb3_genrl.showcase import play_scripted
+    from sb3_genrl.study.quickstart import quickstart
+
+    dataset = tmp_path / "demos"
+    (dataset / "data").mkdir(parents=True)
+    (dataset / "data" / "metadata.json").write_text("{}")
+    for out in (dataset, dataset / "inside"):
+        with pytest.raises(ValueError, match="demonstration dataset.*its files would join the dataset's own"):
+            play_scripted(out, tasks=("hockey",))
+        with pytest.raises(ValueError, match="demonstration dataset.*its files would join the dataset's own"):
+            quickstart(out, task="hockey", video=False)
+    assert sorted(path.name for path in dataset.rglob("*")) == ["data", "metadata.json"]

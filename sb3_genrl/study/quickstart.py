@@ -29,6 +29,7 @@ from sb3_genrl.checks import (
     check_device,
     check_episodes,
     check_int,
+    check_not_in_a_dataset,
     check_output_dir,
     check_positive_int,
     check_seed,
@@ -215,6 +216,7 @@ def quickstart(
     check_seed(seed)
     check_device(device)
     check_output_dir(out_dir)
+    check_not_in_a_dataset(out_dir)
     if (pathlib.Path(out_dir) / RUN_RECORD).is_file():  # its summary.json would be replaced by the quickstart's
         raise ValueError(
             f"out: {str(out_dir)!r} holds a training run ({RUN_RECORD}, written by genrl train-policy or genrl "
