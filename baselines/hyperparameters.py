@@ -23,7 +23,7 @@ from sb3_genrl.baselines.normalization import CLIP, STD_FLOOR
 from sb3_genrl.envs import get_task
 from stable_baselines3 import PPO, SAC
 
-from sb3_genrl.checks import json_object_argument
+from sb3_genrl.checks import is_finite_number, is_whole_number, json_object_argument
 from sb3_genrl.hyperparams import ZOO_KEYS, load_hyperparams
 
 # the settings file of each baseline
@@ -98,16 +98,12 @@ def algorithm_class(algorithm: str) -> type:
     return PPO if algorithm in ("ppo", "latent-ppo") else SAC
 
 
-def _number(value: Any) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
-
-
 def _whole(minimum: int, *, or_minus_one: str = "") -> tuple[str, Callable[[Any], bool]]:
     """An integer setting's description and check (``or_minus_one``: what -1 means, where SB3 takes it)."""
     allowed = f"an integer >= {minimum}" + (f", or -1 ({or_minus_one})" if or_minus_one else "")
     return (
         allowed,
-        lambda value: _number(value) and int(value) == value and (value >= minimum or (bool(or_minus_one) and value == -1)),
+        lambda value: is_whole_number(value) and (value >= minimum or (bool(or_minus_one) and value == -1)),
     )
 
 
@@ -119,9 +115,11 @@ def _between(low: float, high: float, *, low_open: bool = False, high_open: bool
     def valid(value: Any) -> bool:
         if value is None:
             return none
+        if not is_finite_number(value):
+            return False
         above = value > low if low_open else value >= low
         below = value < high if high_open else value <= high
-        return _number(value) and above and below
+        return above and below
 
     return allowed, valid
 
@@ -161,16 +159,17 @@ _ENT_COEF = "a number >= 0 (SAC: also 'auto' or 'auto_<initial value>', the init
 
 def _valid_ent_coef(cls: type, value: Any) -> bool:
     """PPO's entropy coefficient is a number >= 0; SAC's may also be learnt: ``"auto"`` or ``"auto_0.1"``."""
-    if _number(value):
+    if is_finite_number(value):
         return value >= 0
-    if cls is not SAC or not isinstance(value, str) or not value.startswith("auto"):
+    if cls is not SAC or not isinstance(value, str):
         return False
     if value == "auto":
         return True
     try:
-        return value.startswith("auto_") and math.isfinite(float(value[5:])) and float(value[5:]) > 0
+        initial = float(value.removeprefix("auto_")) if value.startswith("auto_") else math.nan
     except ValueError:
         return False
+    return is_finite_number(initial) and initial > 0
 
 
 def check_algorithm_kwargs(algorithm: str, kwargs: dict[str, Any] | None) -> dict[str, Any]:

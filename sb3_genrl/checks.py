@@ -37,6 +37,16 @@ def _named(name: str, text: str) -> str:
     return f"{name} {text}" if name else text
 
 
+def is_finite_number(value: Any) -> bool:
+    """Whether ``value`` is a finite real number (not a bool, a string, NaN or an infinity)."""
+    return isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def is_whole_number(value: Any) -> bool:
+    """Whether ``value`` is a finite whole number: an integer, or a float such as 30.0."""
+    return is_finite_number(value) and int(value) == value
+
+
 def check_int(value: Any, name: str, *, minimum: int = 1, maximum: int | None = None) -> int:
     """An integer within ``[minimum, maximum]``: Python and NumPy integers pass, ``bool``, floats and strings do not.
 

@@ -757,6 +757,7 @@ def test_one_env_keeps_a_latent_baselines_own_settings_and_a_bad_n_envs_is_refus
     ("algorithm", "change", "message"),
     [
         ("ppo", {"gamma": 2}, r"ppo's gamma must be a number in \[0, 1\], got 2"),
+        ("ppo", {"gamma": "x"}, r"ppo's gamma must be a number in \[0, 1\], got 'x'"),
         ("ppo", {"target_kl": -1}, r"ppo's target_kl must be a number in \(0, inf\), or null, got -1"),
         ("ppo", {"clip_range": -1}, r"ppo's clip_range must be a number in \(0, inf\), got -1"),
         ("ppo", {"n_steps": "x"}, r"ppo's n_steps must be an integer >= 1, got 'x'"),

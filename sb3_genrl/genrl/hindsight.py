@@ -19,8 +19,6 @@ at its new context grows faster than the penalty, so relabelling needs the TRPO 
 from __future__ import annotations
 
 import collections
-import math
-import numbers
 from collections.abc import Mapping
 from typing import Any
 
@@ -29,6 +27,7 @@ import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.policies import ActorCriticPolicy
 
+from sb3_genrl.checks import is_finite_number, is_whole_number
 from sb3_genrl.genrl.kept_pulls import KeptPulls
 from sb3_genrl.genrl.regression import mean_parameters, regress_mean
 from sb3_genrl.genrl.value import use_foreach
@@ -67,15 +66,15 @@ def check_hindsight_kwargs(hindsight_kwargs: Mapping[str, Any]) -> dict[str, Any
         ("refit_steps", 1),
     ):
         value = settings[key]
-        if not _is_whole(value) or value < minimum:
+        if not is_whole_number(value) or value < minimum:
             raise ValueError(f"hindsight_kwargs['{key}'] must be an integer >= {minimum}, got {value!r}")
     start = settings["refit_start"]
-    if start is not None and (not _is_whole(start) or start < 1):
+    if start is not None and (not is_whole_number(start) or start < 1):
         raise ValueError(f"hindsight_kwargs['refit_start'] must be an integer >= 1 or None, got {start!r}")
     if start is not None and not settings["refit_every"]:
         raise ValueError("hindsight_kwargs['refit_start'] is the episode of the first refit, which needs refit_every > 0")
     learning_rate = settings["regression_lr"]
-    if isinstance(learning_rate, bool) or not isinstance(learning_rate, numbers.Real) or not 0 < learning_rate < math.inf:
+    if not is_finite_number(learning_rate) or learning_rate <= 0:
         raise ValueError(f"hindsight_kwargs['regression_lr'] must be a finite positive number, got {learning_rate!r}")
     if not isinstance(settings["regression_weighted"], bool | np.bool_):
         raise ValueError(
@@ -86,11 +85,6 @@ def check_hindsight_kwargs(hindsight_kwargs: Mapping[str, Any]) -> dict[str, Any
             "hindsight_kwargs['regression_weighted'] weights the regression's pulls, which needs regression_steps > 0"
         )
     return dict(hindsight_kwargs)
-
-
-def _is_whole(value: Any) -> bool:
-    """Whether ``value`` is a whole number (an int, or a float such as 30.0; not a bool, a string or NaN)."""
-    return isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value) and int(value) == value
 
 
 class HindsightRelabelling:
