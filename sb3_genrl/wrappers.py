@@ -173,14 +173,14 @@ class LatentActionWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
                 f"the generator's trajectories have horizon T = {generator.horizon} time steps, but "
                 f"{type(task).__name__} has horizon {task_horizon}; use a generator trained on this task"
             )
+        has_fast_path = task_has_fast_path(task)
         limit = getattr(self.env.spec, "max_episode_steps", None)  # gymnasium.make's TimeLimit, if any
-        if limit is not None and limit < generator.horizon and not task_has_fast_path(task):
+        if limit is not None and limit < generator.horizon and not has_fast_path:
             raise ValueError(
                 f"the generator's trajectories have horizon T = {generator.horizon} time steps, but the env's episodes "
                 f"end after {limit} (its max_episode_steps): every trajectory would be cut short; use a generator of "
                 f"at most {limit} steps, or make the env with max_episode_steps={generator.horizon}"
             )
-        has_fast_path = task_has_fast_path(task)
         if use_fast_path and not has_fast_path:
             raise ValueError(f"use_fast_path=True but {type(task).__name__} has no play_trajectories()/get_context()")
         return has_fast_path if use_fast_path is None else bool(use_fast_path)

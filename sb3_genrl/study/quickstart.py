@@ -215,18 +215,17 @@ def quickstart(
         )
     check_seed(seed)
     check_device(device)
-    check_output_dir(out_dir)
-    check_not_in_a_dataset(out_dir)
-    if (pathlib.Path(out_dir) / RUN_RECORD).is_file():  # its summary.json would be replaced by the quickstart's
+    out = check_output_dir(out_dir)
+    check_not_in_a_dataset(out)
+    if (out / RUN_RECORD).is_file():  # its summary.json would be replaced by the quickstart's
         raise ValueError(
             f"out: {str(out_dir)!r} holds a training run ({RUN_RECORD}, written by genrl train-policy or genrl "
             "baseline); the quickstart writes into a folder of its own: choose another --out"
         )
-    if video and not _done(pathlib.Path(out_dir), "video"):  # a display missing fails at the first frame, else
+    if video and not _done(out, "video"):  # a display missing fails at the first frame, after every other stage
         check_rendering("genrl quickstart --no-video, quickstart(video=False)")
     # The models are small: one torch thread is as fast as several and leaves the other cores to MuJoCo.
     torch.set_num_threads(1)
-    out = pathlib.Path(out_dir)
     settings = _stage_settings(
         task,
         demo_episodes,
